@@ -1,0 +1,98 @@
+// Beamsors: fields of 4x4 Mueller matrices over beam directions (paper section 3), sampled on a
+// regular grid in the orthographic coordinates (x, y) = (sin rho cos sigma, sin rho sin sigma) of the
+// antenna basis, |x|, |y| <= sin rho_max (DESIGN 4).
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace pisco {
+
+// Mueller matrix indexed [row][column] with T, Q, U, V = 0, 1, 2, 3. The paper's element B_XY is
+// row Y, column X: B_TQ (X = T leaking into Y = Q) is m[1][0].
+using Mueller = std::array<std::array<double, 4>, 4>;
+Mueller identity_mueller();
+
+// Angular pattern of an in-phase cross-polar far field E_cx = kappa(sigma) E_co.
+enum class CrossPolarPattern {
+  uniform,     // kappa constant: the detector's polarization axis is rotated by atan(kappa)
+  // kappa(rho, sigma) = kappa sin(2 sigma) q e^(1 - q), q = rho^2 / 2 s^2 (s the Gaussian width,
+  // geometric mean for elliptical beams): zero on the axis and on the principal planes, largest
+  // (kappa) at rho = sqrt(2) s on the diagonals, like the cross-polar lobes of reflector antennas.
+  quadrupole,
+};
+
+struct BeamOptions {
+  double rho_max = 0.08726646259971647;  // radians (5 deg); must be in (0, pi/2)
+  double grid_step = 0.0;                // radians; 0 = 1/20 of the smallest FWHM
+  double cross_polar = 0.0;              // kappa: cross-polar / co-polar field amplitude ratio
+  CrossPolarPattern cross_polar_pattern = CrossPolarPattern::uniform;
+  Mueller mueller = identity_mueller();  // constant Mueller matrix applied after the beam
+};
+
+class Beamsor {
+ public:
+  // Function of the antenna-basis direction (rho, sigma) returning the (unnormalized) Mueller matrix.
+  using Field = std::function<Mueller(double rho, double sigma)>;
+
+  // Circular Gaussian b = exp(-rho^2 / 2 s^2), s = fwhm / sqrt(8 ln 2): B = b (x) X(kappa) M.
+  static Beamsor gaussian(double fwhm, const BeamOptions& options = {});
+  // Elliptical Gaussian with widths fwhm_x along the major-axis direction `angle` (from theta'
+  // towards phi') and fwhm_y perpendicular to it.
+  static Beamsor elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
+                                     const BeamOptions& options = {});
+  // Any field: sampled on a grid of step `grid_step` out to rho_max; Omega~ by quadrature of the
+  // field's B_TT over the cap (the smallest feature of the field must be resolved by grid_step).
+  static Beamsor from_field(const Field& field, double rho_max, double grid_step,
+                            std::string description, double feature_scale = 0.0);
+
+  // The paper's HEALPix beamsor files: a FITS binary table of up to 16 HEALPix maps with columns
+  // named B_TT, B_QT, ... (B_XY = row Y, column X; absent columns are zero), beam axis at the north
+  // pole, sigma = longitude. Resampled onto the grid with HEALPix bilinear interpolation;
+  // Omega~ is the pixel sum of B_TT within rho_max. grid_step 0 = the file's pixel size.
+  static Beamsor read_healpix_fits(const std::filesystem::path& file, double rho_max,
+                                   double grid_step = 0.0);
+  // Writes this beamsor as such a file at the given NSIDE (pixels beyond rho_max are zero). Only the
+  // non-zero elements are written. Atomic (temporary name, then rename).
+  void write_healpix_fits(const std::filesystem::path& file, int nside) const;
+
+  double rho_max() const noexcept { return rho_max_; }
+  int grid_size() const noexcept { return n_; }          // nodes per axis
+  double grid_half_width() const noexcept { return a_; } // = sin(rho_max)
+  double grid_step() const noexcept { return step_; }    // node spacing in x and y
+  double omega_tilde() const noexcept { return omega_; } // integral of B_TT over the cap, sr
+  const std::string& description() const noexcept { return description_; }
+
+  // Grid values of element (row, col), n*n nodes with x fastest; empty if the element is zero.
+  std::span<const double> element(int row, int col) const;
+  bool has_element(int row, int col) const;
+
+  // Bilinear interpolation of the (unnormalized) Mueller matrix at orthographic (x, y); zero
+  // outside the grid or beyond rho_max.
+  Mueller at(double x, double y) const;
+
+ private:
+  Beamsor() = default;
+  void sample(const Field& field);
+
+  double rho_max_ = 0.0;
+  int n_ = 0;
+  double a_ = 0.0;
+  double step_ = 0.0;
+  double omega_ = 0.0;
+  std::string description_;
+  std::array<std::vector<double>, 16> elements_;  // [row * 4 + col]
+  friend class BeamsorAccess;
+};
+
+// Integral of f(rho, sigma) sin(rho) over the cap rho <= rho_max: composite Gauss-Legendre in rho
+// (panels no wider than feature_scale / 4) times a periodic trapezoid rule in sigma.
+double cap_integral(const std::function<double(double, double)>& f, double rho_max,
+                    double feature_scale, int sigma_points = 64);
+
+}  // namespace pisco

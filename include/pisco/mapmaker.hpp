@@ -1,0 +1,44 @@
+// Binned I/Q/U map-making from TOD, streamed chunk by chunk (DESIGN 8).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "pisco/focal_plane.hpp"
+#include "pisco/pointing.hpp"
+
+namespace pisco {
+
+struct BinnedMaps {
+  int nside = 0;
+  std::vector<double> I, Q, U;            // HEALPix RING; unsolved pixels are UNSEEN (-1.6375e30)
+  std::vector<std::uint32_t> hits;        // samples per pixel
+  std::vector<double> rcond;              // reciprocal condition number of each pixel's 3x3 matrix
+};
+
+inline constexpr double unseen = -1.6375e30;
+
+class BinnedMapmaker {
+ public:
+  // Pixels whose 3x3 normal matrix has a reciprocal condition number below rcond_min are cut.
+  explicit BinnedMapmaker(int nside, double rcond_min = 1e-3);
+
+  // Adds a chunk: the pixel of each sample is that of its beam centre, and the model is the
+  // detector's D(gamma) = s/2 [(1+eps), (1-eps) cos 2gamma, (1-eps) sin 2gamma], gamma = psi + zeta.
+  void add(const Detector& detector, const PointingView& pointing, std::span<const double> tod);
+  // Solves every pixel; may be called again after more add() calls.
+  BinnedMaps solve() const;
+
+  int nside() const noexcept { return nside_; }
+
+ private:
+  int nside_;
+  double rcond_min_;
+  std::vector<double> ata_;  // 6 per pixel: upper triangle of A^T A
+  std::vector<double> atd_;  // 3 per pixel
+  std::vector<std::uint32_t> hits_;
+};
+
+}  // namespace pisco

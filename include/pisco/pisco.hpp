@@ -1,0 +1,13 @@
+// PISCO-VK: pixel-space convolution of polarized skies with beamsors. Umbrella header.
+#pragma once
+
+#include "pisco/beamsor.hpp"
+#include "pisco/engine.hpp"
+#include "pisco/error.hpp"
+#include "pisco/focal_plane.hpp"
+#include "pisco/mapmaker.hpp"
+#include "pisco/pointing.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/sky.hpp"
+#include "pisco/spectra.hpp"
+#include "pisco/version.hpp"

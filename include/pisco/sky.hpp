@@ -1,0 +1,56 @@
+// A polarized sky: HEALPix I, Q, U, V maps in RING ordering, COSMO polarization convention.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace pisco {
+
+enum class StokesIndex : int { I = 0, Q = 1, U = 2, V = 3 };
+
+class Sky {
+ public:
+  // A sky of zeros. Throws pisco::Error unless nside is a power of two in [1, 8192].
+  explicit Sky(int nside, std::string units = "K_CMB");
+
+  int nside() const noexcept { return nside_; }
+  std::size_t npix() const noexcept { return maps_[0].size(); }
+  double pixel_area() const noexcept;  // 4 pi / npix, steradians
+
+  std::span<double> I() noexcept { return maps_[0]; }
+  std::span<double> Q() noexcept { return maps_[1]; }
+  std::span<double> U() noexcept { return maps_[2]; }
+  std::span<double> V() noexcept { return maps_[3]; }
+  std::span<const double> I() const noexcept { return maps_[0]; }
+  std::span<const double> Q() const noexcept { return maps_[1]; }
+  std::span<const double> U() const noexcept { return maps_[2]; }
+  std::span<const double> V() const noexcept { return maps_[3]; }
+  std::span<double> stokes(StokesIndex s) noexcept { return maps_[static_cast<int>(s)]; }
+  std::span<const double> stokes(StokesIndex s) const noexcept { return maps_[static_cast<int>(s)]; }
+
+  const std::string& units() const noexcept { return units_; }
+  void set_units(std::string units) { units_ = std::move(units); }
+
+  // Throws pisco::Error naming `origin`, the Stokes map and the first pixel that is NaN or infinite.
+  void check_finite(const std::string& origin) const;
+
+  // Reads a HEALPix FITS map (1, 3 or 4 columns: I, or I Q U, or I Q U V; the first binary table).
+  // NESTED maps are converted to RING; POLCCONV = 'IAU' maps have U negated (to COSMO).
+  // Throws pisco::Error naming the file on any problem (missing, not HEALPix, bad NSIDE, NaN).
+  static Sky read_fits(const std::filesystem::path& file);
+
+  // Writes I, Q, U, V (TTYPE I_STOKES ... V_STOKES), RING, POLCCONV = 'COSMO', TUNIT = units.
+  // The file is written to a temporary name and renamed, so it is never left half-written.
+  void write_fits(const std::filesystem::path& file) const;
+
+ private:
+  int nside_;
+  std::array<std::vector<double>, 4> maps_;
+  std::string units_;
+};
+
+}  // namespace pisco

@@ -1,0 +1,237 @@
+// Beamsor builders, grid sampling, interpolation and the integral normalization (DESIGN 4).
+#include "pisco/beamsor.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <sstream>
+
+#include "pisco/error.hpp"
+
+namespace pisco {
+namespace {
+
+constexpr double pi = std::numbers::pi;
+constexpr int max_grid_nodes = 8192;
+
+std::string deg(double rad) {
+  std::ostringstream s;
+  s << rad * 180.0 / pi << " deg";
+  return s.str();
+}
+
+void check_rho_max(double rho_max, const char* who) {
+  if (!(rho_max > 0.0 && rho_max < pi / 2))
+    throw Error(std::string(who) + ": rho_max = " + deg(rho_max) +
+                " is outside (0, 90) deg; beams are limited to the front hemisphere");
+}
+
+// Gauss-Legendre nodes and weights on [-1, 1] by Newton iteration on P_n.
+struct GaussLegendre {
+  std::vector<double> x, w;
+  explicit GaussLegendre(int n) : x(n), w(n) {
+    for (int i = 0; i < n; ++i) {
+      double z = std::cos(pi * (i + 0.75) / (n + 0.5));
+      for (int it = 0; it < 100; ++it) {
+        double p0 = 1.0, p1 = 0.0;
+        for (int k = 1; k <= n; ++k) {
+          const double p2 = p1;
+          p1 = p0;
+          p0 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p2) / k;
+        }
+        const double dp = n * (z * p0 - p1) / (z * z - 1.0);
+        const double dz = p0 / dp;
+        z -= dz;
+        if (std::abs(dz) < 1e-16) {
+          x[i] = z;
+          w[i] = 2.0 / ((1.0 - z * z) * dp * dp);
+          break;
+        }
+        x[i] = z;
+        w[i] = 2.0 / ((1.0 - z * z) * dp * dp);
+      }
+    }
+  }
+};
+
+// X(kappa) = (1 + kappa^2) R(atan kappa): an in-phase cross-polar field E_cx = kappa E_co turns the
+// detector's effective polarization axis by atan(kappa) towards phi' and raises its total power.
+Mueller cross_polar_mueller(double kappa) {
+  Mueller m{};
+  const double k2 = kappa * kappa;
+  m[0][0] = 1.0 + k2;
+  m[1][1] = 1.0 - k2;
+  m[1][2] = 2.0 * kappa;
+  m[2][1] = -2.0 * kappa;
+  m[2][2] = 1.0 - k2;
+  m[3][3] = 1.0 + k2;
+  return m;
+}
+
+Mueller multiply(const Mueller& a, const Mueller& b) {
+  Mueller c{};
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j)
+      for (int k = 0; k < 4; ++k) c[i][j] += a[i][k] * b[k][j];
+  return c;
+}
+
+Beamsor::Field gaussian_field(double sx, double sy, double angle, const BeamOptions& o) {
+  const double ax = 0.5 / (sx * sx), ay = 0.5 / (sy * sy);
+  const double kappa = o.cross_polar;
+  const CrossPolarPattern pattern = o.cross_polar_pattern;
+  const Mueller m = o.mueller;
+  const double q_scale = 0.5 / (sx * sy);  // 1 / 2 s^2 with s the geometric-mean width
+  return [=](double rho, double sigma) {
+    const double u = rho * std::cos(sigma - angle), v = rho * std::sin(sigma - angle);
+    const double b = std::exp(-(ax * u * u + ay * v * v));
+    double k = kappa;
+    if (pattern == CrossPolarPattern::quadrupole) {
+      // rho^2 sin(2 sigma) is smooth through the axis; the radial factor peaks at rho = sqrt(2) s.
+      const double q = rho * rho * q_scale;
+      k = kappa * std::sin(2.0 * sigma) * q * std::exp(1.0 - q);
+    }
+    Mueller out = multiply(cross_polar_mueller(k), m);
+    for (auto& row : out)
+      for (double& e : row) e *= b;
+    return out;
+  };
+}
+
+void check_fwhm(double fwhm, double rho_max, const char* what) {
+  if (!(std::isfinite(fwhm) && fwhm > 0.0))
+    throw Error(std::string("beam: ") + what + " must be a positive finite angle, got " + deg(fwhm));
+  if (fwhm / 2 >= rho_max)
+    throw Error(std::string("beam: ") + what + " = " + deg(fwhm) +
+                " is wider than the beam grid: its half-maximum radius does not fit within rho_max = " +
+                deg(rho_max));
+}
+
+}  // namespace
+
+Mueller identity_mueller() {
+  Mueller m{};
+  for (int i = 0; i < 4; ++i) m[i][i] = 1.0;
+  return m;
+}
+
+double cap_integral(const std::function<double(double, double)>& f, double rho_max,
+                    double feature_scale, int sigma_points) {
+  static const GaussLegendre gl(16);
+  const double panel = feature_scale > 0 ? feature_scale / 4 : rho_max / 64;
+  const int panels = std::max(1, static_cast<int>(std::ceil(rho_max / panel)));
+  const double h = rho_max / panels;
+  const double dsigma = 2 * pi / sigma_points;
+  double total = 0.0;
+  for (int p = 0; p < panels; ++p) {
+    const double r0 = p * h;
+    double panel_sum = 0.0;
+    for (std::size_t i = 0; i < gl.x.size(); ++i) {
+      const double rho = r0 + 0.5 * h * (gl.x[i] + 1.0);
+      double ring = 0.0;
+      for (int s = 0; s < sigma_points; ++s) ring += f(rho, s * dsigma);
+      panel_sum += gl.w[i] * ring * dsigma * std::sin(rho);
+    }
+    total += 0.5 * h * panel_sum;
+  }
+  return total;
+}
+
+void Beamsor::sample(const Field& field) {
+  std::array<std::vector<double>, 16> values;
+  for (auto& v : values) v.assign(static_cast<std::size_t>(n_) * n_, 0.0);
+  for (int j = 0; j < n_; ++j) {
+    const double y = -a_ + j * step_;
+    for (int i = 0; i < n_; ++i) {
+      const double x = -a_ + i * step_;
+      const double r = std::min(1.0, std::sqrt(x * x + y * y));
+      const Mueller m = field(std::asin(r), std::atan2(y, x));
+      for (int e = 0; e < 16; ++e) values[e][static_cast<std::size_t>(j) * n_ + i] = m[e / 4][e % 4];
+    }
+  }
+  for (int e = 0; e < 16; ++e) {
+    const bool zero = std::all_of(values[e].begin(), values[e].end(), [](double v) { return v == 0.0; });
+    elements_[e] = zero ? std::vector<double>{} : std::move(values[e]);
+  }
+}
+
+Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step,
+                            std::string description, double feature_scale) {
+  check_rho_max(rho_max, "beam");
+  if (!(std::isfinite(grid_step) && grid_step > 0.0))
+    throw Error("beam: grid_step must be a positive finite angle, got " + deg(grid_step));
+  Beamsor b;
+  b.rho_max_ = rho_max;
+  b.a_ = std::sin(rho_max);
+  const double nodes = std::ceil(2.0 * b.a_ / grid_step) + 1.0;
+  if (nodes > max_grid_nodes)
+    throw Error("beam: grid_step = " + deg(grid_step) + " needs " + std::to_string(nodes) +
+                " nodes per axis for rho_max = " + deg(rho_max) + "; at most " +
+                std::to_string(max_grid_nodes) + " are allowed");
+  b.n_ = std::max(3, static_cast<int>(nodes));
+  b.step_ = 2.0 * b.a_ / (b.n_ - 1);
+  b.description_ = std::move(description);
+  b.sample(field);
+  if (!b.has_element(0, 0)) throw Error("beam '" + b.description_ + "': B_TT is zero everywhere");
+  b.omega_ = cap_integral([&](double r, double s) { return field(r, s)[0][0]; }, rho_max,
+                          feature_scale > 0 ? feature_scale : grid_step * 4);
+  if (!(b.omega_ > 0.0 && std::isfinite(b.omega_)))
+    throw Error("beam '" + b.description_ + "': the integral of B_TT over the cap is not positive");
+  return b;
+}
+
+Beamsor Beamsor::gaussian(double fwhm, const BeamOptions& options) {
+  check_rho_max(options.rho_max, "beam");
+  check_fwhm(fwhm, options.rho_max, "fwhm");
+  return elliptical_gaussian(fwhm, fwhm, 0.0, options);
+}
+
+Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
+                                     const BeamOptions& options) {
+  check_rho_max(options.rho_max, "beam");
+  check_fwhm(fwhm_x, options.rho_max, "fwhm_x");
+  check_fwhm(fwhm_y, options.rho_max, "fwhm_y");
+  if (!std::isfinite(angle)) throw Error("beam: angle must be finite");
+  if (!std::isfinite(options.cross_polar)) throw Error("beam: cross_polar must be finite");
+  const double to_sigma = 1.0 / std::sqrt(8.0 * std::log(2.0));
+  const double smallest = std::min(fwhm_x, fwhm_y);
+  const double step = options.grid_step > 0 ? options.grid_step : smallest / 20.0;
+  std::ostringstream d;
+  if (fwhm_x == fwhm_y)
+    d << "Gaussian FWHM " << fwhm_x * 180 / pi << " deg";
+  else
+    d << "elliptical Gaussian FWHM " << fwhm_x * 180 / pi << " x " << fwhm_y * 180 / pi
+      << " deg at " << angle * 180 / pi << " deg";
+  if (options.cross_polar != 0.0)
+    d << ", cross-polar " << options.cross_polar
+      << (options.cross_polar_pattern == CrossPolarPattern::uniform ? " (uniform)" : " (quadrupole)");
+  d << ", rho_max " << options.rho_max * 180 / pi << " deg, grid step " << step * 180 / pi * 60
+    << " arcmin";
+  return from_field(gaussian_field(fwhm_x * to_sigma, fwhm_y * to_sigma, angle, options),
+                    options.rho_max, step, d.str(), smallest);
+}
+
+std::span<const double> Beamsor::element(int row, int col) const {
+  return elements_.at(static_cast<std::size_t>(row * 4 + col));
+}
+
+bool Beamsor::has_element(int row, int col) const { return !element(row, col).empty(); }
+
+Mueller Beamsor::at(double x, double y) const {
+  Mueller m{};
+  if (x * x + y * y > a_ * a_) return m;
+  const double u = (x + a_) / step_, v = (y + a_) / step_;
+  if (!(u >= 0 && v >= 0 && u <= n_ - 1 && v <= n_ - 1)) return m;
+  const int i = std::min(static_cast<int>(u), n_ - 2), j = std::min(static_cast<int>(v), n_ - 2);
+  const double fu = u - i, fv = v - j;
+  const std::size_t k = static_cast<std::size_t>(j) * n_ + i;
+  for (int e = 0; e < 16; ++e) {
+    const auto& g = elements_[e];
+    if (g.empty()) continue;
+    m[e / 4][e % 4] = (1 - fu) * (1 - fv) * g[k] + fu * (1 - fv) * g[k + 1] +
+                      (1 - fu) * fv * g[k + n_] + fu * fv * g[k + n_ + 1];
+  }
+  return m;
+}
+
+}  // namespace pisco

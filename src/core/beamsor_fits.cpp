@@ -1,0 +1,559 @@
+// HEALPix beamsor files, the PISCO paper's representation (DESIGN 4, 9, 12): a FITS binary table of
+// up to 16 full-sky HEALPix maps named B_TT, B_QT, ... (B_XY = Mueller row Y, column X), with the
+// beam axis at the north pole and sigma = longitude.
+//
+// Reading resamples the maps onto the beamsor's orthographic grid with HEALPix's bilinear
+// interpolation (get_interpol: linear in phi along the two nearest rings, then linear in theta).
+// That resampling is the error this format adds, measured in test_beamsor_fits for a Gaussian of
+// width s (FWHM 1.5 deg) written at NSIDE 1024 (3.4 arcmin pixels) and read back:
+//  - it is largest on the beam axis, which HEALPix interpolates from the first ring of pixels at
+//    theta_1 = acos(1 - 1/(3 NSIDE^2)): the axis value is low by 1 - exp(-theta_1^2 / 2 s^2),
+//    about 1/(3 NSIDE^2 s^2) of the peak (2.6e-3 for the test beam);
+//  - away from the axis it is smaller: 5.6e-4 of the peak at the nodes of a grid of the file's
+//    pixel size, with no node on the axis;
+//  - Omega~, the pixel sum of B_TT, is a midpoint rule in cos(theta) and is low by about
+//    1/(18 NSIDE^2 s^2) (4.3e-4 for the test beam).
+// All three fall as the square of the pixel size: a file should sample the beam's smallest feature
+// (s) with NSIDE >= 1 / (s sqrt(3e-3)) for an axis error below 1e-3.
+
+// The table goes through CFITSIO directly (the same layout HEALPix C++ and healpy use), so that
+// every failure is one pisco::Error naming the file; HEALPix C++ supplies the pixel geometry.
+#include <fitsio.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <new>
+#include <numbers>
+#include <optional>
+#include <span>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <error_handling.h>
+#include <healpix_base.h>
+#include <pointing.h>
+
+#include "pisco/beamsor.hpp"
+#include "pisco/error.hpp"
+
+namespace pisco {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr double pi = std::numbers::pi;
+constexpr int max_nside = 8192;        // Healpix_Base's 32-bit pixel indices
+constexpr int max_grid_nodes = 8192;   // per axis, as for every other beamsor builder
+constexpr double healpix_unseen = -1.6375e30;
+constexpr const char* stokes_letters = "TQUV";
+
+[[noreturn]] void fail(const fs::path& file, const std::string& what) {
+  throw Error(file.string() + ": " + what);
+}
+
+std::string deg(double rad) {
+  std::ostringstream s;
+  s << rad * 180.0 / pi << " deg";
+  return s.str();
+}
+
+// CFITSIO's explanation of a status code; the message stack is cleared so it cannot leak into a
+// later error.
+std::string cfitsio_text(int status) {
+  char text[FLEN_STATUS] = {};
+  fits_get_errstatus(status, text);
+  fits_clear_errmsg();
+  return text;
+}
+
+void check(int status, const fs::path& file, const std::string& doing) {
+  if (status != 0) fail(file, doing + " failed (CFITSIO: " + cfitsio_text(status) + ")");
+}
+
+std::string trim_upper(std::string s) {
+  const auto not_space = [](unsigned char c) { return !std::isspace(c); };
+  s.erase(s.begin(), std::find_if(s.begin(), s.end(), not_space));
+  s.erase(std::find_if(s.rbegin(), s.rend(), not_space).base(), s.end());
+  for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return s;
+}
+
+// Inside a catch block: rethrows the current exception as one pisco::Error naming the file
+// (HEALPix C++ throws PlanckError, the filesystem library filesystem_error).
+[[noreturn]] void rethrow_naming(const fs::path& file) {
+  try {
+    throw;
+  } catch (const Error&) {
+    throw;
+  } catch (const PlanckError& e) {
+    fail(file, std::string("HEALPix: ") + e.what());
+  } catch (const fs::filesystem_error& e) {
+    fail(file, e.code().message());
+  } catch (const std::bad_alloc&) {
+    fail(file, "out of memory for the maps");
+  } catch (const std::exception& e) {
+    fail(file, e.what());
+  }
+}
+
+bool is_power_of_two(long long n) { return n > 0 && (n & (n - 1)) == 0; }
+
+// B_XY names row Y, column X (X leaks into Y); elements are stored at [row * 4 + col].
+std::string element_name(int e) {
+  return std::string("B_") + stokes_letters[e % 4] + stokes_letters[e / 4];
+}
+
+std::optional<int> element_of(const std::string& column_name) {
+  const std::string n = trim_upper(column_name);
+  if (n.size() != 4 || n.compare(0, 2, "B_") != 0) return std::nullopt;
+  const char* x = std::strchr(stokes_letters, n[2]);
+  const char* y = std::strchr(stokes_letters, n[3]);
+  if (!x || !y || !*x || !*y) return std::nullopt;
+  return static_cast<int>(y - stokes_letters) * 4 + static_cast<int>(x - stokes_letters);
+}
+
+// An open FITS file, closed on every path out. The *_diskfile calls take names literally (no
+// CFITSIO extended filename syntax). Errors name `shown`, the file the caller asked for.
+class FitsFile {
+ public:
+  FitsFile(const FitsFile&) = delete;
+  FitsFile& operator=(const FitsFile&) = delete;
+  FitsFile(FitsFile&& o) noexcept : ptr_(o.ptr_), shown_(std::move(o.shown_)) { o.ptr_ = nullptr; }
+  ~FitsFile() {
+    int status = 0;
+    if (ptr_) fits_close_file(ptr_, &status);
+    if (status) fits_clear_errmsg();
+  }
+  static FitsFile open(const fs::path& file) {
+    FitsFile f(file);
+    int status = 0;
+    fits_open_diskfile(&f.ptr_, file.c_str(), READONLY, &status);
+    if (status) {
+      f.ptr_ = nullptr;
+      fail(file, "cannot be read as a FITS file (CFITSIO: " + cfitsio_text(status) +
+                     "); expected a HEALPix beamsor file (binary table with columns B_TT, ...)");
+    }
+    return f;
+  }
+  static FitsFile create(const fs::path& temporary, const fs::path& shown) {
+    FitsFile f(shown);
+    int status = 0;
+    fits_create_diskfile(&f.ptr_, temporary.c_str(), &status);
+    if (status) {
+      f.ptr_ = nullptr;
+      fail(shown, "cannot be created as " + temporary.filename().string() + " (CFITSIO: " +
+                      cfitsio_text(status) + ")");
+    }
+    return f;
+  }
+  // Closing flushes CFITSIO's buffers: a writer closes explicitly to see the errors.
+  void close() {
+    int status = 0;
+    fits_close_file(ptr_, &status);
+    ptr_ = nullptr;
+    check(status, shown_, "closing the file");
+  }
+  fitsfile* get() const { return ptr_; }
+  const fs::path& path() const { return shown_; }
+
+ private:
+  explicit FitsFile(fs::path shown) : shown_(std::move(shown)) {}
+  fitsfile* ptr_ = nullptr;
+  fs::path shown_;
+};
+
+std::optional<std::string> string_key(const FitsFile& f, const char* key) {
+  char value[FLEN_VALUE] = {};
+  int status = 0;
+  fits_read_key(f.get(), TSTRING, key, value, nullptr, &status);
+  if (status == KEY_NO_EXIST) {
+    fits_clear_errmsg();
+    return std::nullopt;
+  }
+  check(status, f.path(), std::string("reading the key ") + key);
+  return std::string(value);
+}
+
+// ---- reading ------------------------------------------------------------------------------------
+
+struct BeamTable {
+  int nside = 0;
+  bool nested = false;
+  long long rows = 0;
+  std::array<int, 16> column{};           // FITS column number per element; 0 = absent
+  std::array<long long, 16> repeat{};     // values per row
+};
+
+void goto_first_binary_table(const FitsFile& f) {
+  int status = 0, hdus = 0;
+  fits_get_num_hdus(f.get(), &hdus, &status);
+  check(status, f.path(), "counting the HDUs");
+  for (int h = 2; h <= hdus; ++h) {
+    int type = 0;
+    fits_movabs_hdu(f.get(), h, &type, &status);
+    check(status, f.path(), "moving to HDU " + std::to_string(h));
+    if (type == BINARY_TBL) return;
+  }
+  fail(f.path(), "has no binary-table extension; expected a HEALPix beamsor file");
+}
+
+void read_geometry(const FitsFile& f, BeamTable& t) {
+  long long nside = 0;
+  int status = 0;
+  fits_read_key(f.get(), TLONGLONG, "NSIDE", &nside, nullptr, &status);
+  if (status == KEY_NO_EXIST) {
+    fits_clear_errmsg();
+    fail(f.path(), "has no NSIDE key; expected a HEALPix beamsor file");
+  }
+  check(status, f.path(), "reading NSIDE (expected an integer)");
+  if (!is_power_of_two(nside) || nside > max_nside)
+    fail(f.path(), "NSIDE = " + std::to_string(nside) + " is not a power of two in [1, " +
+                       std::to_string(max_nside) + "]");
+  t.nside = static_cast<int>(nside);
+  const auto ordering = string_key(f, "ORDERING");
+  const std::string o = ordering ? trim_upper(*ordering) : "";
+  if (o != "RING" && o != "NESTED" && o != "NEST")
+    fail(f.path(), "ORDERING = '" + ordering.value_or("") + "'; expected 'RING' or 'NESTED'");
+  t.nested = o != "RING";
+  const auto scheme = string_key(f, "INDXSCHM");
+  if (scheme && trim_upper(*scheme) == "EXPLICIT")
+    fail(f.path(), "is a cut-sky (partial) map; beamsor files must be full-sky maps");
+}
+
+std::string column_name(const FitsFile& f, int col) {
+  char key[FLEN_KEYWORD], value[FLEN_VALUE] = {};
+  int status = 0;
+  fits_make_keyn("TTYPE", col, key, &status);
+  fits_read_key(f.get(), TSTRING, key, value, nullptr, &status);
+  if (status) fits_clear_errmsg();
+  return value;
+}
+
+// Maps the B_XY columns to elements; other columns are ignored. Each must hold 12 NSIDE^2 numbers.
+void find_columns(const FitsFile& f, BeamTable& t) {
+  int status = 0, ncols = 0;
+  fits_get_num_cols(f.get(), &ncols, &status);
+  fits_get_num_rowsll(f.get(), &t.rows, &status);
+  check(status, f.path(), "reading the table size");
+  std::string found;
+  const long long npix = 12LL * t.nside * t.nside;
+  for (int c = 1; c <= ncols; ++c) {
+    const std::string name = column_name(f, c);
+    found += (found.empty() ? "" : ", ") + name;
+    const auto e = element_of(name);
+    if (!e) continue;
+    if (t.column[*e]) fail(f.path(), "has two columns named " + element_name(*e));
+    int type = 0;
+    long long repeat = 0, width = 0;
+    fits_get_coltypell(f.get(), c, &type, &repeat, &width, &status);
+    check(status, f.path(), "reading the type of column " + name);
+    if (type <= 0 || type == TSTRING || type == TLOGICAL || type == TBIT || type == TCOMPLEX ||
+        type == TDBLCOMPLEX)
+      fail(f.path(), "column " + name + " is not a numeric column of fixed width");
+    if (repeat * t.rows != npix)
+      fail(f.path(), "column " + name + " holds " + std::to_string(repeat * t.rows) +
+                         " values; NSIDE = " + std::to_string(t.nside) + " needs 12 NSIDE^2 = " +
+                         std::to_string(npix));
+    t.column[*e] = c;
+    t.repeat[*e] = repeat;
+  }
+  if (!t.column[0])
+    fail(f.path(), "has no B_TT column (columns: " + (found.empty() ? "none" : found) +
+                       "); expected HEALPix maps named B_TT, B_QT, B_UT, ... with at least B_TT");
+}
+
+// Number of RING pixels in the rings with colatitude <= theta, plus `extra` further rings.
+long long ring_prefix(const Healpix_Base& base, double theta, int extra) {
+  const int rings = 4 * base.Nside() - 1;
+  int ring = 1;
+  for (; ring <= rings; ++ring) {
+    int start = 0, count = 0;
+    double ring_theta = 0.0;
+    bool shifted = false;
+    base.get_ring_info2(ring, start, count, ring_theta, shifted);
+    if (ring_theta > theta) break;
+  }
+  const int end_ring = std::min(rings, ring - 1 + extra);
+  if (end_ring < 1) return 0;
+  int start = 0, count = 0;
+  bool shifted = false;
+  base.get_ring_info_small(end_ring, start, count, shifted);
+  return static_cast<long long>(start) + count;
+}
+
+// Reads the first `count` RING pixels of one element. CFITSIO converts to float64 and reads vector
+// columns across rows; NESTED files are read whole and reordered first.
+std::vector<double> read_element(const FitsFile& f, const BeamTable& t, int e, long long count) {
+  const long long npix = 12LL * t.nside * t.nside;
+  std::vector<double> values(static_cast<std::size_t>(t.nested ? npix : count));
+  long rows_per_chunk = 0;
+  int status = 0;
+  fits_get_rowsize(f.get(), &rows_per_chunk, &status);
+  const long long chunk = std::max<long long>(1, rows_per_chunk) * t.repeat[e];
+  const long long total = static_cast<long long>(values.size());
+  for (long long first = 0; first < total && status == 0; first += chunk) {
+    int anynul = 0;
+    fits_read_col(f.get(), TDOUBLE, t.column[e], first / t.repeat[e] + 1, first % t.repeat[e] + 1,
+                  std::min(chunk, total - first), nullptr, values.data() + first, &anynul, &status);
+  }
+  check(status, f.path(), "reading column " + element_name(e));
+  if (!t.nested) return values;
+  const Healpix_Base nest(t.nside, NEST, SET_NSIDE);
+  std::vector<double> ring(static_cast<std::size_t>(count));
+  for (int p = 0; p < nest.Npix(); ++p) {
+    const int r = nest.nest2ring(p);
+    if (r < count) ring[r] = values[p];
+  }
+  return ring;
+}
+
+// NaN and infinity are errors anywhere read; HEALPix's UNSEEN marker is an error inside the cap
+// (the beam would be undefined there) and zero outside it, where masked files often use it.
+void clean_element(const fs::path& file, int e, std::vector<double>& v, long long cap_pixels) {
+  for (std::size_t p = 0; p < v.size(); ++p) {
+    if (!std::isfinite(v[p]))
+      fail(file, "column " + element_name(e) + " has a non-finite value at pixel " +
+                     std::to_string(p) + " (RING); beam values must be finite");
+    if (std::abs(v[p] - healpix_unseen) > 1e-5 * std::abs(healpix_unseen)) continue;
+    if (static_cast<long long>(p) < cap_pixels)
+      fail(file, "column " + element_name(e) + " is UNSEEN at pixel " + std::to_string(p) +
+                     " (RING), inside rho_max; the beam must be defined over the whole cap");
+    v[p] = 0.0;
+  }
+}
+
+void check_read_arguments(const fs::path& file, double rho_max, double grid_step) {
+  if (!(rho_max > 0.0 && rho_max < pi / 2))
+    fail(file, "rho_max = " + deg(rho_max) +
+                   " is outside (0, 90) deg; beams are limited to the front hemisphere");
+  if (!(std::isfinite(grid_step) && grid_step >= 0.0))
+    fail(file, "grid_step = " + deg(grid_step) +
+                   " must be a finite angle >= 0 (0 = the file's pixel size)");
+}
+
+// The polar cap of a beamsor file, in RING order: the pixels the grid can reach.
+struct BeamMaps {
+  int nside = 0;
+  long long cap_pixels = 0;                     // pixels with theta <= rho_max
+  std::array<std::vector<double>, 16> values;   // per element; empty if absent
+};
+
+// Reads the cap out to `reach`, plus the rings interpolation there touches.
+BeamMaps load_maps(const fs::path& file, double rho_max, double reach) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) fail(file, "no such file; expected a HEALPix beamsor file");
+  const FitsFile f = FitsFile::open(file);
+  goto_first_binary_table(f);
+  BeamTable t;
+  read_geometry(f, t);
+  find_columns(f, t);
+  const Healpix_Base base(t.nside, RING, SET_NSIDE);
+  const long long needed = ring_prefix(base, reach, 2);
+  BeamMaps m;
+  m.nside = t.nside;
+  m.cap_pixels = ring_prefix(base, rho_max, 0);
+  for (int e = 0; e < 16; ++e) {
+    if (!t.column[e]) continue;
+    m.values[e] = read_element(f, t, e, needed);
+    clean_element(file, e, m.values[e], m.cap_pixels);
+  }
+  return m;
+}
+
+// Omega~ = sum of B_TT over the pixels within rho_max times the pixel area.
+double pixel_sum_omega(const fs::path& file, const BeamMaps& m, double rho_max) {
+  double sum = 0.0;
+  for (long long p = 0; p < m.cap_pixels; ++p) sum += m.values[0][static_cast<std::size_t>(p)];
+  const double omega = sum * 4 * pi / (12.0 * m.nside * m.nside);
+  if (!(omega > 0.0))
+    fail(file, "the sum of B_TT over the pixels within rho_max = " + deg(rho_max) + " is " +
+                   std::to_string(omega) + " sr; expected a positive beam solid angle");
+  return omega;
+}
+
+int grid_nodes(const fs::path& file, double half_width, double step, double rho_max) {
+  const double nodes = std::ceil(2.0 * half_width / step) + 1.0;
+  if (nodes > max_grid_nodes)
+    fail(file, "grid_step = " + deg(step) + " needs " + std::to_string(nodes) +
+                   " nodes per axis for rho_max = " + deg(rho_max) + "; at most " +
+                   std::to_string(max_grid_nodes) + " are allowed: choose a larger grid_step");
+  return std::max(3, static_cast<int>(nodes));
+}
+
+// HEALPix bilinear interpolation of every present element at (rho, sigma).
+Beamsor::Field interpolating_field(const BeamMaps& m) {
+  return [&m, base = Healpix_Base(m.nside, RING, SET_NSIDE)](double rho, double sigma) {
+    Mueller out{};
+    fix_arr<int, 4> pix;
+    fix_arr<double, 4> wgt;
+    base.get_interpol(pointing(rho, sigma < 0 ? sigma + 2 * pi : sigma), pix, wgt);
+    for (int e = 0; e < 16; ++e) {
+      const auto& v = m.values[e];
+      if (v.empty()) continue;
+      double sum = 0.0;
+      for (int k = 0; k < 4; ++k)
+        if (static_cast<std::size_t>(pix[k]) < v.size()) sum += wgt[k] * v[pix[k]];
+      out[e / 4][e % 4] = sum;
+    }
+    return out;
+  };
+}
+
+}  // namespace
+
+Beamsor Beamsor::read_healpix_fits(const std::filesystem::path& file, double rho_max,
+                                   double grid_step) {
+  check_read_arguments(file, rho_max, grid_step);
+  try {
+    Beamsor b;
+    b.rho_max_ = rho_max;
+    b.a_ = std::sin(rho_max);
+    // The grid's corner nodes lie at sin(rho) = sqrt(2) a; sample() evaluates them too.
+    const BeamMaps maps = load_maps(file, rho_max, std::asin(std::min(1.0, std::sqrt(2.0) * b.a_)));
+    const double pixel_size = std::sqrt(4 * pi / (12.0 * maps.nside * maps.nside));
+    b.n_ = grid_nodes(file, b.a_, grid_step > 0 ? grid_step : pixel_size, rho_max);
+    b.step_ = 2.0 * b.a_ / (b.n_ - 1);
+    b.omega_ = pixel_sum_omega(file, maps, rho_max);
+    b.sample(interpolating_field(maps));
+    if (!b.has_element(0, 0)) fail(file, "B_TT is zero everywhere on the beam grid");
+    b.description_ = "HEALPix beamsor file " + file.filename().string() + " (NSIDE " +
+                     std::to_string(maps.nside) + ")";
+    return b;
+  } catch (...) {
+    rethrow_naming(file);
+  }
+}
+
+// ---- writing ------------------------------------------------------------------------------------
+
+namespace {
+
+void write_keys(const FitsFile& f, int nside, double rho_max, double grid_step,
+                const std::string& description) {
+  int status = 0;
+  const auto str = [&](const char* key, const char* value, const char* comment) {
+    fits_update_key(f.get(), TSTRING, key, const_cast<char*>(value), comment, &status);
+  };
+  long long nside_value = nside, first = 0, last = 12LL * nside * nside - 1;
+  str("PIXTYPE", "HEALPIX", "HEALPIX pixelisation");
+  str("ORDERING", "RING", "Pixel ordering scheme, either RING or NESTED");
+  fits_update_key(f.get(), TLONGLONG, "NSIDE", &nside_value, "Resolution parameter of HEALPIX",
+                  &status);
+  fits_update_key(f.get(), TLONGLONG, "FIRSTPIX", &first, "First pixel # (0 based)", &status);
+  fits_update_key(f.get(), TLONGLONG, "LASTPIX", &last, "Last pixel # (0 based)", &status);
+  str("INDXSCHM", "IMPLICIT", "Indexing: IMPLICIT or EXPLICIT");
+  str("OBJECT", "FULLSKY", "Sky coverage, either FULLSKY or PARTIAL");
+  fits_update_key(f.get(), TDOUBLE, "RHOMAX", &rho_max, "[rad] beam extent; zero beyond", &status);
+  fits_update_key(f.get(), TDOUBLE, "GRIDSTEP", &grid_step, "[rad] node step of the source grid",
+                  &status);
+  // COMMENT cards hold 70 characters; CFITSIO would split longer text mid-word.
+  for (const char* line : {"PISCO beamsor: a field of Mueller matrices B over beam directions.",
+                           "Column B_XY is row Y, column X (T, Q, U, V); absent columns are zero.",
+                           "Beam axis at the north pole, sigma = longitude."})
+    fits_write_comment(f.get(), line, &status);
+  fits_write_comment(f.get(), ("Source: " + description).c_str(), &status);
+  check(status, f.path(), "writing the header keys");
+}
+
+// Writes the full-sky columns; pixel p of element k is values[k][p] for p < cap, zero beyond.
+void write_columns(const FitsFile& f, const std::vector<std::vector<double>>& values,
+                   long long npix, long long repeat) {
+  int status = 0;
+  long rows_per_chunk = 0;
+  fits_get_rowsize(f.get(), &rows_per_chunk, &status);
+  const long long chunk = std::max<long long>(1, rows_per_chunk) * repeat;
+  std::vector<double> buffer(static_cast<std::size_t>(chunk));
+  for (long long first = 0; first < npix && status == 0; first += chunk) {
+    const long long n = std::min(chunk, npix - first);
+    for (std::size_t k = 0; k < values.size() && status == 0; ++k) {
+      const long long cap = static_cast<long long>(values[k].size());
+      std::fill(buffer.begin(), buffer.end(), 0.0);
+      if (first < cap)
+        std::copy(values[k].begin() + first, values[k].begin() + std::min(cap, first + n),
+                  buffer.begin());
+      fits_write_col(f.get(), TDOUBLE, static_cast<int>(k) + 1, first / repeat + 1,
+                     first % repeat + 1, n, buffer.data(), &status);
+    }
+  }
+  check(status, f.path(), "writing the maps");
+}
+
+}  // namespace
+
+namespace {
+
+// Values of the present elements at the RING pixels within rho_max (a prefix of the RING order).
+std::vector<std::vector<double>> cap_values(const Beamsor& b, const Healpix_Base& base,
+                                            const std::vector<int>& present) {
+  const long long cap = ring_prefix(base, b.rho_max(), 0);
+  std::vector<std::vector<double>> values(present.size(),
+                                          std::vector<double>(static_cast<std::size_t>(cap)));
+  for (long long p = 0; p < cap; ++p) {
+    const pointing ptg = base.pix2ang(static_cast<int>(p));
+    const double s = std::sin(ptg.theta);
+    const Mueller m = b.at(s * std::cos(ptg.phi), s * std::sin(ptg.phi));
+    for (std::size_t k = 0; k < present.size(); ++k)
+      values[k][static_cast<std::size_t>(p)] = m[present[k] / 4][present[k] % 4];
+  }
+  return values;
+}
+
+void write_beam_file(const fs::path& temporary, const fs::path& file, const Beamsor& b, int nside,
+                     const std::vector<int>& present) {
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  const long long npix = base.Npix();
+  const auto values = cap_values(b, base, present);
+  // healpy's layout of 1024 values per row where NSIDE allows it, as for sky maps.
+  const long long repeat = npix % 1024 == 0 ? 1024 : 1;
+  const std::string form = std::to_string(repeat) + "D";
+  std::vector<std::string> names;
+  for (int e : present) names.push_back(element_name(e));
+  std::vector<char*> ttype, tform, tunit;
+  char empty[] = "";
+  for (auto& n : names) {
+    ttype.push_back(n.data());
+    tform.push_back(const_cast<char*>(form.c_str()));
+    tunit.push_back(empty);
+  }
+  FitsFile f = FitsFile::create(temporary, file);
+  int status = 0;
+  fits_create_img(f.get(), BYTE_IMG, 0, nullptr, &status);
+  fits_create_tbl(f.get(), BINARY_TBL, npix / repeat, static_cast<int>(names.size()), ttype.data(),
+                  tform.data(), tunit.data(), "BEAMSOR", &status);
+  check(status, file, "creating the binary table");
+  write_keys(f, nside, b.rho_max(), b.grid_step(), b.description());
+  write_columns(f, values, npix, repeat);
+  f.close();
+}
+
+}  // namespace
+
+void Beamsor::write_healpix_fits(const std::filesystem::path& file, int nside) const {
+  if (!is_power_of_two(nside) || nside > max_nside)
+    fail(file, "NSIDE = " + std::to_string(nside) + " is not a power of two in [1, " +
+                   std::to_string(max_nside) + "]");
+  std::vector<int> present;
+  for (int e = 0; e < 16; ++e)
+    if (!elements_[e].empty()) present.push_back(e);
+  if (present.empty()) fail(file, "the beamsor has no non-zero element; nothing to write");
+  // A temporary name in the same directory, renamed over `file`: never a half-written file.
+  fs::path temporary = file;
+  temporary += ".tmp-" + std::to_string(::getpid());
+  std::error_code ec;
+  fs::remove(temporary, ec);  // a leftover of a crashed process with the same pid
+  try {
+    write_beam_file(temporary, file, *this, nside, present);
+    fs::rename(temporary, file);
+  } catch (...) {
+    fs::remove(temporary, ec);
+    rethrow_naming(file);
+  }
+}
+
+}  // namespace pisco

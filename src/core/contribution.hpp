@@ -1,0 +1,121 @@
+// The per-pixel contribution of the measurement equation (DESIGN 2-3), written once for the float64
+// reference and the CUDA kernels; shaders/contribution.glsl mirrors it line by line.
+//
+// For one sample with antenna basis (theta', phi', p') and detector angle zeta, let
+//   e_c = cos(zeta) theta' + sin(zeta) phi'         (co-polarization at the beam centre)
+// and, for a sky pixel with unit vector k,
+//   x = k.theta', y = k.phi', z = k.p', t = k.e_c = cos(zeta) x + sin(zeta) y.
+// DESIGN 2's Ludwig-3 co-polarization vector E = e0 theta' + e1 phi' + e2 p' with
+//   e = (cos zeta - x t/(1+z), sin zeta - y t/(1+z), -t)
+// simplifies, using x theta' + y phi' = k - z p', to   E = e_c - t/(1+z) (k + p').
+// Against the pixel's meridian basis scaled by sin(theta_k) (which leaves 2chi unchanged),
+//   theta~ = (kz kx, kz ky, -(kx^2+ky^2)),  phi~ = (-ky, kx, 0),   and k.theta~ = k.phi~ = 0:
+//   c = E.theta~ = (kz t - e_c,z) - t/(1+z) (kz z - p'_z)
+//   s = E.phi~   = (kx e_c,y - ky e_c,x) - t/(1+z) (kx p'_y - ky p'_x)
+//   cos 2chi = (c^2 - s^2)/(c^2 + s^2),  sin 2chi = 2 c s/(c^2 + s^2).
+// No trigonometric function is evaluated per pixel. The beam weight is interpolated at the
+// orthographic coordinates (x, y), which are the beamsor grid's coordinates (DESIGN 4).
+#pragma once
+
+#include "core/hd.hpp"
+
+namespace pisco::detail {
+
+template <class T>
+struct Vec3 {
+  T x, y, z;
+};
+
+template <class T>
+PISCO_HD T dot(const Vec3<T>& a, const Vec3<T>& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// Per-sample quantities: the antenna basis and the beam-centre co-polarization vector.
+template <class T>
+struct SampleFrame {
+  Vec3<T> theta_p, phi_p, p;  // theta', phi', p'
+  Vec3<T> e_c;                // cos(zeta) theta' + sin(zeta) phi'
+};
+
+// Antenna basis of DESIGN 2 from trigonometric values of the pointing and of zeta.
+template <class T>
+PISCO_HD SampleFrame<T> make_frame(T cos_theta, T sin_theta, T cos_phi, T sin_phi, T cos_psi,
+                                   T sin_psi, T cos_zeta, T sin_zeta) {
+  const Vec3<T> p{sin_theta * cos_phi, sin_theta * sin_phi, cos_theta};
+  const Vec3<T> th{cos_theta * cos_phi, cos_theta * sin_phi, -sin_theta};
+  const Vec3<T> ph{-sin_phi, cos_phi, T(0)};
+  SampleFrame<T> f;
+  f.p = p;
+  f.theta_p = {cos_psi * th.x + sin_psi * ph.x, cos_psi * th.y + sin_psi * ph.y,
+               cos_psi * th.z + sin_psi * ph.z};
+  f.phi_p = {-sin_psi * th.x + cos_psi * ph.x, -sin_psi * th.y + cos_psi * ph.y,
+             -sin_psi * th.z + cos_psi * ph.z};
+  f.e_c = {cos_zeta * f.theta_p.x + sin_zeta * f.phi_p.x, cos_zeta * f.theta_p.y + sin_zeta * f.phi_p.y,
+           cos_zeta * f.theta_p.z + sin_zeta * f.phi_p.z};
+  return f;
+}
+
+// Antenna coordinates of a sky direction and the polarization rotation 2chi between the detector's
+// co-polarization there and the pixel's meridian.
+template <class T>
+struct PixelGeometry {
+  T x, y, z;  // antenna coordinates: (x, y) orthographic beam coordinates, z = cos(rho)
+  T cos2chi, sin2chi;
+};
+
+template <class T>
+PISCO_HD PixelGeometry<T> pixel_geometry(const SampleFrame<T>& f, const Vec3<T>& k) {
+  PixelGeometry<T> g;
+  g.x = dot(k, f.theta_p);
+  g.y = dot(k, f.phi_p);
+  g.z = dot(k, f.p);
+  const T t = dot(k, f.e_c);
+  const T r = t / (T(1) + g.z);
+  const T c = (k.z * t - f.e_c.z) - r * (k.z * g.z - f.p.z);
+  const T s = (k.x * f.e_c.y - k.y * f.e_c.x) - r * (k.x * f.p.y - k.y * f.p.x);
+  const T inv = T(1) / (c * c + s * s);
+  g.cos2chi = (c * c - s * s) * inv;
+  g.sin2chi = T(2) * c * s * inv;
+  return g;
+}
+
+// Bilinear interpolation of a 4-vector field on the square grid of n x n nodes at
+// x_i = -a + i*step (x fastest), node values stored as 4 consecutive T. Outside the grid: zero.
+template <class T>
+PISCO_HD void interpolate_weights(const T* grid, int n, T a, T inv_step, T x, T y, T w[4]) {
+  const T u = (x + a) * inv_step;
+  const T v = (y + a) * inv_step;
+  w[0] = w[1] = w[2] = w[3] = T(0);
+  if (!(u >= T(0) && v >= T(0) && u <= T(n - 1) && v <= T(n - 1))) return;
+  int i = static_cast<int>(u);
+  int j = static_cast<int>(v);
+  if (i > n - 2) i = n - 2;
+  if (j > n - 2) j = n - 2;
+  const T fu = u - T(i);
+  const T fv = v - T(j);
+  const T* g00 = grid + 4 * (j * n + i);
+  const T* g10 = g00 + 4;
+  const T* g01 = g00 + 4 * n;
+  const T* g11 = g01 + 4;
+  const T c00 = (T(1) - fu) * (T(1) - fv), c10 = fu * (T(1) - fv), c01 = (T(1) - fu) * fv, c11 = fu * fv;
+  for (int m = 0; m < 4; ++m) w[m] = c00 * g00[m] + c10 * g10[m] + c01 * g01[m] + c11 * g11[m];
+}
+
+// w . Lambda(-chi) S: the detector-weighted Stokes response of one pixel (DESIGN 3).
+template <class T>
+PISCO_HD T stokes_response(const T w[4], T cos2chi, T sin2chi, T I, T Q, T U, T V) {
+  return w[0] * I + w[1] * (Q * cos2chi + U * sin2chi) + w[2] * (U * cos2chi - Q * sin2chi) + w[3] * V;
+}
+
+// One pixel's contribution to d(q): geometry, beam interpolation, polarization rotation.
+template <class T>
+PISCO_HD T pixel_contribution(const SampleFrame<T>& f, const Vec3<T>& k, T I, T Q, T U, T V,
+                              const T* grid, int n, T a, T inv_step) {
+  const PixelGeometry<T> g = pixel_geometry(f, k);
+  T w[4];
+  interpolate_weights(grid, n, a, inv_step, g.x, g.y, w);
+  return stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, V);
+}
+
+}  // namespace pisco::detail

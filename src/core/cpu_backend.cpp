@@ -1,0 +1,96 @@
+// The float64 reference backend: one sample per task, the disc walked ring by ring, every pixel
+// through pixel_contribution(). Straightforward by design: it is the ground truth of every test.
+#include <atomic>
+#include <cmath>
+#include <memory>
+#include <thread>
+
+#include "core/backend.hpp"
+#include "core/contribution.hpp"
+#include "core/disc.hpp"
+#include "core/thread_pool.hpp"
+
+namespace pisco::detail {
+namespace {
+
+class CpuBackend final : public Backend {
+ public:
+  CpuBackend(std::shared_ptr<const EngineInputs> inputs, unsigned threads)
+      : in_(std::move(inputs)),
+        pool_(threads ? threads : std::max(1u, std::thread::hardware_concurrency())) {}
+
+  std::string name() const override { return "cpu"; }
+  std::string device() const override {
+    return "float64 reference, " + std::to_string(pool_.size()) + " threads";
+  }
+
+  std::uint64_t convolve(std::size_t detector, const PointingView& pointing,
+                         std::span<double> tod) override {
+    const PreparedDetector& det = in_->detectors.at(detector);
+    std::atomic<std::uint64_t> pixels{0};
+    const bool per_sample = in_->normalization == Normalization::per_sample;
+    pool_.parallel_for(pointing.size(), 64, [&](std::size_t begin, std::size_t end) {
+      std::uint64_t local = 0;
+      for (std::size_t i = begin; i < end; ++i)
+        tod[i] = per_sample ? sample<true>(det, pointing.theta[i], pointing.phi[i], pointing.psi[i], local)
+                            : sample<false>(det, pointing.theta[i], pointing.phi[i], pointing.psi[i], local);
+      pixels += local;
+    });
+    return pixels;
+  }
+
+ private:
+  template <bool PerSample>
+  double sample(const PreparedDetector& det, double theta, double phi, double psi,
+                std::uint64_t& count) const {
+    const PreparedSky& sky = in_->sky;
+    phi = wrap_phi(phi);
+    const SampleFrame<double> f = make_frame(std::cos(theta), std::sin(theta), std::cos(phi),
+                                             std::sin(phi), std::cos(psi), std::sin(psi),
+                                             det.cos_zeta, det.sin_zeta);
+    const double* grid = det.weights.data();
+    const double* norm_grid = det.norm_weights.data();
+    double sum = 0.0, norm = 0.0;
+    for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
+                        [&](std::uint32_t begin, std::uint32_t end) {
+                          count += end - begin;
+                          for (std::uint32_t p = begin; p < end; ++p) {
+                            const double* px = &sky.pixels[std::size_t(p) * 8];
+                            const Vec3<double> k{px[0], px[1], px[2]};
+                            if constexpr (PerSample) {
+                              const PixelGeometry<double> g = pixel_geometry(f, k);
+                              double w[4], wn[4];
+                              interpolate_weights(grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, w);
+                              interpolate_weights(norm_grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wn);
+                              sum += stokes_response(w, g.cos2chi, g.sin2chi, px[4], px[5], px[6], px[7]);
+                              norm += wn[0];
+                            } else {
+                              sum += pixel_contribution(f, k, px[4], px[5], px[6], px[7], grid,
+                                                        det.grid_n, det.grid_a, det.grid_inv_step);
+                            }
+                          }
+                        });
+    if constexpr (PerSample) return norm > 0 ? sum / norm : 0.0;
+    return sum;
+  }
+
+  std::shared_ptr<const EngineInputs> in_;
+  ThreadPool pool_;
+};
+
+}  // namespace
+
+BackendEntry cpu_backend_entry() {
+  return {"cpu", 0,
+          [] {
+            return BackendInfo{"cpu", true,
+                               "float64 reference on " +
+                                   std::to_string(std::max(1u, std::thread::hardware_concurrency())) +
+                                   " hardware threads"};
+          },
+          [](std::shared_ptr<const EngineInputs> in, const EngineOptions& o) -> std::unique_ptr<Backend> {
+            return std::make_unique<CpuBackend>(std::move(in), o.threads);
+          }};
+}
+
+}  // namespace pisco::detail

@@ -1,0 +1,97 @@
+// Disc selection from a ring table (DESIGN 6): the RING pixels whose centres lie within rho of a
+// pointing, the same set as HEALPix C++ query_disc(..., inclusive = false), produced as one or two
+// contiguous index ranges per ring crossing the disc. Written once for the reference and the CUDA
+// kernels; shaders/disc.glsl mirrors it. Double precision throughout: the result must be exact.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "core/hd.hpp"
+
+namespace pisco::detail {
+
+struct RingEntry {
+  double z;             // cos(theta) of the ring
+  std::uint32_t first;  // first pixel index of the ring
+  std::uint32_t count;  // pixels in the ring
+  std::uint32_t shifted;  // 1 when pixel centres sit at phi = (j + 1/2) 2 pi / count
+  std::uint32_t pad;
+};
+
+// z of ring `ring` (1 ... 4 nside - 1), with HEALPix's own arithmetic so that boundary decisions agree.
+PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
+  const double fact2 = 4.0 / double(12 * nside * nside);
+  const double fact1 = double(nside << 1) * fact2;
+  if (ring < nside) return 1.0 - double(ring * ring) * fact2;
+  if (ring <= 3 * nside) return double(2 * nside - ring) * fact1;
+  const std::int64_t r = 4 * nside - ring;
+  return double(r * r) * fact2 - 1.0;
+}
+
+// Index of the ring just north of z (0 when z is north of ring 1), HEALPix's ring_above.
+PISCO_HD std::int64_t ring_above(std::int64_t nside, double z) {
+  const double az = z < 0 ? -z : z;
+  if (az <= 2.0 / 3.0) return std::int64_t(double(nside) * (2.0 - 1.5 * z));
+  const std::int64_t iring = std::int64_t(double(nside) * sqrt(3.0 * (1.0 - az)));
+  return (z > 0) ? iring : 4 * nside - iring - 1;
+}
+
+// The table for all 4 nside - 1 rings; entry r - 1 describes ring r.
+std::vector<RingEntry> make_ring_table(int nside);
+
+// Calls emit(begin, end) for each range [begin, end) of pixels in the disc of radius rho around
+// (theta0, phi0); cos_rho = cos(rho). rho must be in (0, pi/2].
+template <class Emit>
+PISCO_HD void for_each_disc_range(const RingEntry* rings, std::int64_t nside, double theta0,
+                                  double phi0, double rho, double cos_rho, Emit&& emit) {
+  const double pi = 3.141592653589793238462643383279502884;
+  const double inv_twopi = 0.5 / pi;
+  const std::int64_t nrings = 4 * nside - 1;
+  const std::int64_t npix = 12 * nside * nside;
+  const double z0 = cos(theta0);
+  const double xa = 1.0 / sqrt((1.0 - z0) * (1.0 + z0));
+
+  const double rlat1 = theta0 - rho;
+  std::int64_t irmin = ring_above(nside, cos(rlat1)) + 1;
+  if (rlat1 <= 0 && irmin > 1) {  // north pole inside: every ring north of irmin entirely
+    const RingEntry& r = rings[irmin - 2];
+    emit(std::uint32_t(0), r.first + r.count);
+  }
+  const double rlat2 = theta0 + rho;
+  std::int64_t irmax = ring_above(nside, cos(rlat2));
+  if (irmax > nrings) irmax = nrings;
+  if (irmin < 1) irmin = 1;
+
+  for (std::int64_t iz = irmin; iz <= irmax; ++iz) {
+    const RingEntry& r = rings[iz - 1];
+    const double z = r.z;
+    const double x = (cos_rho - z * z0) * xa;
+    const double ysq = 1.0 - z * z - x * x;
+    if (ysq <= 0) continue;  // the ring does not cross the disc boundary
+    const double dphi = atan2(sqrt(ysq), x);
+    if (!(dphi > 0)) continue;
+    const std::int64_t nr = r.count;
+    const double shift = r.shifted ? 0.5 : 0.0;
+    std::int64_t ip_lo = std::int64_t(floor(double(nr) * inv_twopi * (phi0 - dphi) - shift)) + 1;
+    std::int64_t ip_hi = std::int64_t(floor(double(nr) * inv_twopi * (phi0 + dphi) - shift));
+    if (ip_lo > ip_hi) continue;
+    if (ip_hi >= nr) {
+      ip_lo -= nr;
+      ip_hi -= nr;
+    }
+    if (ip_lo < 0) {
+      emit(r.first, std::uint32_t(r.first + ip_hi + 1));
+      emit(std::uint32_t(r.first + ip_lo + nr), r.first + r.count);
+    } else {
+      emit(std::uint32_t(r.first + ip_lo), std::uint32_t(r.first + ip_hi + 1));
+    }
+  }
+  if (rlat2 >= pi && irmax + 1 < 4 * nside) {  // south pole inside
+    const RingEntry& r = rings[irmax];
+    emit(r.first, std::uint32_t(npix));
+  }
+}
+
+}  // namespace pisco::detail

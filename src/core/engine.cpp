@@ -1,0 +1,81 @@
+#include "pisco/engine.hpp"
+
+#include <algorithm>
+
+#include "core/backend.hpp"
+#include "pisco/error.hpp"
+
+namespace pisco {
+namespace detail {
+
+const std::vector<BackendEntry>& backend_registry() {
+  static const std::vector<BackendEntry> registry = [] {
+    std::vector<BackendEntry> r;
+    r.push_back(cpu_backend_entry());
+    return r;
+  }();
+  return registry;
+}
+
+namespace {
+const BackendEntry& choose_backend(const std::string& name) {
+  const auto& reg = backend_registry();
+  if (name == "auto") {
+    const BackendEntry* best = nullptr;
+    for (const auto& e : reg)
+      if ((!best || e.priority > best->priority) && e.probe().available) best = &e;
+    if (!best) throw Error("backend 'auto': no backend is available on this machine");
+    return *best;
+  }
+  std::string known;
+  for (const auto& e : reg) {
+    if (e.name == name) {
+      const BackendInfo info = e.probe();
+      if (!info.available) throw Error("backend '" + name + "' is not available: " + info.detail);
+      return e;
+    }
+    known += (known.empty() ? "" : ", ") + e.name;
+  }
+  throw Error("backend '" + name + "' is unknown; expected one of: auto, " + known);
+}
+}  // namespace
+}  // namespace detail
+
+Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
+               const EngineOptions& options)
+    : focal_plane_(focal_plane) {
+  const detail::BackendEntry& entry = detail::choose_backend(options.backend);
+  auto inputs = std::make_shared<const detail::EngineInputs>(
+      detail::prepare_inputs(sky, beams, focal_plane, options.normalization));
+  backend_ = entry.create(std::move(inputs), options);
+}
+
+Engine::~Engine() = default;
+Engine::Engine(Engine&&) noexcept = default;
+Engine& Engine::operator=(Engine&&) noexcept = default;
+
+void Engine::convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) {
+  if (detector >= focal_plane_.size())
+    throw Error("convolve: detector index " + std::to_string(detector) + " but the focal plane has " +
+                std::to_string(focal_plane_.size()) + " detectors");
+  if (tod.size() != pointing.size())
+    throw Error("convolve: the TOD buffer has " + std::to_string(tod.size()) +
+                " samples but the pointing has " + std::to_string(pointing.size()));
+  check_pointing(pointing, ("pointing of detector '" + focal_plane_[detector].name + "'").c_str());
+  pixels_ += backend_->convolve(detector, pointing, tod);
+  samples_ += pointing.size();
+}
+
+std::string Engine::backend_name() const { return backend_->name(); }
+std::string Engine::device_name() const { return backend_->device(); }
+double Engine::mean_disc_pixels() const noexcept {
+  return samples_ ? double(pixels_) / double(samples_) : 0.0;
+}
+
+std::vector<BackendInfo> Engine::backends() {
+  std::vector<BackendInfo> out;
+  for (const auto& e : detail::backend_registry()) out.push_back(e.probe());
+  return out;
+}
+
+}  // namespace pisco

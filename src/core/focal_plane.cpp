@@ -1,0 +1,20 @@
+#include "pisco/focal_plane.hpp"
+
+#include <numbers>
+
+namespace pisco {
+
+std::size_t FocalPlane::add(Detector detector) {
+  detectors_.push_back(std::move(detector));
+  return detectors_.size() - 1;
+}
+
+std::size_t FocalPlane::add_pair(const std::string& name, double zeta, std::size_t beam_a,
+                                 std::size_t beam_b, double epsilon, double gain_a, double gain_b) {
+  // Paper eq. copol_bolo: detector b's co-polarization is detector a's rotated by -90 deg.
+  const std::size_t first = add({name + "a", zeta, epsilon, gain_a, beam_a});
+  add({name + "b", zeta - std::numbers::pi / 2, epsilon, gain_b, beam_b});
+  return first;
+}
+
+}  // namespace pisco

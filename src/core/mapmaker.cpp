@@ -1,0 +1,168 @@
+#include "pisco/mapmaker.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <string>
+
+#include <healpix_base.h>
+#include <pointing.h>
+
+#include "pisco/error.hpp"
+
+namespace pisco {
+namespace {
+
+using Base = T_Healpix_Base<int64>;
+using Sym3 = std::array<double, 6>;  // upper triangle, row by row: 00 01 02 11 12 22
+using Vec3 = std::array<double, 3>;
+
+// Symmetric 3x3 as a full matrix, for the eigenvalue iteration.
+using Mat3 = std::array<std::array<double, 3>, 3>;
+
+Mat3 full(const Sym3& s) {
+  return {{{s[0], s[1], s[2]}, {s[1], s[3], s[4]}, {s[2], s[4], s[5]}}};
+}
+
+// Eigenvalues of a symmetric 3x3 by cyclic Jacobi rotations. Unlike the closed (trigonometric) form,
+// Jacobi keeps small eigenvalues accurate relative to the large ones, which is what the
+// condition-number cut needs to tell a rank-deficient pixel from a merely poor one.
+Vec3 eigenvalues(const Sym3& s) {
+  Mat3 a = full(s);
+  for (int sweep = 0; sweep < 50; ++sweep) {
+    const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    const double diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+    if (off <= 1e-34 * diag || off == 0.0) break;
+    for (int p = 0; p < 2; ++p)
+      for (int q = p + 1; q < 3; ++q) {
+        if (a[p][q] == 0.0) continue;
+        // Rotation angle that zeroes a[p][q] (Numerical Recipes' stable form).
+        const double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+        const double t = (theta >= 0.0 ? 1.0 : -1.0) /
+                         (std::abs(theta) + std::sqrt(theta * theta + 1.0));
+        const double c = 1.0 / std::sqrt(t * t + 1.0);
+        const double sn = t * c;
+        for (int k = 0; k < 3; ++k) {  // columns p, q
+          const double akp = a[k][p], akq = a[k][q];
+          a[k][p] = c * akp - sn * akq;
+          a[k][q] = sn * akp + c * akq;
+        }
+        for (int k = 0; k < 3; ++k) {  // rows p, q
+          const double apk = a[p][k], aqk = a[q][k];
+          a[p][k] = c * apk - sn * aqk;
+          a[q][k] = sn * apk + c * aqk;
+        }
+      }
+  }
+  return {a[0][0], a[1][1], a[2][2]};
+}
+
+// Smallest over largest eigenvalue; 0 for a zero or (by rounding) indefinite matrix.
+double reciprocal_condition(const Sym3& s) {
+  const Vec3 ev = eigenvalues(s);
+  const double lo = std::min({ev[0], ev[1], ev[2]});
+  const double hi = std::max({ev[0], ev[1], ev[2]});
+  if (!(hi > 0.0) || lo <= 0.0) return 0.0;
+  return lo / hi;
+}
+
+// Solves s x = b by Cholesky; s is positive definite here (the condition cut came first).
+Vec3 cholesky_solve(const Sym3& s, const Vec3& b) {
+  const double l00 = std::sqrt(s[0]);
+  const double l10 = s[1] / l00;
+  const double l20 = s[2] / l00;
+  const double l11 = std::sqrt(s[3] - l10 * l10);
+  const double l21 = (s[4] - l20 * l10) / l11;
+  const double l22 = std::sqrt(s[5] - l20 * l20 - l21 * l21);
+  // Forward substitution L y = b, then back substitution L^T x = y.
+  const double y0 = b[0] / l00;
+  const double y1 = (b[1] - l10 * y0) / l11;
+  const double y2 = (b[2] - l20 * y0 - l21 * y1) / l22;
+  const double x2 = y2 / l22;
+  const double x1 = (y1 - l21 * x2) / l11;
+  const double x0 = (y0 - l10 * x1 - l20 * x2) / l00;
+  return {x0, x1, x2};
+}
+
+void check_inputs(const Detector& det, const PointingView& ptg, std::span<const double> tod) {
+  if (tod.size() != ptg.size())
+    throw Error("BinnedMapmaker::add: detector '" + det.name + "': " + std::to_string(tod.size()) +
+                " TOD samples for " + std::to_string(ptg.size()) + " pointing samples");
+  if (!std::isfinite(det.zeta) || !std::isfinite(det.epsilon) || !std::isfinite(det.gain))
+    throw Error("BinnedMapmaker::add: detector '" + det.name +
+                "' has a non-finite zeta, epsilon or gain");
+  check_pointing(ptg, "BinnedMapmaker::add");
+  for (std::size_t i = 0; i < tod.size(); ++i)
+    if (!std::isfinite(tod[i]))
+      throw Error("BinnedMapmaker::add: detector '" + det.name + "': TOD sample " +
+                  std::to_string(i) + " is not finite");
+}
+
+}  // namespace
+
+BinnedMapmaker::BinnedMapmaker(int nside, double rcond_min) : nside_(nside), rcond_min_(rcond_min) {
+  if (nside < 1 || nside > 8192 || (nside & (nside - 1)) != 0)
+    throw Error("BinnedMapmaker: nside = " + std::to_string(nside) +
+                " is not a power of two in [1, 8192]");
+  if (!std::isfinite(rcond_min) || rcond_min < 0.0 || rcond_min > 1.0)
+    throw Error("BinnedMapmaker: rcond_min = " + std::to_string(rcond_min) +
+                " must be in [0, 1]");
+  const std::size_t npix = 12 * std::size_t(nside) * std::size_t(nside);
+  ata_.assign(6 * npix, 0.0);
+  atd_.assign(3 * npix, 0.0);
+  hits_.assign(npix, 0);
+}
+
+void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
+                         std::span<const double> tod) {
+  // Everything is checked before anything is accumulated, so a bad chunk leaves the maps intact.
+  check_inputs(detector, ptg, tod);
+  const Base base(int64(nside_), RING, SET_NSIDE);
+  const double co = 0.5 * detector.gain * (1.0 + detector.epsilon);
+  const double pol = 0.5 * detector.gain * (1.0 - detector.epsilon);
+  for (std::size_t i = 0; i < tod.size(); ++i) {
+    const std::size_t pix = std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i])));
+    const double gamma = ptg.psi[i] + detector.zeta;
+    const double a[3] = {co, pol * std::cos(2.0 * gamma), pol * std::sin(2.0 * gamma)};
+    double* m = &ata_[6 * pix];
+    m[0] += a[0] * a[0];
+    m[1] += a[0] * a[1];
+    m[2] += a[0] * a[2];
+    m[3] += a[1] * a[1];
+    m[4] += a[1] * a[2];
+    m[5] += a[2] * a[2];
+    double* v = &atd_[3 * pix];
+    for (int k = 0; k < 3; ++k) v[k] += a[k] * tod[i];
+    ++hits_[pix];
+  }
+}
+
+BinnedMaps BinnedMapmaker::solve() const {
+  const std::size_t npix = hits_.size();
+  BinnedMaps out;
+  out.nside = nside_;
+  out.I.assign(npix, unseen);
+  out.Q.assign(npix, unseen);
+  out.U.assign(npix, unseen);
+  out.hits = hits_;
+  out.rcond.assign(npix, 0.0);
+  for (std::size_t p = 0; p < npix; ++p) {
+    if (hits_[p] == 0) continue;
+    Sym3 m;
+    std::copy_n(&ata_[6 * p], 6, m.begin());
+    const double rc = reciprocal_condition(m);
+    out.rcond[p] = rc;
+    // A pixel seen at a single polarization angle (or two orthogonal ones) has a singular
+    // matrix: its Q/U cannot be separated, and the cut leaves it UNSEEN.
+    if (rc < rcond_min_ || rc == 0.0) continue;
+    const Vec3 x = cholesky_solve(m, {atd_[3 * p], atd_[3 * p + 1], atd_[3 * p + 2]});
+    // With a very permissive rcond_min, rounding can still defeat the factorization.
+    if (!std::isfinite(x[0]) || !std::isfinite(x[1]) || !std::isfinite(x[2])) continue;
+    out.I[p] = x[0];
+    out.Q[p] = x[1];
+    out.U[p] = x[2];
+  }
+  return out;
+}
+
+}  // namespace pisco

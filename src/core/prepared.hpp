@@ -1,0 +1,52 @@
+// Engine inputs prepared once, in the layout every backend consumes: the sky as a pixel table, the
+// ring table of the disc selection, and one weight grid per detector (DESIGN 3: the 16-element
+// beamsor collapsed to the 4-vector w a total-power detector needs).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "core/disc.hpp"
+#include "pisco/beamsor.hpp"
+#include "pisco/engine.hpp"
+#include "pisco/focal_plane.hpp"
+#include "pisco/sky.hpp"
+
+namespace pisco::detail {
+
+struct PreparedSky {
+  int nside = 0;
+  double pixel_area = 0.0;
+  // 8 doubles per pixel: unit vector kx, ky, kz, 0, then I, Q, U, V (one cache line per pixel).
+  std::vector<double> pixels;
+  std::vector<RingEntry> rings;
+};
+
+struct PreparedDetector {
+  double cos_zeta = 1.0, sin_zeta = 0.0;
+  double rho_max = 0.0, cos_rho_max = 1.0;
+  int grid_n = 0;
+  double grid_a = 0.0, grid_inv_step = 0.0;
+  // w(x, y) = (Omega_pix / Omega~) s/2 [(1+eps) B_T. + (1-eps) B_Q.], 4 per node, x fastest.
+  std::vector<double> weights;
+  // Per-sample normalization only: (Omega_pix B_TT / Omega~, 0, 0, 0) per node.
+  std::vector<double> norm_weights;
+};
+
+struct EngineInputs {
+  PreparedSky sky;
+  std::vector<PreparedDetector> detectors;
+  Normalization normalization = Normalization::integral;
+};
+
+PreparedSky prepare_sky(const Sky& sky);
+PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
+                                  Normalization normalization);
+EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
+                            const FocalPlane& focal_plane, Normalization normalization);
+
+// phi wrapped into [0, 2 pi).
+double wrap_phi(double phi);
+
+}  // namespace pisco::detail

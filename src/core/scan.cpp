@@ -1,0 +1,131 @@
+#include "pisco/scan.hpp"
+
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <string>
+
+#include <healpix_base.h>
+#include <pointing.h>
+
+#include "pisco/error.hpp"
+
+namespace pisco {
+namespace {
+
+constexpr double pi = std::numbers::pi;
+constexpr double two_pi = 2.0 * std::numbers::pi;
+
+// 64-bit pixel indices, so that every NSIDE HEALPix supports is addressable.
+using Base = T_Healpix_Base<int64>;
+
+void check_nside(const char* fn, int nside) {
+  if (nside < 1 || nside > (1 << 29) || (nside & (nside - 1)) != 0)
+    throw Error(std::string(fn) + ": nside = " + std::to_string(nside) +
+                " is not a power of two in [1, 2^29]");
+}
+
+void check_psis(const char* fn, const std::vector<double>& psis) {
+  if (psis.empty()) throw Error(std::string(fn) + ": psis is empty; give at least one angle");
+  for (std::size_t i = 0; i < psis.size(); ++i)
+    if (!std::isfinite(psis[i]))
+      throw Error(std::string(fn) + ": psis[" + std::to_string(i) + "] is not finite");
+}
+
+Base ring_base(int nside) { return Base(int64(nside), RING, SET_NSIDE); }
+
+double wrap_phi(double phi) {
+  double w = std::fmod(phi, two_pi);
+  if (w < 0.0) w += two_pi;
+  // fmod of a tiny negative number plus 2 pi rounds to 2 pi itself.
+  return w >= two_pi ? 0.0 : w;
+}
+
+// Moves a point whose co-latitude has left [0, pi] back over the pole it crossed: crossing a pole
+// puts the point on the opposite meridian.
+void reflect_at_poles(double& theta, double& phi) {
+  if (theta < 0.0) {
+    theta = -theta;
+    phi += pi;
+  } else if (theta > pi) {
+    theta = two_pi - theta;
+    phi += pi;
+  }
+  phi = wrap_phi(phi);
+}
+
+// Uniform in [-1/2, 1/2) from the top 53 bits of one 64-bit draw. Written out rather than through
+// std::uniform_real_distribution, whose algorithm the standard leaves to each library, so a seed
+// gives the same scan on every platform.
+double centred_uniform(std::mt19937_64& rng) { return double(rng() >> 11) * 0x1.0p-53 - 0.5; }
+
+}  // namespace
+
+Pointing pixel_centre_scan(int nside, const std::vector<double>& psis) {
+  check_nside("pixel_centre_scan", nside);
+  check_psis("pixel_centre_scan", psis);
+  const Base base = ring_base(nside);
+  Pointing out;
+  out.reserve(std::size_t(base.Npix()) * psis.size());
+  for (const double psi : psis)
+    for (int64 pix = 0; pix < base.Npix(); ++pix) {
+      const pointing c = base.pix2ang(pix);
+      out.push_back(c.theta, c.phi, psi);
+    }
+  return out;
+}
+
+Pointing random_offset_scan(int nside, const std::vector<double>& psis, double f,
+                            std::uint64_t seed, bool symmetric) {
+  check_nside("random_offset_scan", nside);
+  check_psis("random_offset_scan", psis);
+  if (!std::isfinite(f) || f < 0.0)
+    throw Error("random_offset_scan: f = " + std::to_string(f) +
+                " must be a finite, non-negative fraction of the pixel size");
+  const Base base = ring_base(nside);
+  const double width = f * std::sqrt(4.0 * pi / double(base.Npix()));  // f Omega
+  std::mt19937_64 rng(seed);
+  Pointing out;
+  out.reserve(std::size_t(base.Npix()) * psis.size() * (symmetric ? 2 : 1));
+  // Fresh offsets for every (psi, pixel) sample: each pass over the sky sees different positions.
+  for (const double psi : psis)
+    for (int64 pix = 0; pix < base.Npix(); ++pix) {
+      const pointing c = base.pix2ang(pix);
+      const double dtheta = width * centred_uniform(rng);
+      // Dividing by sin(theta) makes the longitude offset a comparable arc on the sphere; pixel
+      // centres never sit on a pole, so sin(theta) > 0.
+      const double dphi = width * centred_uniform(rng) / std::sin(c.theta);
+      for (const double sign : {1.0, -1.0}) {
+        double theta = c.theta + sign * dtheta;
+        double phi = c.phi + sign * dphi;
+        reflect_at_poles(theta, phi);
+        out.push_back(theta, phi, psi);
+        if (!symmetric) break;
+      }
+    }
+  return out;
+}
+
+Pointing raster_scan(double theta0, double phi0, double radius, int nside,
+                     const std::vector<double>& psis) {
+  if (!std::isfinite(theta0) || theta0 < 0.0 || theta0 > pi)
+    throw Error("raster_scan: theta0 = " + std::to_string(theta0) + " rad must be in [0, pi]");
+  if (!std::isfinite(phi0)) throw Error("raster_scan: phi0 is not finite");
+  if (!std::isfinite(radius) || radius <= 0.0 || radius >= pi)
+    throw Error("raster_scan: radius = " + std::to_string(radius) + " rad must be in (0, pi)");
+  check_nside("raster_scan", nside);
+  check_psis("raster_scan", psis);
+  const Base base = ring_base(nside);
+  // Non-inclusive: only pixels whose centres lie within the radius.
+  const std::vector<int64> pixels = base.query_disc(pointing(theta0, phi0), radius).toVector();
+  Pointing out;
+  out.reserve(pixels.size() * psis.size());
+  for (const double psi : psis)
+    for (const int64 pix : pixels) {
+      const pointing c = base.pix2ang(pix);
+      out.push_back(c.theta, c.phi, psi);
+    }
+  return out;
+}
+
+}  // namespace pisco

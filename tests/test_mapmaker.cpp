@@ -1,0 +1,238 @@
+// Binned I/Q/U map-maker (DESIGN 8): exact round trips, the condition-number cut, streaming.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+#include <numbers>
+#include <random>
+#include <string>
+
+#include "pisco/error.hpp"
+#include "pisco/mapmaker.hpp"
+#include "pisco/scan.hpp"
+
+namespace {
+
+constexpr double pi = std::numbers::pi;
+constexpr double deg = pi / 180;
+
+struct Maps {
+  std::vector<double> I, Q, U;
+};
+
+Maps random_maps(int nside, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  const std::size_t npix = 12 * std::size_t(nside) * nside;
+  Maps m{std::vector<double>(npix), std::vector<double>(npix), std::vector<double>(npix)};
+  for (std::size_t p = 0; p < npix; ++p) {
+    m.I[p] = 50.0 + 10.0 * n(rng);  // a monopole as well as fluctuations
+    m.Q[p] = n(rng);
+    m.U[p] = n(rng);
+  }
+  return m;
+}
+
+// The detector model the map-maker inverts, evaluated at pixel centres (the scans used here put
+// every sample on the centre of the pixel whose values it reads).
+std::vector<double> make_tod(const pisco::Detector& d, const pisco::Pointing& p, const Maps& m,
+                             int nside) {
+  const std::size_t npix = 12 * std::size_t(nside) * nside;
+  std::vector<double> tod(p.size());
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    const std::size_t pix = k % npix;
+    const double g = p.psi[k] + d.zeta;
+    tod[k] = 0.5 * d.gain *
+             ((1 + d.epsilon) * m.I[pix] +
+              (1 - d.epsilon) * (m.Q[pix] * std::cos(2 * g) + m.U[pix] * std::sin(2 * g)));
+  }
+  return tod;
+}
+
+double max_error(const std::vector<double>& a, const std::vector<double>& b) {
+  double worst = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) worst = std::max(worst, std::abs(a[i] - b[i]));
+  return worst;
+}
+
+template <class Fn>
+void expect_error(Fn fn, const std::string& needle) {
+  try {
+    fn();
+    ADD_FAILURE() << "no pisco::Error; expected one mentioning '" << needle << "'";
+  } catch (const pisco::Error& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
+TEST(Mapmaker, ThreeAnglesRoundTripExactly) {
+  const int nside = 16;
+  const Maps truth = random_maps(nside, 1);
+  const pisco::Detector det{"d0", 10 * deg, 0.05, 1.3, 0};
+  const pisco::Pointing p = pisco::pixel_centre_scan(nside, {0.0, 45 * deg, 90 * deg});
+  const std::vector<double> tod = make_tod(det, p, truth, nside);
+
+  pisco::BinnedMapmaker mm(nside);
+  mm.add(det, p, tod);
+  const pisco::BinnedMaps out = mm.solve();
+  const double eI = max_error(out.I, truth.I), eQ = max_error(out.Q, truth.Q),
+               eU = max_error(out.U, truth.U);
+  std::cout << "round trip NSIDE 16, eps 0.05, gain 1.3, zeta 10 deg: max |dI| " << eI
+            << ", |dQ| " << eQ << ", |dU| " << eU << "\n";
+  EXPECT_LT(eI, 1e-12);
+  EXPECT_LT(eQ, 1e-12);
+  EXPECT_LT(eU, 1e-12);
+  for (std::size_t pix = 0; pix < out.hits.size(); ++pix) ASSERT_EQ(out.hits[pix], 3u) << pix;
+  EXPECT_EQ(out.nside, nside);
+}
+
+TEST(Mapmaker, ConditionNumberOfAnIdealPixel) {
+  // Angles 0, 45, 90 deg: 4 A^T A = [[3,0,1],[0,2,0],[1,0,1]], eigenvalues 2 and 2 +- sqrt 2.
+  pisco::BinnedMapmaker mm(1);
+  const pisco::Detector det{"d", 0.0, 0.0, 1.0, 0};
+  const pisco::Pointing p = pisco::pixel_centre_scan(1, {0.0, 45 * deg, 90 * deg});
+  mm.add(det, p, std::vector<double>(p.size(), 1.0));
+  const pisco::BinnedMaps out = mm.solve();
+  const double expected = (2 - std::sqrt(2.0)) / (2 + std::sqrt(2.0));
+  std::cout << "rcond at 0/45/90 deg: " << out.rcond[0] << " (expected " << expected << ")\n";
+  for (double rc : out.rcond) EXPECT_NEAR(rc, expected, 1e-14);
+  // A constant TOD of 1 is I = 2, Q = U = 0 for this detector.
+  EXPECT_NEAR(out.I[5], 2.0, 1e-14);
+  EXPECT_NEAR(out.Q[5], 0.0, 1e-14);
+  EXPECT_NEAR(out.U[5], 0.0, 1e-14);
+}
+
+TEST(Mapmaker, PixelsSeenAtOneAngleAreCut) {
+  const int nside = 8;
+  const std::size_t npix = 12 * nside * nside;
+  const Maps truth = random_maps(nside, 2);
+  const pisco::Detector det{"d", 0.0, 0.0, 1.0, 0};
+  pisco::BinnedMapmaker mm(nside);
+  // Every pixel once at psi = 0, three more times at psi = 0 for the second quarter, and the
+  // first half also at 45 and 90 deg.
+  const pisco::Pointing all0 = pisco::pixel_centre_scan(nside, {0.0});
+  mm.add(det, all0, make_tod(det, all0, truth, nside));
+  const pisco::Pointing other = pisco::pixel_centre_scan(nside, {45 * deg, 90 * deg});
+  const std::vector<double> tod_other = make_tod(det, other, truth, nside);
+  for (std::size_t block = 0; block < 2; ++block)
+    mm.add(det, other.view().subspan(block * npix, npix / 2),
+           std::span<const double>(tod_other).subspan(block * npix, npix / 2));
+  for (int rep = 0; rep < 3; ++rep)
+    mm.add(det, all0.view().subspan(npix / 4, npix / 4),
+           std::span<const double>(make_tod(det, all0, truth, nside)).subspan(npix / 4, npix / 4));
+
+  const pisco::BinnedMaps out = mm.solve();
+  std::size_t solved = 0, cut = 0;
+  double worst_cut_rcond = 0;
+  for (std::size_t pix = 0; pix < npix; ++pix) {
+    if (pix < npix / 2) {
+      ASSERT_EQ(out.hits[pix], pix < npix / 4 ? 3u : 6u) << pix;
+      ASSERT_NEAR(out.Q[pix], truth.Q[pix], 1e-12) << pix;
+      ++solved;
+    } else {
+      ASSERT_EQ(out.hits[pix], 1u) << pix;
+      ASSERT_EQ(out.I[pix], pisco::unseen) << pix;
+      ASSERT_EQ(out.Q[pix], pisco::unseen) << pix;
+      ASSERT_EQ(out.U[pix], pisco::unseen) << pix;
+      worst_cut_rcond = std::max(worst_cut_rcond, out.rcond[pix]);
+      ++cut;
+    }
+  }
+  std::cout << "single-angle cut: " << solved << " pixels solved, " << cut
+            << " cut; largest rcond among the cut " << worst_cut_rcond << "\n";
+  EXPECT_LT(worst_cut_rcond, 1e-12);
+}
+
+TEST(Mapmaker, RepeatedSingleAngleIsStillCut) {
+  pisco::BinnedMapmaker mm(2);
+  const pisco::Detector det{"d", 0.3, 0.0, 1.0, 0};
+  const pisco::Pointing p = pisco::pixel_centre_scan(2, {0.0, 0.0, 0.0, pi});
+  mm.add(det, p, std::vector<double>(p.size(), 1.0));
+  const pisco::BinnedMaps out = mm.solve();
+  std::cout << "four hits at psi 0 and pi (one polarization angle): rcond " << out.rcond[0] << "\n";
+  for (std::size_t pix = 0; pix < out.hits.size(); ++pix) {
+    EXPECT_EQ(out.hits[pix], 4u);
+    EXPECT_EQ(out.I[pix], pisco::unseen);
+    EXPECT_LT(out.rcond[pix], 1e-12);
+  }
+}
+
+TEST(Mapmaker, UnvisitedPixelsAreUnseenWithZeroHits) {
+  pisco::BinnedMapmaker mm(4);
+  const pisco::Detector det{"d", 0.0, 0.0, 1.0, 0};
+  const pisco::Pointing p = pisco::raster_scan(pi / 2, 1.0, 20 * deg, 4, {0.0, 60 * deg, 120 * deg});
+  mm.add(det, p, std::vector<double>(p.size(), 2.0));
+  const pisco::BinnedMaps out = mm.solve();
+  std::size_t visited = 0;
+  for (std::size_t pix = 0; pix < out.hits.size(); ++pix) {
+    if (out.hits[pix] == 0) {
+      EXPECT_EQ(out.I[pix], pisco::unseen);
+      EXPECT_EQ(out.rcond[pix], 0.0);
+    } else {
+      ++visited;
+      EXPECT_EQ(out.hits[pix], 3u);
+      EXPECT_NEAR(out.I[pix], 4.0, 1e-13);
+    }
+  }
+  std::cout << "raster: " << visited << " of " << out.hits.size() << " pixels visited\n";
+  EXPECT_EQ(visited * 3, p.size());
+}
+
+TEST(Mapmaker, ChunkedAddEqualsOneAdd) {
+  const int nside = 8;
+  const Maps truth = random_maps(nside, 3);
+  const pisco::Detector det{"d", -20 * deg, 0.01, 0.9, 0};
+  const pisco::Pointing p = pisco::random_offset_scan(nside, {0.0, 30 * deg, 100 * deg}, 0.2, 9);
+  std::vector<double> tod(p.size());
+  for (std::size_t k = 0; k < tod.size(); ++k) tod[k] = std::sin(0.01 * double(k));
+
+  pisco::BinnedMapmaker whole(nside), chunked(nside);
+  whole.add(det, p, tod);
+  const std::size_t chunk = 97;  // does not divide the stream evenly
+  std::size_t chunks = 0;
+  for (std::size_t first = 0; first < p.size(); first += chunk, ++chunks) {
+    const std::size_t n = std::min(chunk, p.size() - first);
+    chunked.add(det, p.view().subspan(first, n), std::span<const double>(tod).subspan(first, n));
+  }
+  const pisco::BinnedMaps a = whole.solve(), b = chunked.solve();
+  std::cout << "chunked add: " << chunks << " chunks of " << chunk << " samples\n";
+  EXPECT_EQ(a.I, b.I);
+  EXPECT_EQ(a.Q, b.Q);
+  EXPECT_EQ(a.U, b.U);
+  EXPECT_EQ(a.hits, b.hits);
+  EXPECT_EQ(a.rcond, b.rcond);
+}
+
+TEST(Mapmaker, BadInputsAreReportedAndLeaveTheMapsIntact) {
+  expect_error([] { pisco::BinnedMapmaker(12); }, "nside");
+  expect_error([] { pisco::BinnedMapmaker(0); }, "nside");
+  expect_error([] { pisco::BinnedMapmaker(8, -1.0); }, "rcond_min");
+  expect_error([] { pisco::BinnedMapmaker(8, std::nan("")); }, "rcond_min");
+
+  pisco::BinnedMapmaker mm(4);
+  const pisco::Detector det{"det7", 0.0, 0.0, 1.0, 0};
+  const pisco::Pointing p = pisco::pixel_centre_scan(4, {0.0, 45 * deg, 90 * deg});
+  std::vector<double> tod(p.size(), 1.0);
+  mm.add(det, p, tod);
+  const pisco::BinnedMaps before = mm.solve();
+
+  expect_error([&] { mm.add(det, p, std::span<const double>(tod).first(10)); }, "10 TOD samples");
+  std::vector<double> bad = tod;
+  bad[5] = std::nan("");
+  expect_error([&] { mm.add(det, p, bad); }, "sample 5");
+  bad[5] = 1.0;
+  bad.back() = INFINITY;
+  expect_error([&] { mm.add(det, p, bad); }, "sample " + std::to_string(bad.size() - 1));
+  pisco::Pointing off = p;
+  off.theta[3] = 4.0;
+  expect_error([&] { mm.add(det, off, tod); }, "sample 3");
+  pisco::Detector nan_gain = det;
+  nan_gain.gain = std::nan("");
+  expect_error([&] { mm.add(nan_gain, p, tod); }, "det7");
+
+  const pisco::BinnedMaps after = mm.solve();
+  EXPECT_EQ(before.I, after.I);
+  EXPECT_EQ(before.hits, after.hits);
+}
+
+}  // namespace
