@@ -71,9 +71,10 @@ PISCO_HD PixelGeometry<T> pixel_geometry(const SampleFrame<T>& f, const Vec3<T>&
   g.y = dot(k, f.phi_p);
   g.z = dot(k, f.p);
   const T t = dot(k, f.e_c);
-  const T r = t / (T(1) + g.z);
-  const T c = (k.z * t - f.e_c.z) - r * (k.z * g.z - f.p.z);
-  const T s = (k.x * f.e_c.y - k.y * f.e_c.x) - r * (k.x * f.p.y - k.y * f.p.x);
+  // c and s times (1 + z): the common factor cancels in cos 2chi and sin 2chi, saving a division.
+  const T zp = T(1) + g.z;
+  const T c = (k.z * t - f.e_c.z) * zp - t * (k.z * g.z - f.p.z);
+  const T s = (k.x * f.e_c.y - k.y * f.e_c.x) * zp - t * (k.x * f.p.y - k.y * f.p.x);
   const T inv = T(1) / (c * c + s * s);
   g.cos2chi = (c * c - s * s) * inv;
   g.sin2chi = T(2) * c * s * inv;
