@@ -92,8 +92,11 @@ struct Scene {
     o.cross_polar = 0.02;
     o.cross_polar_pattern = pisco::CrossPolarPattern::uniform;
     beams.push_back(pisco::Beamsor::elliptical_gaussian(2.6 * deg, 3.1 * deg, -40 * deg, o));
+    o.cross_polar = 0.03;  // a round beam with uniform cross-polar: stored as a radial profile
+    beams.push_back(pisco::Beamsor::gaussian(2.5 * deg, o));
     fp.add_pair("p0", 22 * deg, 0, 1, 0.03, 1.1, 0.95);
     fp.add({"single", -63 * deg, 0.2, 0.8, 1});
+    fp.add({"round", 141 * deg, 0.05, 1.2, 2});
     std::mt19937_64 rng(21);
     std::uniform_real_distribution<double> u(0, 1);
     for (int i = 0; i < 60; ++i) ptg.push_back(std::acos(1 - 2 * u(rng)), 2 * pi * u(rng), 2 * pi * u(rng) - pi);

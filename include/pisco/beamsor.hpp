@@ -41,6 +41,7 @@ class Beamsor {
   using Field = std::function<Mueller(double rho, double sigma)>;
 
   // Circular Gaussian b = exp(-rho^2 / 2 s^2), s = fwhm / sqrt(8 ln 2): B = b (x) X(kappa) M.
+  // Round beams without a sigma-dependent cross-polar pattern are stored as radial profiles.
   static Beamsor gaussian(double fwhm, const BeamOptions& options = {});
   // Elliptical Gaussian with widths fwhm_x along the major-axis direction `angle` (from theta'
   // towards phi') and fwhm_y perpendicular to it.
@@ -48,8 +49,13 @@ class Beamsor {
                                      const BeamOptions& options = {});
   // Any field: sampled on a grid of step `grid_step` out to rho_max; Omega~ by quadrature of the
   // field's B_TT over the cap (the smallest feature of the field must be resolved by grid_step).
+  // With `radial`, the field must not depend on sigma: it is stored as a radial profile in
+  // r = sin(rho), sampled radial_oversampling times finer than grid_step, so that its interpolation
+  // is exactly invariant under rotations about the beam axis (an ideal round beam then leaks no
+  // temperature into polarization, VALIDATION C).
   static Beamsor from_field(const Field& field, double rho_max, double grid_step,
-                            std::string description, double feature_scale = 0.0);
+                            std::string description, double feature_scale = 0.0, bool radial = false);
+  static constexpr int radial_oversampling = 8;
 
   // The paper's HEALPix beamsor files: a FITS binary table of up to 16 HEALPix maps with columns
   // named B_TT, B_QT, ... (B_XY = row Y, column X; absent columns are zero), beam axis at the north
@@ -62,18 +68,20 @@ class Beamsor {
   void write_healpix_fits(const std::filesystem::path& file, int nside) const;
 
   double rho_max() const noexcept { return rho_max_; }
-  int grid_size() const noexcept { return n_; }          // nodes per axis
+  bool is_radial() const noexcept { return radial_; }   // stored as a radial profile
+  int grid_size() const noexcept { return n_; }          // nodes per axis (radial: along r)
   double grid_half_width() const noexcept { return a_; } // = sin(rho_max)
-  double grid_step() const noexcept { return step_; }    // node spacing in x and y
+  double grid_step() const noexcept { return step_; }    // node spacing in x and y (radial: in r)
   double omega_tilde() const noexcept { return omega_; } // integral of B_TT over the cap, sr
   const std::string& description() const noexcept { return description_; }
 
-  // Grid values of element (row, col), n*n nodes with x fastest; empty if the element is zero.
+  // Grid values of element (row, col), n*n nodes with x fastest (radial: n nodes at r = i * step);
+  // empty if the element is zero.
   std::span<const double> element(int row, int col) const;
   bool has_element(int row, int col) const;
 
-  // Bilinear interpolation of the (unnormalized) Mueller matrix at orthographic (x, y); zero
-  // outside the grid or beyond rho_max.
+  // Bilinear (radial: linear in r) interpolation of the (unnormalized) Mueller matrix at
+  // orthographic (x, y); zero outside the grid or beyond rho_max.
   Mueller at(double x, double y) const;
 
  private:
@@ -81,6 +89,7 @@ class Beamsor {
   void sample(const Field& field);
 
   double rho_max_ = 0.0;
+  bool radial_ = false;
   int n_ = 0;
   double a_ = 0.0;
   double step_ = 0.0;

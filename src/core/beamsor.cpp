@@ -139,6 +139,18 @@ double cap_integral(const std::function<double(double, double)>& f, double rho_m
 
 void Beamsor::sample(const Field& field) {
   std::array<std::vector<double>, 16> values;
+  if (radial_) {
+    for (auto& v : values) v.assign(static_cast<std::size_t>(n_), 0.0);
+    for (int i = 0; i < n_; ++i) {
+      const Mueller m = field(std::asin(std::min(1.0, i * step_)), 0.0);
+      for (int e = 0; e < 16; ++e) values[e][static_cast<std::size_t>(i)] = m[e / 4][e % 4];
+    }
+    for (int e = 0; e < 16; ++e) {
+      const bool zero = std::all_of(values[e].begin(), values[e].end(), [](double v) { return v == 0.0; });
+      elements_[e] = zero ? std::vector<double>{} : std::move(values[e]);
+    }
+    return;
+  }
   for (auto& v : values) v.assign(static_cast<std::size_t>(n_) * n_, 0.0);
   for (int j = 0; j < n_; ++j) {
     const double y = -a_ + j * step_;
@@ -156,7 +168,7 @@ void Beamsor::sample(const Field& field) {
 }
 
 Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step,
-                            std::string description, double feature_scale) {
+                            std::string description, double feature_scale, bool radial) {
   check_rho_max(rho_max, "beam");
   if (!(std::isfinite(grid_step) && grid_step > 0.0))
     throw Error("beam: grid_step must be a positive finite angle, got " + deg(grid_step));
@@ -168,8 +180,16 @@ Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step
     throw Error("beam: grid_step = " + deg(grid_step) + " needs " + std::to_string(nodes) +
                 " nodes per axis for rho_max = " + deg(rho_max) + "; at most " +
                 std::to_string(max_grid_nodes) + " are allowed");
-  b.n_ = std::max(3, static_cast<int>(nodes));
-  b.step_ = 2.0 * b.a_ / (b.n_ - 1);
+  b.radial_ = radial;
+  if (radial) {
+    // Nodes at r = i * step up to a little beyond a, so every r <= a has two neighbours.
+    const double step = grid_step / radial_oversampling;
+    b.n_ = std::max(3, static_cast<int>(std::ceil(b.a_ / step)) + 2);
+    b.step_ = step;
+  } else {
+    b.n_ = std::max(3, static_cast<int>(nodes));
+    b.step_ = 2.0 * b.a_ / (b.n_ - 1);
+  }
   b.description_ = std::move(description);
   b.sample(field);
   if (!b.has_element(0, 0)) throw Error("beam '" + b.description_ + "': B_TT is zero everywhere");
@@ -207,8 +227,11 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
       << (options.cross_polar_pattern == CrossPolarPattern::uniform ? " (uniform)" : " (quadrupole)");
   d << ", rho_max " << options.rho_max * 180 / pi << " deg, grid step " << step * 180 / pi * 60
     << " arcmin";
+  const bool radial = fwhm_x == fwhm_y && (options.cross_polar == 0.0 ||
+                                           options.cross_polar_pattern == CrossPolarPattern::uniform);
+  if (radial) d << " (radial profile)";
   return from_field(gaussian_field(fwhm_x * to_sigma, fwhm_y * to_sigma, angle, options),
-                    options.rho_max, step, d.str(), smallest);
+                    options.rho_max, step, d.str(), smallest, radial);
 }
 
 std::span<const double> Beamsor::element(int row, int col) const {
@@ -220,6 +243,14 @@ bool Beamsor::has_element(int row, int col) const { return !element(row, col).em
 Mueller Beamsor::at(double x, double y) const {
   Mueller m{};
   if (x * x + y * y > a_ * a_) return m;
+  if (radial_) {
+    const double u = std::sqrt(x * x + y * y) / step_;
+    const int i = std::min(static_cast<int>(u), n_ - 2);
+    const double f = u - i;
+    for (int e = 0; e < 16; ++e)
+      if (!elements_[e].empty()) m[e / 4][e % 4] = (1 - f) * elements_[e][i] + f * elements_[e][i + 1];
+    return m;
+  }
   const double u = (x + a_) / step_, v = (y + a_) / step_;
   if (!(u >= 0 && v >= 0 && u <= n_ - 1 && v <= n_ - 1)) return m;
   const int i = std::min(static_cast<int>(u), n_ - 2), j = std::min(static_cast<int>(v), n_ - 2);

@@ -103,6 +103,21 @@ PISCO_HD void interpolate_weights(const T* grid, int n, T a, T inv_step, T x, T 
   for (int m = 0; m < 4; ++m) w[m] = c00 * g00[m] + c10 * g10[m] + c01 * g01[m] + c11 * g11[m];
 }
 
+// Linear interpolation in r = sqrt(x^2 + y^2) of a radial profile of 4-vectors at r = i*step:
+// exactly invariant under rotations about the beam axis. Beyond the last node: zero.
+template <class T>
+PISCO_HD void interpolate_radial(const T* profile, int n, T inv_step, T x, T y, T w[4]) {
+  const T u = sqrt(x * x + y * y) * inv_step;
+  w[0] = w[1] = w[2] = w[3] = T(0);
+  if (!(u <= T(n - 1))) return;
+  int i = static_cast<int>(u);
+  if (i > n - 2) i = n - 2;
+  const T f = u - T(i);
+  const T* g0 = profile + 4 * i;
+  const T* g1 = g0 + 4;
+  for (int m = 0; m < 4; ++m) w[m] = (T(1) - f) * g0[m] + f * g1[m];
+}
+
 // w . Lambda(-chi) S: the detector-weighted Stokes response of one pixel (DESIGN 3).
 template <class T>
 PISCO_HD T stokes_response(const T w[4], T cos2chi, T sin2chi, T I, T Q, T U, T V) {
@@ -110,12 +125,16 @@ PISCO_HD T stokes_response(const T w[4], T cos2chi, T sin2chi, T I, T Q, T U, T 
 }
 
 // One pixel's contribution to d(q): geometry, beam interpolation, polarization rotation.
-template <class T>
+// The weights come from a 2D grid, or from a radial profile when Radial.
+template <bool Radial, class T>
 PISCO_HD T pixel_contribution(const SampleFrame<T>& f, const Vec3<T>& k, T I, T Q, T U, T V,
                               const T* grid, int n, T a, T inv_step) {
   const PixelGeometry<T> g = pixel_geometry(f, k);
   T w[4];
-  interpolate_weights(grid, n, a, inv_step, g.x, g.y, w);
+  if (Radial)
+    interpolate_radial(grid, n, inv_step, g.x, g.y, w);
+  else
+    interpolate_weights(grid, n, a, inv_step, g.x, g.y, w);
   return stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, V);
 }
 

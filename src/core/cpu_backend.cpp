@@ -21,7 +21,7 @@ namespace {
 #define PISCO_CPU_CLONES
 #endif
 
-template <bool PerSample>
+template <bool PerSample, bool Radial>
 inline __attribute__((always_inline)) double sample(const PreparedSky& sky, const PreparedDetector& det,
                                                     double theta, double phi, double psi, std::uint64_t& count) {
   phi = wrap_phi(phi);
@@ -39,12 +39,17 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
                           if constexpr (PerSample) {
                             const PixelGeometry<double> g = pixel_geometry(f, k);
                             double w[4], wn[4];
-                            interpolate_weights(grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, w);
-                            interpolate_weights(norm_grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wn);
+                            if constexpr (Radial) {
+                              interpolate_radial(grid, det.grid_n, det.grid_inv_step, g.x, g.y, w);
+                              interpolate_radial(norm_grid, det.grid_n, det.grid_inv_step, g.x, g.y, wn);
+                            } else {
+                              interpolate_weights(grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, w);
+                              interpolate_weights(norm_grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wn);
+                            }
                             sum += stokes_response(w, g.cos2chi, g.sin2chi, px[4], px[5], px[6], px[7]);
                             norm += wn[0];
                           } else {
-                            sum += pixel_contribution(f, k, px[4], px[5], px[6], px[7], grid, det.grid_n,
+                            sum += pixel_contribution<Radial>(f, k, px[4], px[5], px[6], px[7], grid, det.grid_n,
                                                       det.grid_a, det.grid_inv_step);
                           }
                         }
@@ -59,9 +64,14 @@ PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const Pr
                                                 const double* psi, double* tod, std::size_t begin,
                                                 std::size_t end) {
   std::uint64_t count = 0;
-  for (std::size_t i = begin; i < end; ++i)
-    tod[i] = per_sample ? sample<true>(sky, det, theta[i], phi[i], psi[i], count)
-                        : sample<false>(sky, det, theta[i], phi[i], psi[i], count);
+  for (std::size_t i = begin; i < end; ++i) {
+    if (det.radial)
+      tod[i] = per_sample ? sample<true, true>(sky, det, theta[i], phi[i], psi[i], count)
+                          : sample<false, true>(sky, det, theta[i], phi[i], psi[i], count);
+    else
+      tod[i] = per_sample ? sample<true, false>(sky, det, theta[i], phi[i], psi[i], count)
+                          : sample<false, false>(sky, det, theta[i], phi[i], psi[i], count);
+  }
   return count;
 }
 

@@ -65,10 +65,12 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
   p.sin_zeta = std::sin(d.zeta);
   p.rho_max = beam.rho_max();
   p.cos_rho_max = std::cos(beam.rho_max());
+  p.radial = beam.is_radial();
   p.grid_n = beam.grid_size();
   p.grid_a = beam.grid_half_width();
   p.grid_inv_step = 1.0 / beam.grid_step();
-  const std::size_t nodes = static_cast<std::size_t>(p.grid_n) * p.grid_n;
+  const std::size_t nodes = p.radial ? static_cast<std::size_t>(p.grid_n)
+                                     : static_cast<std::size_t>(p.grid_n) * p.grid_n;
   const double scale = pixel_area / beam.omega_tilde() * d.gain / 2;
   const double row_t = scale * (1 + d.epsilon), row_q = scale * (1 - d.epsilon);
   p.weights.assign(nodes * 4, 0.0);

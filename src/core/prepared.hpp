@@ -26,9 +26,11 @@ struct PreparedSky {
 struct PreparedDetector {
   double cos_zeta = 1.0, sin_zeta = 0.0;
   double rho_max = 0.0, cos_rho_max = 1.0;
+  bool radial = false;  // weights are a radial profile in r = sin(rho) rather than a 2D grid
   int grid_n = 0;
   double grid_a = 0.0, grid_inv_step = 0.0;
-  // w(x, y) = (Omega_pix / Omega~) s/2 [(1+eps) B_T. + (1-eps) B_Q.], 4 per node, x fastest.
+  // w(x, y) = (Omega_pix / Omega~) s/2 [(1+eps) B_T. + (1-eps) B_Q.], 4 per node, x fastest
+  // (radial: 4 per node along r).
   std::vector<double> weights;
   // Per-sample normalization only: (Omega_pix B_TT / Omega~, 0, 0, 0) per node.
   std::vector<double> norm_weights;
