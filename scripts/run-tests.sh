@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# Sets up, builds and runs the test suite; extra arguments go to ctest (e.g. -L unit).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+"$root/scripts/setup.sh"
+export OMP_WAIT_POLICY=passive
+exec ctest --test-dir "$root/build" --output-on-failure -j2 "$@"
