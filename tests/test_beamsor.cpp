@@ -29,7 +29,7 @@ double simpson(const std::function<double(double)>& f, double a, double b, doubl
 }
 double integrate(const std::function<double(double)>& f, double a, double b, double tol) {
   const double fa = f(a), fb = f(b), fm = f(0.5 * (a + b));
-  return simpson(f, a, b, fa, fm, fb, (b - a) / 6 * (fa + 4 * fm + fb), tol, 60);
+  return simpson(f, a, b, fa, fm, fb, (b - a) / 6 * (fa + 4 * fm + fb), tol, 30);
 }
 
 // Omega~ of an elliptical Gaussian over the cap: the sigma integral in closed form,
@@ -44,7 +44,8 @@ double reference_omega(double fwhm_x, double fwhm_y, double rho_max) {
   // Sub-intervals of half the smallest width, so that no adaptive step can miss the peak.
   const int parts = static_cast<int>(std::ceil(rho_max / (0.5 * std::min(sx, sy))));
   double total = 0;
-  for (int i = 0; i < parts; ++i) total += integrate(f, rho_max * i / parts, rho_max * (i + 1) / parts, 1e-20);
+  const double tol = 1e-12 * 2 * pi * sx * sy / parts;  // 1e-12 of the flat-sky Omega~ overall
+  for (int i = 0; i < parts; ++i) total += integrate(f, rho_max * i / parts, rho_max * (i + 1) / parts, tol);
   return total;
 }
 
