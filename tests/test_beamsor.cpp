@@ -8,6 +8,7 @@
 #include <numbers>
 #include <random>
 
+#include "support.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/error.hpp"
 
@@ -159,14 +160,7 @@ TEST(Beamsor, ConstantMuellerMatrix) {
 }
 
 TEST(Beamsor, BadInputsAreRejected) {
-  auto message = [](auto&& f) {
-    try {
-      f();
-    } catch (const pisco::Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  const auto message = pisco_test::error_of;
   pisco::BeamOptions o;
   EXPECT_NE(message([&] { pisco::Beamsor::gaussian(-1 * deg, o); }).find("fwhm"), std::string::npos);
   EXPECT_NE(message([&] { pisco::Beamsor::gaussian(NAN, o); }).find("fwhm"), std::string::npos);

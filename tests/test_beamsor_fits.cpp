@@ -19,6 +19,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "support.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/error.hpp"
 
@@ -47,20 +48,8 @@ class BeamsorFits : public ::testing::Test {
   fs::path dir_;
 };
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const pisco::Error& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    return std::string("not a pisco::Error: ") + e.what();
-  }
-  return "no error";
-}
-
-bool contains(const std::string& s, const std::string& part) {
-  return s.find(part) != std::string::npos;
-}
+using pisco_test::contains;
+using pisco_test::error_of;
 
 std::size_t file_count(const fs::path& dir) {
   return static_cast<std::size_t>(std::distance(fs::directory_iterator(dir), fs::directory_iterator()));

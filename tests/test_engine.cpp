@@ -11,6 +11,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "support.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
 
@@ -180,14 +181,7 @@ TEST(Engine, BackendsAndErrors) {
   ASSERT_FALSE(backends.empty());
   EXPECT_EQ(backends[0].name, "cpu");
   EXPECT_TRUE(backends[0].available);
-  auto message = [](auto&& f) {
-    try {
-      f();
-    } catch (const pisco::Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  const auto message = pisco_test::error_of;
   EXPECT_NE(message([&] { pisco::Engine(s.sky, s.beams, s.fp, {.backend = "opencl"}); }).find("unknown"), std::string::npos);
   pisco::FocalPlane bad;
   bad.add({"lost", 0, 0, 1, 7});

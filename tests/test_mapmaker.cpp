@@ -7,6 +7,7 @@
 #include <random>
 #include <string>
 
+#include "support.hpp"
 #include "pisco/error.hpp"
 #include "pisco/mapmaker.hpp"
 #include "pisco/scan.hpp"
@@ -55,15 +56,7 @@ double max_error(const std::vector<double>& a, const std::vector<double>& b) {
   return worst;
 }
 
-template <class Fn>
-void expect_error(Fn fn, const std::string& needle) {
-  try {
-    fn();
-    ADD_FAILURE() << "no pisco::Error; expected one mentioning '" << needle << "'";
-  } catch (const pisco::Error& e) {
-    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
-  }
-}
+using pisco_test::expect_error;
 
 TEST(Mapmaker, ThreeAnglesRoundTripExactly) {
   const int nside = 16;

@@ -11,6 +11,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "support.hpp"
 #include "pisco/error.hpp"
 #include "pisco/scan.hpp"
 
@@ -26,16 +27,7 @@ Base ring(int nside) { return Base(std::int64_t(nside), RING, SET_NSIDE); }
 // Longitude difference folded into (-pi, pi].
 double dphi(double a, double b) { return std::remainder(a - b, 2 * pi); }
 
-// Runs fn, expecting a pisco::Error whose message contains `needle`.
-template <class Fn>
-void expect_error(Fn fn, const std::string& needle) {
-  try {
-    fn();
-    ADD_FAILURE() << "no pisco::Error; expected one mentioning '" << needle << "'";
-  } catch (const pisco::Error& e) {
-    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
-  }
-}
+using pisco_test::expect_error;
 
 TEST(Scan, PixelCentreVisitsEveryPixelAtEveryAngle) {
   const int nside = 16;

@@ -21,6 +21,7 @@
 #include <healpix_map.h>
 #include <healpix_map_fitsio.h>
 
+#include "support.hpp"
 #include "pisco/error.hpp"
 #include "pisco/sky.hpp"
 
@@ -101,20 +102,8 @@ void write_table(const fs::path& file, const TableSpec& spec) {
   ASSERT_EQ(status, 0) << "test setup: CFITSIO status " << status;
 }
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const pisco::Error& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    return std::string("not a pisco::Error: ") + e.what();
-  }
-  return "no error";
-}
-
-bool contains(const std::string& s, const std::string& part) {
-  return s.find(part) != std::string::npos;
-}
+using pisco_test::contains;
+using pisco_test::error_of;
 
 double max_abs_diff(std::span<const double> a, std::span<const double> b) {
   double d = a.size() == b.size() ? 0.0 : std::numeric_limits<double>::infinity();

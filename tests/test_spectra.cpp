@@ -14,6 +14,7 @@
 #include <healpix_map.h>
 #include <xcomplex.h>
 
+#include "support.hpp"
 #include "pisco/error.hpp"
 #include "pisco/spectra.hpp"
 
@@ -22,15 +23,7 @@ namespace {
 constexpr double pi = std::numbers::pi;
 constexpr double deg = pi / 180;
 
-template <class Fn>
-void expect_error(Fn fn, const std::string& needle) {
-  try {
-    fn();
-    ADD_FAILURE() << "no pisco::Error; expected one mentioning '" << needle << "'";
-  } catch (const pisco::Error& e) {
-    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
-  }
-}
+using pisco_test::expect_error;
 
 std::filesystem::path write_file(const std::string& name, const std::string& text) {
   const std::filesystem::path file = std::filesystem::path(::testing::TempDir()) / name;

@@ -1,0 +1,33 @@
+// Helpers shared by the test suites.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <functional>
+#include <string>
+
+#include "pisco/error.hpp"
+
+namespace pisco_test {
+
+// The message of the pisco::Error that f throws ("no error" if none; other exceptions are named).
+inline std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const pisco::Error& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    return std::string("not a pisco::Error: ") + e.what();
+  }
+  return "no error";
+}
+
+inline bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+// Runs f, expecting a pisco::Error whose message contains `needle`.
+inline void expect_error(const std::function<void()>& f, const std::string& needle) {
+  const std::string message = error_of(f);
+  EXPECT_TRUE(contains(message, needle)) << "expected a pisco::Error mentioning '" << needle << "', got: " << message;
+}
+
+}  // namespace pisco_test
