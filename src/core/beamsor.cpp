@@ -229,7 +229,7 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
     << " arcmin";
   const bool radial = fwhm_x == fwhm_y && (options.cross_polar == 0.0 ||
                                            options.cross_polar_pattern == CrossPolarPattern::uniform);
-  if (radial) d << " (radial profile)";
+  if (radial) d << " (radial profile every " << step / radial_oversampling * 180 / pi * 60 << " arcmin)";
   return from_field(gaussian_field(fwhm_x * to_sigma, fwhm_y * to_sigma, angle, options),
                     options.rho_max, step, d.str(), smallest, radial);
 }
