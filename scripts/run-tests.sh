@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Sets up, builds and runs the test suite; extra arguments go to ctest (e.g. -L unit).
+# Sets up, builds and runs the test suite; extra arguments go to ctest (e.g. -L unit, -R engine).
+# ctest prints its summary; the script exits with ctest's status.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"

@@ -1,25 +1,44 @@
 #!/usr/bin/env bash
-# Installs the Debian packages PISCO-VK needs (only when one is missing), then configures and builds.
+# Installs the Debian 12 packages PISCO-VK needs (only when one is missing, so repeated runs are fast
+# and need no network), then configures and builds the project in <repo>/build.
+# Works from any directory, as root or as a user with sudo.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 packages=(build-essential cmake ninja-build pkg-config libhealpix-cxx-dev libcfitsio-dev libglm-dev
-          libgtest-dev healpy-data python3-healpy python3-numpy python3-matplotlib)
+          libgtest-dev libtomlplusplus-dev libcli11-dev libhdf5-dev healpy-data python3-healpy python3-numpy python3-matplotlib)
 
 missing=()
 for p in "${packages[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  status="$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)"
+  [[ $status == "install ok installed" ]] || missing+=("$p")
 done
+
 if ((${#missing[@]})); then
-  command -v apt-get >/dev/null || { echo "setup: apt-get not found; install: ${missing[*]}" >&2; exit 1; }
-  sudo=""
+  if ! command -v apt-get >/dev/null 2>&1; then
+    echo "setup: apt-get is not available (PISCO-VK's set-up expects Debian 12)." >&2
+    echo "setup: install these packages or their equivalents by hand: ${missing[*]}" >&2
+    exit 1
+  fi
+  sudo=()
   if [[ $(id -u) -ne 0 ]]; then
-    command -v sudo >/dev/null || { echo "setup: run as root or install sudo to install: ${missing[*]}" >&2; exit 1; }
-    sudo="sudo"
+    if ! command -v sudo >/dev/null 2>&1; then
+      echo "setup: not root and sudo is not available; as root, run:" >&2
+      echo "  apt-get update && apt-get install -y ${missing[*]}" >&2
+      exit 1
+    fi
+    sudo=(sudo)
   fi
   echo "setup: installing ${missing[*]}"
-  $sudo env DEBIAN_FRONTEND=noninteractive apt-get update -qq
-  $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+    "${missing[@]}"
 fi
 
-cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
+# Configure quietly, but show everything if it fails.
+if ! log="$(cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release 2>&1)"; then
+  printf '%s\n' "$log" >&2
+  echo "setup: configuring $root/build failed (if it was configured with another generator," \
+       "remove $root/build and retry)" >&2
+  exit 1
+fi
 cmake --build "$root/build" -j"$(nproc)"

@@ -16,93 +16,45 @@
 // All three fall as the square of the pixel size: a file should sample the beam's smallest feature
 // (s) with NSIDE >= 1 / (s sqrt(3e-3)) for an axis error below 1e-3.
 
-// The table goes through CFITSIO directly (the same layout HEALPix C++ and healpy use), so that
-// every failure is one pisco::Error naming the file; HEALPix C++ supplies the pixel geometry.
+// The table goes through CFITSIO directly (core/fits_table.hpp; the same layout HEALPix C++ and
+// healpy use), so that every failure is one pisco::Error naming the file; HEALPix C++ supplies the
+// pixel geometry.
 #include <fitsio.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <array>
-#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <new>
 #include <numbers>
 #include <optional>
-#include <span>
 #include <sstream>
 #include <string>
 #include <vector>
 
-#include <error_handling.h>
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "core/fits_table.hpp"
 #include "pisco/beamsor.hpp"
-#include "pisco/error.hpp"
 
 namespace pisco {
 namespace {
 
 namespace fs = std::filesystem;
 
+using namespace detail;  // core/fits_table.hpp
+
 constexpr double pi = std::numbers::pi;
-constexpr int max_nside = 8192;        // Healpix_Base's 32-bit pixel indices
 constexpr int max_grid_nodes = 8192;   // per axis, as for every other beamsor builder
 constexpr double healpix_unseen = -1.6375e30;
 constexpr const char* stokes_letters = "TQUV";
-
-[[noreturn]] void fail(const fs::path& file, const std::string& what) {
-  throw Error(file.string() + ": " + what);
-}
 
 std::string deg(double rad) {
   std::ostringstream s;
   s << rad * 180.0 / pi << " deg";
   return s.str();
 }
-
-// CFITSIO's explanation of a status code; the message stack is cleared so it cannot leak into a
-// later error.
-std::string cfitsio_text(int status) {
-  char text[FLEN_STATUS] = {};
-  fits_get_errstatus(status, text);
-  fits_clear_errmsg();
-  return text;
-}
-
-void check(int status, const fs::path& file, const std::string& doing) {
-  if (status != 0) fail(file, doing + " failed (CFITSIO: " + cfitsio_text(status) + ")");
-}
-
-std::string trim_upper(std::string s) {
-  const auto not_space = [](unsigned char c) { return !std::isspace(c); };
-  s.erase(s.begin(), std::find_if(s.begin(), s.end(), not_space));
-  s.erase(std::find_if(s.rbegin(), s.rend(), not_space).base(), s.end());
-  for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-  return s;
-}
-
-// Inside a catch block: rethrows the current exception as one pisco::Error naming the file
-// (HEALPix C++ throws PlanckError, the filesystem library filesystem_error).
-[[noreturn]] void rethrow_naming(const fs::path& file) {
-  try {
-    throw;
-  } catch (const Error&) {
-    throw;
-  } catch (const PlanckError& e) {
-    fail(file, std::string("HEALPix: ") + e.what());
-  } catch (const fs::filesystem_error& e) {
-    fail(file, e.code().message());
-  } catch (const std::bad_alloc&) {
-    fail(file, "out of memory for the maps");
-  } catch (const std::exception& e) {
-    fail(file, e.what());
-  }
-}
-
-bool is_power_of_two(long long n) { return n > 0 && (n & (n - 1)) == 0; }
 
 // B_XY names row Y, column X (X leaks into Y); elements are stored at [row * 4 + col].
 std::string element_name(int e) {
@@ -118,69 +70,9 @@ std::optional<int> element_of(const std::string& column_name) {
   return static_cast<int>(y - stokes_letters) * 4 + static_cast<int>(x - stokes_letters);
 }
 
-// An open FITS file, closed on every path out. The *_diskfile calls take names literally (no
-// CFITSIO extended filename syntax). Errors name `shown`, the file the caller asked for.
-class FitsFile {
- public:
-  FitsFile(const FitsFile&) = delete;
-  FitsFile& operator=(const FitsFile&) = delete;
-  FitsFile(FitsFile&& o) noexcept : ptr_(o.ptr_), shown_(std::move(o.shown_)) { o.ptr_ = nullptr; }
-  ~FitsFile() {
-    int status = 0;
-    if (ptr_) fits_close_file(ptr_, &status);
-    if (status) fits_clear_errmsg();
-  }
-  static FitsFile open(const fs::path& file) {
-    FitsFile f(file);
-    int status = 0;
-    fits_open_diskfile(&f.ptr_, file.c_str(), READONLY, &status);
-    if (status) {
-      f.ptr_ = nullptr;
-      fail(file, "cannot be read as a FITS file (CFITSIO: " + cfitsio_text(status) +
-                     "); expected a HEALPix beamsor file (binary table with columns B_TT, ...)");
-    }
-    return f;
-  }
-  static FitsFile create(const fs::path& temporary, const fs::path& shown) {
-    FitsFile f(shown);
-    int status = 0;
-    fits_create_diskfile(&f.ptr_, temporary.c_str(), &status);
-    if (status) {
-      f.ptr_ = nullptr;
-      fail(shown, "cannot be created as " + temporary.filename().string() + " (CFITSIO: " +
-                      cfitsio_text(status) + ")");
-    }
-    return f;
-  }
-  // Closing flushes CFITSIO's buffers: a writer closes explicitly to see the errors.
-  void close() {
-    int status = 0;
-    fits_close_file(ptr_, &status);
-    ptr_ = nullptr;
-    check(status, shown_, "closing the file");
-  }
-  fitsfile* get() const { return ptr_; }
-  const fs::path& path() const { return shown_; }
-
- private:
-  explicit FitsFile(fs::path shown) : shown_(std::move(shown)) {}
-  fitsfile* ptr_ = nullptr;
-  fs::path shown_;
-};
-
-std::optional<std::string> string_key(const FitsFile& f, const char* key) {
-  char value[FLEN_VALUE] = {};
-  int status = 0;
-  fits_read_key(f.get(), TSTRING, key, value, nullptr, &status);
-  if (status == KEY_NO_EXIST) {
-    fits_clear_errmsg();
-    return std::nullopt;
-  }
-  check(status, f.path(), std::string("reading the key ") + key);
-  return std::string(value);
-}
-
 // ---- reading ------------------------------------------------------------------------------------
+
+constexpr const char* expected_file = "expected a HEALPix beamsor file";
 
 struct BeamTable {
   int nside = 0;
@@ -190,32 +82,8 @@ struct BeamTable {
   std::array<long long, 16> repeat{};     // values per row
 };
 
-void goto_first_binary_table(const FitsFile& f) {
-  int status = 0, hdus = 0;
-  fits_get_num_hdus(f.get(), &hdus, &status);
-  check(status, f.path(), "counting the HDUs");
-  for (int h = 2; h <= hdus; ++h) {
-    int type = 0;
-    fits_movabs_hdu(f.get(), h, &type, &status);
-    check(status, f.path(), "moving to HDU " + std::to_string(h));
-    if (type == BINARY_TBL) return;
-  }
-  fail(f.path(), "has no binary-table extension; expected a HEALPix beamsor file");
-}
-
 void read_geometry(const FitsFile& f, BeamTable& t) {
-  long long nside = 0;
-  int status = 0;
-  fits_read_key(f.get(), TLONGLONG, "NSIDE", &nside, nullptr, &status);
-  if (status == KEY_NO_EXIST) {
-    fits_clear_errmsg();
-    fail(f.path(), "has no NSIDE key; expected a HEALPix beamsor file");
-  }
-  check(status, f.path(), "reading NSIDE (expected an integer)");
-  if (!is_power_of_two(nside) || nside > max_nside)
-    fail(f.path(), "NSIDE = " + std::to_string(nside) + " is not a power of two in [1, " +
-                       std::to_string(max_nside) + "]");
-  t.nside = static_cast<int>(nside);
+  t.nside = detail::read_nside(f, std::string("has no NSIDE key; ") + expected_file);
   const auto ordering = string_key(f, "ORDERING");
   const std::string o = ordering ? trim_upper(*ordering) : "";
   if (o != "RING" && o != "NESTED" && o != "NEST")
@@ -226,35 +94,20 @@ void read_geometry(const FitsFile& f, BeamTable& t) {
     fail(f.path(), "is a cut-sky (partial) map; beamsor files must be full-sky maps");
 }
 
-std::string column_name(const FitsFile& f, int col) {
-  char key[FLEN_KEYWORD], value[FLEN_VALUE] = {};
-  int status = 0;
-  fits_make_keyn("TTYPE", col, key, &status);
-  fits_read_key(f.get(), TSTRING, key, value, nullptr, &status);
-  if (status) fits_clear_errmsg();
-  return value;
-}
-
 // Maps the B_XY columns to elements; other columns are ignored. Each must hold 12 NSIDE^2 numbers.
 void find_columns(const FitsFile& f, BeamTable& t) {
-  int status = 0, ncols = 0;
-  fits_get_num_cols(f.get(), &ncols, &status);
-  fits_get_num_rowsll(f.get(), &t.rows, &status);
-  check(status, f.path(), "reading the table size");
+  const auto [ncols, rows] = detail::table_size(f);
+  t.rows = rows;
   std::string found;
   const long long npix = 12LL * t.nside * t.nside;
   for (int c = 1; c <= ncols; ++c) {
-    const std::string name = column_name(f, c);
+    const std::string name = detail::column_name(f, c);
     found += (found.empty() ? "" : ", ") + name;
     const auto e = element_of(name);
     if (!e) continue;
     if (t.column[*e]) fail(f.path(), "has two columns named " + element_name(*e));
-    int type = 0;
-    long long repeat = 0, width = 0;
-    fits_get_coltypell(f.get(), c, &type, &repeat, &width, &status);
-    check(status, f.path(), "reading the type of column " + name);
-    if (type <= 0 || type == TSTRING || type == TLOGICAL || type == TBIT || type == TCOMPLEX ||
-        type == TDBLCOMPLEX)
+    const auto [type, repeat] = detail::column_type(f, c, name);
+    if (!detail::is_fixed_numeric(type))
       fail(f.path(), "column " + name + " is not a numeric column of fixed width");
     if (repeat * t.rows != npix)
       fail(f.path(), "column " + name + " holds " + std::to_string(repeat * t.rows) +
@@ -292,17 +145,7 @@ long long ring_prefix(const Healpix_Base& base, double theta, int extra) {
 std::vector<double> read_element(const FitsFile& f, const BeamTable& t, int e, long long count) {
   const long long npix = 12LL * t.nside * t.nside;
   std::vector<double> values(static_cast<std::size_t>(t.nested ? npix : count));
-  long rows_per_chunk = 0;
-  int status = 0;
-  fits_get_rowsize(f.get(), &rows_per_chunk, &status);
-  const long long chunk = std::max<long long>(1, rows_per_chunk) * t.repeat[e];
-  const long long total = static_cast<long long>(values.size());
-  for (long long first = 0; first < total && status == 0; first += chunk) {
-    int anynul = 0;
-    fits_read_col(f.get(), TDOUBLE, t.column[e], first / t.repeat[e] + 1, first % t.repeat[e] + 1,
-                  std::min(chunk, total - first), nullptr, values.data() + first, &anynul, &status);
-  }
-  check(status, f.path(), "reading column " + element_name(e));
+  detail::read_column(f, t.column[e], t.repeat[e], values, element_name(e));
   if (!t.nested) return values;
   const Healpix_Base nest(t.nside, NEST, SET_NSIDE);
   std::vector<double> ring(static_cast<std::size_t>(count));
@@ -347,9 +190,10 @@ struct BeamMaps {
 // Reads the cap out to `reach`, plus the rings interpolation there touches.
 BeamMaps load_maps(const fs::path& file, double rho_max, double reach) {
   std::error_code ec;
-  if (!fs::exists(file, ec)) fail(file, "no such file; expected a HEALPix beamsor file");
-  const FitsFile f = FitsFile::open(file);
-  goto_first_binary_table(f);
+  if (!fs::exists(file, ec)) fail(file, std::string("no such file; ") + expected_file);
+  const FitsFile f =
+      FitsFile::open(file, "expected a HEALPix beamsor file (binary table with columns B_TT, ...)");
+  detail::goto_first_binary_table(f, expected_file);
   BeamTable t;
   read_geometry(f, t);
   find_columns(f, t);
@@ -461,33 +305,6 @@ void write_keys(const FitsFile& f, int nside, double rho_max, double grid_step,
   check(status, f.path(), "writing the header keys");
 }
 
-// Writes the full-sky columns; pixel p of element k is values[k][p] for p < cap, zero beyond.
-void write_columns(const FitsFile& f, const std::vector<std::vector<double>>& values,
-                   long long npix, long long repeat) {
-  int status = 0;
-  long rows_per_chunk = 0;
-  fits_get_rowsize(f.get(), &rows_per_chunk, &status);
-  const long long chunk = std::max<long long>(1, rows_per_chunk) * repeat;
-  std::vector<double> buffer(static_cast<std::size_t>(chunk));
-  for (long long first = 0; first < npix && status == 0; first += chunk) {
-    const long long n = std::min(chunk, npix - first);
-    for (std::size_t k = 0; k < values.size() && status == 0; ++k) {
-      const long long cap = static_cast<long long>(values[k].size());
-      std::fill(buffer.begin(), buffer.end(), 0.0);
-      if (first < cap)
-        std::copy(values[k].begin() + first, values[k].begin() + std::min(cap, first + n),
-                  buffer.begin());
-      fits_write_col(f.get(), TDOUBLE, static_cast<int>(k) + 1, first / repeat + 1,
-                     first % repeat + 1, n, buffer.data(), &status);
-    }
-  }
-  check(status, f.path(), "writing the maps");
-}
-
-}  // namespace
-
-namespace {
-
 // Values of the present elements at the RING pixels within rho_max (a prefix of the RING order).
 std::vector<std::vector<double>> cap_values(const Beamsor& b, const Healpix_Base& base,
                                             const std::vector<int>& present) {
@@ -510,7 +327,7 @@ void write_beam_file(const fs::path& temporary, const fs::path& file, const Beam
   const long long npix = base.Npix();
   const auto values = cap_values(b, base, present);
   // healpy's layout of 1024 values per row where NSIDE allows it, as for sky maps.
-  const long long repeat = npix % 1024 == 0 ? 1024 : 1;
+  const long long repeat = detail::values_per_row(npix);
   const std::string form = std::to_string(repeat) + "D";
   std::vector<std::string> names;
   for (int e : present) names.push_back(element_name(e));
@@ -528,32 +345,33 @@ void write_beam_file(const fs::path& temporary, const fs::path& file, const Beam
                   tform.data(), tunit.data(), "BEAMSOR", &status);
   check(status, file, "creating the binary table");
   write_keys(f, nside, b.rho_max(), b.grid_step(), b.description());
-  write_columns(f, values, npix, repeat);
+  // Pixel p of element k is values[k][p] within the cap, zero beyond.
+  std::vector<double> buffer;
+  detail::write_columns(f, static_cast<int>(values.size()), npix, repeat,
+                        [&](int k, long long first, long long n) {
+                          const auto& v = values[static_cast<std::size_t>(k)];
+                          const long long cap = static_cast<long long>(v.size());
+                          buffer.assign(static_cast<std::size_t>(n), 0.0);
+                          if (first < cap)
+                            std::copy(v.begin() + first, v.begin() + std::min(cap, first + n),
+                                      buffer.begin());
+                          return static_cast<const double*>(buffer.data());
+                        });
   f.close();
 }
 
 }  // namespace
 
 void Beamsor::write_healpix_fits(const std::filesystem::path& file, int nside) const {
-  if (!is_power_of_two(nside) || nside > max_nside)
-    fail(file, "NSIDE = " + std::to_string(nside) + " is not a power of two in [1, " +
-                   std::to_string(max_nside) + "]");
+  detail::check_nside(file, nside);
   std::vector<int> present;
   for (int e = 0; e < 16; ++e)
     if (!elements_[e].empty()) present.push_back(e);
   if (present.empty()) fail(file, "the beamsor has no non-zero element; nothing to write");
   // A temporary name in the same directory, renamed over `file`: never a half-written file.
-  fs::path temporary = file;
-  temporary += ".tmp-" + std::to_string(::getpid());
-  std::error_code ec;
-  fs::remove(temporary, ec);  // a leftover of a crashed process with the same pid
-  try {
+  detail::write_atomically(file, [&](const fs::path& temporary) {
     write_beam_file(temporary, file, *this, nside, present);
-    fs::rename(temporary, file);
-  } catch (...) {
-    fs::remove(temporary, ec);
-    rethrow_naming(file);
-  }
+  });
 }
 
 }  // namespace pisco

@@ -129,3 +129,15 @@ Pointing raster_scan(double theta0, double phi0, double radius, int nside,
 }
 
 }  // namespace pisco
+
+namespace pisco {
+
+std::size_t ang2pix(int nside, double theta, double phi) {
+  if (nside < 1 || (nside & (nside - 1)) != 0)
+    throw Error("ang2pix: NSIDE " + std::to_string(nside) + " is not a power of two");
+  if (!(theta >= 0 && theta <= std::numbers::pi) || !std::isfinite(phi))
+    throw Error("ang2pix: theta must be in [0, pi] and phi finite");
+  return static_cast<std::size_t>(T_Healpix_Base<int64>(nside, RING, SET_NSIDE).ang2pix(pointing(theta, phi)));
+}
+
+}  // namespace pisco

@@ -1,21 +1,18 @@
-// The paper's Table 1 workload (VALIDATION G) through the float64 reference backend:
-// a full-sky NSIDE 128 sky, every pixel centre at psi = 0, 45, 90 deg for two detectors
-// (1,179,648 samples), a 1.5 deg Gaussian beam on a grid as fine as a beam NSIDE of 512.
-//   usage: pisco-bench-cpu [rho_max_deg ...] [--threads N]
+// `pisco-vk bench`: the paper's Table 1 workload (VALIDATION G): a full-sky NSIDE 128 sky, every
+// pixel centre at psi = 0, 45, 90 deg for two detectors (1,179,648 samples), a 1.5 deg Gaussian beam
+// on a grid as fine as a beam NSIDE of 512.
+#include "bench.hpp"
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
 #include <map>
 #include <numbers>
 #include <random>
-#include <string>
-#include <thread>
-#include <vector>
 
 #include "pisco/pisco.hpp"
 
+namespace pisco_cli {
 namespace {
 
 constexpr double deg = std::numbers::pi / 180;
@@ -31,20 +28,9 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 }  // namespace
 
-int main(int argc, char** argv) try {
-  std::vector<double> radii;
-  unsigned threads = 0;
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--threads") && i + 1 < argc)
-      threads = static_cast<unsigned>(std::atoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
-      std::puts("usage: pisco-bench-cpu [rho_max_deg ...] [--threads N]\n"
-                "Runs the paper's Table 1 workload through the float64 reference backend.");
-      return 0;
-    } else
-      radii.push_back(std::atof(argv[i]));
-  }
-  if (radii.empty()) radii = {5.0, 10.0};
+int run_bench(const BenchOptions& options) {
+  const std::vector<double>& radii = options.rho_max_deg;
+  const unsigned threads = options.threads;
 
   const int nside = 128;
   pisco::Sky sky(nside, "uK_CMB");
@@ -72,7 +58,7 @@ int main(int argc, char** argv) try {
     o.rho_max = rho * deg;
     o.grid_step = beam_step;
     std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(1.5 * deg, o)};
-    pisco::Engine engine(sky, beams, fp, {.backend = "cpu", .threads = threads});
+    pisco::Engine engine(sky, beams, fp, {.backend = options.backend, .threads = threads});
     const double setup = seconds_since(t0);
     std::vector<double> tod(scan.size());
     const auto t1 = std::chrono::steady_clock::now();
@@ -89,7 +75,6 @@ int main(int argc, char** argv) try {
     std::printf("         device: %s\n", engine.device_name().c_str());
   }
   return 0;
-} catch (const std::exception& e) {
-  std::fprintf(stderr, "pisco-bench-cpu: %s\n", e.what());
-  return 1;
 }
+
+}  // namespace pisco_cli

@@ -1,0 +1,103 @@
+// TOD and pointing files (DESIGN 9): HDF5, one group per detector.
+//
+// Layout of a TOD file ("pisco-tod-1"):
+//   /                      string attributes given by the caller (units, nside, beam, backend, device,
+//                          version, config, created, ...) plus pisco_format = "pisco-tod-1"
+//   /<detector name>/      one group per detector, in focal-plane order (link creation order is
+//                          tracked), with attributes zeta [rad], epsilon, gain (float64), beam (uint64)
+//   /<detector>/signal     float64 or float32, one value per sample
+//   /<detector>/theta,phi,psi   float64 pointing [rad], only when written with_pointing
+//
+// A pointing input file (DESIGN 5, per-detector form) has the same layout without `signal`: groups named
+// after detectors, each holding float64 (or float32) 1-D datasets theta, phi, psi of equal length.
+// A TOD file written with_pointing is therefore also a pointing file.
+//
+// All HDF5 access is serialized inside the library (a process-wide lock), so these functions may be
+// called from several threads; one TodWriter must not be used from two threads at once.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "pisco/focal_plane.hpp"
+#include "pisco/pointing.hpp"
+
+namespace pisco {
+
+enum class TodPrecision { float64, float32 };
+
+// Writes a TOD file incrementally, chunk by chunk: only the chunk passed to write() is held in memory.
+// The file is written under a temporary name in the same directory (file + ".tmp-<pid>") and renamed to
+// `file` by commit(), replacing any existing file. Destroying the writer without commit() (for example
+// while an exception propagates) closes and removes the temporary file, so no half-written output is
+// ever left under the final name. Every failure throws pisco::Error naming the file and the operation.
+class TodWriter {
+ public:
+  // Creates the temporary file with one group per detector of `focal_plane` and its datasets of
+  // `samples_per_detector` samples. Detector names must be unique, non-empty, and contain no '/'.
+  TodWriter(const std::filesystem::path& file, const FocalPlane& focal_plane,
+            std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
+            const std::map<std::string, std::string>& attributes);
+  ~TodWriter();
+  TodWriter(TodWriter&&) noexcept;
+  TodWriter& operator=(TodWriter&&) noexcept;
+  TodWriter(const TodWriter&) = delete;
+  TodWriter& operator=(const TodWriter&) = delete;
+
+  // Writes signal[0..n) to samples [offset, offset + n) of detector `detector` (float32 files round
+  // to nearest). With with_pointing, `pointing` is required and must have n samples; without it,
+  // `pointing` is ignored. Throws pisco::Error on a detector index beyond the focal plane, a range
+  // beyond samples_per_detector, a missing or mis-sized pointing chunk, or after commit().
+  void write(std::size_t detector, std::size_t offset, std::span<const double> signal,
+             const PointingView* pointing = nullptr);
+
+  // Checks that every sample of every detector was written (else pisco::Error naming the detector and
+  // the first missing sample, and the temporary file is removed when the writer is destroyed), closes
+  // the file and renames it to its final name, replacing an existing file.
+  void commit();
+
+  const std::filesystem::path& path() const noexcept { return file_; }
+  const std::filesystem::path& temporary_path() const noexcept { return temporary_; }
+  std::size_t samples_per_detector() const noexcept { return samples_; }
+
+ private:
+  struct Impl;
+  std::filesystem::path file_, temporary_;
+  std::size_t samples_ = 0;
+  std::unique_ptr<Impl> impl_;
+};
+
+// A detector as recorded in a TOD file.
+struct TodFileDetector {
+  std::string name;
+  double zeta = 0.0, epsilon = 0.0, gain = 1.0;
+  std::size_t beam = 0;
+};
+
+// The detectors of a TOD file in the order they were written (name order for files written without
+// link creation order). Throws pisco::Error on a missing or non-HDF5 file or a group missing an attribute.
+std::vector<TodFileDetector> read_tod_detectors(const std::filesystem::path& file);
+
+// The whole `signal` dataset of one detector, converted to double.
+std::vector<double> read_tod_signal(const std::filesystem::path& file, const std::string& detector);
+
+// The root attributes of a file: string attributes as they are, numeric scalar attributes formatted as
+// text; pisco_format included.
+std::map<std::string, std::string> read_tod_attributes(const std::filesystem::path& file);
+
+// Reads and checks the (theta, phi, psi) pointing of one detector. Throws pisco::Error, naming the file,
+// the group and the dataset and what was expected, on a missing file, a file that is not HDF5, a missing
+// group or dataset, a dataset that is not a 1-D float array, datasets of different lengths, and (through
+// check_pointing, origin "file:/detector") a non-finite value or theta outside [0, pi] naming the sample.
+Pointing read_pointing_hdf5(const std::filesystem::path& file, const std::string& detector);
+
+// The detector groups at the root of a pointing (or TOD) file, in creation order where the file tracks
+// it, else in name order.
+std::vector<std::string> pointing_detectors(const std::filesystem::path& file);
+
+}  // namespace pisco

@@ -1,0 +1,44 @@
+// The validation cases of VALIDATION.md that compare the engine with references no part of the
+// project computes itself (HEALPix C++ harmonic smoothing, exact spectra). Used by the test suite
+// (which asserts each figure) and by `pisco-vk validate` (which prints them as a table).
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace pisco::validation {
+
+enum class Scale {
+  test,  // minutes on two CPU cores: what the test suite runs
+  full,  // the paper's scale
+};
+
+struct Figure {
+  std::string name;
+  double value = 0;
+  double bar = 0;  // pass when value <= bar
+  std::string unit;
+  bool pass() const { return value <= bar; }
+};
+
+struct CaseResult {
+  std::string id, title;
+  std::vector<Figure> figures;
+  std::vector<std::string> notes;  // lines worth printing beside the figures
+  double seconds = 0;
+  bool pass() const;
+};
+
+// C (paper 6.1): point source at 45 deg declination, S = (1,0,0,0), (1,1,0,0), (1,0,1,0), against
+// HEALPix C++ polarized Gaussian smoothing. Full scale repeats at beam resolutions 2x coarser and finer.
+CaseResult point_source(Scale scale);
+
+// D (paper 6.2): Gaussian r = 0 CMB, pixel-centre pointing at 0, 45, 90 deg, binned maps, spectra
+// against the input's and against the harmonic image of the same observation.
+CaseResult ideal_cmb(Scale scale, const std::string& backend = "cpu");
+
+// Every case, in order.
+std::vector<std::function<CaseResult(Scale)>> all_cases();
+
+}  // namespace pisco::validation

@@ -1,0 +1,162 @@
+// `pisco-vk` as a user runs it: a small simulation end to end, and every input error of DESIGN 12
+// with its message, a non-zero exit status and no output file left behind.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <string>
+#include <sys/wait.h>
+
+#include "pisco/pisco.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int status;
+  std::string output;  // stdout and stderr
+};
+
+Result run(const std::string& args) {
+  const std::string cmd = std::string(PISCO_VK_EXE) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf;
+  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), p)) out.append(buf.data(), n);
+  const int rc = pclose(p);
+  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, out};
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("pisco-cli-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  fs::path write(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p) << text;
+    return p;
+  }
+  // A small valid simulation; `sky`, `beam`, `scan`, ... replace its tables.
+  std::string config(const std::string& sky = "[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                     const std::string& beam = "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n",
+                     const std::string& fp = "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n",
+                     const std::string& scan = "[scan]\ntype = \"pixel_centres\"\nnside = 16\n",
+                     const std::string& extra = "") {
+    return sky + beam + fp + scan + "[engine]\nbackend = \"cpu\"\n[output]\ndir = \"" + (dir_ / "out").string() +
+           "\"\nplots = false\nlmax = 32\n" + extra;
+  }
+  // The failing command left no output files (final or temporary) behind.
+  void expect_no_output() {
+    if (!fs::exists(dir_ / "out")) return;
+    for (const auto& e : fs::directory_iterator(dir_ / "out")) ADD_FAILURE() << "left behind: " << e.path();
+  }
+  void expect_error(const std::string& args, const std::string& needle) {
+    const Result r = run(args);
+    std::cout << "$ pisco-vk " << args.substr(0, 80) << "\n" << r.output;
+    EXPECT_NE(r.status, 0);
+    EXPECT_NE(r.output.find(needle), std::string::npos) << "expected '" << needle << "' in:\n" << r.output;
+    std::size_t errors = 0;
+    for (std::size_t at = r.output.find("pisco-vk: error:"); at != std::string::npos; at = r.output.find("pisco-vk: error:", at + 1))
+      ++errors;
+    EXPECT_EQ(errors, 1u) << "one clear message";
+    expect_no_output();
+  }
+  fs::path dir_;
+};
+
+TEST_F(Cli, VersionHelpAndDevices) {
+  const Result v = run("--version");
+  EXPECT_EQ(v.status, 0);
+  EXPECT_NE(v.output.find(pisco::version), std::string::npos);
+  for (const char* cmd : {"--help", "run --help", "devices --help", "bench --help", "validate --help"}) {
+    const Result h = run(cmd);
+    EXPECT_EQ(h.status, 0) << cmd;
+    EXPECT_NE(h.output.find("Usage"), std::string::npos) << cmd << ": " << h.output;
+  }
+  const Result d = run("devices");
+  std::cout << d.output;
+  EXPECT_EQ(d.status, 0);
+  EXPECT_NE(d.output.find("cpu"), std::string::npos);
+  EXPECT_NE(run("frobnicate").status, 0);
+}
+
+TEST_F(Cli, SmallSimulationEndToEnd) {
+  const fs::path cfg = write("sim.toml", config());
+  const Result r = run("run " + cfg.string());
+  std::cout << r.output;
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"tod.h5", "maps.fits", "hits.fits", "spectra.txt", "input_spectra.txt"})
+    EXPECT_TRUE(fs::exists(dir_ / "out" / f)) << f;
+  EXPECT_NE(r.output.find("summary: 18432 samples"), std::string::npos);  // 2 detectors x 3072 x 3
+  // The TOD file holds what the library computes for the same inputs.
+  const auto dets = pisco::read_tod_detectors(dir_ / "out" / "tod.h5");
+  ASSERT_EQ(dets.size(), 2u);
+  EXPECT_EQ(dets[0].name, "pa");
+  EXPECT_EQ(pisco::read_tod_signal(dir_ / "out" / "tod.h5", "pb").size(), 9216u);
+  const auto attrs = pisco::read_tod_attributes(dir_ / "out" / "tod.h5");
+  EXPECT_EQ(attrs.at("backend"), "cpu");
+  EXPECT_NE(attrs.at("config").find("pixel_centres"), std::string::npos);
+  const pisco::Sky maps = pisco::Sky::read_fits(dir_ / "out" / "maps.fits");
+  EXPECT_EQ(maps.nside(), 16);
+}
+
+TEST_F(Cli, ConfigErrors) {
+  expect_error("run " + (dir_ / "absent.toml").string(), "absent.toml: cannot open");
+  expect_error("run " + write("bad.toml", "[sky\nnside = 3").string(), "bad.toml:1:");
+  expect_error("run " + write("typo.toml", config() + "[output.extra]\n").string(), "unknown key");
+  expect_error("run " + write("typo2.toml", config("[sky]\nnsid = 32\n")).string(), "[sky] unknown key 'nsid'");
+  expect_error("run " + write("nside.toml", config("[sky]\nnside = 100\n")).string(), "[sky] nside: expected a power of two");
+  expect_error("run " + write("rho.toml", config("[sky]\nnside = 32\n", "[beams.main]\nfwhm_deg = 1.5\nrho_max_deg = 90\n")).string(),
+               "rho_max_deg");
+  expect_error("run " + write("wide.toml", config("[sky]\nnside = 32\n", "[beams.main]\nfwhm_deg = 12\nrho_max_deg = 5\n")).string(),
+               "wider than the beam grid");
+  expect_error("run " + write("beam.toml", config("[sky]\nnside = 32\n", "[beams.main]\nfwhm_deg = 2\n",
+                                                  "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"side\"\n")).string(),
+               "no beam named \"side\"");
+  expect_error("run " + write("backend.toml", config() + "").string() + " --backend vulkan", "backend 'vulkan'");
+}
+
+TEST_F(Cli, InputFileErrors) {
+  expect_error("run " + write("sky.toml", config("[sky]\nfile = \"missing.fits\"\n")).string(), "missing.fits");
+  // A map with a NaN pixel.
+  pisco::Sky nan_sky(16);
+  nan_sky.Q()[77] = std::numeric_limits<double>::quiet_NaN();
+  nan_sky.write_fits(dir_ / "nan.fits");
+  expect_error("run " + write("nan.toml", config("[sky]\nfile = \"nan.fits\"\n")).string(), "pixel 77");
+  // A focal-plane table with a malformed number.
+  write("fp.csv", "name,zeta_deg,beam\nd1,abc,main\n");
+  expect_error("run " + write("fp.toml", config("[sky]\nnside = 32\n", "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n",
+                                                "[focal_plane]\nfile = \"fp.csv\"\n")).string(),
+               "fp.csv:2: column 'zeta_deg': expected a number");
+  // Pointing files: a NaN sample and a theta outside [0, pi], each named by its index.
+  pisco::FocalPlane fp;
+  fp.add({"d1", 0, 0, 1, 0});
+  for (const auto& [name, theta] : {std::pair{"nanptg.h5", std::numeric_limits<double>::quiet_NaN()}, {"theta.h5", 4.0}}) {
+    pisco::Pointing p;
+    for (int i = 0; i < 20; ++i) p.push_back(i == 7 ? theta : 1.0, 0.1 * i, 0.0);
+    // Written through the TOD writer's pointing datasets, the same layout the reader takes.
+    pisco::TodWriter w(dir_ / name, fp, p.size(), pisco::TodPrecision::float64, true, {});
+    const std::vector<double> zeros(p.size(), 0.0);
+    const pisco::PointingView v = p.view();
+    w.write(0, 0, zeros, &v);
+    w.commit();
+  }
+  const std::string det = "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d1\"\nbeam = \"main\"\n";
+  const std::string beam = "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n";
+  expect_error("run " + write("p1.toml", config("[sky]\nnside = 32\n", beam, det, "[scan]\ntype = \"file\"\nfile = \"nanptg.h5\"\n")).string(),
+               "sample 7");
+  expect_error("run " + write("p2.toml", config("[sky]\nnside = 32\n", beam, det, "[scan]\ntype = \"file\"\nfile = \"theta.h5\"\n")).string(),
+               "sample 7");
+}
+
+}  // namespace

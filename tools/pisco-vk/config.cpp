@@ -1,0 +1,428 @@
+#include "config.hpp"
+
+#include <fstream>
+#include <numbers>
+#include <set>
+#include <sstream>
+
+#include <toml++/toml.h>
+
+namespace pisco_cli {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr double deg = std::numbers::pi / 180;
+constexpr double arcmin = deg / 60;
+
+// A TOML table with the context for error messages; finish() rejects keys nobody asked for, so a
+// misspelt key is an error rather than a silently ignored setting.
+class Table {
+ public:
+  Table(const toml::table& t, std::string where, const fs::path& file) : t_(t), where_(std::move(where)), file_(file) {}
+
+  [[noreturn]] void fail(const std::string& key, const std::string& what) const {
+    throw pisco::Error(file_.string() + ": [" + where_ + "] " + key + ": " + what);
+  }
+  bool has(const std::string& key) const { return t_.contains(key); }
+
+  std::optional<double> number(const std::string& key) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return std::nullopt;
+    if (auto v = n->value<double>()) return *v;
+    fail(key, "expected a number");
+  }
+  double number(const std::string& key, double fallback) { return number(key).value_or(fallback); }
+  double positive(const std::string& key, double fallback) {
+    const double v = number(key, fallback);
+    if (!(v > 0) || !std::isfinite(v)) fail(key, "expected a positive number, got " + std::to_string(v));
+    return v;
+  }
+  std::int64_t integer(const std::string& key, std::int64_t fallback) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return fallback;
+    if (auto v = n->value_exact<std::int64_t>()) return *v;
+    fail(key, "expected an integer");
+  }
+  bool boolean(const std::string& key, bool fallback) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return fallback;
+    if (auto v = n->value_exact<bool>()) return *v;
+    fail(key, "expected true or false");
+  }
+  std::optional<std::string> string(const std::string& key) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return std::nullopt;
+    if (auto v = n->value_exact<std::string>()) return *v;
+    fail(key, "expected a string");
+  }
+  std::string string(const std::string& key, const std::string& fallback) { return string(key).value_or(fallback); }
+  std::string choice(const std::string& key, const std::string& fallback, const std::vector<std::string>& allowed) {
+    const std::string v = string(key, fallback);
+    for (const auto& a : allowed)
+      if (a == v) return v;
+    std::string list;
+    for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+    fail(key, "expected one of " + list + ", got \"" + v + "\"");
+  }
+  std::vector<double> numbers(const std::string& key, std::vector<double> fallback) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return fallback;
+    const toml::array* a = n->as_array();
+    if (!a || a->empty()) fail(key, "expected a non-empty array of numbers");
+    std::vector<double> out;
+    for (const auto& e : *a) {
+      auto v = e.value<double>();
+      if (!v) fail(key, "expected a non-empty array of numbers");
+      out.push_back(*v);
+    }
+    return out;
+  }
+  const toml::table* table(const std::string& key) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return nullptr;
+    if (!n->is_table()) fail(key, "expected a table");
+    return n->as_table();
+  }
+  const toml::array* array_of_tables(const std::string& key) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return nullptr;
+    if (!n->is_array_of_tables()) fail(key, "expected an array of tables ([[" + where_ + "." + key + "]])");
+    return n->as_array();
+  }
+  fs::path path(const std::string& key) {
+    const auto s = string(key);
+    if (!s) return {};
+    const fs::path p(*s);
+    return p.is_absolute() ? p : file_.parent_path() / p;
+  }
+  void finish() const {
+    for (const auto& [k, v] : t_)
+      if (!used_.count(std::string(k.str())))
+        throw pisco::Error(file_.string() + ": [" + where_ + "] unknown key '" + std::string(k.str()) + "'");
+  }
+  const std::string& where() const { return where_; }
+
+ private:
+  const toml::table& t_;
+  std::string where_;
+  const fs::path& file_;
+  std::set<std::string> used_;
+};
+
+toml::table parse(const fs::path& file, std::string* text) {
+  std::ifstream in(file);
+  if (!in) throw pisco::Error(file.string() + ": cannot open the file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  if (text) *text = ss.str();
+  try {
+    return toml::parse(ss.str(), file.string());
+  } catch (const toml::parse_error& e) {
+    std::ostringstream m;
+    m << file.string() << ":" << e.source().begin.line << ":" << e.source().begin.column << ": not valid TOML: "
+      << e.description();
+    throw pisco::Error(m.str());
+  }
+}
+
+SkyConfig read_sky(Table t) {
+  SkyConfig s;
+  s.file = t.path("file");
+  if (t.has("point_source")) {
+    const std::vector<double> p = t.numbers("point_source", {});
+    if (p.size() != 6) t.fail("point_source", "expected [theta_deg, phi_deg, I, Q, U, V]");
+    s.point_source = {p[0] * deg, p[1] * deg, p[2], p[3], p[4], p[5]};
+    s.units = t.string("units", "K");
+  }
+  s.nside = static_cast<int>(t.integer("nside", 128));
+  if (s.nside < 1 || s.nside > 8192 || (s.nside & (s.nside - 1)) != 0)
+    t.fail("nside", "expected a power of two from 1 to 8192, got " + std::to_string(s.nside));
+  s.lmax = static_cast<int>(t.integer("lmax", 0));
+  s.r = t.number("r", 0.0);
+  s.seed = static_cast<std::uint64_t>(t.integer("seed", 1));
+  s.unpolarized = t.boolean("unpolarized", false);
+  s.cl_file = t.path("cl_file");
+  s.bb_template = t.path("bb_template");
+  if (s.r < 0 || !std::isfinite(s.r)) t.fail("r", "expected r >= 0");
+  if (s.lmax < 0) t.fail("lmax", "expected lmax >= 0");
+  if (!s.file.empty() && (t.has("nside") || t.has("seed") || t.has("cl_file") || t.has("r") || t.has("point_source")))
+    t.fail("file", "give either a map file or the synthesis keys (nside, seed, cl_file, r), not both");
+  if (!s.point_source.empty() && (t.has("seed") || t.has("cl_file") || t.has("r")))
+    t.fail("point_source", "a point source takes nside and units only");
+  if (s.cl_file.empty()) s.cl_file = pisco::default_cl_file();
+  t.finish();
+  return s;
+}
+
+BeamConfig read_beam(Table t, const std::string& name) {
+  BeamConfig b;
+  b.name = name;
+  b.type = t.choice("type", "gaussian", {"gaussian", "elliptical", "file"});
+  b.options.rho_max = t.positive("rho_max_deg", 5.0) * deg;
+  if (b.options.rho_max >= std::numbers::pi / 2) t.fail("rho_max_deg", "expected less than 90 deg");
+  b.options.grid_step = t.number("grid_step_arcmin", 0.0) * arcmin;
+  if (b.options.grid_step < 0) t.fail("grid_step_arcmin", "expected a positive step (or 0 for the default)");
+  if (b.type == "gaussian") {
+    b.fwhm = t.positive("fwhm_deg", 1.5) * deg;
+  } else if (b.type == "elliptical") {
+    b.fwhm_x = t.positive("fwhm_x_deg", 1.5) * deg;
+    b.fwhm_y = t.positive("fwhm_y_deg", 1.5) * deg;
+    b.angle = t.number("angle_deg", 0.0) * deg;
+  } else {
+    b.file = t.path("file");
+    if (b.file.empty()) t.fail("file", "a beam of type \"file\" needs file = \"beamsor.fits\"");
+  }
+  if (b.type != "file") {
+    b.options.cross_polar = t.number("cross_polar", 0.0);
+    b.options.cross_polar_pattern =
+        t.choice("cross_polar_pattern", "uniform", {"uniform", "quadrupole"}) == "uniform"
+            ? pisco::CrossPolarPattern::uniform
+            : pisco::CrossPolarPattern::quadrupole;
+    const std::vector<double> m = t.numbers("mueller", {});
+    if (!m.empty()) {
+      if (m.size() != 16) t.fail("mueller", "expected 16 numbers (a 4x4 Mueller matrix, row by row)");
+      for (int i = 0; i < 16; ++i) b.options.mueller[i / 4][i % 4] = m[i];
+    }
+  }
+  t.finish();
+  return b;
+}
+
+std::size_t beam_index(Table& t, const std::string& key, const std::vector<BeamConfig>& beams, bool required) {
+  const auto name = t.string(key);
+  if (!name) {
+    if (required && beams.size() != 1) t.fail(key, "expected the name of one of the [beams] tables");
+    return 0;
+  }
+  for (std::size_t i = 0; i < beams.size(); ++i)
+    if (beams[i].name == *name) return i;
+  t.fail(key, "no beam named \"" + *name + "\" in [beams]");
+}
+
+void read_detectors(const toml::table& root, const std::string& where, const fs::path& file,
+                    const std::vector<BeamConfig>& beams, std::vector<pisco::Detector>& out) {
+  Table t(root, where, file);
+  if (const toml::array* dets = t.array_of_tables("detectors")) {
+    std::size_t i = 0;
+    for (const auto& node : *dets) {
+      Table d(*node.as_table(), where + ".detectors[" + std::to_string(i++) + "]", file);
+      pisco::Detector det;
+      const auto name = d.string("name");
+      if (!name || name->empty()) d.fail("name", "every detector needs a name");
+      det.name = *name;
+      det.zeta = d.number("zeta_deg", 0.0) * deg;
+      det.epsilon = d.number("epsilon", 0.0);
+      det.gain = d.number("gain", 1.0);
+      det.beam = beam_index(d, "beam", beams, true);
+      d.finish();
+      out.push_back(det);
+    }
+  }
+  if (const toml::array* pairs = t.array_of_tables("pairs")) {
+    std::size_t i = 0;
+    for (const auto& node : *pairs) {
+      Table p(*node.as_table(), where + ".pairs[" + std::to_string(i++) + "]", file);
+      const auto name = p.string("name");
+      if (!name || name->empty()) p.fail("name", "every pair needs a name");
+      const double zeta = p.number("zeta_deg", 0.0) * deg;
+      const double eps = p.number("epsilon", 0.0);
+      std::size_t ba = 0, bb = 0;
+      if (p.has("beam")) {
+        ba = bb = beam_index(p, "beam", beams, true);
+      } else {
+        ba = beam_index(p, "beam_a", beams, true);
+        bb = beam_index(p, "beam_b", beams, true);
+      }
+      const double ga = p.number("gain_a", 1.0), gb = p.number("gain_b", 1.0);
+      p.finish();
+      out.push_back({*name + "a", zeta, eps, ga, ba});
+      out.push_back({*name + "b", zeta - std::numbers::pi / 2, eps, gb, bb});
+    }
+  }
+  t.string("file");  // handled by the caller
+  t.finish();
+}
+
+ScanConfig read_scan(Table t) {
+  ScanConfig s;
+  s.type = t.choice("type", "pixel_centres", {"pixel_centres", "random_offsets", "raster", "file"});
+  for (double p : t.numbers("psi_deg", {0.0, 45.0, 90.0})) s.psi.push_back(p * deg);
+  if (s.type == "file") {
+    s.file = t.path("file");
+    if (s.file.empty()) t.fail("file", "a scan of type \"file\" needs file = \"pointing.h5\"");
+  } else {
+    s.nside = static_cast<int>(t.integer("nside", 64));
+    if (s.nside < 1 || s.nside > 8192 || (s.nside & (s.nside - 1)) != 0)
+      t.fail("nside", "expected a power of two from 1 to 8192, got " + std::to_string(s.nside));
+  }
+  if (s.type == "random_offsets") {
+    s.f = t.number("f", 0.1);
+    s.symmetric = t.boolean("symmetric", false);
+    s.seed = static_cast<std::uint64_t>(t.integer("seed", 1));
+  }
+  if (s.type == "raster") {
+    s.theta = t.number("theta_deg", 45.0) * deg;
+    s.phi = t.number("phi_deg", 0.0) * deg;
+    s.radius = t.positive("radius_deg", 5.0) * deg;
+  }
+  t.finish();
+  return s;
+}
+
+EngineConfig read_engine(Table t) {
+  EngineConfig e;
+  e.options.backend = t.string("backend", "auto");
+  e.options.device = t.string("device", "auto");
+  e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
+                                ? pisco::Normalization::integral
+                                : pisco::Normalization::per_sample;
+  const auto threads = t.integer("threads", 0);
+  if (threads < 0) t.fail("threads", "expected 0 (all) or a positive number");
+  e.options.threads = static_cast<unsigned>(threads);
+  const auto chunk = t.integer("chunk_samples", 1 << 16);
+  if (chunk < 1) t.fail("chunk_samples", "expected a positive number");
+  e.chunk_samples = static_cast<std::size_t>(chunk);
+  t.finish();
+  return e;
+}
+
+OutputConfig read_output(Table t) {
+  OutputConfig o;
+  o.dir = t.string("dir", "pisco-out");  // relative to the working directory, not to the file
+  o.tod = t.boolean("tod", true);
+  o.tod_precision = t.choice("tod_precision", "float64", {"float64", "float32"}) == "float64"
+                        ? pisco::TodPrecision::float64
+                        : pisco::TodPrecision::float32;
+  o.tod_pointing = t.boolean("tod_pointing", false);
+  o.maps = t.boolean("maps", true);
+  o.maps_nside = static_cast<int>(t.integer("maps_nside", 0));
+  if (o.maps_nside != 0 && (o.maps_nside < 1 || o.maps_nside > 8192 || (o.maps_nside & (o.maps_nside - 1)) != 0))
+    t.fail("maps_nside", "expected a power of two from 1 to 8192 (or 0: the scan's), got " + std::to_string(o.maps_nside));
+  o.rcond_min = t.number("rcond_min", 1e-3);
+  o.spectra = t.boolean("spectra", true);
+  o.lmax = static_cast<int>(t.integer("lmax", 0));
+  o.deconvolve_beam = t.boolean("deconvolve_beam", true);
+  o.deconvolve_pixel_window = t.boolean("deconvolve_pixel_window", false);
+  o.plots = t.boolean("plots", true);
+  if (o.spectra && !o.maps) t.fail("spectra", "spectra are computed from the maps: set maps = true");
+  t.finish();
+  return o;
+}
+
+}  // namespace
+
+std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::vector<BeamConfig>& beams) {
+  std::vector<pisco::Detector> out;
+  if (file.extension() == ".toml") {
+    const toml::table root = parse(file, nullptr);
+    read_detectors(root, "focal plane", file, beams, out);
+    if (out.empty()) throw pisco::Error(file.string() + ": no [[detectors]] or [[pairs]]");
+    return out;
+  }
+  std::ifstream in(file);
+  if (!in) throw pisco::Error(file.string() + ": cannot open the focal plane file");
+  std::string line;
+  std::vector<std::string> header;
+  auto split = [](const std::string& s) {
+    std::vector<std::string> f;
+    std::stringstream ss(s);
+    std::string x;
+    while (std::getline(ss, x, ',')) {
+      const auto b = x.find_first_not_of(" \t\r"), e = x.find_last_not_of(" \t\r");
+      f.push_back(b == std::string::npos ? "" : x.substr(b, e - b + 1));
+    }
+    return f;
+  };
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.find_first_not_of(" \t\r") == std::string::npos || line[line.find_first_not_of(" \t")] == '#') continue;
+    const auto f = split(line);
+    const std::string where = file.string() + ":" + std::to_string(lineno) + ": ";
+    if (header.empty()) {
+      header = f;
+      for (const auto& h : header)
+        if (h != "name" && h != "zeta_deg" && h != "epsilon" && h != "gain" && h != "beam")
+          throw pisco::Error(where + "unknown column '" + h + "'; expected name, zeta_deg, epsilon, gain, beam");
+      if (std::find(header.begin(), header.end(), "name") == header.end())
+        throw pisco::Error(where + "the header needs a 'name' column");
+      continue;
+    }
+    if (f.size() != header.size())
+      throw pisco::Error(where + "expected " + std::to_string(header.size()) + " fields, got " + std::to_string(f.size()));
+    pisco::Detector d;
+    for (std::size_t i = 0; i < f.size(); ++i) {
+      auto num = [&](const std::string& s) {
+        try {
+          std::size_t used = 0;
+          const double v = std::stod(s, &used);
+          if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
+          return v;
+        } catch (const std::exception&) {
+          throw pisco::Error(where + "column '" + header[i] + "': expected a number, got '" + s + "'");
+        }
+      };
+      if (header[i] == "name") d.name = f[i];
+      else if (header[i] == "zeta_deg") d.zeta = num(f[i]) * deg;
+      else if (header[i] == "epsilon") d.epsilon = num(f[i]);
+      else if (header[i] == "gain") d.gain = num(f[i]);
+      else {
+        auto it = std::find_if(beams.begin(), beams.end(), [&](const BeamConfig& b) { return b.name == f[i]; });
+        if (it == beams.end()) throw pisco::Error(where + "no beam named '" + f[i] + "' in [beams]");
+        d.beam = static_cast<std::size_t>(it - beams.begin());
+      }
+    }
+    if (d.name.empty()) throw pisco::Error(where + "empty detector name");
+    out.push_back(d);
+  }
+  if (out.empty()) throw pisco::Error(file.string() + ": no detectors in the focal plane table");
+  return out;
+}
+
+SimulationConfig load_config(const fs::path& file) {
+  SimulationConfig c;
+  c.source = file;
+  const toml::table root = parse(file, &c.text);
+  Table t(root, "top level", file);
+  const toml::table* sky = t.table("sky");
+  if (!sky) t.fail("sky", "missing [sky] table");
+  c.sky = read_sky(Table(*sky, "sky", file));
+
+  const toml::table* beams = t.table("beams");
+  if (!beams || beams->empty()) t.fail("beams", "missing [beams.NAME] tables");
+  for (const auto& [name, node] : *beams) {
+    if (!node.is_table()) Table(*beams, "beams", file).fail(std::string(name.str()), "expected a table [beams." + std::string(name.str()) + "]");
+    c.beams.push_back(read_beam(Table(*node.as_table(), "beams." + std::string(name.str()), file), std::string(name.str())));
+  }
+
+  const toml::table* fp = t.table("focal_plane");
+  if (!fp) t.fail("focal_plane", "missing [focal_plane] table");
+  Table fpt(*fp, "focal_plane", file);
+  const fs::path fp_file = fpt.path("file");
+  if (!fp_file.empty()) {
+    if (fp->contains("detectors") || fp->contains("pairs")) fpt.fail("file", "give either a file or detectors/pairs, not both");
+    c.detectors = load_focal_plane(fp_file, c.beams);
+  } else {
+    read_detectors(*fp, "focal_plane", file, c.beams, c.detectors);
+    if (c.detectors.empty()) fpt.fail("detectors", "no [[focal_plane.detectors]] or [[focal_plane.pairs]]");
+  }
+
+  const toml::table* scan = t.table("scan");
+  if (!scan) t.fail("scan", "missing [scan] table");
+  c.scan = read_scan(Table(*scan, "scan", file));
+  const toml::table* engine = t.table("engine");
+  c.engine = engine ? read_engine(Table(*engine, "engine", file)) : EngineConfig{};
+  const toml::table* output = t.table("output");
+  c.output = output ? read_output(Table(*output, "output", file)) : OutputConfig{};
+  t.finish();
+  return c;
+}
+
+}  // namespace pisco_cli

@@ -1,0 +1,88 @@
+// The simulation file of `pisco-vk run` (DESIGN 9): one TOML file naming the sky, beams, focal plane,
+// scan, engine and outputs. docs/config.md documents every key.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "pisco/pisco.hpp"
+
+namespace pisco_cli {
+
+struct SkyConfig {
+  std::filesystem::path file;    // a HEALPix FITS map, or empty to synthesize
+  std::filesystem::path cl_file; // C_l table for synthesis
+  int nside = 128;
+  int lmax = 0;                  // 0: 2 nside
+  double r = 0.0;
+  std::filesystem::path bb_template;  // tensor BB D_l table for r = 1 (columns l, BB)
+  std::uint64_t seed = 1;
+  bool unpolarized = false;      // Q = U = 0 after synthesis or loading
+  std::vector<double> point_source;  // theta, phi (rad), I, Q, U, V: one non-zero pixel (paper 6.1)
+  std::string units;
+};
+
+struct BeamConfig {
+  std::string name;
+  std::string type;              // gaussian, elliptical, file
+  double fwhm = 0, fwhm_x = 0, fwhm_y = 0, angle = 0;  // radians
+  pisco::BeamOptions options;
+  std::filesystem::path file;
+};
+
+struct ScanConfig {
+  std::string type;              // pixel_centres, random_offsets, raster, file
+  int nside = 64;
+  std::vector<double> psi;       // radians
+  double f = 0.1;
+  bool symmetric = false;
+  std::uint64_t seed = 1;
+  double theta = 0, phi = 0, radius = 0;  // raster centre and radius, radians
+  std::filesystem::path file;
+};
+
+struct EngineConfig {
+  pisco::EngineOptions options;
+  std::size_t chunk_samples = 1 << 16;
+};
+
+struct OutputConfig {
+  std::filesystem::path dir = "pisco-out";
+  bool tod = true;
+  pisco::TodPrecision tod_precision = pisco::TodPrecision::float64;
+  bool tod_pointing = false;
+  bool maps = true;
+  int maps_nside = 0;            // 0: the scan's NSIDE (or the sky's for pointing files)
+  double rcond_min = 1e-3;
+  bool spectra = true;
+  int lmax = 0;                  // 0: 2 maps_nside
+  bool deconvolve_beam = true;
+  bool deconvolve_pixel_window = false;
+  bool plots = true;
+};
+
+struct SimulationConfig {
+  std::filesystem::path source;  // the config file ("" for built-in defaults)
+  std::string text;              // its contents, recorded as provenance
+  SkyConfig sky;
+  std::vector<BeamConfig> beams;
+  std::vector<pisco::Detector> detectors;
+  ScanConfig scan;
+  EngineConfig engine;
+  OutputConfig output;
+};
+
+// Reads and checks a simulation file. Relative paths inside it are relative to its directory.
+// Throws pisco::Error naming the file and the key on anything unexpected, unknown keys included.
+SimulationConfig load_config(const std::filesystem::path& file);
+
+// Reads a focal plane table: CSV with a header (name, zeta_deg, epsilon, gain, beam) or TOML
+// ([[detectors]] / [[pairs]] as in the simulation file). Beam names are resolved against `beams`.
+std::vector<pisco::Detector> load_focal_plane(const std::filesystem::path& file,
+                                              const std::vector<BeamConfig>& beams);
+
+}  // namespace pisco_cli

@@ -1,0 +1,113 @@
+// pisco-vk: the command line of PISCO-VK (DESIGN 10), a thin layer over the library.
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+
+#include "bench.hpp"
+#include "config.hpp"
+#include "run.hpp"
+#include "validation/validation.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Where the bundled examples and tools live: $PISCO_DATA_DIR, an installation's share/pisco, or
+// the source tree the program was built from.
+fs::path data_dir() {
+  if (const char* env = std::getenv("PISCO_DATA_DIR")) return env;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const fs::path installed = exe.parent_path().parent_path() / "share" / "pisco";
+    if (fs::exists(installed / "assets")) return installed;
+  }
+  return PISCO_SOURCE_DIR;
+}
+
+// A pass/fail table of the validation cases with their figures; the exit status says whether all passed.
+int validate(bool full) {
+  using namespace pisco::validation;
+  bool all = true;
+  for (const auto& run_case : all_cases()) {
+    const CaseResult r = run_case(full ? Scale::full : Scale::test);
+    std::printf("\n%s  %s  [%s, %.1f s]\n", r.id.c_str(), r.title.c_str(), r.pass() ? "pass" : "FAIL", r.seconds);
+    for (const auto& n : r.notes) std::printf("    %s\n", n.c_str());
+    for (const auto& f : r.figures)
+      std::printf("  %-4s %-58s %11.3g %-9s (bar %.3g)\n", f.pass() ? "ok" : "FAIL", f.name.c_str(), f.value,
+                  f.unit.c_str(), f.bar);
+    std::fflush(stdout);
+    all = all && r.pass();
+  }
+  std::printf("\nvalidation (%s scale): %s\n", full ? "full" : "test", all ? "all cases pass" : "FAILED");
+  return all ? 0 : 1;
+}
+
+int devices() {
+  std::printf("%-8s %-10s %s\n", "backend", "status", "device or reason");
+  for (const auto& b : pisco::Engine::backends())
+    std::printf("%-8s %-10s %s\n", b.name.c_str(), b.available ? "available" : "missing", b.detail.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"PISCO-VK: pixel-space convolution of polarized skies with beamsors, for CMB simulations.",
+               "pisco-vk"};
+  app.set_version_flag("--version", std::string("pisco-vk ") + pisco::version);
+  app.require_subcommand(1);
+
+  auto* run = app.add_subcommand("run", "Run a simulation: sky -> TOD -> maps -> spectra (-> plots).");
+  std::string config_path, output_dir, backend;
+  bool quiet = false, no_plots = false;
+  run->add_option("config", config_path,
+                  "Simulation file (TOML). Without one, the bundled quick-start assets/examples/quickstart.toml.");
+  run->add_option("-o,--output", output_dir, "Output directory (overrides [output] dir).");
+  run->add_option("-b,--backend", backend, "Backend: auto, cpu (overrides [engine] backend).");
+  run->add_flag("-q,--quiet", quiet, "Print nothing but errors.");
+  run->add_flag("--no-plots", no_plots, "Do not run the plotting tool.");
+
+  app.add_subcommand("devices", "List the backends compiled in, the devices found, and why a backend is missing.");
+
+  auto* bench = app.add_subcommand("bench", "Benchmark the paper's Table 1 workload (VALIDATION G).");
+  pisco_cli::BenchOptions bench_options;
+  bench->add_option("--rho-max", bench_options.rho_max_deg, "Disc radii in degrees (default: 5 10).");
+  bench->add_option("-b,--backend", bench_options.backend, "Backend (default: auto).");
+  bench->add_option("--threads", bench_options.threads, "CPU backend threads (default: all).");
+
+  auto* val = app.add_subcommand("validate", "Run the paper's validation cases (VALIDATION.md C, D) and print a pass/fail table.");
+  bool full = false;
+  val->add_flag("--full", full, "Paper scale (C at three beam resolutions, D with an NSIDE 512 sky); minutes on a CPU.");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  try {
+    if (app.got_subcommand("devices")) return devices();
+    if (app.got_subcommand("bench")) return pisco_cli::run_bench(bench_options);
+    if (app.got_subcommand("validate")) return validate(full);
+    const fs::path data = data_dir();
+    const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
+    pisco_cli::SimulationConfig config = pisco_cli::load_config(config_file);
+    if (!output_dir.empty()) config.output.dir = output_dir;
+    if (!backend.empty()) config.engine.options.backend = backend;
+    pisco_cli::RunOptions options;
+    options.quiet = quiet;
+    options.plots = !no_plots;
+    options.plot_script = data / "tools" / "pisco_plot.py";
+    return pisco_cli::run_simulation(config, options);
+  } catch (const pisco::Error& e) {
+    std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
+    return 3;
+  }
+}

@@ -1,0 +1,281 @@
+// `pisco-vk run`: sky -> TOD -> binned maps -> spectra, streaming the TOD chunk by chunk through the
+// map-maker and the TOD file, so memory stays bounded whatever the length of the scan.
+#include "run.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <numbers>
+#include <optional>
+#include <sstream>
+
+#include "progress.hpp"
+
+namespace pisco_cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<double> read_bb_template(const fs::path& file, int lmax) {
+  std::ifstream in(file);
+  if (!in) throw pisco::Error(file.string() + ": cannot open the tensor BB template");
+  std::vector<double> cl(static_cast<std::size_t>(lmax) + 1, 0.0);
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    double l, dl;
+    if (!(ss >> l >> dl) || !std::isfinite(dl) || l < 0)
+      throw pisco::Error(file.string() + ":" + std::to_string(lineno) + ": expected 'l D_l^BB'");
+    const int il = static_cast<int>(l);
+    if (il >= 2 && il <= lmax) cl[il] = 2 * std::numbers::pi * dl / (l * (l + 1));
+  }
+  return cl;
+}
+
+pisco::Sky make_sky(const SkyConfig& s, const fs::path& assets) {
+  if (!s.file.empty()) {
+    pisco::Sky sky = pisco::Sky::read_fits(s.file);
+    if (s.unpolarized) {
+      std::fill(sky.Q().begin(), sky.Q().end(), 0.0);
+      std::fill(sky.U().begin(), sky.U().end(), 0.0);
+    }
+    return sky;
+  }
+  if (!s.point_source.empty()) {
+    pisco::Sky sky(s.nside, s.units);
+    const std::size_t p = pisco::ang2pix(s.nside, s.point_source[0], s.point_source[1]);
+    for (int k = 0; k < 4; ++k) sky.stokes(static_cast<pisco::StokesIndex>(k))[p] = s.point_source[2 + k];
+    return sky;
+  }
+  const int lmax = s.lmax > 0 ? s.lmax : 2 * s.nside;
+  pisco::Spectra cls = pisco::read_cl_table(s.cl_file, lmax, true);
+  if (s.r > 0) {
+    const fs::path tmpl = s.bb_template.empty() ? assets / "spectra" / "tensor_bb_r1.txt" : s.bb_template;
+    const std::vector<double> bb = read_bb_template(tmpl, lmax);
+    for (int l = 0; l <= lmax; ++l) cls.BB[l] = s.r * bb[l];
+  }
+  if (s.unpolarized) {
+    std::fill(cls.EE.begin(), cls.EE.end(), 0.0);
+    std::fill(cls.BB.begin(), cls.BB.end(), 0.0);
+    std::fill(cls.TE.begin(), cls.TE.end(), 0.0);
+  }
+  return pisco::synthesize_sky(cls, s.nside, s.seed);
+}
+
+pisco::Beamsor make_beam(const BeamConfig& b, const fs::path& config) {
+  try {
+    if (b.type == "gaussian") return pisco::Beamsor::gaussian(b.fwhm, b.options);
+    if (b.type == "elliptical") return pisco::Beamsor::elliptical_gaussian(b.fwhm_x, b.fwhm_y, b.angle, b.options);
+    return pisco::Beamsor::read_healpix_fits(b.file, b.options.rho_max, b.options.grid_step);
+  } catch (const pisco::Error& e) {
+    throw pisco::Error(config.string() + ": [beams." + b.name + "] " + e.what());
+  }
+}
+
+// The pointing of one detector: the generated scan (shared by all detectors) or its file group.
+class PointingSource {
+ public:
+  explicit PointingSource(const ScanConfig& s) : scan_(s) {
+    if (s.type == "pixel_centres") shared_ = pisco::pixel_centre_scan(s.nside, s.psi);
+    else if (s.type == "random_offsets") shared_ = pisco::random_offset_scan(s.nside, s.psi, s.f, s.seed, s.symmetric);
+    else if (s.type == "raster") shared_ = pisco::raster_scan(s.theta, s.phi, s.radius, s.nside, s.psi);
+  }
+  const pisco::Pointing& get(const pisco::Detector& d) {
+    if (shared_) return *shared_;
+    current_ = pisco::read_pointing_hdf5(scan_.file, d.name);
+    return current_;
+  }
+  std::size_t samples(const pisco::Detector& d) {
+    return shared_ ? shared_->size() : pisco::read_pointing_hdf5(scan_.file, d.name).size();
+  }
+
+ private:
+  ScanConfig scan_;
+  std::optional<pisco::Pointing> shared_;
+  pisco::Pointing current_;
+};
+
+std::string utc_now() {
+  const std::time_t t = std::time(nullptr);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
+  return buf;
+}
+
+// Beam window for the spectra: exact for a Gaussian; the Gaussian of the geometric-mean width for
+// an elliptical beam (the leading term of its mean radial profile); none for beams from files.
+std::optional<double> window_fwhm(const BeamConfig& b) {
+  if (b.type == "gaussian") return b.fwhm;
+  if (b.type == "elliptical") return std::sqrt(b.fwhm_x * b.fwhm_y);
+  return std::nullopt;
+}
+
+void write_spectra(const fs::path& file, const pisco::Spectra& s, int lmax, const std::string& header) {
+  const fs::path tmp = file.string() + ".tmp";
+  {
+    std::ofstream out(tmp);
+    if (!out) throw pisco::Error(file.string() + ": cannot write");
+    out << "# " << header << "\n# l  D_l = l(l+1)C_l/2pi:  TT EE BB TE EB TB\n";
+    char buf[256];
+    for (int l = 2; l <= lmax; ++l) {
+      const double f = l * (l + 1.0) / (2 * std::numbers::pi);
+      std::snprintf(buf, sizeof buf, "%d %.10e %.10e %.10e %.10e %.10e %.10e\n", l, f * s.TT[l], f * s.EE[l],
+                    f * s.BB[l], f * s.TE[l], f * s.EB[l], f * s.TB[l]);
+      out << buf;
+    }
+    if (!out.flush()) throw pisco::Error(file.string() + ": write failed");
+  }
+  fs::rename(tmp, file);
+}
+
+}  // namespace
+
+int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const bool quiet = ro.quiet;
+  auto say = [&](const char* fmt, auto... args) {
+    if (!quiet) std::printf(fmt, args...);
+    std::fflush(stdout);
+  };
+  say("pisco-vk %s: %s\n", pisco::version, c.source.empty() ? "built-in defaults" : c.source.string().c_str());
+
+  const fs::path assets = ro.plot_script.empty() ? fs::path() : ro.plot_script.parent_path().parent_path() / "assets";
+  const pisco::Sky sky = make_sky(c.sky, assets);
+  say("sky: NSIDE %d, %s%s\n", sky.nside(), c.sky.file.empty() ? "synthesized from " : "",
+      c.sky.file.empty() ? c.sky.cl_file.string().c_str() : c.sky.file.string().c_str());
+  std::vector<pisco::Beamsor> beams;
+  for (const auto& b : c.beams) {
+    beams.push_back(make_beam(b, c.source));
+    say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
+  }
+  pisco::FocalPlane fp(c.detectors);
+  pisco::Engine engine(sky, beams, fp, c.engine.options);
+  say("backend: %s (%s)\n", engine.backend_name().c_str(), engine.device_name().c_str());
+
+  PointingSource source(c.scan);
+  std::size_t samples_per_detector = 0;
+  std::uint64_t total = 0;
+  for (const auto& d : fp.detectors()) {
+    const std::size_t n = source.samples(d);
+    if (samples_per_detector == 0) samples_per_detector = n;
+    if (n != samples_per_detector)
+      throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
+                         " samples, the others " + std::to_string(samples_per_detector));
+    total += n;
+  }
+  const int maps_nside = c.output.maps_nside > 0 ? c.output.maps_nside
+                         : c.scan.type == "file" ? sky.nside() : c.scan.nside;
+  say("scan: %s, %zu detectors x %zu samples\n", c.scan.type.c_str(), fp.size(), samples_per_detector);
+
+  fs::create_directories(c.output.dir);
+  std::optional<pisco::BinnedMapmaker> mapper;
+  if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
+  std::optional<pisco::TodWriter> tod_file;
+  const fs::path tod_path = c.output.dir / "tod.h5";
+  if (c.output.tod) {
+    std::string beam_desc;
+    for (std::size_t i = 0; i < beams.size(); ++i)
+      beam_desc += (i ? "; " : "") + c.beams[i].name + ": " + beams[i].description();
+    tod_file.emplace(tod_path, fp, samples_per_detector, c.output.tod_precision, c.output.tod_pointing,
+                     std::map<std::string, std::string>{{"units", sky.units()},
+                                                        {"nside", std::to_string(sky.nside())},
+                                                        {"beam", beam_desc},
+                                                        {"backend", engine.backend_name()},
+                                                        {"device", engine.device_name()},
+                                                        {"pisco_version", pisco::version},
+                                                        {"created", utc_now()},
+                                                        {"config", c.text}});
+  }
+
+  Progress progress(total, quiet);
+  std::vector<double> tod(std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1)));
+  const auto tc = std::chrono::steady_clock::now();
+  for (std::size_t d = 0; d < fp.size(); ++d) {
+    const pisco::Pointing& ptg = source.get(fp[d]);
+    for (std::size_t off = 0; off < ptg.size(); off += tod.size()) {
+      const std::size_t n = std::min(tod.size(), ptg.size() - off);
+      const pisco::PointingView v = ptg.view().subspan(off, n);
+      const std::span<double> chunk(tod.data(), n);
+      engine.convolve(d, v, chunk);
+      if (mapper) mapper->add(fp[d], v, chunk);
+      if (tod_file) tod_file->write(d, off, chunk, c.output.tod_pointing ? &v : nullptr);
+      progress.advance(n);
+    }
+  }
+  progress.finish();
+  const double conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
+  std::vector<fs::path> written;
+  if (tod_file) {
+    tod_file->commit();
+    written.push_back(tod_path);
+  }
+
+  if (mapper) {
+    const pisco::BinnedMaps maps = mapper->solve();
+    const fs::path maps_path = c.output.dir / "maps.fits", hits_path = c.output.dir / "hits.fits";
+    pisco::write_healpix_map(maps_path, maps_nside, {{"I_STOKES", maps.I}, {"Q_STOKES", maps.Q}, {"U_STOKES", maps.U}},
+                             sky.units());
+    std::vector<double> hits(maps.hits.begin(), maps.hits.end());
+    pisco::write_healpix_map(hits_path, maps_nside, {{"HITS", hits}}, "samples");
+    written.push_back(maps_path);
+    written.push_back(hits_path);
+    const auto solved = std::count_if(maps.I.begin(), maps.I.end(), [](double v) { return v != pisco::unseen; });
+    say("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside, solved, maps.I.size(),
+        c.output.rcond_min);
+
+    if (c.output.spectra) {
+      const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
+      const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
+      const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
+      std::vector<double> bt, bp, pt, pp;
+      std::string note = "binned maps";
+      const auto fw = window_fwhm(c.beams[c.detectors.front().beam]);
+      if (c.output.deconvolve_beam && fw) {
+        bt = pisco::gaussian_beam_window(*fw, lmax, false);
+        bp = pisco::gaussian_beam_window(*fw, lmax, true);
+        note += ", divided by the Gaussian beam window of FWHM " + std::to_string(*fw * 180 / std::numbers::pi) + " deg";
+      }
+      if (c.output.deconvolve_pixel_window) {
+        pt = pisco::pixel_window(maps_nside, lmax, false);
+        pp = pisco::pixel_window(maps_nside, lmax, true);
+        note += ", divided by the NSIDE " + std::to_string(maps_nside) + " pixel window";
+      }
+      const fs::path spectra_path = c.output.dir / "spectra.txt", input_path = c.output.dir / "input_spectra.txt";
+      write_spectra(spectra_path, pisco::deconvolve_windows(out, bt, bp, pt, pp), lmax, note);
+      write_spectra(input_path, pisco::anafast(sky.I(), sky.Q(), sky.U(), sky.nside(), lmax_sky), lmax_sky,
+                    "input sky");
+      written.push_back(spectra_path);
+      written.push_back(input_path);
+    }
+  }
+
+  if (c.output.plots && ro.plots && c.output.maps) {
+    if (ro.plot_script.empty() || !fs::exists(ro.plot_script)) {
+      say("plots: skipped (tools/pisco_plot.py not found)\n");
+    } else {
+      const std::string python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+      const std::string cmd = python + " \"" + ro.plot_script.string() + "\" \"" + c.output.dir.string() + "\"" +
+                              (quiet ? " >/dev/null" : "");
+      if (std::system(cmd.c_str()) != 0) say("plots: skipped (%s could not run; see above)\n", python.c_str());
+    }
+  }
+
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!quiet) {
+    std::printf("summary: %llu samples, %.1f pixels per disc, %.3g pixel evaluations/s, %.3g samples/s\n",
+                static_cast<unsigned long long>(total), engine.mean_disc_pixels(),
+                double(total) * engine.mean_disc_pixels() / conv, double(total) / conv);
+    std::printf("         device %s (%s); convolution %s, wall time %s\n", engine.backend_name().c_str(),
+                engine.device_name().c_str(), human_seconds(conv).c_str(), human_seconds(wall).c_str());
+    for (const auto& f : written) std::printf("         wrote %s\n", f.string().c_str());
+  }
+  return 0;
+}
+
+}  // namespace pisco_cli
