@@ -13,6 +13,12 @@ struct Detector {
   double epsilon = 0.0;  // cross-polar leakage: polarization efficiency is 1 - epsilon
   double gain = 1.0;     // responsivity s
   std::size_t beam = 0;  // index of this detector's beamsor in the engine's beam list
+  // Offset from the boresight in focal-plane coordinates (radians): the detector's beam axis lies at
+  // distance sqrt(xi^2 + eta^2) from the boresight towards atan2(eta, xi), measured from the
+  // boresight's theta' axis towards phi' (azimuthal-equidistant), and its own theta' axis is the
+  // boresight's carried along that great circle, then turned by gamma. Zero: on the boresight.
+  double xi = 0.0, eta = 0.0, gamma = 0.0;
+  bool has_offset() const noexcept { return xi != 0.0 || eta != 0.0 || gamma != 0.0; }
 };
 
 class FocalPlane {

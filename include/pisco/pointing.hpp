@@ -27,6 +27,10 @@ struct Pointing {
   operator PointingView() const { return view(); }
 };
 
+// The pointing of a detector at focal-plane offset (xi, eta, gamma) (see Detector) from a boresight
+// pointing: the boresight's antenna frame rotated by the offset, appended to `out` (cleared first).
+void offset_pointing(const PointingView& boresight, double xi, double eta, double gamma, Pointing& out);
+
 // Throws pisco::Error naming `origin` and the first sample with a non-finite value or theta outside
 // [0, pi], or arrays of different length.
 void check_pointing(const PointingView& pointing, const char* origin);
