@@ -1,5 +1,6 @@
 #include "config.hpp"
 
+#include <cstdio>
 #include <fstream>
 #include <numbers>
 #include <set>
@@ -221,6 +222,9 @@ void read_detectors(const toml::table& root, const std::string& where, const fs:
       det.epsilon = d.number("epsilon", 0.0);
       det.gain = d.number("gain", 1.0);
       det.beam = beam_index(d, "beam", beams, true);
+      det.xi = d.number("xi_deg", 0.0) * deg;
+      det.eta = d.number("eta_deg", 0.0) * deg;
+      det.gamma = d.number("gamma_deg", 0.0) * deg;
       d.finish();
       out.push_back(det);
     }
@@ -241,20 +245,64 @@ void read_detectors(const toml::table& root, const std::string& where, const fs:
         bb = beam_index(p, "beam_b", beams, true);
       }
       const double ga = p.number("gain_a", 1.0), gb = p.number("gain_b", 1.0);
+      // A pair shares its position; xi_b, eta_b give detector b its own (pointing mismatch).
+      const double xi = p.number("xi_deg", 0.0) * deg, eta = p.number("eta_deg", 0.0) * deg;
+      const double xi_b = p.number("xi_b_deg").value_or(xi / deg) * deg, eta_b = p.number("eta_b_deg").value_or(eta / deg) * deg;
+      const double gamma = p.number("gamma_deg", 0.0) * deg;
       p.finish();
-      out.push_back({*name + "a", zeta, eps, ga, ba});
-      out.push_back({*name + "b", zeta - std::numbers::pi / 2, eps, gb, bb});
+      out.push_back({*name + "a", zeta, eps, ga, ba, xi, eta, gamma});
+      out.push_back({*name + "b", zeta - std::numbers::pi / 2, eps, gb, bb, xi_b, eta_b, gamma});
     }
   }
   t.string("file");  // handled by the caller
   t.finish();
 }
 
+// "YYYY-MM-DDTHH:MM:SSZ" (UTC) to seconds since 1970-01-01.
+double parse_utc(Table& t, const std::string& key, const std::string& text) {
+  int y, mo, d, h, mi;
+  double sec;
+  char z = 0;
+  if (std::sscanf(text.c_str(), "%d-%d-%dT%d:%d:%lf%c", &y, &mo, &d, &h, &mi, &sec, &z) != 7 || z != 'Z' || mo < 1 ||
+      mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || sec >= 61)
+    t.fail(key, "expected a UTC time like \"2019-06-01T00:00:00Z\", got \"" + text + "\"");
+  // Days from civil (proleptic Gregorian), Howard Hinnant's algorithm.
+  y -= mo <= 2;
+  const int era = (y >= 0 ? y : y - 399) / 400;
+  const unsigned yoe = static_cast<unsigned>(y - era * 400);
+  const unsigned doy = (153 * (mo + (mo > 2 ? -3 : 9)) + 2) / 5 + d - 1;
+  const unsigned doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+  const long days = era * 146097L + static_cast<long>(doe) - 719468L;
+  return days * 86400.0 + h * 3600.0 + mi * 60.0 + sec;
+}
+
 ScanConfig read_scan(Table t) {
   ScanConfig s;
-  s.type = t.choice("type", "pixel_centres", {"pixel_centres", "random_offsets", "raster", "file"});
-  for (double p : t.numbers("psi_deg", {0.0, 45.0, 90.0})) s.psi.push_back(p * deg);
-  if (s.type == "file") {
+  s.type = t.choice("type", "pixel_centres", {"pixel_centres", "random_offsets", "raster", "ces", "file"});
+  if (s.type != "ces" && s.type != "file")
+    for (double p : t.numbers("psi_deg", {0.0, 45.0, 90.0})) s.psi.push_back(p * deg);
+  if (s.type == "ces") {
+    pisco::CesScan& c = s.ces;
+    c.latitude = t.number("latitude_deg", -22.96) * deg;
+    c.longitude = t.number("longitude_deg", -67.79) * deg;
+    c.elevation = t.number("elevation_deg", 45.0) * deg;
+    c.az_centre = t.number("az_centre_deg", 180.0) * deg;
+    c.az_throw = t.number("az_throw_deg", 720.0) * deg;
+    c.az_speed = t.positive("az_speed_deg_s", 1.0) * deg;
+    c.sample_rate = t.positive("sample_rate_hz", 20.0);
+    c.start_unix = parse_utc(t, "start", t.string("start", "2019-06-01T00:00:00Z"));
+    const double hours = t.positive("duration_hours", 1.0);
+    c.samples = static_cast<std::size_t>(std::llround(hours * 3600 * c.sample_rate));
+    c.boresight_angles.clear();
+    for (double b : t.numbers("boresight_deg", {0.0})) c.boresight_angles.push_back(b * deg);
+    c.boresight_period = t.positive("boresight_period_hours", 24.0) * 3600;
+    s.nside = static_cast<int>(t.integer("nside", 128));  // the maps' default NSIDE
+    try {
+      c.check();
+    } catch (const pisco::Error& e) {
+      t.fail("type", e.what());
+    }
+  } else if (s.type == "file") {
     s.file = t.path("file");
     if (s.file.empty()) t.fail("file", "a scan of type \"file\" needs file = \"pointing.h5\"");
   } else {
@@ -349,8 +397,10 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
     if (header.empty()) {
       header = f;
       for (const auto& h : header)
-        if (h != "name" && h != "zeta_deg" && h != "epsilon" && h != "gain" && h != "beam")
-          throw pisco::Error(where + "unknown column '" + h + "'; expected name, zeta_deg, epsilon, gain, beam");
+        if (h != "name" && h != "zeta_deg" && h != "epsilon" && h != "gain" && h != "beam" && h != "xi_deg" &&
+            h != "eta_deg" && h != "gamma_deg")
+          throw pisco::Error(where + "unknown column '" + h +
+                             "'; expected name, zeta_deg, epsilon, gain, beam, xi_deg, eta_deg, gamma_deg");
       if (std::find(header.begin(), header.end(), "name") == header.end())
         throw pisco::Error(where + "the header needs a 'name' column");
       continue;
@@ -373,6 +423,9 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
       else if (header[i] == "zeta_deg") d.zeta = num(f[i]) * deg;
       else if (header[i] == "epsilon") d.epsilon = num(f[i]);
       else if (header[i] == "gain") d.gain = num(f[i]);
+      else if (header[i] == "xi_deg") d.xi = num(f[i]) * deg;
+      else if (header[i] == "eta_deg") d.eta = num(f[i]) * deg;
+      else if (header[i] == "gamma_deg") d.gamma = num(f[i]) * deg;
       else {
         auto it = std::find_if(beams.begin(), beams.end(), [&](const BeamConfig& b) { return b.name == f[i]; });
         if (it == beams.end()) throw pisco::Error(where + "no beam named '" + f[i] + "' in [beams]");

@@ -35,7 +35,7 @@ struct BeamConfig {
 };
 
 struct ScanConfig {
-  std::string type;              // pixel_centres, random_offsets, raster, file
+  std::string type;              // pixel_centres, random_offsets, raster, ces, file
   int nside = 64;
   std::vector<double> psi;       // radians
   double f = 0.1;
@@ -43,6 +43,7 @@ struct ScanConfig {
   std::uint64_t seed = 1;
   double theta = 0, phi = 0, radius = 0;  // raster centre and radius, radians
   std::filesystem::path file;
+  pisco::CesScan ces;            // type = "ces"
 };
 
 struct EngineConfig {

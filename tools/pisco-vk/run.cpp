@@ -78,27 +78,25 @@ pisco::Beamsor make_beam(const BeamConfig& b, const fs::path& config) {
   }
 }
 
-// The pointing of one detector: the generated scan (shared by all detectors) or its file group.
-class PointingSource {
+// The boresight pointing of the generated scans, produced chunk by chunk (a week of
+// constant-elevation scanning is never held in memory whole).
+class Boresight {
  public:
-  explicit PointingSource(const ScanConfig& s) : scan_(s) {
-    if (s.type == "pixel_centres") shared_ = pisco::pixel_centre_scan(s.nside, s.psi);
-    else if (s.type == "random_offsets") shared_ = pisco::random_offset_scan(s.nside, s.psi, s.f, s.seed, s.symmetric);
-    else if (s.type == "raster") shared_ = pisco::raster_scan(s.theta, s.phi, s.radius, s.nside, s.psi);
+  explicit Boresight(const ScanConfig& s) : scan_(s) {
+    if (s.type == "pixel_centres") all_ = pisco::pixel_centre_scan(s.nside, s.psi);
+    else if (s.type == "random_offsets") all_ = pisco::random_offset_scan(s.nside, s.psi, s.f, s.seed, s.symmetric);
+    else if (s.type == "raster") all_ = pisco::raster_scan(s.theta, s.phi, s.radius, s.nside, s.psi);
   }
-  const pisco::Pointing& get(const pisco::Detector& d) {
-    if (shared_) return *shared_;
-    current_ = pisco::read_pointing_hdf5(scan_.file, d.name);
-    return current_;
-  }
-  std::size_t samples(const pisco::Detector& d) {
-    return shared_ ? shared_->size() : pisco::read_pointing_hdf5(scan_.file, d.name).size();
+  std::size_t size() const { return scan_.type == "ces" ? scan_.ces.samples : all_.size(); }
+  pisco::PointingView chunk(std::size_t first, std::size_t count) {
+    if (scan_.type != "ces") return all_.view().subspan(first, count);
+    scan_.ces.generate(first, count, buffer_);
+    return buffer_.view();
   }
 
  private:
   ScanConfig scan_;
-  std::optional<pisco::Pointing> shared_;
-  pisco::Pointing current_;
+  pisco::Pointing all_, buffer_;
 };
 
 std::string utc_now() {
@@ -158,17 +156,22 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   pisco::Engine engine(sky, beams, fp, c.engine.options);
   say("backend: %s (%s)\n", engine.backend_name().c_str(), engine.device_name().c_str());
 
-  PointingSource source(c.scan);
+  const bool from_file = c.scan.type == "file";
+  std::optional<Boresight> boresight;
   std::size_t samples_per_detector = 0;
-  std::uint64_t total = 0;
-  for (const auto& d : fp.detectors()) {
-    const std::size_t n = source.samples(d);
-    if (samples_per_detector == 0) samples_per_detector = n;
-    if (n != samples_per_detector)
-      throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
-                         " samples, the others " + std::to_string(samples_per_detector));
-    total += n;
+  if (from_file) {
+    for (const auto& d : fp.detectors()) {
+      const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
+      if (samples_per_detector == 0) samples_per_detector = n;
+      if (n != samples_per_detector)
+        throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
+                           " samples, the others " + std::to_string(samples_per_detector));
+    }
+  } else {
+    boresight.emplace(c.scan);
+    samples_per_detector = boresight->size();
   }
+  const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
   const int maps_nside = c.output.maps_nside > 0 ? c.output.maps_nside
                          : c.scan.type == "file" ? sky.nside() : c.scan.nside;
   say("scan: %s, %zu detectors x %zu samples\n", c.scan.type.c_str(), fp.size(), samples_per_detector);
@@ -196,16 +199,33 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   Progress progress(total, quiet);
   std::vector<double> tod(std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1)));
   const auto tc = std::chrono::steady_clock::now();
-  for (std::size_t d = 0; d < fp.size(); ++d) {
-    const pisco::Pointing& ptg = source.get(fp[d]);
-    for (std::size_t off = 0; off < ptg.size(); off += tod.size()) {
-      const std::size_t n = std::min(tod.size(), ptg.size() - off);
-      const pisco::PointingView v = ptg.view().subspan(off, n);
-      const std::span<double> chunk(tod.data(), n);
-      engine.convolve(d, v, chunk);
-      if (mapper) mapper->add(fp[d], v, chunk);
-      if (tod_file) tod_file->write(d, off, chunk, c.output.tod_pointing ? &v : nullptr);
-      progress.advance(n);
+  // One detector's chunk: convolve, bin, write.
+  auto process = [&](std::size_t d, std::size_t off, const pisco::PointingView& v) {
+    const std::span<double> chunk(tod.data(), v.size());
+    engine.convolve(d, v, chunk);
+    if (mapper) mapper->add(fp[d], v, chunk);
+    if (tod_file) tod_file->write(d, off, chunk, c.output.tod_pointing ? &v : nullptr);
+    progress.advance(v.size());
+  };
+  if (from_file) {
+    for (std::size_t d = 0; d < fp.size(); ++d) {
+      const pisco::Pointing ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
+      for (std::size_t off = 0; off < ptg.size(); off += tod.size())
+        process(d, off, ptg.view().subspan(off, std::min(tod.size(), ptg.size() - off)));
+    }
+  } else {
+    // Time chunks outermost: the boresight chunk is made once and offset for each detector.
+    pisco::Pointing offset;
+    for (std::size_t off = 0; off < samples_per_detector; off += tod.size()) {
+      const pisco::PointingView b = boresight->chunk(off, std::min(tod.size(), samples_per_detector - off));
+      for (std::size_t d = 0; d < fp.size(); ++d) {
+        if (!fp[d].has_offset()) {
+          process(d, off, b);
+          continue;
+        }
+        pisco::offset_pointing(b, fp[d].xi, fp[d].eta, fp[d].gamma, offset);
+        process(d, off, offset.view());
+      }
     }
   }
   progress.finish();
