@@ -110,6 +110,52 @@ TEST_F(Cli, SmallSimulationEndToEnd) {
   EXPECT_EQ(maps.nside(), 16);
 }
 
+TEST_F(Cli, ConstantElevationScanWithOffsetsMatchesTheLibrary) {
+  const std::string scan =
+      "[scan]\ntype = \"ces\"\nelevation_deg = 50\naz_throw_deg = 40\nsample_rate_hz = 10\n"
+      "duration_hours = 0.05\nboresight_deg = [15]\nnside = 16\n";
+  const std::string fp = "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\nxi_deg = 2.5\neta_deg = -1.0\n";
+  const fs::path cfg = write("ces.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n",
+                                                fp, scan, "tod_pointing = true\nspectra = false\n"));
+  const Result r = run("run " + cfg.string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  // The same simulation through the library: boresight, offset, engine.
+  pisco::CesScan ces;
+  ces.latitude = -22.96 * std::numbers::pi / 180;
+  ces.longitude = -67.79 * std::numbers::pi / 180;
+  ces.elevation = 50 * std::numbers::pi / 180;
+  ces.az_centre = std::numbers::pi;
+  ces.az_throw = 40 * std::numbers::pi / 180;
+  ces.sample_rate = 10;
+  ces.start_unix = 1559347200;
+  ces.boresight_angles = {15 * std::numbers::pi / 180};
+  ces.samples = 1800;
+  pisco::Pointing b, det;
+  ces.generate(0, ces.samples, b);
+  pisco::offset_pointing(b, 2.5 * std::numbers::pi / 180, -1.0 * std::numbers::pi / 180, 0, det);
+  const pisco::Pointing file_ptg = pisco::read_pointing_hdf5(dir_ / "out" / "tod.h5", "pa");
+  ASSERT_EQ(file_ptg.size(), det.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < det.size(); ++i)
+    worst = std::max({worst, std::abs(file_ptg.theta[i] - det.theta[i]), std::abs(file_ptg.psi[i] - det.psi[i])});
+  EXPECT_EQ(worst, 0.0);
+  const pisco::Sky sky = pisco::synthesize_sky(pisco::read_cl_table(pisco::default_cl_file(), 64, true), 32, 3);
+  pisco::BeamOptions o;
+  o.rho_max = 8 * std::numbers::pi / 180;
+  std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(4 * std::numbers::pi / 180, o)};
+  pisco::FocalPlane lib_fp;
+  lib_fp.add_pair("p", 0, 0, 0);
+  pisco::Engine engine(sky, beams, lib_fp);
+  std::vector<double> tod(det.size());
+  engine.convolve(1, det, tod);
+  const std::vector<double> file_tod = pisco::read_tod_signal(dir_ / "out" / "tod.h5", "pb");
+  double diff = 0;
+  for (std::size_t i = 0; i < tod.size(); ++i) diff = std::max(diff, std::abs(file_tod[i] - tod[i]));
+  std::cout << "ces run: " << det.size() << " samples per detector, max |TOD(file) - TOD(library)| " << diff << "\n";
+  EXPECT_EQ(diff, 0.0);
+}
+
 TEST_F(Cli, ConfigErrors) {
   expect_error("run " + (dir_ / "absent.toml").string(), "absent.toml: cannot open");
   expect_error("run " + write("bad.toml", "[sky\nnside = 3").string(), "bad.toml:1:");
