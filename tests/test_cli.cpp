@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <sstream>
 #include <numbers>
 #include <string>
 #include <sys/wait.h>
@@ -154,6 +156,40 @@ TEST_F(Cli, ConstantElevationScanWithOffsetsMatchesTheLibrary) {
   for (std::size_t i = 0; i < tod.size(); ++i) diff = std::max(diff, std::abs(file_tod[i] - tod[i]));
   std::cout << "ces run: " << det.size() << " samples per detector, max |TOD(file) - TOD(library)| " << diff << "\n";
   EXPECT_EQ(diff, 0.0);
+}
+
+TEST_F(Cli, TensorModesScaleWithR) {
+  // r = 1: the synthesized sky's BB follows the shipped tensor template within cosmic variance.
+  const fs::path cfg = write("r.toml", config("[sky]\nnside = 64\nlmax = 128\nseed = 9\nr = 1.0\n", "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n",
+                                              "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"main\"\n",
+                                              "[scan]\ntype = \"pixel_centres\"\nnside = 8\n", "tod = false\n"));
+  const Result r = run("run " + cfg.string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::ifstream in(dir_ / "out" / "input_spectra.txt"), tmpl(std::string(PISCO_TEST_ASSETS_DIR) + "/spectra/tensor_bb_r1.txt");
+  std::map<int, double> ref;
+  std::string line;
+  while (std::getline(tmpl, line))
+    if (line[0] != '#') {
+      std::istringstream ss(line);
+      int l;
+      double d;
+      ss >> l >> d;
+      ref[l] = d;
+    }
+  double sum_in = 0, sum_ref = 0;
+  while (std::getline(in, line))
+    if (line[0] != '#') {
+      std::istringstream ss(line);
+      int l;
+      double tt, ee, bb;
+      ss >> l >> tt >> ee >> bb;
+      if (l >= 2 && l <= 32) {
+        sum_in += bb;
+        sum_ref += ref.at(l);
+      }
+    }
+  std::cout << "r = 1 sky: sum of D_l^BB over l = 2..32 is " << sum_in / sum_ref << " of the template\n";
+  EXPECT_NEAR(sum_in / sum_ref, 1.0, 0.3);
 }
 
 TEST_F(Cli, ConfigErrors) {

@@ -101,7 +101,7 @@ int main(int argc, char** argv) {
     pisco_cli::RunOptions options;
     options.quiet = quiet;
     options.plots = !no_plots;
-    options.plot_script = data / "tools" / "pisco_plot.py";
+    options.data_dir = data;
     return pisco_cli::run_simulation(config, options);
   } catch (const pisco::Error& e) {
     std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());

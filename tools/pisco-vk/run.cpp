@@ -143,8 +143,7 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   };
   say("pisco-vk %s: %s\n", pisco::version, c.source.empty() ? "built-in defaults" : c.source.string().c_str());
 
-  const fs::path assets = ro.plot_script.empty() ? fs::path() : ro.plot_script.parent_path().parent_path() / "assets";
-  const pisco::Sky sky = make_sky(c.sky, assets);
+  const pisco::Sky sky = make_sky(c.sky, ro.data_dir / "assets");
   say("sky: NSIDE %d, %s%s\n", sky.nside(), c.sky.file.empty() ? "synthesized from " : "",
       c.sky.file.empty() ? c.sky.cl_file.string().c_str() : c.sky.file.string().c_str());
   std::vector<pisco::Beamsor> beams;
@@ -276,11 +275,12 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   }
 
   if (c.output.plots && ro.plots && c.output.maps) {
-    if (ro.plot_script.empty() || !fs::exists(ro.plot_script)) {
+    const fs::path plot_script = ro.data_dir / "tools" / "pisco_plot.py";
+    if (!fs::exists(plot_script)) {
       say("plots: skipped (tools/pisco_plot.py not found)\n");
     } else {
       const std::string python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-      const std::string cmd = python + " \"" + ro.plot_script.string() + "\" \"" + c.output.dir.string() + "\"" +
+      const std::string cmd = python + " \"" + plot_script.string() + "\" \"" + c.output.dir.string() + "\"" +
                               (quiet ? " >/dev/null" : "");
       if (std::system(cmd.c_str()) != 0) say("plots: skipped (%s could not run; see above)\n", python.c_str());
     }

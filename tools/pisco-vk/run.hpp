@@ -9,7 +9,7 @@ namespace pisco_cli {
 struct RunOptions {
   bool quiet = false;
   bool plots = true;
-  std::filesystem::path plot_script;  // tools/pisco_plot.py, found by the caller
+  std::filesystem::path data_dir;     // holds assets/ and tools/pisco_plot.py
 };
 
 // Runs a whole simulation: sky -> TOD -> maps -> spectra (-> plots). Returns the exit status.
