@@ -46,6 +46,20 @@ TEST(Scan, PixelCentreVisitsEveryPixelAtEveryAngle) {
   }
 }
 
+TEST(Scan, RandomOffsetsAreSharedByEveryAngle) {
+  // Paper 6.3: a pixel is seen at the same displaced position at every psi.
+  const int nside = 16;
+  const std::size_t npix = 12 * nside * nside;
+  const pisco::Pointing p = pisco::random_offset_scan(nside, {0.0, 45 * deg, 90 * deg}, 0.1, 5);
+  ASSERT_EQ(p.size(), 3 * npix);
+  for (std::size_t i = 0; i < npix; ++i)
+    for (std::size_t k = 1; k < 3; ++k) {
+      EXPECT_EQ(p.theta[i], p.theta[k * npix + i]);
+      EXPECT_EQ(p.phi[i], p.phi[k * npix + i]);
+      EXPECT_EQ(p.psi[k * npix + i], k * 45 * deg);
+    }
+}
+
 TEST(Scan, RandomOffsetsStayWithinHalfWidth) {
   const int nside = 32;
   const double f = 0.1;

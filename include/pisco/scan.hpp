@@ -12,8 +12,9 @@ namespace pisco {
 Pointing pixel_centre_scan(int nside, const std::vector<double>& psis);
 
 // Pixel-centre scan with random offsets (paper 6.3): theta += U(f Omega), phi += U(f Omega)/sin theta,
-// U(a) uniform in [-a/2, a/2], Omega = sqrt(4 pi / npix) the mean pixel size. With `symmetric`,
-// each offset sample is followed by its mirror (-dtheta, -dphi), doubling the number of samples.
+// U(a) uniform in [-a/2, a/2], Omega = sqrt(4 pi / npix) the mean pixel size; one offset per pixel,
+// the same at every psi. With `symmetric`, each offset sample is followed by its mirror
+// (-dtheta, -dphi), doubling the number of samples.
 // theta is reflected back into [0, pi] at the poles; deterministic for a given seed.
 Pointing random_offset_scan(int nside, const std::vector<double>& psis, double f, std::uint64_t seed,
                             bool symmetric = false);

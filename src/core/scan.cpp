@@ -84,20 +84,26 @@ Pointing random_offset_scan(int nside, const std::vector<double>& psis, double f
                 " must be a finite, non-negative fraction of the pixel size");
   const Base base = ring_base(nside);
   const double width = f * std::sqrt(4.0 * pi / double(base.Npix()));  // f Omega
+  // One offset per pixel, shared by every psi: each pixel is seen at the same displaced position
+  // at all angles (paper 6.3), so the map-maker solves a consistent I, Q, U there and the only
+  // error left is that position's displacement from the centre (E -> B from intra-pixel gradients,
+  // no temperature-to-polarization leakage).
   std::mt19937_64 rng(seed);
+  std::vector<double> dtheta(std::size_t(base.Npix())), dphi(std::size_t(base.Npix()));
+  for (int64 pix = 0; pix < base.Npix(); ++pix) {
+    dtheta[pix] = width * centred_uniform(rng);
+    // Dividing by sin(theta) makes the longitude offset a comparable arc on the sphere; pixel
+    // centres never sit on a pole, so sin(theta) > 0.
+    dphi[pix] = width * centred_uniform(rng) / std::sin(base.pix2ang(pix).theta);
+  }
   Pointing out;
   out.reserve(std::size_t(base.Npix()) * psis.size() * (symmetric ? 2 : 1));
-  // Fresh offsets for every (psi, pixel) sample: each pass over the sky sees different positions.
   for (const double psi : psis)
     for (int64 pix = 0; pix < base.Npix(); ++pix) {
       const pointing c = base.pix2ang(pix);
-      const double dtheta = width * centred_uniform(rng);
-      // Dividing by sin(theta) makes the longitude offset a comparable arc on the sphere; pixel
-      // centres never sit on a pole, so sin(theta) > 0.
-      const double dphi = width * centred_uniform(rng) / std::sin(c.theta);
       for (const double sign : {1.0, -1.0}) {
-        double theta = c.theta + sign * dtheta;
-        double phi = c.phi + sign * dphi;
+        double theta = c.theta + sign * dtheta[pix];
+        double phi = c.phi + sign * dphi[pix];
         reflect_at_poles(theta, phi);
         out.push_back(theta, phi, psi);
         if (!symmetric) break;

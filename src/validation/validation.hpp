@@ -38,6 +38,10 @@ CaseResult point_source(Scale scale);
 // against the input's and against the harmonic image of the same observation.
 CaseResult ideal_cmb(Scale scale, const std::string& backend = "cpu");
 
+// E (paper 6.3): the same with random offsets from the pixel centres (spurious BB), symmetric
+// offsets (BB falls by >= 1e3), and an unpolarized sky (no T->P).
+CaseResult pointing_offsets(Scale scale, const std::string& backend = "cpu");
+
 // Every case, in order.
 std::vector<std::function<CaseResult(Scale)>> all_cases();
 
