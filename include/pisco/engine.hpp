@@ -22,8 +22,9 @@ enum class Normalization {
 };
 
 struct EngineOptions {
-  std::string backend = "cpu";  // "cpu" or "auto" (the best backend compiled in and present)
-  std::string device = "auto";  // backend-specific device selector (index or name)
+  std::string backend = "cpu";  // "cpu", "vulkan", "cuda" or "auto" (the best backend compiled in and present)
+  std::string device = "auto";  // vulkan/cuda: device index, or part of its name; "auto" prefers a discrete GPU
+  std::size_t chunk_samples = 0;  // vulkan/cuda: samples per device chunk; 0 = fitted to the device's limits
   Normalization normalization = Normalization::integral;
   unsigned threads = 0;         // cpu backend: worker threads, 0 = all hardware threads
 };

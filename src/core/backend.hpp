@@ -34,5 +34,7 @@ struct BackendEntry {
 const std::vector<BackendEntry>& backend_registry();
 
 BackendEntry cpu_backend_entry();
+BackendEntry vulkan_backend_entry();  // src/vulkan/, when built with Vulkan
+BackendEntry cuda_backend_entry();    // src/cuda/, when built with CUDA
 
 }  // namespace pisco::detail

@@ -12,6 +12,12 @@ const std::vector<BackendEntry>& backend_registry() {
   static const std::vector<BackendEntry> registry = [] {
     std::vector<BackendEntry> r;
     r.push_back(cpu_backend_entry());
+#ifdef PISCO_HAVE_VULKAN
+    r.push_back(vulkan_backend_entry());
+#endif
+#ifdef PISCO_HAVE_CUDA
+    r.push_back(cuda_backend_entry());
+#endif
     return r;
   }();
   return registry;

@@ -1,0 +1,51 @@
+# The vulkan backend (DESIGN 7): GLSL compute shaders compiled to SPIR-V at build time and embedded in
+# libpisco; Vulkan 1.2 loaded at run time through volk (Debian's libvulkan-volk-dev), whose global
+# function pointers are compiled with hidden visibility so that they never clash with the Vulkan loader
+# of an application that embeds the library. Device-level calls go through a per-device VolkDeviceTable.
+option(PISCO_WITH_VULKAN "Build the vulkan backend (Vulkan headers, volk and glslangValidator)" ON)
+if(NOT PISCO_WITH_VULKAN)
+  return()
+endif()
+
+find_package(Vulkan REQUIRED)  # headers; the loader itself is opened by volk at run time
+find_path(PISCO_VOLK_INCLUDE_DIR volk.h REQUIRED)
+find_file(PISCO_VOLK_SOURCE volk.c PATHS ${PISCO_VOLK_INCLUDE_DIR} NO_DEFAULT_PATH REQUIRED)
+find_program(PISCO_GLSLANG glslangValidator REQUIRED)
+
+# Shaders -> SPIR-V as C arrays (glslangValidator --vn), with depfiles so that an edited include
+# rebuilds the kernels that use it.
+set(pisco_shader_dir ${PROJECT_SOURCE_DIR}/shaders)
+set(pisco_spv_dir ${CMAKE_CURRENT_BINARY_DIR}/spv)
+file(MAKE_DIRECTORY ${pisco_spv_dir})
+set(pisco_spv_headers)
+foreach(kernel convolve)
+  set(out ${pisco_spv_dir}/${kernel}.spv.h)
+  add_custom_command(
+    OUTPUT ${out}
+    COMMAND ${PISCO_GLSLANG} --target-env vulkan1.2 -Os --quiet
+            --vn pisco_spv_${kernel} --depfile ${out}.d -o ${out} ${pisco_shader_dir}/${kernel}.comp
+    DEPENDS ${pisco_shader_dir}/${kernel}.comp
+    DEPFILE ${out}.d
+    COMMENT "SPIR-V: shaders/${kernel}.comp"
+    VERBATIM)
+  list(APPEND pisco_spv_headers ${out})
+endforeach()
+add_custom_target(pisco_shaders DEPENDS ${pisco_spv_headers})
+
+add_library(pisco_volk OBJECT ${CMAKE_CURRENT_SOURCE_DIR}/vulkan/volk.c)
+target_include_directories(pisco_volk PRIVATE ${PISCO_VOLK_INCLUDE_DIR} ${Vulkan_INCLUDE_DIRS})
+set_target_properties(pisco_volk PROPERTIES C_VISIBILITY_PRESET hidden POSITION_INDEPENDENT_CODE ON)
+target_compile_definitions(pisco_volk PRIVATE VK_NO_PROTOTYPES)
+
+target_sources(pisco PRIVATE
+  vulkan/context.cpp
+  vulkan/buffer.cpp
+  vulkan/pipeline.cpp
+  vulkan/vulkan_backend.cpp
+  $<TARGET_OBJECTS:pisco_volk>)
+add_dependencies(pisco pisco_shaders)
+target_include_directories(pisco PRIVATE ${PISCO_VOLK_INCLUDE_DIR} ${Vulkan_INCLUDE_DIRS} ${pisco_spv_dir}
+                                         ${PROJECT_SOURCE_DIR}/shaders)
+target_compile_definitions(pisco PRIVATE PISCO_HAVE_VULKAN VK_NO_PROTOTYPES)
+target_link_libraries(pisco PRIVATE ${CMAKE_DL_LIBS})
+set(PISCO_HAVE_VULKAN ON)
