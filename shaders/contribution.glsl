@@ -1,0 +1,90 @@
+// The per-pixel contribution of the measurement equation in float32: src/core/contribution.hpp line
+// for line (see the derivation there and in docs/physics.md). tests/test_vulkan.cpp holds the two to
+// the same numbers through the backend parity tests.
+#ifndef PISCO_CONTRIBUTION_GLSL
+#define PISCO_CONTRIBUTION_GLSL
+
+struct SampleFrame {
+  vec3 theta_p, phi_p, p;  // theta', phi', p'
+  vec3 e_c;                // cos(zeta) theta' + sin(zeta) phi'
+};
+
+SampleFrame make_frame(float cos_theta, float sin_theta, float cos_phi, float sin_phi, float cos_psi,
+                       float sin_psi, float cos_zeta, float sin_zeta) {
+  const vec3 p = vec3(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta);
+  const vec3 th = vec3(cos_theta * cos_phi, cos_theta * sin_phi, -sin_theta);
+  const vec3 ph = vec3(-sin_phi, cos_phi, 0.0);
+  SampleFrame f;
+  f.p = p;
+  f.theta_p = cos_psi * th + sin_psi * ph;
+  f.phi_p = -sin_psi * th + cos_psi * ph;
+  f.e_c = cos_zeta * f.theta_p + sin_zeta * f.phi_p;
+  return f;
+}
+
+// Antenna coordinates (x, y, z) of k and (cos 2chi, sin 2chi).
+void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float cos2chi, out float sin2chi) {
+  xyz = vec3(dot(k, f.theta_p), dot(k, f.phi_p), dot(k, f.p));
+  const float t = dot(k, f.e_c);
+  const float zp = 1.0 + xyz.z;
+  const float c = (k.z * t - f.e_c.z) * zp - t * (k.z * xyz.z - f.p.z);
+  const float s = (k.x * f.e_c.y - k.y * f.e_c.x) * zp - t * (k.x * f.p.y - k.y * f.p.x);
+  const float inv = 1.0 / (c * c + s * s);
+  cos2chi = (c * c - s * s) * inv;
+  sin2chi = 2.0 * c * s * inv;
+}
+
+// Bilinear interpolation on the n x n grid at x_i = -a + i * step (x fastest); zero outside.
+vec4 interpolate_weights(uint offset, uint n, float a, float inv_step, float x, float y) {
+  const float u = (x + a) * inv_step;
+  const float v = (y + a) * inv_step;
+  const float last = float(n - 1u);
+  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return vec4(0.0);
+  const uint i = min(uint(u), n - 2u);
+  const uint j = min(uint(v), n - 2u);
+  const float fu = u - float(i);
+  const float fv = v - float(j);
+  const uint g00 = offset + j * n + i;
+  return ((1.0 - fu) * (1.0 - fv)) * weights[g00] + (fu * (1.0 - fv)) * weights[g00 + 1u] +
+         ((1.0 - fu) * fv) * weights[g00 + n] + (fu * fv) * weights[g00 + n + 1u];
+}
+
+// Linear interpolation in r = sqrt(x^2 + y^2) of a radial profile at r = i * step; zero beyond.
+vec4 interpolate_radial(uint offset, uint n, float inv_step, float x, float y) {
+  const float u = sqrt(x * x + y * y) * inv_step;
+  if (!(u <= float(n - 1u))) return vec4(0.0);
+  const uint i = min(uint(u), n - 2u);
+  const float f = u - float(i);
+  return (1.0 - f) * weights[offset + i] + f * weights[offset + i + 1u];
+}
+
+// w . Lambda(-chi) S (DESIGN 3).
+float stokes_response(vec4 w, float cos2chi, float sin2chi, vec4 S) {
+  return w.x * S.x + w.y * (S.y * cos2chi + S.z * sin2chi) + w.z * (S.z * cos2chi - S.y * sin2chi) +
+         w.w * S.w;
+}
+
+// The float64 path: (w_I, Omega_pix B_TT / Omega~) interpolated in double from double coordinates.
+dvec2 interpolate_weights64(uint offset, uint n, double a, double inv_step, double x, double y) {
+  const double u = (x + a) * inv_step;
+  const double v = (y + a) * inv_step;
+  const double last = double(n - 1u);
+  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return dvec2(0.0);
+  const uint i = min(uint(u), n - 2u);
+  const uint j = min(uint(v), n - 2u);
+  const double fu = u - double(i);
+  const double fv = v - double(j);
+  const uint g00 = offset + j * n + i;
+  return ((1.0 - fu) * (1.0 - fv)) * weights64[g00] + (fu * (1.0 - fv)) * weights64[g00 + 1u] +
+         ((1.0 - fu) * fv) * weights64[g00 + n] + (fu * fv) * weights64[g00 + n + 1u];
+}
+
+dvec2 interpolate_radial64(uint offset, uint n, double inv_step, double x, double y) {
+  const double u = sqrt(x * x + y * y) * inv_step;
+  if (!(u <= double(n - 1u))) return dvec2(0.0);
+  const uint i = min(uint(u), n - 2u);
+  const double f = u - double(i);
+  return (1.0 - f) * weights64[offset + i] + f * weights64[offset + i + 1u];
+}
+
+#endif

@@ -1,0 +1,57 @@
+// The interface between the host and the kernels, included by both the C++ code (src/vulkan/) and
+// the GLSL (shaders/*.comp), so that bindings, workgroup size and push constants cannot drift apart.
+#ifndef PISCO_SHADER_INTERFACE_H
+#define PISCO_SHADER_INTERFACE_H
+
+// One workgroup convolves one sample: its invocations share the disc's rings and pixels.
+#define PISCO_WG_SIZE 64
+// Ranges a workgroup holds per ring batch: two per ring (a ring range may wrap around phi = 0) and,
+// for invocation 0, the polar caps.
+#define PISCO_RANGES_PER_LANE 2
+
+#define PISCO_BINDING_SKY 0        // 2 vec4 per pixel: (kx, ky, kz, I - I0), (Q, U, V, 0), float32
+#define PISCO_BINDING_SKY_LO 1     // vec4 per pixel: k - float(k), so that float(k) + lo = k in float64
+#define PISCO_BINDING_RINGS 2      // RingEntry per ring (src/core/disc.hpp)
+#define PISCO_BINDING_WEIGHTS 3    // vec4 w per beam-grid node, every detector's grid in turn
+#define PISCO_BINDING_WEIGHTS64 4  // dvec2 (w_I, Omega_pix B_TT / Omega~) per node, float64
+#define PISCO_BINDING_POINTING 5   // 3 doubles (theta, phi, psi) per sample of the chunk
+#define PISCO_BINDING_TOD 6        // 1 double per sample of the chunk
+#define PISCO_BINDING_COUNT 7      // 1 uint per sample: pixels in its disc
+#define PISCO_BINDINGS 8
+
+#define PISCO_FLAG_RADIAL 1u      // the detector's weights are a radial profile in r = sin(rho)
+#define PISCO_FLAG_PER_SAMPLE 2u  // divide each sample by its own sum of Omega_pix B_TT / Omega~
+#define PISCO_FLAG_FLOAT64 4u     // run the float64 path: I0 sum_k w_I(k) and the per-sample norm
+
+#ifdef __cplusplus
+#include <cstdint>
+namespace pisco::detail::vk {
+using uint = std::uint32_t;
+struct PushConstants {
+#else
+layout(push_constant) uniform PushConstants {
+#endif
+  double rho_max;
+  double cos_rho_max;
+  double monopole;        // I0, subtracted from the float32 sky and added back in float64
+  double grid_a;          // half-width of the beam grid (= sin rho_max)
+  double grid_inv_step;   // 1 / node spacing
+  float grid_a32;
+  float grid_inv_step32;
+  float cos_zeta;
+  float sin_zeta;
+  uint grid_n;            // nodes per axis (radial: along r)
+  uint grid_offset;       // first node of this detector's grid in the weight buffers
+  uint nside;
+  uint flags;             // PISCO_FLAG_*
+  uint sample_count;      // samples in this chunk
+  uint groups_x;          // workgroups along x: sample = group.x + group.y * groups_x
+#ifdef __cplusplus
+};
+static_assert(sizeof(PushConstants) == 80, "push constants must match the GLSL block");
+}  // namespace pisco::detail::vk
+#else
+} pc;
+#endif
+
+#endif

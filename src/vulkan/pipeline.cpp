@@ -1,0 +1,106 @@
+#include "vulkan/pipeline.hpp"
+
+#include "vulkan/check.hpp"
+
+namespace pisco::detail::vk {
+
+ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint32_t> spirv, std::uint32_t max_sets)
+    : device_(device) {
+  const auto& fn = device.fn();
+  const VkDevice dev = device.handle();
+  try {
+    VkShaderModuleCreateInfo mi{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+    mi.codeSize = spirv.size_bytes();
+    mi.pCode = spirv.data();
+    PISCO_VK(fn.vkCreateShaderModule(dev, &mi, nullptr, &module_));
+
+    std::array<VkDescriptorSetLayoutBinding, PISCO_BINDINGS> bindings{};
+    for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) {
+      bindings[b].binding = b;
+      bindings[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      bindings[b].descriptorCount = 1;
+      bindings[b].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
+    }
+    VkDescriptorSetLayoutCreateInfo li{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+    li.bindingCount = PISCO_BINDINGS;
+    li.pBindings = bindings.data();
+    PISCO_VK(fn.vkCreateDescriptorSetLayout(dev, &li, nullptr, &set_layout_));
+
+    VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(PushConstants)};
+    VkPipelineLayoutCreateInfo pli{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+    pli.setLayoutCount = 1;
+    pli.pSetLayouts = &set_layout_;
+    pli.pushConstantRangeCount = 1;
+    pli.pPushConstantRanges = &range;
+    PISCO_VK(fn.vkCreatePipelineLayout(dev, &pli, nullptr, &layout_));
+
+    VkComputePipelineCreateInfo ci{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+    ci.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+    ci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+    ci.stage.module = module_;
+    ci.stage.pName = "main";
+    ci.layout = layout_;
+    PISCO_VK(fn.vkCreateComputePipelines(dev, VK_NULL_HANDLE, 1, &ci, nullptr, &pipeline_));
+
+    VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, PISCO_BINDINGS * max_sets};
+    VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+    pi.maxSets = max_sets;
+    pi.poolSizeCount = 1;
+    pi.pPoolSizes = &size;
+    PISCO_VK(fn.vkCreateDescriptorPool(dev, &pi, nullptr, &pool_));
+  } catch (...) {
+    release();
+    throw;
+  }
+}
+
+ComputePipeline::~ComputePipeline() { release(); }
+
+void ComputePipeline::release() noexcept {
+  const auto& fn = device_.fn();
+  const VkDevice dev = device_.handle();
+  if (pool_) fn.vkDestroyDescriptorPool(dev, pool_, nullptr);
+  if (pipeline_) fn.vkDestroyPipeline(dev, pipeline_, nullptr);
+  if (layout_) fn.vkDestroyPipelineLayout(dev, layout_, nullptr);
+  if (set_layout_) fn.vkDestroyDescriptorSetLayout(dev, set_layout_, nullptr);
+  if (module_) fn.vkDestroyShaderModule(dev, module_, nullptr);
+  pool_ = VK_NULL_HANDLE;
+  pipeline_ = VK_NULL_HANDLE;
+  layout_ = VK_NULL_HANDLE;
+  set_layout_ = VK_NULL_HANDLE;
+  module_ = VK_NULL_HANDLE;
+}
+
+VkDescriptorSet ComputePipeline::make_set(const std::array<VkBuffer, PISCO_BINDINGS>& buffers) {
+  const auto& fn = device_.fn();
+  VkDescriptorSetAllocateInfo ai{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+  ai.descriptorPool = pool_;
+  ai.descriptorSetCount = 1;
+  ai.pSetLayouts = &set_layout_;
+  VkDescriptorSet set = VK_NULL_HANDLE;
+  PISCO_VK(fn.vkAllocateDescriptorSets(device_.handle(), &ai, &set));
+  std::array<VkDescriptorBufferInfo, PISCO_BINDINGS> infos{};
+  std::array<VkWriteDescriptorSet, PISCO_BINDINGS> writes{};
+  for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) {
+    infos[b] = {buffers[b], 0, VK_WHOLE_SIZE};
+    writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+    writes[b].dstSet = set;
+    writes[b].dstBinding = b;
+    writes[b].descriptorCount = 1;
+    writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[b].pBufferInfo = &infos[b];
+  }
+  fn.vkUpdateDescriptorSets(device_.handle(), PISCO_BINDINGS, writes.data(), 0, nullptr);
+  return set;
+}
+
+void ComputePipeline::record(VkCommandBuffer cmd, VkDescriptorSet set, const PushConstants& push, std::uint32_t x,
+                             std::uint32_t y) const {
+  const auto& fn = device_.fn();
+  fn.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+  fn.vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout_, 0, 1, &set, 0, nullptr);
+  fn.vkCmdPushConstants(cmd, layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(PushConstants), &push);
+  fn.vkCmdDispatch(cmd, x, y, 1);
+}
+
+}  // namespace pisco::detail::vk

@@ -1,0 +1,365 @@
+// The vulkan backend (DESIGN 6-7): the sky, ring table and weight grids are uploaded once; pointing
+// then streams through two slots of bounded size, so that the host fills one chunk and reads the
+// previous one back while the device convolves the other. Device memory is sky + beams + two chunks,
+// whatever the length of the TOD.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <numbers>
+
+#include "convolve.spv.h"
+#include "core/backend.hpp"
+#include "interface.h"
+#include "vulkan/buffer.hpp"
+#include "vulkan/check.hpp"
+#include "vulkan/context.hpp"
+#include "vulkan/pipeline.hpp"
+
+namespace pisco::detail {
+namespace {
+
+using vk::Buffer;
+using vk::MemoryUse;
+
+constexpr std::size_t default_chunk = std::size_t(1) << 18;  // samples: 6 MiB of pointing per slot
+constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+
+double mib(double bytes) { return bytes / double(1 << 20); }
+
+// x - double(float(x)): what float(x) lacks of x. Kept out of line: GCC 12's vectorizer at -O3 folds
+// x - double(float(x)) to zero when this runs inside the pixel loop below.
+[[gnu::noinline]] float float_residual(double x) {
+  const float hi = float(x);
+  return float(x - double(hi));
+}
+
+class VulkanBackend final : public Backend {
+ public:
+  VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const EngineOptions& options);
+  ~VulkanBackend() override;
+
+  std::string name() const override { return "vulkan"; }
+  std::string device() const override {
+    return device_->info().describe() + (device_->instance().validation() ? " with the Khronos validation layer" : "");
+  }
+  std::uint64_t convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) override;
+
+ private:
+  struct Slot {
+    Buffer pointing, tod, counts;
+    VkCommandBuffer cmd = VK_NULL_HANDLE;
+    VkFence fence = VK_NULL_HANDLE;
+    VkDescriptorSet set = VK_NULL_HANDLE;
+    std::size_t begin = 0, n = 0;
+    bool pending = false;
+  };
+
+  Buffer upload(const void* data, std::size_t bytes, const char* what);
+  void make_slots(std::size_t chunk);
+  void submit(Slot& slot, const vk::PushConstants& push, const PointingView& pointing, std::size_t begin,
+              std::size_t n);
+  std::uint64_t collect(Slot& slot, std::span<double> tod);
+
+  std::shared_ptr<const EngineInputs> in_;
+  std::unique_ptr<vk::Device> device_;
+  std::unique_ptr<vk::ComputePipeline> pipeline_;
+  VkCommandPool pool_ = VK_NULL_HANDLE;
+  Buffer sky_, sky_lo_, rings_, weights_, weights64_;
+  std::vector<std::uint32_t> grid_offset_;  // per detector, in nodes
+  double monopole_ = 0.0;
+  bool float64_ = false;
+  std::size_t chunk_ = 0;
+  std::array<Slot, 2> slots_;
+};
+
+VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const EngineOptions& options)
+    : in_(std::move(inputs)) {
+  auto instance = vk::Instance::get();
+  const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), options.device);
+  device_ = std::make_unique<vk::Device>(std::move(instance), info);
+  const auto& fn = device_->fn();
+
+  VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+  pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+  pi.queueFamilyIndex = info.queue_family;
+  PISCO_VK(fn.vkCreateCommandPool(device_->handle(), &pi, nullptr, &pool_));
+  pipeline_ = std::make_unique<vk::ComputePipeline>(
+      *device_, std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t)),
+      std::uint32_t(slots_.size()));
+
+  // The sky in float32 without its monopole I0, which float32 cannot carry next to micro-kelvin
+  // anisotropies (DESIGN 7): I0 sum_k w_I(k) is added back by the kernel's float64 path.
+  const PreparedSky& sky = in_->sky;
+  const std::size_t npix = sky.pixels.size() / 8;
+  double mean = 0.0, var = 0.0;
+  for (std::size_t p = 0; p < npix; ++p) mean += sky.pixels[8 * p + 4];
+  mean /= double(npix);
+  for (std::size_t p = 0; p < npix; ++p) var += (sky.pixels[8 * p + 4] - mean) * (sky.pixels[8 * p + 4] - mean);
+  const double rms = std::sqrt(var / double(npix));
+  if (std::abs(mean) > 0.1 * rms) monopole_ = mean;
+  const bool per_sample = in_->normalization == Normalization::per_sample;
+  float64_ = monopole_ != 0.0 || per_sample;
+
+  const double range = double(info.max_storage_buffer_range);
+  if (32.0 * double(npix) > range)
+    throw Error("vulkan: an NSIDE " + std::to_string(sky.nside) + " sky needs " + std::to_string(int(mib(32.0 * double(npix)))) +
+                " MiB in one storage buffer, but " + info.name + " binds at most " + std::to_string(int(mib(range))) +
+                " MiB (maxStorageBufferRange); use a GPU or the cpu backend");
+  std::vector<float> sky32(8 * npix), lo(float64_ ? 4 * npix : 4);
+  for (std::size_t p = 0; p < npix; ++p) {
+    const double* px = &sky.pixels[8 * p];
+    for (int c = 0; c < 3; ++c) {
+      sky32[8 * p + c] = float(px[c]);
+      if (float64_) lo[4 * p + c] = float_residual(px[c]);
+    }
+    sky32[8 * p + 3] = float(px[4] - monopole_);
+    sky32[8 * p + 4] = float(px[5]);
+    sky32[8 * p + 5] = float(px[6]);
+    sky32[8 * p + 6] = float(px[7]);
+    sky32[8 * p + 7] = 0.0f;
+  }
+  sky_ = upload(sky32.data(), sky32.size() * sizeof(float), "the sky");
+  sky_lo_ = upload(lo.data(), lo.size() * sizeof(float), "the sky's float64 pixel vectors");
+  rings_ = upload(sky.rings.data(), sky.rings.size() * sizeof(RingEntry), "the ring table");
+
+  std::vector<float> w32;
+  std::vector<double> w64;
+  for (const PreparedDetector& d : in_->detectors) {
+    grid_offset_.push_back(std::uint32_t(w32.size() / 4));
+    const std::size_t nodes = d.weights.size() / 4;
+    for (std::size_t k = 0; k < 4 * nodes; ++k) w32.push_back(float(d.weights[k]));
+    if (float64_)
+      for (std::size_t k = 0; k < nodes; ++k) {
+        w64.push_back(d.weights[4 * k]);
+        w64.push_back(per_sample ? d.norm_weights[4 * k] : 0.0);
+      }
+  }
+  if (w64.empty()) w64.assign(2, 0.0);
+  if (16.0 * double(w32.size() / 4) > range)
+    throw Error("vulkan: the beam grids need " + std::to_string(int(mib(4.0 * double(w32.size())))) + " MiB, but " +
+                info.name + " binds at most " + std::to_string(int(mib(range))) + " MiB; use a coarser grid_step");
+  weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids");
+  weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids");
+
+  // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
+  const std::size_t by_range = info.max_storage_buffer_range / (3 * sizeof(double));
+  const std::size_t by_groups = std::size_t(info.max_groups_x) * info.max_groups_y;
+  std::size_t chunk = options.chunk_samples ? options.chunk_samples : default_chunk;
+  chunk = std::max<std::size_t>(1, std::min({chunk, by_range, by_groups}));
+  make_slots(chunk);
+  device_->check_validation("setting up");
+}
+
+Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* what) {
+  const auto& fn = device_->fn();
+  try {
+    Buffer staging(*device_, bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::upload);
+    std::memcpy(staging.mapped(), data, bytes);
+    Buffer target(*device_, bytes, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
+    VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    ai.commandPool = pool_;
+    ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    ai.commandBufferCount = 1;
+    VkCommandBuffer cmd = VK_NULL_HANDLE;
+    PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &cmd));
+    VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    PISCO_VK(fn.vkBeginCommandBuffer(cmd, &bi));
+    const VkBufferCopy region{0, 0, bytes};
+    fn.vkCmdCopyBuffer(cmd, staging.handle(), target.handle(), 1, &region);
+    VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+    barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+    fn.vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier,
+                            0, nullptr, 0, nullptr);
+    PISCO_VK(fn.vkEndCommandBuffer(cmd));
+    VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd;
+    PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, VK_NULL_HANDLE));
+    PISCO_VK(fn.vkQueueWaitIdle(device_->queue()));
+    fn.vkFreeCommandBuffers(device_->handle(), pool_, 1, &cmd);
+    return target;
+  } catch (const vk::OutOfMemory& e) {
+    throw Error("vulkan: out of memory uploading " + std::string(what) + " (" + std::to_string(int(mib(double(bytes)))) +
+                " MiB) to " + device_->info().name + ": " + e.what());
+  }
+}
+
+// Two slots of `chunk` samples; on out-of-memory, half the chunk, down to one sample.
+void VulkanBackend::make_slots(std::size_t chunk) {
+  const auto& fn = device_->fn();
+  for (;;) {
+    try {
+      for (Slot& s : slots_) {
+        s.pointing = Buffer(*device_, chunk * 3 * sizeof(double), storage, MemoryUse::upload);
+        s.tod = Buffer(*device_, chunk * sizeof(double), storage, MemoryUse::readback);
+        s.counts = Buffer(*device_, chunk * sizeof(std::uint32_t), storage, MemoryUse::readback);
+      }
+      break;
+    } catch (const vk::OutOfMemory&) {
+      for (Slot& s : slots_) s = Slot{};
+      if (chunk == 1) throw Error("vulkan: out of memory on " + device_->info().name + " even for one-sample chunks");
+      chunk /= 2;
+    }
+  }
+  chunk_ = chunk;
+  for (Slot& s : slots_) {
+    VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    ai.commandPool = pool_;
+    ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    ai.commandBufferCount = 1;
+    PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &s.cmd));
+    VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+    PISCO_VK(fn.vkCreateFence(device_->handle(), &fi, nullptr, &s.fence));
+    std::array<VkBuffer, PISCO_BINDINGS> b{};
+    b[PISCO_BINDING_SKY] = sky_.handle();
+    b[PISCO_BINDING_SKY_LO] = sky_lo_.handle();
+    b[PISCO_BINDING_RINGS] = rings_.handle();
+    b[PISCO_BINDING_WEIGHTS] = weights_.handle();
+    b[PISCO_BINDING_WEIGHTS64] = weights64_.handle();
+    b[PISCO_BINDING_POINTING] = s.pointing.handle();
+    b[PISCO_BINDING_TOD] = s.tod.handle();
+    b[PISCO_BINDING_COUNT] = s.counts.handle();
+    s.set = pipeline_->make_set(b);
+  }
+}
+
+VulkanBackend::~VulkanBackend() {
+  if (!device_) return;
+  const auto& fn = device_->fn();
+  fn.vkDeviceWaitIdle(device_->handle());
+  for (Slot& s : slots_)
+    if (s.fence) fn.vkDestroyFence(device_->handle(), s.fence, nullptr);
+  for (Slot& s : slots_) s = Slot{};
+  for (Buffer* b : {&sky_, &sky_lo_, &rings_, &weights_, &weights64_}) *b = Buffer();
+  pipeline_.reset();
+  if (pool_) fn.vkDestroyCommandPool(device_->handle(), pool_, nullptr);
+}
+
+void VulkanBackend::submit(Slot& slot, const vk::PushConstants& push_in, const PointingView& pointing,
+                           std::size_t begin, std::size_t n) {
+  const auto& fn = device_->fn();
+  constexpr double twopi = 2 * std::numbers::pi;
+  auto* p = static_cast<double*>(slot.pointing.mapped());
+  for (std::size_t i = 0; i < n; ++i) {
+    double phi = pointing.phi[begin + i];
+    if (!(phi >= 0.0 && phi < twopi)) phi = wrap_phi(phi);  // as the reference does
+    p[3 * i] = pointing.theta[begin + i];
+    p[3 * i + 1] = phi;
+    p[3 * i + 2] = pointing.psi[begin + i];
+  }
+  vk::PushConstants push = push_in;
+  push.sample_count = std::uint32_t(n);
+  const std::uint32_t gx = std::uint32_t(std::min<std::size_t>(n, device_->info().max_groups_x));
+  const std::uint32_t gy = std::uint32_t((n + gx - 1) / gx);
+  push.groups_x = gx;
+
+  PISCO_VK(fn.vkResetCommandBuffer(slot.cmd, 0));
+  VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  PISCO_VK(fn.vkBeginCommandBuffer(slot.cmd, &bi));
+  pipeline_->record(slot.cmd, slot.set, push, gx, gy);
+  VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  barrier.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  barrier.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+  fn.vkCmdPipelineBarrier(slot.cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &barrier, 0,
+                          nullptr, 0, nullptr);
+  PISCO_VK(fn.vkEndCommandBuffer(slot.cmd));
+  PISCO_VK(fn.vkResetFences(device_->handle(), 1, &slot.fence));
+  VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  si.commandBufferCount = 1;
+  si.pCommandBuffers = &slot.cmd;
+  PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, slot.fence));
+  slot.begin = begin;
+  slot.n = n;
+  slot.pending = true;
+}
+
+std::uint64_t VulkanBackend::collect(Slot& slot, std::span<double> tod) {
+  const auto& fn = device_->fn();
+  slot.pending = false;
+  PISCO_VK(fn.vkWaitForFences(device_->handle(), 1, &slot.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()));
+  slot.tod.invalidate();
+  slot.counts.invalidate();
+  std::memcpy(tod.data() + slot.begin, slot.tod.mapped(), slot.n * sizeof(double));
+  const auto* counts = static_cast<const std::uint32_t*>(slot.counts.mapped());
+  std::uint64_t pixels = 0;
+  for (std::size_t i = 0; i < slot.n; ++i) pixels += counts[i];
+  return pixels;
+}
+
+std::uint64_t VulkanBackend::convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) {
+  const PreparedDetector& det = in_->detectors.at(detector);
+  vk::PushConstants push{};
+  push.rho_max = det.rho_max;
+  push.cos_rho_max = det.cos_rho_max;
+  push.monopole = monopole_;
+  push.grid_a = det.grid_a;
+  push.grid_inv_step = det.grid_inv_step;
+  push.grid_a32 = float(det.grid_a);
+  push.grid_inv_step32 = float(det.grid_inv_step);
+  push.cos_zeta = float(det.cos_zeta);
+  push.sin_zeta = float(det.sin_zeta);
+  push.grid_n = std::uint32_t(det.grid_n);
+  push.grid_offset = grid_offset_.at(detector);
+  push.nside = std::uint32_t(in_->sky.nside);
+  push.flags = (det.radial ? PISCO_FLAG_RADIAL : 0u) |
+               (in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) |
+               (float64_ ? PISCO_FLAG_FLOAT64 : 0u);
+
+  std::uint64_t pixels = 0;
+  std::size_t next = 0;
+  try {
+    for (std::size_t begin = 0; begin < pointing.size(); begin += chunk_, ++next) {
+      Slot& slot = slots_[next % slots_.size()];
+      if (slot.pending) pixels += collect(slot, tod);
+      submit(slot, push, pointing, begin, std::min(chunk_, pointing.size() - begin));
+    }
+    for (std::size_t i = 0; i < slots_.size(); ++i) {  // the last chunks, in order
+      Slot& slot = slots_[(next + i) % slots_.size()];
+      if (slot.pending) pixels += collect(slot, tod);
+    }
+  } catch (const Error& e) {
+    for (Slot& s : slots_) s.pending = false;
+    device_->fn().vkDeviceWaitIdle(device_->handle());
+    throw Error(std::string(e.what()) + " (detector " + std::to_string(detector) + ", " +
+                std::to_string(pointing.size()) + " samples)");
+  }
+  device_->check_validation("convolving detector " + std::to_string(detector));
+  return pixels;
+}
+
+}  // namespace
+
+BackendEntry vulkan_backend_entry() {
+  return {"vulkan", 10,
+          [] {
+            try {
+              auto instance = vk::Instance::get();
+              const auto devices = vk::enumerate_devices(*instance);
+              std::string usable, unusable;
+              for (const auto& d : devices)
+                (d.unusable.empty() ? usable : unusable) += (std::to_string(d.index) + ": " + d.describe() +
+                                                             (d.unusable.empty() ? "" : " (" + d.unusable + ")") + "; ");
+              if (usable.empty())
+                return BackendInfo{"vulkan", false,
+                                   devices.empty() ? "no Vulkan device was found (for a CPU device, install "
+                                                     "mesa-vulkan-drivers)"
+                                                   : "no usable Vulkan device: " + unusable.substr(0, unusable.size() - 2)};
+              const std::string pick = vk::choose_device(devices, "auto").describe();
+              std::string detail = usable + unusable;
+              return BackendInfo{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")"};
+            } catch (const Error& e) {
+              return BackendInfo{"vulkan", false, e.what()};
+            }
+          },
+          [](std::shared_ptr<const EngineInputs> in, const EngineOptions& o) -> std::unique_ptr<Backend> {
+            return std::make_unique<VulkanBackend>(std::move(in), o);
+          }};
+}
+
+}  // namespace pisco::detail
