@@ -1,6 +1,6 @@
 // The per-pixel contribution of the measurement equation in float32: src/core/contribution.hpp line
-// for line (see the derivation there and in docs/physics.md). tests/test_vulkan.cpp holds the two to
-// the same numbers through the backend parity tests.
+// for line (see the derivation there and in docs/physics.md); the backend parity tests
+// (tests/test_backend_parity.cpp) hold the two to the same numbers.
 #ifndef PISCO_CONTRIBUTION_GLSL
 #define PISCO_CONTRIBUTION_GLSL
 
@@ -35,27 +35,28 @@ void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float cos2chi, out 
 }
 
 // Bilinear interpolation on the n x n grid at x_i = -a + i * step (x fastest); zero outside.
-vec4 interpolate_weights(uint offset, uint n, float a, float inv_step, float x, float y) {
+vec4 interpolate_weights(int offset, int n, float a, float inv_step, float x, float y) {
   const float u = (x + a) * inv_step;
   const float v = (y + a) * inv_step;
-  const float last = float(n - 1u);
+  const float last = float(n - 1);
   if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return vec4(0.0);
-  const uint i = min(uint(u), n - 2u);
-  const uint j = min(uint(v), n - 2u);
+  const int i = min(int(u), n - 2);
+  const int j = min(int(v), n - 2);
   const float fu = u - float(i);
   const float fv = v - float(j);
-  const uint g00 = offset + j * n + i;
-  return ((1.0 - fu) * (1.0 - fv)) * weights[g00] + (fu * (1.0 - fv)) * weights[g00 + 1u] +
-         ((1.0 - fu) * fv) * weights[g00 + n] + (fu * fv) * weights[g00 + n + 1u];
+  const int g00 = offset + j * n + i;
+  return ((1.0 - fu) * (1.0 - fv)) * weights[g00] + (fu * (1.0 - fv)) * weights[g00 + 1] +
+         ((1.0 - fu) * fv) * weights[g00 + n] + (fu * fv) * weights[g00 + n + 1];
 }
 
 // Linear interpolation in r = sqrt(x^2 + y^2) of a radial profile at r = i * step; zero beyond.
-vec4 interpolate_radial(uint offset, uint n, float inv_step, float x, float y) {
+// Signed indices: CPUs (lavapipe) convert float to int in one instruction, to uint in several.
+vec4 interpolate_radial(int offset, int n, float inv_step, float x, float y) {
   const float u = sqrt(x * x + y * y) * inv_step;
-  if (!(u <= float(n - 1u))) return vec4(0.0);
-  const uint i = min(uint(u), n - 2u);
+  if (!(u <= float(n - 1))) return vec4(0.0);
+  const int i = min(int(u), n - 2);
   const float f = u - float(i);
-  return (1.0 - f) * weights[offset + i] + f * weights[offset + i + 1u];
+  return (1.0 - f) * weights[offset + i] + f * weights[offset + i + 1];
 }
 
 // w . Lambda(-chi) S (DESIGN 3).

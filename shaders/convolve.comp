@@ -1,16 +1,28 @@
-// The convolution kernel (DESIGN 3, 6, 7): one workgroup per sample. Invocation 0 builds the sample's
-// antenna frame and disc bounds; then, in batches of PISCO_WG_SIZE rings, each invocation turns one
-// ring into pixel ranges, a subgroup scan lays the ranges end to end, and the invocations share the
-// pixels evenly, each pixel through the float32 contribution (contribution.glsl). A float64 path adds
-// the sky's monopole, I0 sum_k w_I(k), and the per-sample normalization when asked for.
+// The convolution kernel (DESIGN 3, 6, 7): one invocation per sample, walking its disc ring by ring
+// as the float64 reference does (src/core/cpu_backend.cpp), with no shared memory and no barriers.
+// Large discs are split: PARTS invocations of one workgroup take every PARTS-th ring of the sample
+// and add their sums in shared memory (lavapipe also stops any invocation after 65,535 loop
+// iterations in all, so a disc of more pixels must be split there).
+// Neighbouring invocations hold neighbouring samples of the scan, whose discs overlap: their rings
+// have nearly the same length (little divergence) and their pixels are the same cache lines.
+// Each pixel goes through the float32 contribution (contribution.glsl); a float64 path adds the sky's
+// monopole, I0 sum_k w_I(k), and the per-sample normalization when asked for.
 #version 460
 #extension GL_GOOGLE_include_directive : require
-#extension GL_KHR_shader_subgroup_basic : require
-#extension GL_KHR_shader_subgroup_arithmetic : require
 
 #include "interface.h"
 
 layout(local_size_x = PISCO_WG_SIZE) in;
+
+// Specialization constants, so that each pipeline holds only the code it runs (a branch on a push
+// constant still costs its code's registers, and on lavapipe most of its time).
+layout(constant_id = PISCO_SPEC_RADIAL) const bool RADIAL = false;    // weights as a radial profile
+layout(constant_id = PISCO_SPEC_FLOAT64) const bool FLOAT64 = false;  // the float64 path
+layout(constant_id = PISCO_SPEC_PARTS) const int PARTS = 1;           // invocations per sample
+
+shared float s_sum[PISCO_WG_SIZE], s_comp[PISCO_WG_SIZE];
+shared double s_s0[PISCO_WG_SIZE], s_n0[PISCO_WG_SIZE];
+shared uint s_count[PISCO_WG_SIZE];
 
 struct RingEntry {
   double z;
@@ -32,164 +44,110 @@ layout(std430, binding = PISCO_BINDING_COUNT) writeonly buffer CountBuffer { uin
 #include "contribution.glsl"
 #include "disc.glsl"
 
-// The sample, as invocation 0 prepared it.
-shared vec3 s_theta_p, s_phi_p, s_p, s_e_c;
-shared dvec3 s_theta_p64, s_phi_p64;
-shared double s_z0, s_xa, s_phi0;
-shared int s_irmin, s_irmax;
-shared uint s_cap_begin, s_cap_len;  // a polar cap inside the disc (at most one for rho < 90 deg)
-// One batch of rings: each invocation's two ranges and where they start in the batch's pixel list.
-shared uint s_b0[PISCO_WG_SIZE], s_l0[PISCO_WG_SIZE], s_b1[PISCO_WG_SIZE];
-shared uint s_start[PISCO_WG_SIZE + 1];
-shared uint s_subgroup_total[PISCO_WG_SIZE];
-shared double s_partial[3 * PISCO_WG_SIZE];
+// The running sums of one sample: Kahan-compensated float32, float64 monopole weight and norm.
+struct Sums {
+  float sum, comp;
+  double s0, n0;
+};
 
-void prepare_sample(uint sid) {
-  const double theta = pointing[3u * sid];
-  const double phi = pointing[3u * sid + 1u];  // wrapped into [0, 2 pi) by the host
-  const double psi = pointing[3u * sid + 2u];
-  const double ct = pisco_cos(theta), st = pisco_sin(theta);
-  const double cp = pisco_cos(phi), sp = pisco_sin(phi);
-  const double cs = pisco_cos(psi), ss = pisco_sin(psi);
-  const dvec3 th = dvec3(ct * cp, ct * sp, -st);
-  const dvec3 ph = dvec3(-sp, cp, 0.0);
-  s_theta_p64 = cs * th + ss * ph;
-  s_phi_p64 = -ss * th + cs * ph;
-  const SampleFrame f = make_frame(float(ct), float(st), float(cp), float(sp), float(cs), float(ss),
-                                   pc.cos_zeta, pc.sin_zeta);
-  s_theta_p = f.theta_p;
-  s_phi_p = f.phi_p;
-  s_p = f.p;
-  s_e_c = f.e_c;
-
-  // Disc bounds: for_each_disc_range of src/core/disc.hpp.
-  const int nside = int(pc.nside);
-  const int nrings = 4 * nside - 1;
-  const double z0 = ct;
-  s_z0 = z0;
-  s_xa = 1.0 / sqrt((1.0 - z0) * (1.0 + z0));
-  s_phi0 = phi;
-  s_cap_begin = 0u;
-  s_cap_len = 0u;
-  const double rlat1 = theta - pc.rho_max;
-  int irmin = ring_above(nside, pisco_cos(rlat1)) + 1;
-  if (rlat1 <= 0.0 && irmin > 1) {  // north pole inside: every ring north of irmin entirely
-    s_cap_begin = 0u;
-    s_cap_len = rings[irmin - 2].first + rings[irmin - 2].count;
+void accumulate(SampleFrame f, dvec3 theta_p64, dvec3 phi_p64, uint begin, uint end, inout Sums acc) {
+  for (uint p = begin; p < end; ++p) {
+    const vec4 a = sky[2u * p];
+    const vec4 b = sky[2u * p + 1u];
+    vec3 xyz;
+    float cos2chi, sin2chi;
+    pixel_geometry(f, a.xyz, xyz, cos2chi, sin2chi);
+    const vec4 w = RADIAL ? interpolate_radial(int(pc.grid_offset), int(pc.grid_n), pc.grid_inv_step32, xyz.x, xyz.y)
+                          : interpolate_weights(int(pc.grid_offset), int(pc.grid_n), pc.grid_a32, pc.grid_inv_step32, xyz.x,
+                                                xyz.y);
+    precise const float y = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.xyz)) - acc.comp;
+    precise const float t = acc.sum + y;
+    acc.comp = (t - acc.sum) - y;
+    acc.sum = t;
+    if (FLOAT64) {
+      const dvec3 k = dvec3(a.xyz) + dvec3(sky_lo[p].xyz);
+      const double x64 = dot(k, theta_p64), y64 = dot(k, phi_p64);
+      const dvec2 w64 = RADIAL ? interpolate_radial64(pc.grid_offset, pc.grid_n, pc.grid_inv_step, x64, y64)
+                               : interpolate_weights64(pc.grid_offset, pc.grid_n, pc.grid_a, pc.grid_inv_step, x64,
+                                                       y64);
+      acc.s0 += w64.x;
+      acc.n0 += w64.y;
+    }
   }
-  const double rlat2 = theta + pc.rho_max;
-  int irmax = ring_above(nside, pisco_cos(rlat2));
-  if (irmax > nrings) irmax = nrings;
-  if (irmin < 1) irmin = 1;
-  if (rlat2 >= PISCO_PI && irmax + 1 < 4 * nside) {  // south pole inside
-    s_cap_begin = rings[irmax].first;
-    s_cap_len = uint(12 * nside * nside) - rings[irmax].first;
-  }
-  s_irmin = irmin;
-  s_irmax = irmax;
 }
 
 void main() {
-  const uint sid = gl_WorkGroupID.x + gl_WorkGroupID.y * pc.groups_x;
-  if (sid >= pc.sample_count) return;  // the whole workgroup leaves together
-  const uint lid = gl_LocalInvocationID.x;
-  if (lid == 0u) prepare_sample(sid);
-  barrier();
+  const uint local = gl_LocalInvocationID.x;
+  const uint sid = (gl_WorkGroupID.y * pc.groups_x + gl_WorkGroupID.x) * (PISCO_WG_SIZE / PARTS) + local / PARTS;
+  const int part = int(local) % PARTS;
+  const bool live = sid < pc.sample_count;
+  if (PARTS == 1 && !live) return;
 
-  SampleFrame f;
-  f.theta_p = s_theta_p;
-  f.phi_p = s_phi_p;
-  f.p = s_p;
-  f.e_c = s_e_c;
-  const dvec3 theta_p64 = s_theta_p64, phi_p64 = s_phi_p64;
-  const double z0 = s_z0, xa = s_xa, phi0 = s_phi0;
-  const int irmin = s_irmin, irmax = s_irmax;
-  const bool radial = (pc.flags & PISCO_FLAG_RADIAL) != 0u;
-  const bool float64 = (pc.flags & PISCO_FLAG_FLOAT64) != 0u;
+  Sums acc = Sums(0.0, 0.0, 0.0lf, 0.0lf);
+  uint count = 0u;
+  if (live) {
+    // The antenna frame (DESIGN 2), from float64 trigonometry of the pointing.
+    const double theta = pointing[3u * sid];
+    const double phi = pointing[3u * sid + 1u];  // wrapped into [0, 2 pi) by the host
+    const double psi = pointing[3u * sid + 2u];
+    const double ct = pisco_cos(theta), st = pisco_sin(theta);
+    const double cp = pisco_cos(phi), sp = pisco_sin(phi);
+    const double cs = pisco_cos(psi), ss = pisco_sin(psi);
+    const dvec3 th = dvec3(ct * cp, ct * sp, -st);
+    const dvec3 ph = dvec3(-sp, cp, 0.0lf);
+    const dvec3 theta_p64 = cs * th + ss * ph;
+    const dvec3 phi_p64 = -ss * th + cs * ph;
+    const SampleFrame f = make_frame(float(ct), float(st), float(cp), float(sp), float(cs), float(ss), pc.cos_zeta,
+                                     pc.sin_zeta);
 
-  // Compensated (Kahan) float32 sum, float64 sums of the monopole weight and the normalization.
-  precise float sum = 0.0, comp = 0.0;
-  double s0 = 0.0, n0 = 0.0;
-  uint total = 0u;
-  const int rings_in_disc = max(irmax - irmin + 1, 0);
-  const int batches = max((rings_in_disc + PISCO_WG_SIZE - 1) / PISCO_WG_SIZE, 1);
-  for (int batch = 0; batch < batches; ++batch) {
-    const int iz = irmin + batch * PISCO_WG_SIZE + int(lid);
-    uint b0, l0, b1, l1;
-    if (iz <= irmax) {
-      ring_ranges(iz, z0, xa, phi0, pc.cos_rho_max, b0, l0, b1, l1);
-    } else {
-      b0 = 0u; l0 = 0u; b1 = 0u; l1 = 0u;
-    }
-    // Lay the ranges end to end: the cap first (batch 0 only), then invocation by invocation.
-    const uint len = l0 + l1;
-    const uint inclusive = subgroupInclusiveAdd(len);
-    if (gl_SubgroupInvocationID == gl_SubgroupSize - 1u) s_subgroup_total[gl_SubgroupID] = inclusive;
-    s_b0[lid] = b0;
-    s_l0[lid] = l0;
-    s_b1[lid] = b1;
-    barrier();
-    const uint cap = batch == 0 ? s_cap_len : 0u;
-    uint before = cap;
-    for (uint g = 0u; g < gl_SubgroupID; ++g) before += s_subgroup_total[g];
-    s_start[lid] = before + inclusive - len;
-    if (lid == PISCO_WG_SIZE - 1u) s_start[PISCO_WG_SIZE] = before + inclusive;
-    barrier();
-    const uint count = s_start[PISCO_WG_SIZE];
-    total += count;
-
-    uint owner = 0u;
-    for (uint i = lid; i < count; i += PISCO_WG_SIZE) {
-      uint p;
-      if (i < cap) {
-        p = s_cap_begin + i;
+    // The disc: for_each_disc_range of src/core/disc.hpp, with the polar caps as whole rings.
+    const int nside = int(pc.nside);
+    const int nrings = 4 * nside - 1;
+    const double z0 = ct;
+    const double xa = 1.0lf / sqrt((1.0lf - z0) * (1.0lf + z0));
+    const double rlat1 = theta - pc.rho_max;
+    int irmin = ring_above(nside, pisco_cos(rlat1)) + 1;
+    const bool north_cap = rlat1 <= 0.0lf && irmin > 1;  // every ring north of irmin entirely
+    const double rlat2 = theta + pc.rho_max;
+    int irmax = ring_above(nside, pisco_cos(rlat2));
+    if (irmax > nrings) irmax = nrings;
+    if (irmin < 1) irmin = 1;
+    const bool south_cap = rlat2 >= PISCO_PI && irmax + 1 < 4 * nside;  // every ring south of irmax
+    const int first_ring = north_cap ? 1 : irmin;
+    const int last_ring = south_cap ? nrings : irmax;
+    for (int iz = first_ring + part; iz <= last_ring; iz += PARTS) {
+      if (iz < irmin || iz > irmax) {
+        const uint b = rings[iz - 1].first, l = rings[iz - 1].count;
+        accumulate(f, theta_p64, phi_p64, b, b + l, acc);
+        count += l;
       } else {
-        while (owner + 1u < PISCO_WG_SIZE && s_start[owner + 1u] <= i) ++owner;
-        const uint r = i - s_start[owner];
-        p = r < s_l0[owner] ? s_b0[owner] + r : s_b1[owner] + (r - s_l0[owner]);
-      }
-      const vec4 a = sky[2u * p];
-      const vec4 b = sky[2u * p + 1u];
-      vec3 xyz;
-      float cos2chi, sin2chi;
-      pixel_geometry(f, a.xyz, xyz, cos2chi, sin2chi);
-      const vec4 w = radial ? interpolate_radial(pc.grid_offset, pc.grid_n, pc.grid_inv_step32, xyz.x, xyz.y)
-                            : interpolate_weights(pc.grid_offset, pc.grid_n, pc.grid_a32, pc.grid_inv_step32,
-                                                  xyz.x, xyz.y);
-      const float term = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.xyz));
-      const float y = term - comp;
-      const float t = sum + y;
-      comp = (t - sum) - y;
-      sum = t;
-      if (float64) {
-        const dvec3 k = dvec3(a.xyz) + dvec3(sky_lo[p].xyz);
-        const double x64 = dot(k, theta_p64), y64 = dot(k, phi_p64);
-        const dvec2 w64 = radial ? interpolate_radial64(pc.grid_offset, pc.grid_n, pc.grid_inv_step, x64, y64)
-                                 : interpolate_weights64(pc.grid_offset, pc.grid_n, pc.grid_a, pc.grid_inv_step,
-                                                         x64, y64);
-        s0 += w64.x;
-        n0 += w64.y;
+        uint b0, l0, b1, l1;
+        ring_ranges(iz, z0, xa, phi, pc.cos_rho_max, b0, l0, b1, l1);
+        accumulate(f, theta_p64, phi_p64, b0, b0 + l0, acc);
+        accumulate(f, theta_p64, phi_p64, b1, b1 + l1, acc);
+        count += l0 + l1;
       }
     }
-    barrier();  // the next batch overwrites the shared ranges
   }
 
-  // Workgroup reduction in float64, invocation by invocation in a fixed order (deterministic, and
-  // without relying on float64 subgroup arithmetic).
-  s_partial[3u * lid] = double(sum) - double(comp);
-  s_partial[3u * lid + 1u] = s0;
-  s_partial[3u * lid + 2u] = n0;
-  barrier();
-  if (lid == 0u) {
-    double d = 0.0, m = 0.0, n = 0.0;
-    for (uint g = 0u; g < PISCO_WG_SIZE; ++g) {
-      d += s_partial[3u * g];
-      m += s_partial[3u * g + 1u];
-      n += s_partial[3u * g + 2u];
+  double d = double(acc.sum) - double(acc.comp);
+  if (PARTS > 1) {  // the parts of a sample are neighbours in the workgroup: add them in order
+    s_sum[local] = acc.sum;
+    s_comp[local] = acc.comp;
+    s_s0[local] = acc.s0;
+    s_n0[local] = acc.n0;
+    s_count[local] = count;
+    barrier();
+    if (part != 0 || !live) return;
+    for (uint q = 1u; q < uint(PARTS); ++q) {
+      d += double(s_sum[local + q]) - double(s_comp[local + q]);
+      acc.s0 += s_s0[local + q];
+      acc.n0 += s_n0[local + q];
+      count += s_count[local + q];
     }
-    d += pc.monopole * m;
-    if ((pc.flags & PISCO_FLAG_PER_SAMPLE) != 0u) d = n > 0.0 ? d / n : 0.0;
-    tod[sid] = d;
-    counts[sid] = total;
   }
+  d += pc.monopole * acc.s0;
+  if ((pc.flags & PISCO_FLAG_PER_SAMPLE) != 0u) d = acc.n0 > 0.0lf ? d / acc.n0 : 0.0lf;
+  tod[sid] = d;
+  counts[sid] = count;
 }

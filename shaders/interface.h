@@ -3,11 +3,8 @@
 #ifndef PISCO_SHADER_INTERFACE_H
 #define PISCO_SHADER_INTERFACE_H
 
-// One workgroup convolves one sample: its invocations share the disc's rings and pixels.
+// Samples per workgroup: one invocation convolves one sample.
 #define PISCO_WG_SIZE 64
-// Ranges a workgroup holds per ring batch: two per ring (a ring range may wrap around phi = 0) and,
-// for invocation 0, the polar caps.
-#define PISCO_RANGES_PER_LANE 2
 
 #define PISCO_BINDING_SKY 0        // 2 vec4 per pixel: (kx, ky, kz, I - I0), (Q, U, V, 0), float32
 #define PISCO_BINDING_SKY_LO 1     // vec4 per pixel: k - float(k), so that float(k) + lo = k in float64
@@ -19,9 +16,12 @@
 #define PISCO_BINDING_COUNT 7      // 1 uint per sample: pixels in its disc
 #define PISCO_BINDINGS 8
 
-#define PISCO_FLAG_RADIAL 1u      // the detector's weights are a radial profile in r = sin(rho)
 #define PISCO_FLAG_PER_SAMPLE 2u  // divide each sample by its own sum of Omega_pix B_TT / Omega~
-#define PISCO_FLAG_FLOAT64 4u     // run the float64 path: I0 sum_k w_I(k) and the per-sample norm
+
+// Specialization constant ids: one pipeline per combination in use.
+#define PISCO_SPEC_RADIAL 0   // the detector's weights are a radial profile in r = sin(rho)
+#define PISCO_SPEC_FLOAT64 1  // run the float64 path: I0 sum_k w_I(k) and the per-sample norm
+#define PISCO_SPEC_PARTS 2    // invocations per sample (a power of two <= PISCO_WG_SIZE)
 
 #ifdef __cplusplus
 #include <cstdint>
@@ -45,7 +45,7 @@ layout(push_constant) uniform PushConstants {
   uint nside;
   uint flags;             // PISCO_FLAG_*
   uint sample_count;      // samples in this chunk
-  uint groups_x;          // workgroups along x: sample = group.x + group.y * groups_x
+  uint groups_x;          // workgroups along x: sample = (group.y * groups_x + group.x) * (WG / parts) + local / parts
 #ifdef __cplusplus
 };
 static_assert(sizeof(PushConstants) == 80, "push constants must match the GLSL block");

@@ -202,7 +202,6 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
         d.queue_family = q;
         compute = true;
       }
-    const VkSubgroupFeatureFlags needed = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT;
     if (d.api_version < VK_API_VERSION_1_2)
       d.unusable = "supports only Vulkan " + std::to_string(VK_API_VERSION_MAJOR(d.api_version)) + "." +
                    std::to_string(VK_API_VERSION_MINOR(d.api_version)) + " (1.2 required)";
@@ -210,10 +209,6 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
       d.unusable = "has no compute queue";
     else if (!features.shaderFloat64)
       d.unusable = "lacks shaderFloat64 (the exact disc selection and the monopole run in float64)";
-    else if ((sub.supportedOperations & needed) != needed || !(sub.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT))
-      d.unusable = "lacks subgroup arithmetic in compute shaders";
-    else if (d.subgroup_size == 0 || d.subgroup_size > PISCO_WG_SIZE)
-      d.unusable = "has a subgroup size of " + std::to_string(d.subgroup_size);
     out.push_back(std::move(d));
   }
   return out;

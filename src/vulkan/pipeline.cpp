@@ -34,14 +34,6 @@ ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint
     pli.pPushConstantRanges = &range;
     PISCO_VK(fn.vkCreatePipelineLayout(dev, &pli, nullptr, &layout_));
 
-    VkComputePipelineCreateInfo ci{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
-    ci.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
-    ci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
-    ci.stage.module = module_;
-    ci.stage.pName = "main";
-    ci.layout = layout_;
-    PISCO_VK(fn.vkCreateComputePipelines(dev, VK_NULL_HANDLE, 1, &ci, nullptr, &pipeline_));
-
     VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, PISCO_BINDINGS * max_sets};
     VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pi.maxSets = max_sets;
@@ -60,12 +52,13 @@ void ComputePipeline::release() noexcept {
   const auto& fn = device_.fn();
   const VkDevice dev = device_.handle();
   if (pool_) fn.vkDestroyDescriptorPool(dev, pool_, nullptr);
-  if (pipeline_) fn.vkDestroyPipeline(dev, pipeline_, nullptr);
+  for (auto& [spec, p] : pipelines_)
+    if (p) fn.vkDestroyPipeline(dev, p, nullptr);
+  pipelines_.clear();
   if (layout_) fn.vkDestroyPipelineLayout(dev, layout_, nullptr);
   if (set_layout_) fn.vkDestroyDescriptorSetLayout(dev, set_layout_, nullptr);
   if (module_) fn.vkDestroyShaderModule(dev, module_, nullptr);
   pool_ = VK_NULL_HANDLE;
-  pipeline_ = VK_NULL_HANDLE;
   layout_ = VK_NULL_HANDLE;
   set_layout_ = VK_NULL_HANDLE;
   module_ = VK_NULL_HANDLE;
@@ -94,10 +87,28 @@ VkDescriptorSet ComputePipeline::make_set(const std::array<VkBuffer, PISCO_BINDI
   return set;
 }
 
-void ComputePipeline::record(VkCommandBuffer cmd, VkDescriptorSet set, const PushConstants& push, std::uint32_t x,
-                             std::uint32_t y) const {
+VkPipeline ComputePipeline::pipeline(const Specialization& spec) {
+  if (auto it = pipelines_.find(spec); it != pipelines_.end()) return it->second;
+  std::array<VkSpecializationMapEntry, std::tuple_size_v<Specialization>> entries{};
+  for (std::uint32_t i = 0; i < entries.size(); ++i) entries[i] = {i, std::uint32_t(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};
+  VkSpecializationInfo si{std::uint32_t(entries.size()), entries.data(), sizeof(spec), spec.data()};
+  VkComputePipelineCreateInfo ci{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+  ci.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+  ci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+  ci.stage.module = module_;
+  ci.stage.pName = "main";
+  ci.stage.pSpecializationInfo = &si;
+  ci.layout = layout_;
+  VkPipeline p = VK_NULL_HANDLE;
+  PISCO_VK(device_.fn().vkCreateComputePipelines(device_.handle(), VK_NULL_HANDLE, 1, &ci, nullptr, &p));
+  pipelines_[spec] = p;
+  return p;
+}
+
+void ComputePipeline::record(VkCommandBuffer cmd, const Specialization& spec, VkDescriptorSet set, const PushConstants& push,
+                             std::uint32_t x, std::uint32_t y) {
   const auto& fn = device_.fn();
-  fn.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+  fn.vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline(spec));
   fn.vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout_, 0, 1, &set, 0, nullptr);
   fn.vkCmdPushConstants(cmd, layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(PushConstants), &push);
   fn.vkCmdDispatch(cmd, x, y, 1);

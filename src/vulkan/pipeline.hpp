@@ -1,10 +1,12 @@
-// The compute pipeline of one embedded SPIR-V kernel: its descriptor set layout (PISCO_BINDINGS storage
-// buffers, shaders/interface.h), push constants and a pool of descriptor sets.
+// The compute pipelines of one embedded SPIR-V kernel: its descriptor set layout (PISCO_BINDINGS storage
+// buffers, shaders/interface.h), push constants, a pool of descriptor sets, and one pipeline per
+// set of specialization-constant values, created when first used.
 #pragma once
 
 #include <volk.h>
 
 #include <array>
+#include <map>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -23,9 +25,14 @@ class ComputePipeline {
 
   // A descriptor set with buffers[b] at binding b.
   VkDescriptorSet make_set(const std::array<VkBuffer, PISCO_BINDINGS>& buffers);
-  // Records: bind the pipeline and `set`, push `push`, dispatch (x, y) workgroups.
-  void record(VkCommandBuffer cmd, VkDescriptorSet set, const PushConstants& push, std::uint32_t x,
-              std::uint32_t y) const;
+  // Values of the kernel's specialization constants, by constant_id (booleans as 0 or 1).
+  using Specialization = std::array<std::uint32_t, 3>;
+  // Creates the pipeline specialized with `spec` now rather than at its first use.
+  void prepare(const Specialization& spec) { pipeline(spec); }
+  // Records: bind the pipeline specialized with `spec`, bind `set`, push `push`, dispatch (x, y)
+  // workgroups.
+  void record(VkCommandBuffer cmd, const Specialization& spec, VkDescriptorSet set, const PushConstants& push,
+              std::uint32_t x, std::uint32_t y);
 
  private:
   void release() noexcept;
@@ -33,7 +40,8 @@ class ComputePipeline {
   VkShaderModule module_ = VK_NULL_HANDLE;
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout layout_ = VK_NULL_HANDLE;
-  VkPipeline pipeline_ = VK_NULL_HANDLE;
+  VkPipeline pipeline(const Specialization& spec);
+  std::map<Specialization, VkPipeline> pipelines_;
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
 };
 

@@ -59,8 +59,10 @@ class VulkanBackend final : public Backend {
 
   Buffer upload(const void* data, std::size_t bytes, const char* what);
   void make_slots(std::size_t chunk);
-  void submit(Slot& slot, const vk::PushConstants& push, const PointingView& pointing, std::size_t begin,
-              std::size_t n);
+  vk::ComputePipeline::Specialization specialization(const PreparedDetector& det) const;
+  void submit(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push,
+              const PointingView& pointing,
+              std::size_t begin, std::size_t n);
   std::uint64_t collect(Slot& slot, std::span<double> tod);
 
   std::shared_ptr<const EngineInputs> in_;
@@ -146,10 +148,12 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const E
 
   // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
   const std::size_t by_range = info.max_storage_buffer_range / (3 * sizeof(double));
-  const std::size_t by_groups = std::size_t(info.max_groups_x) * info.max_groups_y;
+  const std::size_t by_groups = std::size_t(info.max_groups_x) * info.max_groups_y;  // one sample per group at worst
   std::size_t chunk = options.chunk_samples ? options.chunk_samples : default_chunk;
   chunk = std::max<std::size_t>(1, std::min({chunk, by_range, by_groups}));
   make_slots(chunk);
+  // Compile, at set-up, the pipelines the detectors will use.
+  for (const PreparedDetector& d : in_->detectors) pipeline_->prepare(specialization(d));
   device_->check_validation("setting up");
 }
 
@@ -240,8 +244,22 @@ VulkanBackend::~VulkanBackend() {
   if (pool_) fn.vkDestroyCommandPool(device_->handle(), pool_, nullptr);
 }
 
-void VulkanBackend::submit(Slot& slot, const vk::PushConstants& push_in, const PointingView& pointing,
-                           std::size_t begin, std::size_t n) {
+// The kernel for this detector: its weight layout, the float64 path, and how many invocations share
+// one sample: enough that none walks more than about 16,000 pixels (lavapipe ends an invocation
+// after 65,535 loop iterations; on GPUs, large discs gain parallelism).
+vk::ComputePipeline::Specialization VulkanBackend::specialization(const PreparedDetector& det) const {
+  const double disc_pixels = 12.0 * double(in_->sky.nside) * double(in_->sky.nside) * (1.0 - det.cos_rho_max) / 2.0;
+  std::uint32_t parts = 1;
+  while (parts < PISCO_WG_SIZE && disc_pixels / parts > 16384.0) parts *= 2;
+  vk::ComputePipeline::Specialization spec{};
+  spec[PISCO_SPEC_RADIAL] = det.radial ? 1u : 0u;
+  spec[PISCO_SPEC_FLOAT64] = float64_ ? 1u : 0u;
+  spec[PISCO_SPEC_PARTS] = parts;
+  return spec;
+}
+
+void VulkanBackend::submit(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push_in,
+                           const PointingView& pointing, std::size_t begin, std::size_t n) {
   const auto& fn = device_->fn();
   constexpr double twopi = 2 * std::numbers::pi;
   auto* p = static_cast<double*>(slot.pointing.mapped());
@@ -254,15 +272,17 @@ void VulkanBackend::submit(Slot& slot, const vk::PushConstants& push_in, const P
   }
   vk::PushConstants push = push_in;
   push.sample_count = std::uint32_t(n);
-  const std::uint32_t gx = std::uint32_t(std::min<std::size_t>(n, device_->info().max_groups_x));
-  const std::uint32_t gy = std::uint32_t((n + gx - 1) / gx);
+  const std::size_t per_group = PISCO_WG_SIZE / spec[PISCO_SPEC_PARTS];
+  const std::size_t groups = (n + per_group - 1) / per_group;
+  const std::uint32_t gx = std::uint32_t(std::min<std::size_t>(groups, device_->info().max_groups_x));
+  const std::uint32_t gy = std::uint32_t((groups + gx - 1) / gx);
   push.groups_x = gx;
 
   PISCO_VK(fn.vkResetCommandBuffer(slot.cmd, 0));
   VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   PISCO_VK(fn.vkBeginCommandBuffer(slot.cmd, &bi));
-  pipeline_->record(slot.cmd, slot.set, push, gx, gy);
+  pipeline_->record(slot.cmd, spec, slot.set, push, gx, gy);
   VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
   barrier.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
   barrier.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
@@ -307,9 +327,8 @@ std::uint64_t VulkanBackend::convolve(std::size_t detector, const PointingView& 
   push.grid_n = std::uint32_t(det.grid_n);
   push.grid_offset = grid_offset_.at(detector);
   push.nside = std::uint32_t(in_->sky.nside);
-  push.flags = (det.radial ? PISCO_FLAG_RADIAL : 0u) |
-               (in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) |
-               (float64_ ? PISCO_FLAG_FLOAT64 : 0u);
+  push.flags = in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u;
+  const vk::ComputePipeline::Specialization spec = specialization(det);
 
   std::uint64_t pixels = 0;
   std::size_t next = 0;
@@ -317,7 +336,7 @@ std::uint64_t VulkanBackend::convolve(std::size_t detector, const PointingView& 
     for (std::size_t begin = 0; begin < pointing.size(); begin += chunk_, ++next) {
       Slot& slot = slots_[next % slots_.size()];
       if (slot.pending) pixels += collect(slot, tod);
-      submit(slot, push, pointing, begin, std::min(chunk_, pointing.size() - begin));
+      submit(slot, spec, push, pointing, begin, std::min(chunk_, pointing.size() - begin));
     }
     for (std::size_t i = 0; i < slots_.size(); ++i) {  // the last chunks, in order
       Slot& slot = slots_[(next + i) % slots_.size()];
