@@ -12,7 +12,10 @@
 // Precision: the sky is stored in float32 with its monopole I0 removed (a 2.725 K monopole would leave
 // float32 only ~0.3 uK of resolution). The monopole's own contribution, I0 sum_k w_I(k), and the
 // per-sample normalization sum_k wn(k) are summed in float64 from double pixel vectors and double
-// weights: the same arithmetic as the reference.
+// weights: the same arithmetic as the reference. On that path the float32 evaluation also takes its
+// beam coordinates (x, y) from the float64 ones, which cuts its error about five-fold for free (the
+// rounding of the float32 pixel vectors is the largest float32 error, amplified by the beam's slope);
+// otherwise the whole evaluation is contribution.hpp's pixel_contribution<float>.
 #pragma once
 
 #include <cstdint>
@@ -98,12 +101,26 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
     while (j >= offset[r + 1]) ++r;
     const std::uint32_t p = first[r] + (j - offset[r]);
     const PixelRecord px = sky.pixels[p];
-    kahan_add(acc, pixel_contribution<Radial>(f, Vec3<float>{px.kx, px.ky, px.kz}, px.i, px.q, px.u, px.v,
-                                              det.weights, det.grid_n, det.grid_a, det.grid_inv_step));
-    if constexpr (Monopole || PerSample) {
+    const Vec3<float> k{px.kx, px.ky, px.kz};
+    if constexpr (!Monopole && !PerSample) {
+      kahan_add(acc, pixel_contribution<Radial>(f, k, px.i, px.q, px.u, px.v, det.weights, det.grid_n, det.grid_a,
+                                                det.grid_inv_step));
+    } else {
+      // The beam coordinates in float64, from the reference's pixel vectors: they give the float64
+      // sums their weights, and the float32 evaluation its (x, y), which float32 pixel vectors would
+      // only carry to ~1e-7 (the largest float32 error otherwise, on steep beams).
       const double* kv = sky.vectors + 4 * std::size_t(p);
-      const Vec3<double> k{kv[0], kv[1], kv[2]};
-      const double x = dot(k, fd.theta_p), y = dot(k, fd.phi_p);
+      const Vec3<double> kd{kv[0], kv[1], kv[2]};
+      const double x = dot(kd, fd.theta_p), y = dot(kd, fd.phi_p);
+      PixelGeometry<float> g = pixel_geometry(f, k);
+      g.x = float(x);
+      g.y = float(y);
+      float wf[4];
+      if constexpr (Radial)
+        interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.x, g.y, wf);
+      else
+        interpolate_weights(det.weights, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wf);
+      kahan_add(acc, stokes_response(wf, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
       double w[4];
       if constexpr (Radial)
         interpolate_radial(det.exact_weights, det.grid_n, det.grid_inv_step_d, x, y, w);
