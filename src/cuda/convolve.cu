@@ -76,6 +76,17 @@ void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& ch
 
 }  // namespace
 
+void check_kernel_image(const std::string& device) {
+  cudaFuncAttributes attributes{};
+  const cudaError_t status = cudaFuncGetAttributes(&attributes, convolve_kernel<false, false, false>);
+  if (status != cudaSuccess) {
+    cudaGetLastError();
+    throw Error("cuda: the kernel cannot run on " + device + ": " + cudaGetErrorString(status) +
+                " (libpisco was built for the CUDA architectures " PISCO_CUDA_ARCHITECTURES
+                "; rebuild with -DCMAKE_CUDA_ARCHITECTURES=...)");
+  }
+}
+
 void launch_convolve(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial,
                      bool monopole, bool per_sample, cudaStream_t stream) {
   if (chunk.count == 0) return;

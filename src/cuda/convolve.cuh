@@ -4,6 +4,7 @@
 #include <cuda_runtime_api.h>
 
 #include <cstdint>
+#include <string>
 
 #include "cuda/sample.hpp"
 
@@ -20,6 +21,10 @@ struct ChunkArgs {
 
 // Enqueues the kernel on `stream`. The variant is chosen from the beam's layout (radial profile or
 // 2D grid), whether the sky's monopole is summed apart, and the normalization.
+// Throws pisco::Error when the current device cannot run the kernel (an architecture the library was
+// not built for: CMAKE_CUDA_ARCHITECTURES).
+void check_kernel_image(const std::string& device);
+
 void launch_convolve(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial,
                      bool monopole, bool per_sample, cudaStream_t stream);
 

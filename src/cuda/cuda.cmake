@@ -43,3 +43,7 @@ set_target_properties(pisco PROPERTIES
 target_compile_options(pisco PRIVATE $<$<COMPILE_LANGUAGE:CUDA>:-Xcompiler=-Wall,-Wextra>)
 target_link_libraries(pisco PRIVATE CUDA::cudart_static)
 target_compile_definitions(pisco PRIVATE PISCO_HAVE_CUDA)
+# Named in the error a device of another architecture gets.
+string(REPLACE ";" "," pisco_cuda_arch_list "${CMAKE_CUDA_ARCHITECTURES}")
+set_source_files_properties(cuda/convolve.cu PROPERTIES
+  COMPILE_DEFINITIONS "PISCO_CUDA_ARCHITECTURES=\"${pisco_cuda_arch_list}\"")

@@ -43,6 +43,7 @@ class CudaBackend final : public Backend {
  public:
   CudaBackend(std::shared_ptr<const EngineInputs> inputs, const EngineOptions& options)
       : in_(std::move(inputs)), device_(open_device(options.device)) {
+    check_kernel_image(device_.description());
     const PreparedSky& sky = in_->sky;
     per_sample_ = in_->normalization == Normalization::per_sample;
     const double monopole = sky_monopole(sky);
