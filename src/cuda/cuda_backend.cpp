@@ -66,6 +66,7 @@ class CudaBackend final : public Backend {
     std::size_t free_bytes = 0, total_bytes = 0;
     PISCO_CUDA_CHECK(cudaMemGetInfo(&free_bytes, &total_bytes));
     capacity_ = fit_chunk(options.chunk_samples, free_bytes);
+    slots_.reserve(chunk_slots);
     for (;;) {
       try {
         for (std::size_t s = 0; s < chunk_slots; ++s) slots_.emplace_back(capacity_);
