@@ -1,0 +1,100 @@
+// The convolution kernel (DESIGN 3, 6, 7): one warp per sample. The per-sample arithmetic lives in
+// sample.hpp, shared with the host tests; this file adds the warp plumbing and the launcher.
+#include "cuda/check.hpp"
+#include "cuda/convolve.cuh"
+
+namespace pisco::detail::cuda {
+namespace {
+
+constexpr int warps_per_block = 8;
+constexpr int block_threads = warps_per_block * warp_lanes;
+constexpr unsigned full_mask = 0xffffffffu;
+
+template <class T>
+__device__ __forceinline__ T warp_sum(T v) {
+  // Butterfly: a fixed order, so the result does not depend on timing.
+  for (int offset = warp_lanes / 2; offset > 0; offset /= 2) v += __shfl_xor_sync(full_mask, v, offset);
+  return v;
+}
+
+template <bool Radial, bool Monopole, bool PerSample>
+__global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, KernelDetector det, ChunkArgs chunk) {
+  __shared__ std::uint32_t first[warps_per_block][batch_ranges];
+  __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
+  const int warp = int(threadIdx.x) / warp_lanes;
+  const int lane = int(threadIdx.x) % warp_lanes;
+  const std::size_t i = std::size_t(blockIdx.x) * warps_per_block + warp;
+  if (i >= chunk.count) return;  // whole warps only
+
+  const double theta = chunk.theta[i];
+  const double phi = wrap_longitude(chunk.phi[i]);
+  const SampleFrame<double> fd = sample_frame(theta, phi, chunk.psi[i], det);
+  const SampleFrame<float> f = to_float(fd);
+  std::uint32_t* my_first = first[warp];
+  std::uint32_t* my_offset = offset[warp];
+
+  LaneSums acc;
+  const std::uint32_t pixels =
+      walk_disc(sky, det, theta, phi, my_first, my_offset, lane == 0, [&](int count) {
+        __syncwarp();  // the batch written by lane 0 is visible to the warp
+        process_batch<Radial, Monopole, PerSample>(sky, det, f, fd, my_first, my_offset, count, lane, acc);
+        __syncwarp();  // every lane is done with it before lane 0 writes the next
+      });
+
+  const float sum = warp_sum(lane_total(acc));
+  const double monopole_weight = Monopole ? warp_sum(acc.monopole) : 0.0;
+  const double norm = PerSample ? warp_sum(acc.norm) : 0.0;
+  if (lane == 0) {
+    chunk.tod[i] = finish_sample(sum, monopole_weight, norm, sky.monopole, PerSample);
+    atomicAdd(chunk.pixels, static_cast<unsigned long long>(pixels));
+  }
+}
+
+template <bool Radial, bool Monopole, bool PerSample>
+void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
+  const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
+  convolve_kernel<Radial, Monopole, PerSample><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+}
+
+template <bool Radial, bool Monopole>
+void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool per_sample,
+            cudaStream_t stream) {
+  if (per_sample)
+    launch<Radial, Monopole, true>(sky, det, chunk, stream);
+  else
+    launch<Radial, Monopole, false>(sky, det, chunk, stream);
+}
+
+template <bool Radial>
+void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool monopole,
+            bool per_sample, cudaStream_t stream) {
+  if (monopole)
+    launch<Radial, true>(sky, det, chunk, per_sample, stream);
+  else
+    launch<Radial, false>(sky, det, chunk, per_sample, stream);
+}
+
+}  // namespace
+
+void check_kernel_image(const std::string& device) {
+  cudaFuncAttributes attributes{};
+  const cudaError_t status = cudaFuncGetAttributes(&attributes, convolve_kernel<false, false, false>);
+  if (status != cudaSuccess) {
+    cudaGetLastError();
+    throw Error("cuda: the kernel cannot run on " + device + ": " + cudaGetErrorString(status) +
+                " (libpisco was built for the CUDA architectures " PISCO_CUDA_ARCHITECTURES
+                "; rebuild with -DCMAKE_CUDA_ARCHITECTURES=...)");
+  }
+}
+
+void launch_convolve(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial,
+                     bool monopole, bool per_sample, cudaStream_t stream) {
+  if (chunk.count == 0) return;
+  if (radial)
+    launch<true>(sky, det, chunk, monopole, per_sample, stream);
+  else
+    launch<false>(sky, det, chunk, monopole, per_sample, stream);
+  PISCO_CUDA_CHECK(cudaGetLastError());
+}
+
+}  // namespace pisco::detail::cuda

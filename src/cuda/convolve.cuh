@@ -1,0 +1,31 @@
+// The convolution kernel's launcher: one warp per sample (sample.hpp), 8 samples a block.
+#pragma once
+
+#include <cuda_runtime_api.h>
+
+#include <cstdint>
+#include <string>
+
+#include "cuda/sample.hpp"
+
+namespace pisco::detail::cuda {
+
+struct ChunkArgs {
+  const double* theta;  // count samples each
+  const double* phi;
+  const double* psi;
+  double* tod;
+  unsigned long long* pixels;  // incremented by the disc size of every sample
+  std::uint32_t count;
+};
+
+// Enqueues the kernel on `stream`. The variant is chosen from the beam's layout (radial profile or
+// 2D grid), whether the sky's monopole is summed apart, and the normalization.
+// Throws pisco::Error when the current device cannot run the kernel (an architecture the library was
+// not built for: CMAKE_CUDA_ARCHITECTURES).
+void check_kernel_image(const std::string& device);
+
+void launch_convolve(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial,
+                     bool monopole, bool per_sample, cudaStream_t stream);
+
+}  // namespace pisco::detail::cuda

@@ -1,0 +1,33 @@
+// The engine inputs in the layout the CUDA kernel reads (sample.hpp), built on the host: the sky in
+// float32 with its monopole removed, double pixel vectors and double (w_I, wn) weights where the
+// float64 sums need them. Plain C++: the unit tests use it without a GPU.
+#pragma once
+
+#include <vector>
+
+#include "core/prepared.hpp"
+#include "cuda/sample.hpp"
+
+namespace pisco::detail::cuda {
+
+// I0: the mean of I over the sky, when it matters for float32, that is when |I0| > 0.1 x the RMS of
+// I - I0; 0 otherwise (nothing is removed, and the kernel skips the float64 monopole sum).
+double sky_monopole(const PreparedSky& sky);
+
+// One record per pixel, I - monopole in float32.
+std::vector<PixelRecord> pixel_records(const PreparedSky& sky, double monopole);
+
+// 4 doubles per pixel (kx, ky, kz, 0), the unit vectors of the reference.
+std::vector<double> pixel_vectors(const PreparedSky& sky);
+
+// The detector's weights converted to float32, 4 per node as in the reference.
+std::vector<float> float_weights(const PreparedDetector& det);
+
+// (w_I, wn, 0, 0) per node in double: the I weight and the per-sample normalization weight (zero
+// unless the inputs were prepared for per-sample normalization).
+std::vector<double> exact_weights(const PreparedDetector& det);
+
+// The kernel's view of a detector, given its uploaded weights.
+KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* exact);
+
+}  // namespace pisco::detail::cuda

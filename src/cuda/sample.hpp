@@ -1,0 +1,171 @@
+// What the CUDA kernel computes for one sample, written as host/device functions so that the host can
+// run the very same float32 arithmetic (tests/test_cuda_host.cpp checks the precision contract of
+// DESIGN 7 without a GPU). The kernel (convolve.cu) adds only the warp plumbing: shared memory for the
+// range batch, __syncwarp and the shuffle reduction.
+//
+// One warp per sample. Every lane walks the disc's ring ranges (for_each_disc_range in double, as the
+// reference does) and the ranges are gathered into a batch of up to batch_ranges; the batch's pixels,
+// numbered 0 ... total-1 across its ranges, are dealt to the lanes round-robin, so a lane stays busy
+// however short the rings are. The assignment depends only on the disc, never on the chunk or launch
+// size: results are deterministic.
+//
+// Precision: the sky is stored in float32 with its monopole I0 removed (a 2.725 K monopole would leave
+// float32 only ~0.3 uK of resolution). The monopole's own contribution, I0 sum_k w_I(k), and the
+// per-sample normalization sum_k wn(k) are summed in float64 from double pixel vectors and double
+// weights: the same arithmetic as the reference. On that path the float32 evaluation also takes its
+// beam coordinates (x, y) from the float64 ones, which cuts its error about five-fold for free (the
+// rounding of the float32 pixel vectors is the largest float32 error, amplified by the beam's slope);
+// otherwise the whole evaluation is contribution.hpp's pixel_contribution<float>.
+#pragma once
+
+#include <cstdint>
+
+#include "core/contribution.hpp"
+#include "core/disc.hpp"
+#include "core/hd.hpp"
+
+namespace pisco::detail::cuda {
+
+constexpr int warp_lanes = 32;
+constexpr int batch_ranges = 32;
+
+// One sky pixel as the kernel reads it: two 16-byte loads.
+struct alignas(16) PixelRecord {
+  float kx, ky, kz;  // unit vector
+  float i;           // I - I0
+  float q, u, v, pad;
+};
+
+struct KernelSky {
+  const PixelRecord* pixels;
+  const double* vectors;  // 4 doubles per pixel (kx, ky, kz, 0); only for the float64 sums
+  const RingEntry* rings;
+  std::int64_t nside;
+  double monopole;        // I0, removed from PixelRecord::i
+};
+
+struct KernelDetector {
+  const float* weights;         // w per node, 4 floats (reference layout, converted)
+  const double* exact_weights;  // (w_I, wn, 0, 0) per node in double; only for the float64 sums
+  int grid_n;
+  float grid_a, grid_inv_step;
+  double grid_a_d, grid_inv_step_d;
+  double rho_max, cos_rho_max;
+  double cos_zeta, sin_zeta;
+};
+
+// Per-lane partial sums.
+struct LaneSums {
+  float sum = 0.0f, carry = 0.0f;  // Kahan-compensated sum of the float32 contributions
+  double monopole = 0.0;            // sum of w_I, float64
+  double norm = 0.0;                // sum of the normalization weight, float64
+};
+
+// phi wrapped into [0, 2 pi): the reference's wrap_phi (prepared.cpp), operation for operation.
+PISCO_HD double wrap_longitude(double phi) {
+  const double twopi = 6.283185307179586476925286766559;
+  double p = fmod(phi, twopi);
+  if (p < 0) p += twopi;
+  if (p >= twopi) p = 0.0;
+  return p;
+}
+
+PISCO_HD SampleFrame<double> sample_frame(double theta, double phi, double psi, const KernelDetector& det) {
+  return make_frame(cos(theta), sin(theta), cos(phi), sin(phi), cos(psi), sin(psi), det.cos_zeta, det.sin_zeta);
+}
+
+PISCO_HD SampleFrame<float> to_float(const SampleFrame<double>& f) {
+  auto v = [](const Vec3<double>& a) { return Vec3<float>{float(a.x), float(a.y), float(a.z)}; };
+  return {v(f.theta_p), v(f.phi_p), v(f.p), v(f.e_c)};
+}
+
+PISCO_HD void kahan_add(LaneSums& s, float value) {
+  const float y = value - s.carry;
+  const float t = s.sum + y;
+  s.carry = (t - s.sum) - y;
+  s.sum = t;
+}
+
+// A lane's compensated float32 total, the value that enters the warp reduction.
+PISCO_HD float lane_total(const LaneSums& s) { return s.sum - s.carry; }
+
+// The pixels of one batch that fall to `lane`: positions lane, lane + 32, ... of the concatenated
+// ranges [first[r], first[r] + offset[r+1] - offset[r]), r < count.
+template <bool Radial, bool Monopole, bool PerSample>
+PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
+                            const SampleFrame<double>& fd, const std::uint32_t* first,
+                            const std::uint32_t* offset, int count, int lane, LaneSums& acc) {
+  const std::uint32_t total = offset[count];
+  int r = 0;
+  for (std::uint32_t j = std::uint32_t(lane); j < total; j += warp_lanes) {
+    while (j >= offset[r + 1]) ++r;
+    const std::uint32_t p = first[r] + (j - offset[r]);
+    const PixelRecord px = sky.pixels[p];
+    const Vec3<float> k{px.kx, px.ky, px.kz};
+    if constexpr (!Monopole && !PerSample) {
+      kahan_add(acc, pixel_contribution<Radial>(f, k, px.i, px.q, px.u, px.v, det.weights, det.grid_n, det.grid_a,
+                                                det.grid_inv_step));
+    } else {
+      // The beam coordinates in float64, from the reference's pixel vectors: they give the float64
+      // sums their weights, and the float32 evaluation its (x, y), which float32 pixel vectors would
+      // only carry to ~1e-7 (the largest float32 error otherwise, on steep beams).
+      const double* kv = sky.vectors + 4 * std::size_t(p);
+      const Vec3<double> kd{kv[0], kv[1], kv[2]};
+      const double x = dot(kd, fd.theta_p), y = dot(kd, fd.phi_p);
+      PixelGeometry<float> g = pixel_geometry(f, k);
+      g.x = float(x);
+      g.y = float(y);
+      float wf[4];
+      if constexpr (Radial)
+        interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.x, g.y, wf);
+      else
+        interpolate_weights(det.weights, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wf);
+      kahan_add(acc, stokes_response(wf, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
+      double w[4];
+      if constexpr (Radial)
+        interpolate_radial(det.exact_weights, det.grid_n, det.grid_inv_step_d, x, y, w);
+      else
+        interpolate_weights(det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
+      if constexpr (Monopole) acc.monopole += w[0];
+      if constexpr (PerSample) acc.norm += w[1];
+    }
+  }
+}
+
+// Walks the disc of (theta, phi), gathering ranges into first[]/offset[] (written only where
+// `writer`, the other lanes keep the same counts in registers) and calling flush(count) whenever
+// batch_ranges ranges are gathered and once at the end. Returns the disc's pixel count.
+template <class Flush>
+PISCO_HD std::uint32_t walk_disc(const KernelSky& sky, const KernelDetector& det, double theta, double phi,
+                                 std::uint32_t* first, std::uint32_t* offset, bool writer, Flush&& flush) {
+  std::uint32_t pixels = 0, batched = 0;
+  int count = 0;
+  if (writer) offset[0] = 0;
+  for_each_disc_range(sky.rings, sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
+                      [&](std::uint32_t begin, std::uint32_t end) {
+                        if (end <= begin) return;
+                        batched += end - begin;
+                        if (writer) {
+                          first[count] = begin;
+                          offset[count + 1] = batched;
+                        }
+                        if (++count == batch_ranges) {
+                          flush(count);
+                          pixels += batched;
+                          batched = 0;
+                          count = 0;
+                        }
+                      });
+  if (count > 0) flush(count);
+  return pixels + batched;
+}
+
+// The sample from the reduced sums, as the reference: float32 sum plus I0 sum w_I, over the
+// normalization when per-sample.
+PISCO_HD double finish_sample(float sum, double monopole_weight, double norm, double monopole, bool per_sample) {
+  const double d = double(sum) + monopole * monopole_weight;
+  if (per_sample) return norm > 0 ? d / norm : 0.0;
+  return d;
+}
+
+}  // namespace pisco::detail::cuda

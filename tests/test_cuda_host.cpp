@@ -1,0 +1,326 @@
+// The cuda backend without a GPU: chunk sizing, device choice, the monopole split, and the kernel's
+// per-sample float32 arithmetic (src/cuda/sample.hpp, the functions convolve.cu runs) executed on the
+// host with the warp emulated lane by lane, held to the precision contract of VALIDATION B against
+// the float64 reference. On a GPU, test_cuda checks the device itself against the same bars.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include <healpix_base.h>
+#include <pointing.h>
+
+#include "core/prepared.hpp"
+#include "cuda/chunk.hpp"
+#include "cuda/device_choice.hpp"
+#include "cuda/device_data.hpp"
+#include "cuda/sample.hpp"
+#include "pisco/engine.hpp"
+#include "support.hpp"
+
+namespace {
+
+namespace pc = pisco::detail::cuda;
+constexpr double pi = std::numbers::pi;
+constexpr double deg = pi / 180;
+
+TEST(CudaChunk, RequestedSizeIsKeptAndCapped) {
+  EXPECT_EQ(pc::fit_chunk(7, 0), 7u);
+  EXPECT_EQ(pc::fit_chunk(1, 1ull << 40), 1u);
+  EXPECT_EQ(pc::fit_chunk(std::size_t(1) << 40, 1ull << 40), pc::max_chunk_samples);
+}
+
+TEST(CudaChunk, DefaultFitsHalfTheFreeMemory) {
+  EXPECT_EQ(pc::fit_chunk(0, std::size_t(80) << 30), pc::default_chunk_samples);  // an H100: the default
+  const std::size_t free_bytes = 1000 * pc::bytes_per_chunk_sample;
+  EXPECT_EQ(pc::fit_chunk(0, free_bytes), 500u);
+  EXPECT_LE(pc::fit_chunk(0, free_bytes) * pc::bytes_per_chunk_sample, free_bytes / 2);
+  EXPECT_EQ(pc::fit_chunk(0, 0), 1u);
+}
+
+TEST(CudaChunk, HalvingStopsAtOneSample) {
+  EXPECT_EQ(pc::halve_chunk(262144), 131072u);
+  EXPECT_EQ(pc::halve_chunk(3), 1u);
+  pisco_test::expect_error([] { pc::halve_chunk(1); }, "out of device or pinned host memory");
+}
+
+TEST(CudaDeviceChoice, AutoIndexAndName) {
+  const std::vector<std::string> names{"NVIDIA H100 80GB HBM3", "NVIDIA A100-SXM4-40GB"};
+  EXPECT_EQ(pc::choose_device(names, "auto"), 0);
+  EXPECT_EQ(pc::choose_device(names, ""), 0);
+  EXPECT_EQ(pc::choose_device(names, "1"), 1);
+  EXPECT_EQ(pc::choose_device(names, "a100"), 1);
+  EXPECT_EQ(pc::choose_device(names, "H100"), 0);
+  EXPECT_EQ(pc::choose_device(names, "NVIDIA"), 0);  // the first match
+}
+
+TEST(CudaDeviceChoice, BadRequestsNameWhatWasAskedAndWhatExists) {
+  const std::vector<std::string> names{"NVIDIA H100 80GB HBM3"};
+  pisco_test::expect_error([&] { pc::choose_device(names, "99"); }, "99");
+  pisco_test::expect_error([&] { pc::choose_device(names, "99"); }, "0: NVIDIA H100 80GB HBM3");
+  pisco_test::expect_error([&] { pc::choose_device(names, "99999999999999999999"); }, "out of range");
+  pisco_test::expect_error([&] { pc::choose_device(names, "no-such-device"); }, "no-such-device");
+  pisco_test::expect_error([&] { pc::choose_device(names, "no-such-device"); }, "H100");
+  pisco_test::expect_error([&] { pc::choose_device({}, "auto"); }, "no CUDA devices");
+}
+
+// ---- the kernel's arithmetic on the host ----
+
+pisco::Sky cmb_like_sky(int nside, std::uint64_t seed, double monopole) {
+  pisco::Sky sky(nside, "K_CMB");
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g(0, 1);
+  for (std::size_t i = 0; i < sky.npix(); ++i) {
+    const pointing p = base.pix2ang(int(i));
+    const double smooth = std::sin(3 * p.theta) * std::cos(2 * p.phi) + 0.5 * std::cos(5 * p.theta + p.phi);
+    sky.I()[i] = monopole + 1e-6 * (80 * smooth + 20 * g(rng));
+    sky.Q()[i] = 1e-6 * (3 * std::cos(4 * p.theta) * std::sin(p.phi) + g(rng));
+    sky.U()[i] = 1e-6 * (3 * std::sin(2 * p.theta) * std::cos(3 * p.phi) + g(rng));
+    sky.V()[i] = 1e-8 * g(rng);
+  }
+  return sky;
+}
+
+pisco::Pointing random_pointing(std::size_t n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  pisco::Pointing p;
+  for (std::size_t i = 0; i < n; ++i) {
+    double theta = std::acos(1 - 2 * u(rng));
+    double phi = 2 * pi * u(rng) - (i % 5 == 0 ? pi : 0.0);
+    if (i % 17 == 0) theta = u(rng) * deg;
+    if (i % 19 == 0) theta = pi - u(rng) * deg;
+    if (i % 23 == 0) phi = 1e-3 * (u(rng) - 0.5);
+    p.push_back(theta, phi, 4 * pi * (u(rng) - 0.5));
+  }
+  return p;
+}
+
+struct Scene {
+  pisco::Sky sky;
+  std::vector<pisco::Beamsor> beams;
+  pisco::FocalPlane focal_plane;
+};
+
+// A PSB pair with elliptical beams, cross-polar lobes and Mueller leakage; a round beam (radial
+// profile); a wide round beam whose 20 deg discs cross more rings than one batch holds.
+Scene scene(int nside, double monopole) {
+  Scene s{cmb_like_sky(nside, 7, monopole), {}, {}};
+  pisco::BeamOptions a;
+  a.rho_max = 5 * deg;
+  a.cross_polar = 0.03;
+  a.cross_polar_pattern = pisco::CrossPolarPattern::quadrupole;
+  a.mueller[1][0] = 0.01;
+  a.mueller[2][0] = -0.004;
+  pisco::BeamOptions b = a;
+  b.cross_polar = 0.02;
+  b.cross_polar_pattern = pisco::CrossPolarPattern::uniform;
+  s.beams.push_back(pisco::Beamsor::elliptical_gaussian(1.6 * deg, 1.4 * deg, 20 * deg, a));
+  s.beams.push_back(pisco::Beamsor::elliptical_gaussian(1.5 * deg, 1.45 * deg, -35 * deg, b));
+  pisco::BeamOptions r;
+  r.rho_max = 4 * deg;
+  s.beams.push_back(pisco::Beamsor::gaussian(1.5 * deg, r));
+  pisco::BeamOptions w;
+  w.rho_max = 20 * deg;
+  s.beams.push_back(pisco::Beamsor::gaussian(6 * deg, w));
+  s.focal_plane.add_pair("psb", 22.5 * deg, 0, 1, 0.01, 1.0, 0.98);
+  s.focal_plane.add({"round", -10 * deg, 0.0, 1.02, 2});
+  s.focal_plane.add({"wide", 40 * deg, 0.02, 1.0, 3});
+  return s;
+}
+
+// The device's data for one engine input, kept alive for the emulated kernel.
+struct HostDevice {
+  std::vector<pc::PixelRecord> pixels;
+  std::vector<double> vectors;
+  std::vector<std::vector<float>> weights;
+  std::vector<std::vector<double>> exact;
+  pc::KernelSky sky{};
+  std::vector<pc::KernelDetector> detectors;
+  bool monopole = false, per_sample = false;
+
+  explicit HostDevice(const pisco::detail::EngineInputs& in) {
+    const double i0 = pc::sky_monopole(in.sky);
+    monopole = i0 != 0.0;
+    per_sample = in.normalization == pisco::Normalization::per_sample;
+    pixels = pc::pixel_records(in.sky, i0);
+    vectors = pc::pixel_vectors(in.sky);
+    sky = {pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0};
+    for (const auto& d : in.detectors) {
+      weights.push_back(pc::float_weights(d));
+      exact.push_back(pc::exact_weights(d));
+    }
+    for (std::size_t k = 0; k < in.detectors.size(); ++k)
+      detectors.push_back(pc::kernel_detector(in.detectors[k], weights[k].data(), exact[k].data()));
+  }
+};
+
+// The warp's butterfly reduction (convolve.cu's warp_sum), lane by lane; returns lane 0's value.
+template <class T>
+T butterfly(T v[pc::warp_lanes]) {
+  for (int offset = pc::warp_lanes / 2; offset > 0; offset /= 2) {
+    T next[pc::warp_lanes];
+    for (int l = 0; l < pc::warp_lanes; ++l) next[l] = v[l] + v[l ^ offset];
+    for (int l = 0; l < pc::warp_lanes; ++l) v[l] = next[l];
+  }
+  return v[0];
+}
+
+struct Emulated {
+  std::vector<double> tod;
+  std::uint64_t pixels = 0;
+  int most_batches = 0;  // the largest number of batches one sample needed
+};
+
+// convolve_kernel of convolve.cu for every sample, one warp emulated on the host.
+template <bool Radial, bool Monopole, bool PerSample>
+Emulated emulate(const pc::KernelSky& sky, const pc::KernelDetector& det, const pisco::Pointing& p) {
+  Emulated out;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double theta = p.theta[i];
+    const double phi = pc::wrap_longitude(p.phi[i]);
+    const auto fd = pc::sample_frame(theta, phi, p.psi[i], det);
+    const auto f = pc::to_float(fd);
+    std::uint32_t first[pc::batch_ranges], offset[pc::batch_ranges + 1];
+    pc::LaneSums lanes[pc::warp_lanes];
+    int batches = 0;
+    out.pixels += pc::walk_disc(sky, det, theta, phi, first, offset, true, [&](int count) {
+      ++batches;
+      for (int l = 0; l < pc::warp_lanes; ++l)
+        pc::process_batch<Radial, Monopole, PerSample>(sky, det, f, fd, first, offset, count, l, lanes[l]);
+    });
+    out.most_batches = std::max(out.most_batches, batches);
+    float sums[pc::warp_lanes];
+    double mono[pc::warp_lanes], norm[pc::warp_lanes];
+    for (int l = 0; l < pc::warp_lanes; ++l) {
+      sums[l] = pc::lane_total(lanes[l]);
+      mono[l] = lanes[l].monopole;
+      norm[l] = lanes[l].norm;
+    }
+    out.tod.push_back(pc::finish_sample(butterfly(sums), butterfly(mono), butterfly(norm), sky.monopole, PerSample));
+  }
+  return out;
+}
+
+Emulated emulate(const HostDevice& dev, std::size_t d, bool radial, const pisco::Pointing& p) {
+  const auto& det = dev.detectors[d];
+  const int v = (radial ? 4 : 0) + (dev.monopole ? 2 : 0) + (dev.per_sample ? 1 : 0);
+  switch (v) {
+    case 0: return emulate<false, false, false>(dev.sky, det, p);
+    case 1: return emulate<false, false, true>(dev.sky, det, p);
+    case 2: return emulate<false, true, false>(dev.sky, det, p);
+    case 3: return emulate<false, true, true>(dev.sky, det, p);
+    case 4: return emulate<true, false, false>(dev.sky, det, p);
+    case 5: return emulate<true, false, true>(dev.sky, det, p);
+    case 6: return emulate<true, true, false>(dev.sky, det, p);
+    default: return emulate<true, true, true>(dev.sky, det, p);
+  }
+}
+
+struct Stats {
+  double rms_ref = 0, rms_err = 0, max_err = 0;
+};
+
+Stats compare(const std::vector<double>& ref, const std::vector<double>& got) {
+  Stats s;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    const double e = got[i] - ref[i];
+    s.rms_ref += ref[i] * ref[i];
+    s.rms_err += e * e;
+    s.max_err = std::max(s.max_err, std::abs(e));
+  }
+  s.rms_ref = std::sqrt(s.rms_ref / double(ref.size()));
+  s.rms_err = std::sqrt(s.rms_err / double(ref.size()));
+  return s;
+}
+
+std::vector<double> reference(const Scene& s, std::size_t d, const pisco::Pointing& p, pisco::Normalization n,
+                              double* mean_pixels = nullptr) {
+  pisco::EngineOptions o;
+  o.backend = "cpu";
+  o.normalization = n;
+  pisco::Engine cpu(s.sky, s.beams, s.focal_plane, o);
+  std::vector<double> tod(p.size());
+  cpu.convolve(d, p, tod);
+  if (mean_pixels) *mean_pixels = cpu.mean_disc_pixels();
+  return tod;
+}
+
+TEST(CudaHostKernel, MonopoleIsSplitOnlyWhereItMatters) {
+  const Scene plain = scene(16, 0.0);
+  const Scene mono = scene(16, 2.725);
+  EXPECT_EQ(pc::sky_monopole(pisco::detail::prepare_sky(plain.sky)), 0.0);
+  const double i0 = pc::sky_monopole(pisco::detail::prepare_sky(mono.sky));
+  EXPECT_NEAR(i0, 2.725, 1e-5);
+  pisco::Sky flat(8);
+  for (std::size_t i = 0; i < flat.npix(); ++i) flat.I()[i] = -3.0;
+  EXPECT_EQ(pc::sky_monopole(pisco::detail::prepare_sky(flat)), -3.0);
+  const auto records = pc::pixel_records(pisco::detail::prepare_sky(flat), -3.0);
+  EXPECT_EQ(records[5].i, 0.0f);
+}
+
+// B1 for the kernel's arithmetic: relative RMS <= 1e-5, max <= 1e-4 of the RMS, the reference's discs.
+TEST(CudaHostKernel, Float32SamplesMatchTheReference) {
+  for (auto norm : {pisco::Normalization::integral, pisco::Normalization::per_sample}) {
+    const Scene s = scene(64, 0.0);
+    const pisco::Pointing p = random_pointing(1500, 11);
+    const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, norm);
+    const HostDevice dev(in);
+    EXPECT_FALSE(dev.monopole);
+    for (std::size_t d = 0; d < s.focal_plane.size(); ++d) {
+      double ref_pixels = 0;
+      const std::vector<double> ref = reference(s, d, p, norm, &ref_pixels);
+      const Emulated got = emulate(dev, d, in.detectors[d].radial, p);
+      const Stats st = compare(ref, got.tod);
+      std::cout << s.focal_plane[d].name << (norm == pisco::Normalization::per_sample ? " (per sample)" : "")
+                << ": relative rms error " << st.rms_err / st.rms_ref << ", max error / rms "
+                << st.max_err / st.rms_ref << ", up to " << got.most_batches << " batches a sample\n";
+      EXPECT_LE(st.rms_err, 1e-5 * st.rms_ref) << s.focal_plane[d].name;
+      EXPECT_LE(st.max_err, 1e-4 * st.rms_ref) << s.focal_plane[d].name;
+      EXPECT_EQ(double(got.pixels), ref_pixels * double(p.size())) << "the discs differ";
+      if (s.focal_plane[d].name == "wide") EXPECT_GT(got.most_batches, 1) << "batching left untested";
+    }
+  }
+}
+
+// B2: a 2.725 K monopole plus anisotropies: the error stays below 1e-5 of the anisotropy RMS.
+TEST(CudaHostKernel, MonopoleSkyKeepsTheAnisotropies) {
+  for (auto norm : {pisco::Normalization::integral, pisco::Normalization::per_sample}) {
+    const Scene s = scene(64, 2.725);
+    const Scene a = scene(64, 0.0);
+    const pisco::Pointing p = random_pointing(1000, 14);
+    const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, norm);
+    const HostDevice dev(in);
+    EXPECT_TRUE(dev.monopole);
+    for (std::size_t d = 0; d < s.focal_plane.size(); ++d) {
+      const std::vector<double> ref = reference(s, d, p, norm);
+      const std::vector<double> aniso = reference(a, d, p, norm);
+      const Stats st = compare(ref, emulate(dev, d, in.detectors[d].radial, p).tod);
+      const double aniso_rms = compare(aniso, aniso).rms_ref;
+      std::cout << s.focal_plane[d].name << ": anisotropy rms " << aniso_rms << " K, max error " << st.max_err
+                << " K\n";
+      EXPECT_LE(st.max_err, 1e-5 * aniso_rms) << s.focal_plane[d].name;
+    }
+  }
+}
+
+// Without the split, float32 cannot carry the monopole: the bar above is one that can fail.
+TEST(CudaHostKernel, WithoutTheSplitTheMonopoleSkyFails) {
+  const Scene s = scene(32, 2.725);
+  const Scene a = scene(32, 0.0);
+  const pisco::Pointing p = random_pointing(300, 15);
+  const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, pisco::Normalization::integral);
+  HostDevice dev(in);
+  dev.pixels = pc::pixel_records(in.sky, 0.0);  // the monopole left in float32
+  dev.sky.pixels = dev.pixels.data();
+  dev.sky.monopole = 0.0;
+  dev.monopole = false;
+  const Stats st = compare(reference(s, 0, p, pisco::Normalization::integral), emulate(dev, 0, false, p).tod);
+  const std::vector<double> aniso = reference(a, 0, p, pisco::Normalization::integral);
+  const double aniso_rms = compare(aniso, aniso).rms_ref;
+  EXPECT_GT(st.max_err, 1e-5 * aniso_rms);
+}
+
+}  // namespace

@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Everything to run on a machine with an NVIDIA GPU, as-is, from anywhere in the checkout:
+#   tools/gpu_steps.sh [LOG_DIR]
+# configures and builds with CUDA and Vulkan, runs the device tests (ctest -L 'cuda|vulkan'), the
+# Table 1 benchmark on both GPU backends and the ducc0 comparison, writing each step's output to
+# LOG_DIR (default gpu-logs-DATE/) and a summary at the end. Steps that fail are reported and the
+# script goes on; its exit status is non-zero if any failed.
+set -u
+root=$(cd "$(dirname "$0")/.." && pwd)
+logs=${1:-$root/gpu-logs-$(date +%Y%m%d-%H%M%S)}
+build=${PISCO_BUILD_DIR:-$root/build-gpu}
+radii="5 7.5 10 15 20 25 30"  # Table 1
+mkdir -p "$logs"
+logs=$(cd "$logs" && pwd)
+failed=()
+
+step() {  # step NAME COMMAND...: runs COMMAND, output to LOG_DIR/NAME.log
+  local name=$1
+  shift
+  echo "== $name: $*" | tee -a "$logs/summary.txt"
+  if "$@" >"$logs/$name.log" 2>&1; then
+    echo "   ok" | tee -a "$logs/summary.txt"
+  else
+    echo "   FAILED (exit $?), see $logs/$name.log" | tee -a "$logs/summary.txt"
+    failed+=("$name")
+  fi
+}
+
+{
+  date -u
+  uname -a
+  nvidia-smi || echo "nvidia-smi not found"
+  nvcc --version || /usr/local/cuda/bin/nvcc --version || echo "nvcc not found"
+  vulkaninfo --summary || echo "vulkaninfo not found"
+  git -C "$root" log -1 --oneline
+} >"$logs/machine.txt" 2>&1
+
+cuda_arch=${CMAKE_CUDA_ARCHITECTURES:-80;90}
+step configure cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+  -DPISCO_WITH_CUDA=ON -DPISCO_WITH_VULKAN=ON "-DCMAKE_CUDA_ARCHITECTURES=$cuda_arch"
+step build cmake --build "$build" -j "$(nproc)"
+step devices "$build/tools/pisco-vk" devices
+step ctest-gpu ctest --test-dir "$build" -L 'cuda|vulkan' --output-on-failure -V
+step ctest-unit ctest --test-dir "$build" -L unit -j "$(nproc)" --output-on-failure
+for backend in cuda vulkan; do
+  # shellcheck disable=SC2086
+  step "bench-$backend" "$build/tools/pisco-vk" bench -b "$backend" --rho-max $radii
+done
+step bench-cpu-5deg "$build/tools/pisco-vk" bench -b cpu --rho-max 5
+# shellcheck disable=SC2086
+step ducc0 python3 "$root/tools/ducc0_compare.py" --pisco "$build/tools/pisco-vk" -b cuda --rho-max $radii
+
+echo | tee -a "$logs/summary.txt"
+for f in bench-cuda bench-vulkan ducc0; do
+  [ -f "$logs/$f.log" ] && { echo "--- $f"; cat "$logs/$f.log"; } >>"$logs/summary.txt"
+done
+echo "logs in $logs"
+if [ ${#failed[@]} -gt 0 ]; then
+  echo "failed steps: ${failed[*]}"
+  exit 1
+fi
+echo "all steps passed"
