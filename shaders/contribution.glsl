@@ -22,13 +22,17 @@ SampleFrame make_frame(float cos_theta, float sin_theta, float cos_phi, float si
   return f;
 }
 
-// Antenna coordinates (x, y, z) of k and (cos 2chi, sin 2chi).
-void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float cos2chi, out float sin2chi) {
-  xyz = vec3(dot(k, f.theta_p), dot(k, f.phi_p), dot(k, f.p));
-  const float t = dot(k, f.e_c);
-  const float zp = 1.0 + xyz.z;
-  const float c = (k.z * t - f.e_c.z) * zp - t * (k.z * xyz.z - f.p.z);
-  const float s = (k.x * f.e_c.y - k.y * f.e_c.x) * zp - t * (k.x * f.p.y - k.y * f.p.x);
+// Antenna coordinates (x, y, z) of k, r2 = x^2 + y^2 (independent of psi) and (cos 2chi, sin 2chi),
+// all from d = k - p' (see contribution.hpp for why).
+void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float r2, out float cos2chi, out float sin2chi) {
+  const vec3 d = k - f.p;
+  const float dz = dot(d, f.p);  // z - 1
+  xyz = vec3(dot(d, f.theta_p), dot(d, f.phi_p), 1.0 + dz);
+  r2 = dot(d, d) - dz * dz;
+  const float t = dot(d, f.e_c);
+  const float zp = 2.0 + dz;
+  const float c = (k.z * t - f.e_c.z) * zp - t * (d.z + k.z * dz);
+  const float s = (k.x * f.e_c.y - k.y * f.e_c.x) * zp - t * (d.x * f.p.y - d.y * f.p.x);
   const float inv = 1.0 / (c * c + s * s);
   cos2chi = (c * c - s * s) * inv;
   sin2chi = 2.0 * c * s * inv;
@@ -49,10 +53,10 @@ vec4 interpolate_weights(int offset, int n, float a, float inv_step, float x, fl
          ((1.0 - fu) * fv) * weights[g00 + n] + (fu * fv) * weights[g00 + n + 1];
 }
 
-// Linear interpolation in r = sqrt(x^2 + y^2) of a radial profile at r = i * step; zero beyond.
+// Linear interpolation in r = sqrt(r2) of a radial profile at r = i * step; zero beyond.
 // Signed indices: CPUs (lavapipe) convert float to int in one instruction, to uint in several.
-vec4 interpolate_radial(int offset, int n, float inv_step, float x, float y) {
-  const float u = sqrt(x * x + y * y) * inv_step;
+vec4 interpolate_radial(int offset, int n, float inv_step, float r2) {
+  const float u = sqrt(max(r2, 0.0)) * inv_step;
   if (!(u <= float(n - 1))) return vec4(0.0);
   const int i = min(int(u), n - 2);
   const float f = u - float(i);
@@ -80,8 +84,8 @@ dvec2 interpolate_weights64(uint offset, uint n, double a, double inv_step, doub
          ((1.0 - fu) * fv) * weights64[g00 + n] + (fu * fv) * weights64[g00 + n + 1u];
 }
 
-dvec2 interpolate_radial64(uint offset, uint n, double inv_step, double x, double y) {
-  const double u = sqrt(x * x + y * y) * inv_step;
+dvec2 interpolate_radial64(uint offset, uint n, double inv_step, double r2) {
+  const double u = sqrt(max(r2, 0.0lf)) * inv_step;
   if (!(u <= double(n - 1u))) return dvec2(0.0);
   const uint i = min(uint(u), n - 2u);
   const double f = u - double(i);

@@ -55,9 +55,9 @@ void accumulate(SampleFrame f, dvec3 theta_p64, dvec3 phi_p64, uint begin, uint 
     const vec4 a = sky[2u * p];
     const vec4 b = sky[2u * p + 1u];
     vec3 xyz;
-    float cos2chi, sin2chi;
-    pixel_geometry(f, a.xyz, xyz, cos2chi, sin2chi);
-    const vec4 w = RADIAL ? interpolate_radial(int(pc.grid_offset), int(pc.grid_n), pc.grid_inv_step32, xyz.x, xyz.y)
+    float r2, cos2chi, sin2chi;
+    pixel_geometry(f, a.xyz, xyz, r2, cos2chi, sin2chi);
+    const vec4 w = RADIAL ? interpolate_radial(int(pc.grid_offset), int(pc.grid_n), pc.grid_inv_step32, r2)
                           : interpolate_weights(int(pc.grid_offset), int(pc.grid_n), pc.grid_a32, pc.grid_inv_step32, xyz.x,
                                                 xyz.y);
     precise const float y = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.xyz)) - acc.comp;
@@ -67,7 +67,7 @@ void accumulate(SampleFrame f, dvec3 theta_p64, dvec3 phi_p64, uint begin, uint 
     if (FLOAT64) {
       const dvec3 k = dvec3(a.xyz) + dvec3(sky_lo[p].xyz);
       const double x64 = dot(k, theta_p64), y64 = dot(k, phi_p64);
-      const dvec2 w64 = RADIAL ? interpolate_radial64(pc.grid_offset, pc.grid_n, pc.grid_inv_step, x64, y64)
+      const dvec2 w64 = RADIAL ? interpolate_radial64(pc.grid_offset, pc.grid_n, pc.grid_inv_step, x64 * x64 + y64 * y64)
                                : interpolate_weights64(pc.grid_offset, pc.grid_n, pc.grid_a, pc.grid_inv_step, x64,
                                                        y64);
       acc.s0 += w64.x;

@@ -29,6 +29,9 @@ struct BackendEntry {
   int priority;  // "auto" picks the available backend with the highest priority
   std::function<BackendInfo()> probe;
   std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const EngineOptions&)> create;
+  // When set, replaces `priority` for "auto" once the backend is known to be available (the vulkan
+  // backend ranks below the float64 reference when its only device is a CPU, where it is slower).
+  std::function<int()> auto_priority = nullptr;
 };
 
 const std::vector<BackendEntry>& backend_registry();

@@ -40,8 +40,8 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
                             const PixelGeometry<double> g = pixel_geometry(f, k);
                             double w[4], wn[4];
                             if constexpr (Radial) {
-                              interpolate_radial(grid, det.grid_n, det.grid_inv_step, g.x, g.y, w);
-                              interpolate_radial(norm_grid, det.grid_n, det.grid_inv_step, g.x, g.y, wn);
+                              interpolate_radial(grid, det.grid_n, det.grid_inv_step, g.r2, w);
+                              interpolate_radial(norm_grid, det.grid_n, det.grid_inv_step, g.r2, wn);
                             } else {
                               interpolate_weights(grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, w);
                               interpolate_weights(norm_grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wn);

@@ -28,8 +28,15 @@ const BackendEntry& choose_backend(const std::string& name) {
   const auto& reg = backend_registry();
   if (name == "auto") {
     const BackendEntry* best = nullptr;
-    for (const auto& e : reg)
-      if ((!best || e.priority > best->priority) && e.probe().available) best = &e;
+    int best_priority = 0;
+    for (const auto& e : reg) {
+      if (!e.probe().available) continue;
+      const int priority = e.auto_priority ? e.auto_priority() : e.priority;
+      if (!best || priority > best_priority) {
+        best = &e;
+        best_priority = priority;
+      }
+    }
     if (!best) throw Error("backend 'auto': no backend is available on this machine");
     return *best;
   }

@@ -117,13 +117,13 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
       g.y = float(y);
       float wf[4];
       if constexpr (Radial)
-        interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.x, g.y, wf);
+        interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.r2, wf);
       else
         interpolate_weights(det.weights, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wf);
       kahan_add(acc, stokes_response(wf, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
       double w[4];
       if constexpr (Radial)
-        interpolate_radial(det.exact_weights, det.grid_n, det.grid_inv_step_d, x, y, w);
+        interpolate_radial(det.exact_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
       else
         interpolate_weights(det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
       if constexpr (Monopole) acc.monopole += w[0];

@@ -63,7 +63,8 @@ std::string fmt(const char* f, double a, double b = 0, double c = 0, double d = 
 }
 
 // One point-source observation: binned maps of a raster over the source against the smoothing.
-void observe_point_source(double I, double Q, double U, double grid_step, const std::string& label, CaseResult& r) {
+void observe_point_source(double I, double Q, double U, double grid_step, const std::string& label,
+                          const std::string& backend, CaseResult& r) {
   const int nside = 256;
   const double radius = 5 * deg;
   Sky sky(nside, "K");
@@ -79,7 +80,8 @@ void observe_point_source(double I, double Q, double U, double grid_step, const 
   std::vector<Beamsor> beams{Beamsor::gaussian(fwhm, o)};
   FocalPlane fp;
   fp.add({"det", 0.0, 0.0, 1.0, 0});
-  Engine engine(sky, beams, fp);
+  Engine engine(sky, beams, fp, {.backend = backend});
+  if (r.notes.empty()) r.notes.push_back("engine: " + engine.backend_name() + ", " + engine.device_name());
   const Pointing raster = raster_scan(at.theta, at.phi, radius, nside, {0.0, 45 * deg, 90 * deg});
   std::vector<double> tod(raster.size());
   engine.convolve(0, raster, tod);
@@ -119,7 +121,7 @@ bool CaseResult::pass() const {
   return std::all_of(figures.begin(), figures.end(), [](const Figure& f) { return f.pass(); });
 }
 
-CaseResult point_source(Scale scale) {
+CaseResult point_source(Scale scale, const std::string& backend) {
   const auto t0 = std::chrono::steady_clock::now();
   CaseResult r{"C", "point source (paper 6.1) vs HEALPix C++ smoothing", {}, {}, 0};
   // The paper's beam resolution, NSIDE 1024 (3.44 arcmin); full scale adds 2x coarser and finer.
@@ -130,9 +132,9 @@ CaseResult point_source(Scale scale) {
     grids.push_back({nside_1024 / 2, "beam 1.72'"});
   }
   for (const auto& [step, name] : grids) {
-    observe_point_source(1, 0, 0, step, "S=(1,0,0,0) " + name, r);
-    observe_point_source(1, 1, 0, step, "S=(1,1,0,0) " + name, r);
-    observe_point_source(1, 0, 1, step, "S=(1,0,1,0) " + name, r);
+    observe_point_source(1, 0, 0, step, "S=(1,0,0,0) " + name, backend, r);
+    observe_point_source(1, 1, 0, step, "S=(1,1,0,0) " + name, backend, r);
+    observe_point_source(1, 0, 1, step, "S=(1,0,1,0) " + name, backend, r);
   }
   r.seconds = seconds_since(t0);
   return r;
@@ -278,8 +280,9 @@ CaseResult pointing_offsets(Scale scale, const std::string& backend) {
   return r;
 }
 
-std::vector<std::function<CaseResult(Scale)>> all_cases() {
-  return {point_source, [](Scale s) { return ideal_cmb(s); }, [](Scale s) { return pointing_offsets(s); }};
+std::vector<std::function<CaseResult(Scale)>> all_cases(const std::string& backend) {
+  return {[backend](Scale s) { return point_source(s, backend); }, [backend](Scale s) { return ideal_cmb(s, backend); },
+          [backend](Scale s) { return pointing_offsets(s, backend); }};
 }
 
 }  // namespace pisco::validation

@@ -32,7 +32,7 @@ struct CaseResult {
 
 // C (paper 6.1): point source at 45 deg declination, S = (1,0,0,0), (1,1,0,0), (1,0,1,0), against
 // HEALPix C++ polarized Gaussian smoothing. Full scale repeats at beam resolutions 2x coarser and finer.
-CaseResult point_source(Scale scale);
+CaseResult point_source(Scale scale, const std::string& backend = "cpu");
 
 // D (paper 6.2): Gaussian r = 0 CMB, pixel-centre pointing at 0, 45, 90 deg, binned maps, spectra
 // against the input's and against the harmonic image of the same observation.
@@ -42,7 +42,7 @@ CaseResult ideal_cmb(Scale scale, const std::string& backend = "cpu");
 // offsets (BB falls by >= 1e3), and an unpolarized sky (no T->P).
 CaseResult pointing_offsets(Scale scale, const std::string& backend = "cpu");
 
-// Every case, in order.
-std::vector<std::function<CaseResult(Scale)>> all_cases();
+// Every case, in order, through the given backend.
+std::vector<std::function<CaseResult(Scale)>> all_cases(const std::string& backend = "cpu");
 
 }  // namespace pisco::validation

@@ -378,6 +378,14 @@ BackendEntry vulkan_backend_entry() {
           },
           [](std::shared_ptr<const EngineInputs> in, const EngineOptions& o) -> std::unique_ptr<Backend> {
             return std::make_unique<VulkanBackend>(std::move(in), o);
+          },
+          [] {
+            try {
+              const auto d = vk::choose_device(vk::enumerate_devices(*vk::Instance::get()), "auto");
+              return d.type == VK_PHYSICAL_DEVICE_TYPE_CPU ? -1 : 10;
+            } catch (const Error&) {
+              return -1;
+            }
           }};
 }
 

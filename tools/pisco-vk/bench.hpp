@@ -8,6 +8,7 @@ namespace pisco_cli {
 struct BenchOptions {
   std::vector<double> rho_max_deg{5.0, 10.0};
   std::string backend = "auto";
+  std::string device = "auto";
   unsigned threads = 0;
 };
 

@@ -29,10 +29,10 @@ fs::path data_dir() {
 }
 
 // A pass/fail table of the validation cases with their figures; the exit status says whether all passed.
-int validate(bool full) {
+int validate(bool full, const std::string& backend) {
   using namespace pisco::validation;
   bool all = true;
-  for (const auto& run_case : all_cases()) {
+  for (const auto& run_case : all_cases(backend)) {
     const CaseResult r = run_case(full ? Scale::full : Scale::test);
     std::printf("\n%s  %s  [%s, %.1f s]\n", r.id.c_str(), r.title.c_str(), r.pass() ? "pass" : "FAIL", r.seconds);
     for (const auto& n : r.notes) std::printf("    %s\n", n.c_str());
@@ -62,12 +62,14 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
 
   auto* run = app.add_subcommand("run", "Run a simulation: sky -> TOD -> maps -> spectra (-> plots).");
-  std::string config_path, output_dir, backend;
+  std::string config_path, output_dir, backend, device;
   bool quiet = false, no_plots = false;
   run->add_option("config", config_path,
                   "Simulation file (TOML). Without one, the bundled quick-start assets/examples/quickstart.toml.");
   run->add_option("-o,--output", output_dir, "Output directory (overrides [output] dir).");
-  run->add_option("-b,--backend", backend, "Backend: auto, cpu (overrides [engine] backend).");
+  run->add_option("-b,--backend", backend, "Backend: auto, cpu, vulkan, cuda (overrides [engine] backend).");
+  run->add_option("-d,--device", device, "Device of the vulkan or cuda backend: auto, an index or part of its name "
+                                         "(overrides [engine] device; `pisco-vk devices` lists them).");
   run->add_flag("-q,--quiet", quiet, "Print nothing but errors.");
   run->add_flag("--no-plots", no_plots, "Do not run the plotting tool.");
 
@@ -76,12 +78,15 @@ int main(int argc, char** argv) {
   auto* bench = app.add_subcommand("bench", "Benchmark the paper's Table 1 workload (VALIDATION G).");
   pisco_cli::BenchOptions bench_options;
   bench->add_option("--rho-max", bench_options.rho_max_deg, "Disc radii in degrees (default: 5 10).");
-  bench->add_option("-b,--backend", bench_options.backend, "Backend (default: auto).");
+  bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, vulkan, cuda (default: auto).");
+  bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend (default: auto).");
   bench->add_option("--threads", bench_options.threads, "CPU backend threads (default: all).");
 
   auto* val = app.add_subcommand("validate", "Run the paper's validation cases (VALIDATION.md C, D) and print a pass/fail table.");
   bool full = false;
+  std::string validate_backend = "cpu";
   val->add_flag("--full", full, "Paper scale (C at three beam resolutions, D with an NSIDE 512 sky); minutes on a CPU.");
+  val->add_option("-b,--backend", validate_backend, "Backend the cases run through (default: cpu, the reference).");
 
   try {
     app.parse(argc, argv);
@@ -92,12 +97,13 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("devices")) return devices();
     if (app.got_subcommand("bench")) return pisco_cli::run_bench(bench_options);
-    if (app.got_subcommand("validate")) return validate(full);
+    if (app.got_subcommand("validate")) return validate(full, validate_backend);
     const fs::path data = data_dir();
     const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
     pisco_cli::SimulationConfig config = pisco_cli::load_config(config_file);
     if (!output_dir.empty()) config.output.dir = output_dir;
     if (!backend.empty()) config.engine.options.backend = backend;
+    if (!device.empty()) config.engine.options.device = device;
     pisco_cli::RunOptions options;
     options.quiet = quiet;
     options.plots = !no_plots;
