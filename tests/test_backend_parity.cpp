@@ -255,6 +255,48 @@ TEST(BackendParity, DeviceDiscsAreQueryDisc) {
   }
 }
 
+// Out of memory and a lost device, injected through PISCO_VK_TEST_FAULT (vulkan only).
+class FaultInjection {
+ public:
+  explicit FaultInjection(const char* fault) { ::setenv("PISCO_VK_TEST_FAULT", fault, 1); }
+  ~FaultInjection() { ::unsetenv("PISCO_VK_TEST_FAULT"); }
+};
+
+TEST(BackendParity, OutOfMemoryFallsBackToSmallerChunks) {
+  SKIP_WITHOUT_DEVICE();
+  if (backend != "vulkan") GTEST_SKIP() << "fault injection is the vulkan backend's";
+  const Scene s = scene(32);
+  const pisco::Pointing p = random_pointing(700, 15);
+  pisco::Engine cpu(s.sky, s.beams, s.focal_plane, options("cpu"));
+  const std::vector<double> ref = run(cpu, 0, p);
+  {
+    FaultInjection f("oom-above:4000");  // 166 samples of pointing: chunks of 128
+    pisco::Engine dev(s.sky, s.beams, s.focal_plane, options(backend));
+    std::cout << dev.device_name() << "\n";
+    EXPECT_TRUE(pisco_test::contains(dev.device_name(), "chunks of 128 samples")) << dev.device_name();
+    const Stats st = compare(ref, run(dev, 0, p));
+    EXPECT_EQ(st.non_finite, 0u);
+    EXPECT_LE(st.rms_err, 1e-5 * st.rms_ref);
+  }
+  FaultInjection f("oom-above:1");
+  pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, options(backend)); },
+                           "even for one-sample chunks");
+}
+
+TEST(BackendParity, LostDeviceIsAClearError) {
+  SKIP_WITHOUT_DEVICE();
+  if (backend != "vulkan") GTEST_SKIP() << "fault injection is the vulkan backend's";
+  const Scene s = scene(32);
+  const pisco::Pointing p = random_pointing(517, 16);
+  FaultInjection f("lose-device-after:2");
+  pisco::Engine dev(s.sky, s.beams, s.focal_plane, options(backend, 100));
+  std::vector<double> tod(p.size());
+  const std::string e = pisco_test::error_of([&] { dev.convolve(1, p, tod); });
+  std::cout << e << "\n";
+  EXPECT_TRUE(pisco_test::contains(e, "device was lost")) << e;
+  EXPECT_TRUE(pisco_test::contains(e, "detector 1")) << e;
+}
+
 TEST(BackendParity, UnknownDeviceIsAClearError) {
   SKIP_WITHOUT_DEVICE();
   const Scene s = scene(16);

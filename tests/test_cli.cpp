@@ -235,6 +235,15 @@ TEST_F(Cli, ConfigErrors) {
                "no device named 'nosuch'");
 }
 
+// A device lost in the middle of a run (injected): one clear error, no output left half-written.
+TEST_F(Cli, LostDeviceLeavesNoOutput) {
+  for (const auto& b : pisco::Engine::backends())
+    if (b.name == "vulkan" && !b.available) GTEST_SKIP() << "vulkan backend unavailable: " << b.detail;
+  ::setenv("PISCO_VK_TEST_FAULT", "lose-device-after:1", 1);
+  expect_error("run " + write("lost.toml", config()).string() + " --backend vulkan", "device was lost");
+  ::unsetenv("PISCO_VK_TEST_FAULT");
+}
+
 TEST_F(Cli, InputFileErrors) {
   expect_error("run " + write("sky.toml", config("[sky]\nfile = \"missing.fits\"\n")).string(), "missing.fits");
   // A map with a NaN pixel.

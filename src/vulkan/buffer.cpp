@@ -19,6 +19,9 @@ int find_type(const VkPhysicalDeviceMemoryProperties& mem, std::uint32_t bits, V
 Buffer::Buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage, MemoryUse use)
     : device_(&device), size_(size) {
   const auto& fn = device.fn();
+  if (const Faults f = injected_faults(); use != MemoryUse::device && (usage & VK_BUFFER_USAGE_STORAGE_BUFFER_BIT) &&
+      f.oom_above && size > f.oom_above)
+    fail(VK_ERROR_OUT_OF_DEVICE_MEMORY, "vkAllocateMemory (PISCO_VK_TEST_FAULT)");
   VkBufferCreateInfo bi{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
   bi.size = size;
   bi.usage = usage;

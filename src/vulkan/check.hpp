@@ -3,6 +3,7 @@
 
 #include <volk.h>
 
+#include <cstddef>
 #include <string>
 
 #include "pisco/error.hpp"
@@ -17,6 +18,16 @@ struct OutOfMemory : Error {
 };
 
 [[noreturn]] void fail(VkResult r, const char* call);
+
+// Fault injection for the tests of the error paths, from the environment variable
+// PISCO_VK_TEST_FAULT: "oom-above:BYTES" makes every streaming buffer larger than BYTES fail to
+// allocate as if the device were out of memory; "lose-device-after:N" makes the device fail as lost
+// once N chunks have completed. Unset (always, outside tests): no effect.
+struct Faults {
+  std::size_t oom_above = 0;         // 0: none
+  long lose_device_after = -1;       // -1: never
+};
+Faults injected_faults();
 
 inline void check(VkResult r, const char* call) {
   if (r != VK_SUCCESS) fail(r, call);

@@ -47,6 +47,21 @@ void fail(VkResult r, const char* call) {
   throw Error(what);
 }
 
+Faults injected_faults() {
+  Faults f;
+  const char* v = std::getenv("PISCO_VK_TEST_FAULT");
+  if (!v) return f;
+  const std::string s(v);
+  try {
+    if (s.rfind("oom-above:", 0) == 0) f.oom_above = std::stoull(s.substr(10));
+    else if (s.rfind("lose-device-after:", 0) == 0) f.lose_device_after = std::stol(s.substr(18));
+    else throw Error("");
+  } catch (const std::exception&) {
+    throw Error("PISCO_VK_TEST_FAULT='" + s + "': expected oom-above:BYTES or lose-device-after:N");
+  }
+  return f;
+}
+
 namespace {
 
 constexpr const char* validation_layer = "VK_LAYER_KHRONOS_validation";

@@ -43,7 +43,8 @@ class VulkanBackend final : public Backend {
 
   std::string name() const override { return "vulkan"; }
   std::string device() const override {
-    return device_->info().describe() + (device_->instance().validation() ? " with the Khronos validation layer" : "");
+    return device_->info().describe() + ", chunks of " + std::to_string(chunk_) + " samples" +
+           (device_->instance().validation() ? ", with the Khronos validation layer" : "");
   }
   std::uint64_t convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) override;
 
@@ -75,6 +76,8 @@ class VulkanBackend final : public Backend {
   bool float64_ = false;
   std::size_t chunk_ = 0;
   std::array<Slot, 2> slots_;
+  long lose_device_after_ = vk::injected_faults().lose_device_after;
+  long completed_chunks_ = 0;
 };
 
 VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const EngineOptions& options)
@@ -303,6 +306,8 @@ std::uint64_t VulkanBackend::collect(Slot& slot, std::span<double> tod) {
   const auto& fn = device_->fn();
   slot.pending = false;
   PISCO_VK(fn.vkWaitForFences(device_->handle(), 1, &slot.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()));
+  if (lose_device_after_ >= 0 && completed_chunks_++ >= lose_device_after_)
+    vk::fail(VK_ERROR_DEVICE_LOST, "vkWaitForFences (PISCO_VK_TEST_FAULT)");
   slot.tod.invalidate();
   slot.counts.invalidate();
   std::memcpy(tod.data() + slot.begin, slot.tod.mapped(), slot.n * sizeof(double));
