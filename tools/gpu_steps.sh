@@ -37,7 +37,8 @@ step() {  # step NAME COMMAND...: runs COMMAND, output to LOG_DIR/NAME.log
 
 cuda_arch=${CMAKE_CUDA_ARCHITECTURES:-80;90}
 step configure cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
-  -DPISCO_WITH_CUDA=ON -DPISCO_WITH_VULKAN=ON "-DCMAKE_CUDA_ARCHITECTURES=$cuda_arch"
+  -DPISCO_WITH_CUDA=ON -DPISCO_WITH_VULKAN=ON "-DCMAKE_CUDA_ARCHITECTURES=$cuda_arch" \
+  -DPISCO_TEST_VK_VALIDATION=auto
 step build cmake --build "$build" -j "$(nproc)"
 step devices "$build/tools/pisco-vk" devices
 step ctest-gpu ctest --test-dir "$build" -L 'cuda|vulkan' --output-on-failure -V

@@ -66,9 +66,13 @@ namespace {
 
 constexpr const char* validation_layer = "VK_LAYER_KHRONOS_validation";
 
-bool validation_requested() {
+// PISCO_VK_VALIDATION: unset or "0": off; "auto": on where the layer is installed; else: required.
+enum class Validation { off, if_installed, required };
+Validation validation_requested() {
   const char* v = std::getenv("PISCO_VK_VALIDATION");
-  return v && *v && std::strcmp(v, "0") != 0;
+  if (!v || !*v || std::strcmp(v, "0") == 0) return Validation::off;
+  if (std::strcmp(v, "auto") == 0) return Validation::if_installed;
+  return Validation::required;
 }
 
 void load_loader() {
@@ -97,20 +101,24 @@ Instance::Instance() {
     throw Error("vulkan: the Vulkan loader supports only Vulkan " +
                 std::to_string(VK_API_VERSION_MAJOR(volkGetInstanceVersion())) + "." +
                 std::to_string(VK_API_VERSION_MINOR(volkGetInstanceVersion())) + "; Vulkan 1.2 is required");
-  const bool validate = validation_requested();
+  const Validation mode = validation_requested();
+  bool validate = false;
   std::vector<const char*> layers, extensions;
-  if (validate) {
+  if (mode != Validation::off) {
     std::uint32_t n = 0;
     PISCO_VK(vkEnumerateInstanceLayerProperties(&n, nullptr));
     std::vector<VkLayerProperties> props(n);
     PISCO_VK(vkEnumerateInstanceLayerProperties(&n, props.data()));
     const bool found = std::any_of(props.begin(), props.end(),
                                    [](const VkLayerProperties& p) { return std::strcmp(p.layerName, validation_layer) == 0; });
-    if (!found)
+    if (!found && mode == Validation::required)
       throw Error("vulkan: PISCO_VK_VALIDATION is set but the layer VK_LAYER_KHRONOS_validation is not installed "
-                  "(Debian: vulkan-validationlayers)");
-    layers.push_back(validation_layer);
-    extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+                  "(Debian: vulkan-validationlayers; PISCO_VK_VALIDATION=auto runs without it)");
+    if (found) {
+      validate = true;
+      layers.push_back(validation_layer);
+      extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+    }
   }
   // Devices behind the portability subset (MoltenVK) are listed too.
   std::uint32_t n = 0;

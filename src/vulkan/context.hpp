@@ -1,8 +1,9 @@
 // Vulkan instance and device (DESIGN 7). The instance is shared by every engine of the process and
 // loaded through volk; each device keeps its own function table (VolkDeviceTable), so that several
 // devices, and the host application's own use of Vulkan, never share global device entry points.
-// With PISCO_VK_VALIDATION=1 in the environment the Khronos validation layer is enabled and any
-// message it gives is turned into an error by the caller (Device::take_messages).
+// With PISCO_VK_VALIDATION=1 in the environment the Khronos validation layer is enabled (an error if
+// it is not installed; PISCO_VK_VALIDATION=auto enables it only where it is), and any message it gives
+// is turned into an error by the caller (Device::check_validation).
 #pragma once
 
 #include <volk.h>
