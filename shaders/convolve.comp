@@ -32,10 +32,10 @@ struct RingEntry {
   uint pad;
 };
 
-layout(std430, binding = PISCO_BINDING_SKY) readonly buffer SkyBuffer { vec4 sky[]; };
+layout(std430, binding = PISCO_BINDING_SKY) readonly buffer SkyBuffer { dvec4 sky[]; };
 layout(std430, binding = PISCO_BINDING_SKY_LO) readonly buffer SkyLoBuffer { vec4 sky_lo[]; };
 layout(std430, binding = PISCO_BINDING_RINGS) readonly buffer RingBuffer { RingEntry rings[]; };
-layout(std430, binding = PISCO_BINDING_WEIGHTS) readonly buffer WeightBuffer { vec4 weights[]; };
+layout(std430, binding = PISCO_BINDING_WEIGHTS) readonly buffer WeightBuffer { dvec4 weight_pairs[]; };
 layout(std430, binding = PISCO_BINDING_WEIGHTS64) readonly buffer Weight64Buffer { dvec2 weights64[]; };
 layout(std430, binding = PISCO_BINDING_POINTING) readonly buffer PointingBuffer { double pointing[]; };
 layout(std430, binding = PISCO_BINDING_TOD) writeonly buffer TodBuffer { double tod[]; };
@@ -52,8 +52,9 @@ struct Sums {
 
 void accumulate(SampleFrame f, dvec3 theta_p64, dvec3 phi_p64, uint begin, uint end, inout Sums acc) {
   for (uint p = begin; p < end; ++p) {
-    const vec4 a = sky[2u * p];
-    const vec4 b = sky[2u * p + 1u];
+    const dvec4 rec = sky[p];
+    const vec4 a = uintBitsToFloat(uvec4(unpackDouble2x32(rec.x), unpackDouble2x32(rec.y)));
+    const vec4 b = uintBitsToFloat(uvec4(unpackDouble2x32(rec.z), unpackDouble2x32(rec.w)));
     vec3 xyz;
     float r2, cos2chi, sin2chi;
     pixel_geometry(f, a.xyz, xyz, r2, cos2chi, sin2chi);
@@ -115,17 +116,22 @@ void main() {
     const bool south_cap = rlat2 >= PISCO_PI && irmax + 1 < 4 * nside;  // every ring south of irmax
     const int first_ring = north_cap ? 1 : irmin;
     const int last_ring = south_cap ? nrings : irmax;
+    // One pixel loop for every range of the disc (a single copy of the pixel code): ring iz's first
+    // range, then its second (zero length when absent).
     for (int iz = first_ring + part; iz <= last_ring; iz += PARTS) {
+      uint b0, l0, b1, l1;
       if (iz < irmin || iz > irmax) {
-        const uint b = rings[iz - 1].first, l = rings[iz - 1].count;
-        accumulate(f, theta_p64, phi_p64, b, b + l, acc);
-        count += l;
+        b0 = rings[iz - 1].first;
+        l0 = rings[iz - 1].count;
+        b1 = 0u;
+        l1 = 0u;
       } else {
-        uint b0, l0, b1, l1;
         ring_ranges(iz, z0, xa, phi, pc.cos_rho_max, b0, l0, b1, l1);
-        accumulate(f, theta_p64, phi_p64, b0, b0 + l0, acc);
-        accumulate(f, theta_p64, phi_p64, b1, b1 + l1, acc);
-        count += l0 + l1;
+      }
+      count += l0 + l1;
+      for (int r = 0; r < 2; ++r) {
+        const uint begin = r == 0 ? b0 : b1;
+        accumulate(f, theta_p64, phi_p64, begin, begin + (r == 0 ? l0 : l1), acc);
       }
     }
   }

@@ -4,7 +4,7 @@
 #define PISCO_SHADER_INTERFACE_H
 
 // Samples per workgroup: one invocation convolves one sample.
-#define PISCO_WG_SIZE 64
+#define PISCO_WG_SIZE 32
 
 #define PISCO_BINDING_SKY 0        // 2 vec4 per pixel: (kx, ky, kz, I - I0), (Q, U, V, 0), float32
 #define PISCO_BINDING_SKY_LO 1     // vec4 per pixel: k - float(k), so that float(k) + lo = k in float64

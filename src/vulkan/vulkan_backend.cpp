@@ -133,9 +133,14 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const E
   std::vector<float> w32;
   std::vector<double> w64;
   for (const PreparedDetector& d : in_->detectors) {
-    grid_offset_.push_back(std::uint32_t(w32.size() / 4));
+    // Each node with its neighbour along x (or r): (w[k], w[k + 1]), 8 floats, read in one load.
+    grid_offset_.push_back(std::uint32_t(w32.size() / 8));
     const std::size_t nodes = d.weights.size() / 4;
-    for (std::size_t k = 0; k < 4 * nodes; ++k) w32.push_back(float(d.weights[k]));
+    for (std::size_t k = 0; k < nodes; ++k)
+      for (std::size_t m = 0; m < 8; ++m) {
+        const std::size_t src = 4 * k + m;
+        w32.push_back(src < d.weights.size() ? float(d.weights[src]) : 0.0f);
+      }
     if (float64_)
       for (std::size_t k = 0; k < nodes; ++k) {
         w64.push_back(d.weights[4 * k]);
@@ -143,7 +148,7 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const E
       }
   }
   if (w64.empty()) w64.assign(2, 0.0);
-  if (16.0 * double(w32.size() / 4) > range)
+  if (4.0 * double(w32.size()) > range)
     throw Error("vulkan: the beam grids need " + std::to_string(int(mib(4.0 * double(w32.size())))) + " MiB, but " +
                 info.name + " binds at most " + std::to_string(int(mib(range))) + " MiB; use a coarser grid_step");
   weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids");
