@@ -4,17 +4,14 @@
 #include <gtest/gtest.h>
 
 #include "pisco/engine.hpp"
+#include "backend_fixtures.hpp"
 #include "validation_report.hpp"
 
 namespace {
 
 const std::string backend = PISCO_TEST_BACKEND;
 
-std::string unavailable() {
-  for (const auto& b : pisco::Engine::backends())
-    if (b.name == backend) return b.available ? "" : b.detail;
-  return "the backend '" + backend + "' is not compiled into this build";
-}
+std::string unavailable() { return pisco_test::backend_unavailable(backend); }
 
 TEST(BackendValidation, PointSource) {
   if (const std::string why = unavailable(); !why.empty()) GTEST_SKIP() << backend << " backend unavailable: " << why;

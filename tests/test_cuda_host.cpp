@@ -17,6 +17,7 @@
 #include "cuda/device_data.hpp"
 #include "cuda/sample.hpp"
 #include "pisco/engine.hpp"
+#include "backend_fixtures.hpp"
 #include "support.hpp"
 
 namespace {
@@ -67,36 +68,10 @@ TEST(CudaDeviceChoice, BadRequestsNameWhatWasAskedAndWhatExists) {
 
 // ---- the kernel's arithmetic on the host ----
 
-pisco::Sky cmb_like_sky(int nside, std::uint64_t seed, double monopole) {
-  pisco::Sky sky(nside, "K_CMB");
-  const Healpix_Base base(nside, RING, SET_NSIDE);
-  std::mt19937_64 rng(seed);
-  std::normal_distribution<double> g(0, 1);
-  for (std::size_t i = 0; i < sky.npix(); ++i) {
-    const pointing p = base.pix2ang(int(i));
-    const double smooth = std::sin(3 * p.theta) * std::cos(2 * p.phi) + 0.5 * std::cos(5 * p.theta + p.phi);
-    sky.I()[i] = monopole + 1e-6 * (80 * smooth + 20 * g(rng));
-    sky.Q()[i] = 1e-6 * (3 * std::cos(4 * p.theta) * std::sin(p.phi) + g(rng));
-    sky.U()[i] = 1e-6 * (3 * std::sin(2 * p.theta) * std::cos(3 * p.phi) + g(rng));
-    sky.V()[i] = 1e-8 * g(rng);
-  }
-  return sky;
-}
-
-pisco::Pointing random_pointing(std::size_t n, std::uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0, 1);
-  pisco::Pointing p;
-  for (std::size_t i = 0; i < n; ++i) {
-    double theta = std::acos(1 - 2 * u(rng));
-    double phi = 2 * pi * u(rng) - (i % 5 == 0 ? pi : 0.0);
-    if (i % 17 == 0) theta = u(rng) * deg;
-    if (i % 19 == 0) theta = pi - u(rng) * deg;
-    if (i % 23 == 0) phi = 1e-3 * (u(rng) - 0.5);
-    p.push_back(theta, phi, 4 * pi * (u(rng) - 0.5));
-  }
-  return p;
-}
+using pisco_test::cmb_like_sky;
+using pisco_test::compare;
+using pisco_test::random_pointing;
+using pisco_test::Stats;
 
 struct Scene {
   pisco::Sky sky;
@@ -217,23 +192,6 @@ Emulated emulate(const HostDevice& dev, std::size_t d, bool radial, const pisco:
     case 6: return emulate<true, true, false>(dev.sky, det, p);
     default: return emulate<true, true, true>(dev.sky, det, p);
   }
-}
-
-struct Stats {
-  double rms_ref = 0, rms_err = 0, max_err = 0;
-};
-
-Stats compare(const std::vector<double>& ref, const std::vector<double>& got) {
-  Stats s;
-  for (std::size_t i = 0; i < ref.size(); ++i) {
-    const double e = got[i] - ref[i];
-    s.rms_ref += ref[i] * ref[i];
-    s.rms_err += e * e;
-    s.max_err = std::max(s.max_err, std::abs(e));
-  }
-  s.rms_ref = std::sqrt(s.rms_ref / double(ref.size()));
-  s.rms_err = std::sqrt(s.rms_err / double(ref.size()));
-  return s;
 }
 
 std::vector<double> reference(const Scene& s, std::size_t d, const pisco::Pointing& p, pisco::Normalization n,

@@ -1,0 +1,82 @@
+// Inputs and comparisons shared by the backend tests (VALIDATION B): a CMB-like sky, pointings that
+// reach the poles and cross phi = 0, the error statistics of a TOD against the reference, and why a
+// backend cannot run here.
+#pragma once
+
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <healpix_base.h>
+#include <pointing.h>
+
+#include "pisco/engine.hpp"
+#include "pisco/pointing.hpp"
+#include "pisco/sky.hpp"
+
+namespace pisco_test {
+
+// CMB-like sky in K: smooth large-scale structure plus white noise, polarized, small V, on top of
+// `monopole`.
+inline pisco::Sky cmb_like_sky(int nside, std::uint64_t seed, double monopole = 0.0) {
+  pisco::Sky sky(nside, "K_CMB");
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g(0, 1);
+  for (std::size_t i = 0; i < sky.npix(); ++i) {
+    const pointing p = base.pix2ang(int(i));
+    const double smooth = std::sin(3 * p.theta) * std::cos(2 * p.phi) + 0.5 * std::cos(5 * p.theta + p.phi);
+    sky.I()[i] = monopole + 1e-6 * (80 * smooth + 20 * g(rng));
+    sky.Q()[i] = 1e-6 * (3 * std::cos(4 * p.theta) * std::sin(p.phi) + g(rng));
+    sky.U()[i] = 1e-6 * (3 * std::sin(2 * p.theta) * std::cos(3 * p.phi) + g(rng));
+    sky.V()[i] = 1e-8 * g(rng);
+  }
+  return sky;
+}
+
+// Random pointings over the sphere, with some within 1 deg of each pole and across phi = 0.
+inline pisco::Pointing random_pointing(std::size_t n, std::uint64_t seed) {
+  constexpr double pi = std::numbers::pi, deg = pi / 180;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  pisco::Pointing p;
+  for (std::size_t i = 0; i < n; ++i) {
+    double theta = std::acos(1 - 2 * u(rng));
+    double phi = 2 * pi * u(rng) - (i % 5 == 0 ? pi : 0.0);
+    if (i % 17 == 0) theta = u(rng) * deg;
+    if (i % 19 == 0) theta = pi - u(rng) * deg;
+    if (i % 23 == 0) phi = 1e-3 * (u(rng) - 0.5);
+    p.push_back(theta, phi, 4 * pi * (u(rng) - 0.5));
+  }
+  return p;
+}
+
+struct Stats {
+  double rms_ref = 0, rms_err = 0, max_err = 0;
+  std::size_t non_finite = 0;  // samples of `got` left unwritten (NaN-poisoned) or not finite
+};
+
+inline Stats compare(const std::vector<double>& ref, const std::vector<double>& got) {
+  Stats s;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    if (!std::isfinite(got[i])) ++s.non_finite;
+    const double e = got[i] - ref[i];
+    s.rms_ref += ref[i] * ref[i];
+    s.rms_err += e * e;
+    s.max_err = std::max(s.max_err, std::abs(e));
+  }
+  s.rms_ref = std::sqrt(s.rms_ref / double(ref.size()));
+  s.rms_err = std::sqrt(s.rms_err / double(ref.size()));
+  return s;
+}
+
+// Why `backend` cannot run on this machine, or "" when it can.
+inline std::string backend_unavailable(const std::string& backend) {
+  for (const auto& b : pisco::Engine::backends())
+    if (b.name == backend) return b.available ? "" : b.detail;
+  return "the backend '" + backend + "' is not compiled into this build";
+}
+
+}  // namespace pisco_test
