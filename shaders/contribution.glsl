@@ -39,11 +39,11 @@ void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float r2, out float
 }
 
 // Node g's weights and its neighbour's along x (or r), stored side by side and read in one 32-byte
-// load (the bits of a dvec4): half the load instructions, which on lavapipe are most of the cost.
+// load (four 64-bit words): half the load instructions, which on lavapipe are most of the cost.
 void weight_pair(int g, out vec4 w, out vec4 next) {
-  const dvec4 pair = weight_pairs[g];
-  w = uintBitsToFloat(uvec4(unpackDouble2x32(pair.x), unpackDouble2x32(pair.y)));
-  next = uintBitsToFloat(uvec4(unpackDouble2x32(pair.z), unpackDouble2x32(pair.w)));
+  const u64vec4 pair = weight_pairs[g];
+  w = uintBitsToFloat(uvec4(unpack32(pair.x), unpack32(pair.y)));
+  next = uintBitsToFloat(uvec4(unpack32(pair.z), unpack32(pair.w)));
 }
 
 // Bilinear interpolation on the n x n grid at x_i = -a + i * step (x fastest); zero outside.

@@ -9,6 +9,7 @@
 // monopole, I0 sum_k w_I(k), and the per-sample normalization when asked for.
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 
 #include "interface.h"
 
@@ -32,10 +33,12 @@ struct RingEntry {
   uint pad;
 };
 
-layout(std430, binding = PISCO_BINDING_SKY) readonly buffer SkyBuffer { dvec4 sky[]; };
+// 32-byte records read in one load as four 64-bit integers (integers: no float64 rounding or flushing
+// can touch the float bits they carry).
+layout(std430, binding = PISCO_BINDING_SKY) readonly buffer SkyBuffer { u64vec4 sky[]; };
 layout(std430, binding = PISCO_BINDING_SKY_LO) readonly buffer SkyLoBuffer { vec4 sky_lo[]; };
 layout(std430, binding = PISCO_BINDING_RINGS) readonly buffer RingBuffer { RingEntry rings[]; };
-layout(std430, binding = PISCO_BINDING_WEIGHTS) readonly buffer WeightBuffer { dvec4 weight_pairs[]; };
+layout(std430, binding = PISCO_BINDING_WEIGHTS) readonly buffer WeightBuffer { u64vec4 weight_pairs[]; };
 layout(std430, binding = PISCO_BINDING_WEIGHTS64) readonly buffer Weight64Buffer { dvec2 weights64[]; };
 layout(std430, binding = PISCO_BINDING_POINTING) readonly buffer PointingBuffer { double pointing[]; };
 layout(std430, binding = PISCO_BINDING_TOD) writeonly buffer TodBuffer { double tod[]; };
@@ -52,9 +55,9 @@ struct Sums {
 
 void accumulate(SampleFrame f, dvec3 theta_p64, dvec3 phi_p64, uint begin, uint end, inout Sums acc) {
   for (uint p = begin; p < end; ++p) {
-    const dvec4 rec = sky[p];
-    const vec4 a = uintBitsToFloat(uvec4(unpackDouble2x32(rec.x), unpackDouble2x32(rec.y)));
-    const vec4 b = uintBitsToFloat(uvec4(unpackDouble2x32(rec.z), unpackDouble2x32(rec.w)));
+    const u64vec4 rec = sky[p];
+    const vec4 a = uintBitsToFloat(uvec4(unpack32(rec.x), unpack32(rec.y)));
+    const vec4 b = uintBitsToFloat(uvec4(unpack32(rec.z), unpack32(rec.w)));
     vec3 xyz;
     float r2, cos2chi, sin2chi;
     pixel_geometry(f, a.xyz, xyz, r2, cos2chi, sin2chi);

@@ -75,7 +75,11 @@ void Engine::convolve(std::size_t detector, const PointingView& pointing, std::s
     throw Error("convolve: the TOD buffer has " + std::to_string(tod.size()) +
                 " samples but the pointing has " + std::to_string(pointing.size()));
   check_pointing(pointing, ("pointing of detector '" + focal_plane_[detector].name + "'").c_str());
-  pixels_ += backend_->convolve(detector, pointing, tod);
+  try {
+    pixels_ += backend_->convolve(detector, pointing, tod);
+  } catch (const Error& e) {
+    throw Error("convolving detector '" + focal_plane_[detector].name + "': " + e.what());
+  }
   samples_ += pointing.size();
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cstdlib>
 #include <cstring>
 #include <utility>
@@ -41,7 +42,12 @@ const char* result_name(VkResult r) {
 }
 
 void fail(VkResult r, const char* call) {
-  const std::string what = std::string("vulkan: ") + call + " failed: " + result_name(r);
+  // The function's name from the call's text: "fn.vkWaitForFences(device, ...)" -> "vkWaitForFences".
+  std::string name(call);
+  name = name.substr(0, name.find('('));
+  if (const auto dot = name.find_last_of(".>"); dot != std::string::npos) name = name.substr(dot + 1);
+  while (!name.empty() && name.back() == ' ') name.pop_back();
+  const std::string what = "vulkan: " + name + " failed: " + result_name(r);
   if (r == VK_ERROR_OUT_OF_DEVICE_MEMORY || r == VK_ERROR_OUT_OF_HOST_MEMORY) throw OutOfMemory(what);
   if (r == VK_ERROR_DEVICE_LOST) throw Error(what + " (the device was lost: driver reset, hang or removal)");
   throw Error(what);
@@ -90,7 +96,11 @@ std::weak_ptr<Instance> current_instance;
 std::shared_ptr<Instance> Instance::get() {
   std::lock_guard lock(instance_mutex);
   if (auto i = current_instance.lock()) return i;
-  std::shared_ptr<Instance> i(new Instance());
+  // Destroyed under the same lock, so that a new instance is never loaded while the last one goes.
+  std::shared_ptr<Instance> i(new Instance(), [](Instance* p) {
+    std::lock_guard destroy_lock(instance_mutex);
+    delete p;
+  });
   current_instance = i;
   return i;
 }
@@ -232,6 +242,8 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
       d.unusable = "has no compute queue";
     else if (!features.shaderFloat64)
       d.unusable = "lacks shaderFloat64 (the exact disc selection and the monopole run in float64)";
+    else if (!features.shaderInt64)
+      d.unusable = "lacks shaderInt64 (the kernel reads 32-byte records as 64-bit words)";
     out.push_back(std::move(d));
   }
   return out;
@@ -273,8 +285,9 @@ DeviceInfo choose_device(const std::vector<DeviceInfo>& devices, const std::stri
   }
   const bool numeric = std::all_of(selector.begin(), selector.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); });
   if (numeric) {
-    const unsigned long i = std::stoul(selector);
-    if (i >= devices.size())
+    std::size_t i = 0;
+    const auto [end, ec] = std::from_chars(selector.data(), selector.data() + selector.size(), i);
+    if (ec != std::errc() || end != selector.data() + selector.size() || i >= devices.size())
       throw Error("vulkan: device '" + selector + "' does not exist; " + listing(devices));
     pick = &devices[i];
   } else {
@@ -298,6 +311,7 @@ Device::Device(std::shared_ptr<Instance> instance, DeviceInfo info) : instance_(
   qi.pQueuePriorities = &priority;
   VkPhysicalDeviceFeatures features{};
   features.shaderFloat64 = VK_TRUE;
+  features.shaderInt64 = VK_TRUE;
   VkDeviceCreateInfo ci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
   ci.queueCreateInfoCount = 1;
   ci.pQueueCreateInfos = &qi;

@@ -58,8 +58,11 @@ class VulkanBackend final : public Backend {
     bool pending = false;
   };
 
+  void setup(const vk::DeviceInfo& info, const EngineOptions& options);
+  void release() noexcept;
   Buffer upload(const void* data, std::size_t bytes, const char* what);
   void make_slots(std::size_t chunk);
+  double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
   vk::ComputePipeline::Specialization specialization(const PreparedDetector& det) const;
   void submit(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push,
               const PointingView& pointing,
@@ -85,6 +88,18 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const E
   auto instance = vk::Instance::get();
   const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), options.device);
   device_ = std::make_unique<vk::Device>(std::move(instance), info);
+  try {
+    setup(info, options);
+  } catch (const Error& e) {
+    release();  // the destructor does not run for a constructor that throws
+    throw Error(std::string(e.what()) + " (device " + info.describe() + ")");
+  } catch (...) {
+    release();
+    throw;
+  }
+}
+
+void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& options) {
   const auto& fn = device_->fn();
 
   VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
@@ -177,6 +192,16 @@ Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* wh
     ai.commandBufferCount = 1;
     VkCommandBuffer cmd = VK_NULL_HANDLE;
     PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &cmd));
+    // Whatever happens below, the copy is finished (or abandoned) before the buffers go.
+    struct Guard {
+      const vk::Device& device;
+      VkCommandPool pool;
+      VkCommandBuffer cmd;
+      ~Guard() {
+        device.fn().vkDeviceWaitIdle(device.handle());
+        device.fn().vkFreeCommandBuffers(device.handle(), pool, 1, &cmd);
+      }
+    } guard{*device_, pool_, cmd};
     VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
     PISCO_VK(fn.vkBeginCommandBuffer(cmd, &bi));
@@ -193,7 +218,6 @@ Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* wh
     si.pCommandBuffers = &cmd;
     PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, VK_NULL_HANDLE));
     PISCO_VK(fn.vkQueueWaitIdle(device_->queue()));
-    fn.vkFreeCommandBuffers(device_->handle(), pool_, 1, &cmd);
     return target;
   } catch (const vk::OutOfMemory& e) {
     throw Error("vulkan: out of memory uploading " + std::string(what) + " (" + std::to_string(int(mib(double(bytes)))) +
@@ -240,7 +264,10 @@ void VulkanBackend::make_slots(std::size_t chunk) {
   }
 }
 
-VulkanBackend::~VulkanBackend() {
+VulkanBackend::~VulkanBackend() { release(); }
+
+// Everything made on the device, in reverse order; safe on a partly set-up backend.
+void VulkanBackend::release() noexcept {
   if (!device_) return;
   const auto& fn = device_->fn();
   fn.vkDeviceWaitIdle(device_->handle());
@@ -250,15 +277,26 @@ VulkanBackend::~VulkanBackend() {
   for (Buffer* b : {&sky_, &sky_lo_, &rings_, &weights_, &weights64_}) *b = Buffer();
   pipeline_.reset();
   if (pool_) fn.vkDestroyCommandPool(device_->handle(), pool_, nullptr);
+  pool_ = VK_NULL_HANDLE;
 }
 
 // The kernel for this detector: its weight layout, the float64 path, and how many invocations share
 // one sample: enough that none walks more than about 16,000 pixels (lavapipe ends an invocation
 // after 65,535 loop iterations; on GPUs, large discs gain parallelism).
+double VulkanBackend::disc_pixels(const PreparedDetector& det) const {
+  return 12.0 * double(in_->sky.nside) * double(in_->sky.nside) * (1.0 - det.cos_rho_max) / 2.0;
+}
+
 vk::ComputePipeline::Specialization VulkanBackend::specialization(const PreparedDetector& det) const {
-  const double disc_pixels = 12.0 * double(in_->sky.nside) * double(in_->sky.nside) * (1.0 - det.cos_rho_max) / 2.0;
+  const double disc = disc_pixels(det);
   std::uint32_t parts = 1;
-  while (parts < PISCO_WG_SIZE && disc_pixels / parts > 16384.0) parts *= 2;
+  while (parts < PISCO_WG_SIZE && disc / parts > 16384.0) parts *= 2;
+  // lavapipe (a CPU device) ends an invocation after 65,535 loop iterations without an error.
+  if (device_->info().type == VK_PHYSICAL_DEVICE_TYPE_CPU && disc / parts > 60000.0)
+    throw Error("vulkan: discs of rho_max = " + std::to_string(std::acos(det.cos_rho_max) * 180 / 3.141592653589793) +
+                " deg at NSIDE " + std::to_string(in_->sky.nside) + " hold about " + std::to_string(std::size_t(disc)) +
+                " pixels, more than " + device_->info().name +
+                " can sum in one workgroup; use a smaller rho_max, a GPU or the cpu backend");
   vk::ComputePipeline::Specialization spec{};
   spec[PISCO_SPEC_RADIAL] = det.radial ? 1u : 0u;
   spec[PISCO_SPEC_FLOAT64] = float64_ ? 1u : 0u;
@@ -340,23 +378,42 @@ std::uint64_t VulkanBackend::convolve(std::size_t detector, const PointingView& 
   push.flags = in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u;
   const vk::ComputePipeline::Specialization spec = specialization(det);
 
+  // Chunks of at most chunk_ samples and about 1e9 pixel evaluations, so that no submission runs
+  // for long enough to meet a driver's watchdog on large discs.
+  const double disc = disc_pixels(det);
+  const std::size_t chunk = std::max<std::size_t>(1, std::min<std::size_t>(chunk_, std::size_t(1e9 / std::max(disc, 1.0))));
   std::uint64_t pixels = 0;
-  std::size_t next = 0;
+  std::size_t next = 0, at = 0, len = 0;  // the chunk in hand, for error messages
   try {
-    for (std::size_t begin = 0; begin < pointing.size(); begin += chunk_, ++next) {
+    for (std::size_t begin = 0; begin < pointing.size(); begin += chunk, ++next) {
       Slot& slot = slots_[next % slots_.size()];
-      if (slot.pending) pixels += collect(slot, tod);
-      submit(slot, spec, push, pointing, begin, std::min(chunk_, pointing.size() - begin));
+      if (slot.pending) {
+        at = slot.begin;
+        len = slot.n;
+        pixels += collect(slot, tod);
+      }
+      at = begin;
+      len = std::min(chunk, pointing.size() - begin);
+      submit(slot, spec, push, pointing, begin, len);
     }
     for (std::size_t i = 0; i < slots_.size(); ++i) {  // the last chunks, in order
       Slot& slot = slots_[(next + i) % slots_.size()];
-      if (slot.pending) pixels += collect(slot, tod);
+      if (slot.pending) {
+        at = slot.begin;
+        len = slot.n;
+        pixels += collect(slot, tod);
+      }
     }
   } catch (const Error& e) {
     for (Slot& s : slots_) s.pending = false;
     device_->fn().vkDeviceWaitIdle(device_->handle());
-    throw Error(std::string(e.what()) + " (detector " + std::to_string(detector) + ", " +
-                std::to_string(pointing.size()) + " samples)");
+    throw Error(std::string(e.what()) + " (device " + device_->info().name + ", detector " + std::to_string(detector) +
+                ", samples " + std::to_string(at) + " to " + std::to_string(at + len - 1) + " of " +
+                std::to_string(pointing.size()) + ")");
+  } catch (...) {
+    for (Slot& s : slots_) s.pending = false;
+    device_->fn().vkDeviceWaitIdle(device_->handle());
+    throw;
   }
   device_->check_validation("convolving detector " + std::to_string(detector));
   return pixels;
