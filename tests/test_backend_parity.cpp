@@ -39,34 +39,9 @@ using pisco_test::Stats;
     if (!why.empty()) GTEST_SKIP() << backend << " backend unavailable: " << why; \
   } while (0)
 
-struct Scene {
-  pisco::Sky sky;
-  std::vector<pisco::Beamsor> beams;
-  pisco::FocalPlane focal_plane;
-};
+using pisco_test::Scene;
 
-// A PSB pair with mismatched elliptical beams carrying cross-polar lobes and Mueller leakage, and a
-// third detector with a round beam (stored as a radial profile).
-Scene scene(int nside, double monopole = 0.0) {
-  Scene s{cmb_like_sky(nside, 7, monopole), {}, {}};
-  pisco::BeamOptions a;
-  a.rho_max = 5 * deg;
-  a.cross_polar = 0.03;
-  a.cross_polar_pattern = pisco::CrossPolarPattern::quadrupole;
-  a.mueller[1][0] = 0.01;  // T -> Q leakage
-  a.mueller[2][0] = -0.004;
-  pisco::BeamOptions b = a;
-  b.cross_polar = 0.02;
-  b.cross_polar_pattern = pisco::CrossPolarPattern::uniform;
-  s.beams.push_back(pisco::Beamsor::elliptical_gaussian(1.6 * deg, 1.4 * deg, 20 * deg, a));
-  s.beams.push_back(pisco::Beamsor::elliptical_gaussian(1.5 * deg, 1.45 * deg, -35 * deg, b));
-  pisco::BeamOptions r;
-  r.rho_max = 4 * deg;
-  s.beams.push_back(pisco::Beamsor::gaussian(1.5 * deg, r));
-  s.focal_plane.add_pair("psb", 22.5 * deg, 0, 1, 0.01, 1.0, 0.98);
-  s.focal_plane.add({"round", -10 * deg, 0.0, 1.02, 2});
-  return s;
-}
+Scene scene(int nside, double monopole = 0.0) { return pisco_test::backend_scene(nside, monopole); }
 
 std::vector<double> run(pisco::Engine& engine, std::size_t detector, const pisco::Pointing& p) {
   std::vector<double> tod(p.size(), std::numeric_limits<double>::quiet_NaN());  // poisoned

@@ -13,6 +13,7 @@
 #include <string>
 #include <sys/wait.h>
 
+#include "backend_fixtures.hpp"
 #include "pisco/pisco.hpp"
 
 namespace {
@@ -116,8 +117,8 @@ TEST_F(Cli, SmallSimulationEndToEnd) {
 // The same simulation through the vulkan backend (lavapipe in CI): the TOD agrees with the cpu run to
 // the float32 precision contract (DESIGN 7), and the file records the backend.
 TEST_F(Cli, VulkanBackendMatchesTheReference) {
-  for (const auto& b : pisco::Engine::backends())
-    if (b.name == "vulkan" && !b.available) GTEST_SKIP() << "vulkan backend unavailable: " << b.detail;
+  if (const std::string why = pisco_test::backend_unavailable("vulkan"); !why.empty())
+    GTEST_SKIP() << "vulkan backend unavailable: " << why;
   const fs::path cfg = write("sim.toml", config());
   ASSERT_EQ(run("run -q " + cfg.string() + " -o " + (dir_ / "cpu").string()).status, 0);
   const Result r = run("run " + cfg.string() + " -o " + (dir_ / "vk").string() + " --backend vulkan");
@@ -237,8 +238,8 @@ TEST_F(Cli, ConfigErrors) {
 
 // A device lost in the middle of a run (injected): one clear error, no output left half-written.
 TEST_F(Cli, LostDeviceLeavesNoOutput) {
-  for (const auto& b : pisco::Engine::backends())
-    if (b.name == "vulkan" && !b.available) GTEST_SKIP() << "vulkan backend unavailable: " << b.detail;
+  if (const std::string why = pisco_test::backend_unavailable("vulkan"); !why.empty())
+    GTEST_SKIP() << "vulkan backend unavailable: " << why;
   ::setenv("PISCO_VK_TEST_FAULT", "lose-device-after:1", 1);
   expect_error("run " + write("lost.toml", config()).string() + " --backend vulkan", "device was lost");
   ::unsetenv("PISCO_VK_TEST_FAULT");

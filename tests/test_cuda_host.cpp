@@ -73,35 +73,15 @@ using pisco_test::compare;
 using pisco_test::random_pointing;
 using pisco_test::Stats;
 
-struct Scene {
-  pisco::Sky sky;
-  std::vector<pisco::Beamsor> beams;
-  pisco::FocalPlane focal_plane;
-};
+using pisco_test::Scene;
 
-// A PSB pair with elliptical beams, cross-polar lobes and Mueller leakage; a round beam (radial
-// profile); a wide round beam whose 20 deg discs cross more rings than one batch holds.
+// The backend tests' scene plus a wide round beam whose 20 deg discs cross more rings than one
+// batch holds.
 Scene scene(int nside, double monopole) {
-  Scene s{cmb_like_sky(nside, 7, monopole), {}, {}};
-  pisco::BeamOptions a;
-  a.rho_max = 5 * deg;
-  a.cross_polar = 0.03;
-  a.cross_polar_pattern = pisco::CrossPolarPattern::quadrupole;
-  a.mueller[1][0] = 0.01;
-  a.mueller[2][0] = -0.004;
-  pisco::BeamOptions b = a;
-  b.cross_polar = 0.02;
-  b.cross_polar_pattern = pisco::CrossPolarPattern::uniform;
-  s.beams.push_back(pisco::Beamsor::elliptical_gaussian(1.6 * deg, 1.4 * deg, 20 * deg, a));
-  s.beams.push_back(pisco::Beamsor::elliptical_gaussian(1.5 * deg, 1.45 * deg, -35 * deg, b));
-  pisco::BeamOptions r;
-  r.rho_max = 4 * deg;
-  s.beams.push_back(pisco::Beamsor::gaussian(1.5 * deg, r));
+  Scene s = pisco_test::backend_scene(nside, monopole);
   pisco::BeamOptions w;
   w.rho_max = 20 * deg;
   s.beams.push_back(pisco::Beamsor::gaussian(6 * deg, w));
-  s.focal_plane.add_pair("psb", 22.5 * deg, 0, 1, 0.01, 1.0, 0.98);
-  s.focal_plane.add({"round", -10 * deg, 0.0, 1.02, 2});
   s.focal_plane.add({"wide", 40 * deg, 0.02, 1.0, 3});
   return s;
 }
@@ -117,7 +97,7 @@ struct HostDevice {
   bool monopole = false, per_sample = false;
 
   explicit HostDevice(const pisco::detail::EngineInputs& in) {
-    const double i0 = pc::sky_monopole(in.sky);
+    const double i0 = pisco::detail::float32_monopole(in.sky);
     monopole = i0 != 0.0;
     per_sample = in.normalization == pisco::Normalization::per_sample;
     pixels = pc::pixel_records(in.sky, i0);
@@ -155,7 +135,7 @@ Emulated emulate(const pc::KernelSky& sky, const pc::KernelDetector& det, const 
   Emulated out;
   for (std::size_t i = 0; i < p.size(); ++i) {
     const double theta = p.theta[i];
-    const double phi = pc::wrap_longitude(p.phi[i]);
+    const double phi = pisco::detail::wrap_phi(p.phi[i]);
     const auto fd = pc::sample_frame(theta, phi, p.psi[i], det);
     const auto f = pc::to_float(fd);
     std::uint32_t first[pc::batch_ranges], offset[pc::batch_ranges + 1];
@@ -209,12 +189,12 @@ std::vector<double> reference(const Scene& s, std::size_t d, const pisco::Pointi
 TEST(CudaHostKernel, MonopoleIsSplitOnlyWhereItMatters) {
   const Scene plain = scene(16, 0.0);
   const Scene mono = scene(16, 2.725);
-  EXPECT_EQ(pc::sky_monopole(pisco::detail::prepare_sky(plain.sky)), 0.0);
-  const double i0 = pc::sky_monopole(pisco::detail::prepare_sky(mono.sky));
+  EXPECT_EQ(pisco::detail::float32_monopole(pisco::detail::prepare_sky(plain.sky)), 0.0);
+  const double i0 = pisco::detail::float32_monopole(pisco::detail::prepare_sky(mono.sky));
   EXPECT_NEAR(i0, 2.725, 1e-5);
   pisco::Sky flat(8);
   for (std::size_t i = 0; i < flat.npix(); ++i) flat.I()[i] = -3.0;
-  EXPECT_EQ(pc::sky_monopole(pisco::detail::prepare_sky(flat)), -3.0);
+  EXPECT_EQ(pisco::detail::float32_monopole(pisco::detail::prepare_sky(flat)), -3.0);
   const auto records = pc::pixel_records(pisco::detail::prepare_sky(flat), -3.0);
   EXPECT_EQ(records[5].i, 0.0f);
 }

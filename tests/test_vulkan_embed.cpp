@@ -8,6 +8,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "backend_fixtures.hpp"
 #include "pisco/pisco.hpp"
 
 namespace {
@@ -26,8 +27,8 @@ std::uint32_t application_devices() {
 }
 
 TEST(VulkanEmbed, ApplicationLoaderAndPiscoCoexist) {
-  for (const auto& b : pisco::Engine::backends())
-    if (b.name == "vulkan" && !b.available) GTEST_SKIP() << "vulkan backend unavailable: " << b.detail;
+  if (const std::string why = pisco_test::backend_unavailable("vulkan"); !why.empty())
+    GTEST_SKIP() << "vulkan backend unavailable: " << why;
   const std::uint32_t before = application_devices();
   ASSERT_GT(before, 0u);
 

@@ -20,6 +20,17 @@ struct RingEntry {
   std::uint32_t pad;
 };
 
+// A longitude wrapped into [0, 2 pi), as the disc selection expects phi0. One definition for the
+// reference, the scan generators and the CUDA kernels.
+PISCO_HD double wrap_phi(double phi) {
+  const double twopi = 6.283185307179586476925286766559;
+  double p = fmod(phi, twopi);
+  if (p < 0) p += twopi;
+  // fmod of a tiny negative number plus 2 pi rounds to 2 pi itself.
+  if (p >= twopi) p = 0.0;
+  return p;
+}
+
 // z of ring `ring` (1 ... 4 nside - 1), with HEALPix's own arithmetic so that boundary decisions agree.
 PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
   const double fact2 = 4.0 / double(12 * nside * nside);

@@ -24,12 +24,19 @@ std::vector<RingEntry> make_ring_table(int nside) {
   return rings;
 }
 
-double wrap_phi(double phi) {
-  constexpr double twopi = 2 * std::numbers::pi;
-  double p = std::fmod(phi, twopi);
-  if (p < 0) p += twopi;
-  if (p >= twopi) p = 0.0;
-  return p;
+double float32_monopole(const PreparedSky& sky) {
+  const std::size_t npix = sky.pixels.size() / 8;
+  if (npix == 0) return 0.0;
+  double mean = 0.0;
+  for (std::size_t i = 0; i < npix; ++i) mean += sky.pixels[i * 8 + 4];
+  mean /= double(npix);
+  double var = 0.0;
+  for (std::size_t i = 0; i < npix; ++i) {
+    const double d = sky.pixels[i * 8 + 4] - mean;
+    var += d * d;
+  }
+  const double rms = std::sqrt(var / double(npix));
+  return std::abs(mean) > 0.1 * rms ? mean : 0.0;
 }
 
 PreparedSky prepare_sky(const Sky& sky) {

@@ -43,12 +43,14 @@ struct EngineInputs {
 };
 
 PreparedSky prepare_sky(const Sky& sky);
+// The monopole the float32 backends take out of the sky (DESIGN 7): the mean I0 of I when it matters
+// for float32, that is when |I0| > 0.1 x the RMS of I - I0; 0 otherwise. They add I0 sum_k w_I(k)
+// back in float64.
+double float32_monopole(const PreparedSky& sky);
 PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
                                   Normalization normalization);
 EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
                             const FocalPlane& focal_plane, Normalization normalization);
 
-// phi wrapped into [0, 2 pi).
-double wrap_phi(double phi);
 
 }  // namespace pisco::detail

@@ -8,6 +8,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "core/disc.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {
@@ -34,13 +35,6 @@ void check_psis(const char* fn, const std::vector<double>& psis) {
 
 Base ring_base(int nside) { return Base(int64(nside), RING, SET_NSIDE); }
 
-double wrap_phi(double phi) {
-  double w = std::fmod(phi, two_pi);
-  if (w < 0.0) w += two_pi;
-  // fmod of a tiny negative number plus 2 pi rounds to 2 pi itself.
-  return w >= two_pi ? 0.0 : w;
-}
-
 // Moves a point whose co-latitude has left [0, pi] back over the pole it crossed: crossing a pole
 // puts the point on the opposite meridian.
 void reflect_at_poles(double& theta, double& phi) {
@@ -51,7 +45,7 @@ void reflect_at_poles(double& theta, double& phi) {
     theta = two_pi - theta;
     phi += pi;
   }
-  phi = wrap_phi(phi);
+  phi = detail::wrap_phi(phi);
 }
 
 // Uniform in [-1/2, 1/2) from the top 53 bits of one 64-bit draw. Written out rather than through

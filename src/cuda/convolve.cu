@@ -27,7 +27,7 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
   if (i >= chunk.count) return;  // whole warps only
 
   const double theta = chunk.theta[i];
-  const double phi = wrap_longitude(chunk.phi[i]);
+  const double phi = wrap_phi(chunk.phi[i]);
   const SampleFrame<double> fd = sample_frame(theta, phi, chunk.psi[i], det);
   const SampleFrame<float> f = to_float(fd);
   std::uint32_t* my_first = first[warp];

@@ -46,7 +46,7 @@ class CudaBackend final : public Backend {
     check_kernel_image(device_.description());
     const PreparedSky& sky = in_->sky;
     per_sample_ = in_->normalization == Normalization::per_sample;
-    const double monopole = sky_monopole(sky);
+    const double monopole = float32_monopole(sky);
     monopole_term_ = monopole != 0.0;
     const bool exact = monopole_term_ || per_sample_;
 

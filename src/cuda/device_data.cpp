@@ -4,21 +4,6 @@
 
 namespace pisco::detail::cuda {
 
-double sky_monopole(const PreparedSky& sky) {
-  const std::size_t npix = sky.pixels.size() / 8;
-  if (npix == 0) return 0.0;
-  double mean = 0.0;
-  for (std::size_t i = 0; i < npix; ++i) mean += sky.pixels[i * 8 + 4];
-  mean /= double(npix);
-  double var = 0.0;
-  for (std::size_t i = 0; i < npix; ++i) {
-    const double d = sky.pixels[i * 8 + 4] - mean;
-    var += d * d;
-  }
-  const double rms = std::sqrt(var / double(npix));
-  return std::abs(mean) > 0.1 * rms ? mean : 0.0;
-}
-
 std::vector<PixelRecord> pixel_records(const PreparedSky& sky, double monopole) {
   const std::size_t npix = sky.pixels.size() / 8;
   std::vector<PixelRecord> out(npix);

@@ -10,9 +10,6 @@
 
 namespace pisco::detail::cuda {
 
-// I0: the mean of I over the sky, when it matters for float32, that is when |I0| > 0.1 x the RMS of
-// I - I0; 0 otherwise (nothing is removed, and the kernel skips the float64 monopole sum).
-double sky_monopole(const PreparedSky& sky);
 
 // One record per pixel, I - monopole in float32.
 std::vector<PixelRecord> pixel_records(const PreparedSky& sky, double monopole);

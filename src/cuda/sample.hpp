@@ -61,15 +61,6 @@ struct LaneSums {
   double norm = 0.0;                // sum of the normalization weight, float64
 };
 
-// phi wrapped into [0, 2 pi): the reference's wrap_phi (prepared.cpp), operation for operation.
-PISCO_HD double wrap_longitude(double phi) {
-  const double twopi = 6.283185307179586476925286766559;
-  double p = fmod(phi, twopi);
-  if (p < 0) p += twopi;
-  if (p >= twopi) p = 0.0;
-  return p;
-}
-
 PISCO_HD SampleFrame<double> sample_frame(double theta, double phi, double psi, const KernelDetector& det) {
   return make_frame(cos(theta), sin(theta), cos(phi), sin(phi), cos(psi), sin(psi), det.cos_zeta, det.sin_zeta);
 }

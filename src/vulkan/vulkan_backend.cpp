@@ -114,12 +114,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   // anisotropies (DESIGN 7): I0 sum_k w_I(k) is added back by the kernel's float64 path.
   const PreparedSky& sky = in_->sky;
   const std::size_t npix = sky.pixels.size() / 8;
-  double mean = 0.0, var = 0.0;
-  for (std::size_t p = 0; p < npix; ++p) mean += sky.pixels[8 * p + 4];
-  mean /= double(npix);
-  for (std::size_t p = 0; p < npix; ++p) var += (sky.pixels[8 * p + 4] - mean) * (sky.pixels[8 * p + 4] - mean);
-  const double rms = std::sqrt(var / double(npix));
-  if (std::abs(mean) > 0.1 * rms) monopole_ = mean;
+  monopole_ = float32_monopole(sky);
   const bool per_sample = in_->normalization == Normalization::per_sample;
   float64_ = monopole_ != 0.0 || per_sample;
 
