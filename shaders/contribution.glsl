@@ -9,19 +9,6 @@ struct SampleFrame {
   vec3 e_c;                // cos(zeta) theta' + sin(zeta) phi'
 };
 
-SampleFrame make_frame(float cos_theta, float sin_theta, float cos_phi, float sin_phi, float cos_psi,
-                       float sin_psi, float cos_zeta, float sin_zeta) {
-  const vec3 p = vec3(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta);
-  const vec3 th = vec3(cos_theta * cos_phi, cos_theta * sin_phi, -sin_theta);
-  const vec3 ph = vec3(-sin_phi, cos_phi, 0.0);
-  SampleFrame f;
-  f.p = p;
-  f.theta_p = cos_psi * th + sin_psi * ph;
-  f.phi_p = -sin_psi * th + cos_psi * ph;
-  f.e_c = cos_zeta * f.theta_p + sin_zeta * f.phi_p;
-  return f;
-}
-
 // Antenna coordinates (x, y, z) of k, r2 = x^2 + y^2 (independent of psi) and (cos 2chi, sin 2chi),
 // all from d = k - p' (see contribution.hpp for why).
 void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float r2, out float cos2chi, out float sin2chi) {

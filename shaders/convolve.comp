@@ -1,6 +1,5 @@
 // The convolution kernel (DESIGN 3, 6, 7): one invocation per sample, walking its disc ring by ring
-// as the float64 reference does (src/core/cpu_backend.cpp), with no shared memory and no barriers.
-// Large discs are split: PARTS invocations of one workgroup take every PARTS-th ring of the sample
+// as the float64 reference does (src/core/cpu_backend.cpp). Large discs are split: PARTS invocations of one workgroup take every PARTS-th ring of the sample
 // and add their sums in shared memory (lavapipe also stops any invocation after 65,535 loop
 // iterations in all, so a disc of more pixels must be split there).
 // Neighbouring invocations hold neighbouring samples of the scan, whose discs overlap: their rings
@@ -101,8 +100,11 @@ void main() {
     const dvec3 ph = dvec3(-sp, cp, 0.0lf);
     const dvec3 theta_p64 = cs * th + ss * ph;
     const dvec3 phi_p64 = -ss * th + cs * ph;
-    const SampleFrame f = make_frame(float(ct), float(st), float(cp), float(sp), float(cs), float(ss), pc.cos_zeta,
-                                     pc.sin_zeta);
+    SampleFrame f;  // the float32 frame: the float64 one, rounded
+    f.theta_p = vec3(theta_p64);
+    f.phi_p = vec3(phi_p64);
+    f.p = vec3(dvec3(st * cp, st * sp, ct));
+    f.e_c = pc.cos_zeta * f.theta_p + pc.sin_zeta * f.phi_p;
 
     // The disc: for_each_disc_range of src/core/disc.hpp, with the polar caps as whole rings.
     const int nside = int(pc.nside);

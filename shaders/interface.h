@@ -6,10 +6,10 @@
 // Samples per workgroup: one invocation convolves one sample.
 #define PISCO_WG_SIZE 32
 
-#define PISCO_BINDING_SKY 0        // 2 vec4 per pixel: (kx, ky, kz, I - I0), (Q, U, V, 0), float32
+#define PISCO_BINDING_SKY 0        // 32 bytes per pixel: (kx, ky, kz, I - I0, Q, U, V, 0) in float32
 #define PISCO_BINDING_SKY_LO 1     // vec4 per pixel: k - float(k), so that float(k) + lo = k in float64
 #define PISCO_BINDING_RINGS 2      // RingEntry per ring (src/core/disc.hpp)
-#define PISCO_BINDING_WEIGHTS 3    // vec4 w per beam-grid node, every detector's grid in turn
+#define PISCO_BINDING_WEIGHTS 3    // 32 bytes per node: its w and its neighbour's; every detector's grid
 #define PISCO_BINDING_WEIGHTS64 4  // dvec2 (w_I, Omega_pix B_TT / Omega~) per node, float64
 #define PISCO_BINDING_POINTING 5   // 3 doubles (theta, phi, psi) per sample of the chunk
 #define PISCO_BINDING_TOD 6        // 1 double per sample of the chunk
