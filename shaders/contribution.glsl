@@ -25,41 +25,60 @@ void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float r2, out float
   sin2chi = 2.0 * c * s * inv;
 }
 
-// Node g's weights and its neighbour's along x (or r), stored side by side and read in one 32-byte
-// load (four 64-bit words): half the load instructions, which on lavapipe are most of the cost.
-void weight_pair(int g, out vec4 w, out vec4 next) {
-  const u64vec4 pair = weight_pairs[g];
-  w = uintBitsToFloat(uvec4(unpack32(pair.x), unpack32(pair.y)));
-  next = uintBitsToFloat(uvec4(unpack32(pair.z), unpack32(pair.w)));
+// The beam grid of one detector, read from the push constants once per sample (lavapipe reads a
+// push constant inside a loop again for every invocation and iteration).
+struct Grid {
+  int offset;      // first texel in the weight texels
+  int n;           // nodes per axis (radial: along r)
+  float a;         // half-width: nodes at x_i = -a + i * step
+  float inv_step;  // 1 / step
+  uint offset64;   // first node in the float64 weights
+  double a64, inv_step64;
+};
+
+// Node k's weights and its neighbour's along x (or r), stored side by side: one texel with the
+// two columns (w_I, w_Q) of each, or two texels with all four.
+void weight_pair(Grid g, int k, out vec4 w, out vec4 next) {
+  if (COLUMNS == 2) {
+    const vec4 t = uintBitsToFloat(texelFetch(weight_pairs, g.offset + k));
+    w = vec4(t.xy, 0.0, 0.0);
+    next = vec4(t.zw, 0.0, 0.0);
+  } else {
+    w = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k));
+    next = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k + 1));
+  }
 }
 
 // Bilinear interpolation on the n x n grid at x_i = -a + i * step (x fastest); zero outside.
-vec4 interpolate_weights(int offset, int n, float a, float inv_step, float x, float y) {
-  const float u = (x + a) * inv_step;
-  const float v = (y + a) * inv_step;
-  const float last = float(n - 1);
-  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return vec4(0.0);
-  const int i = min(int(u), n - 2);
-  const int j = min(int(v), n - 2);
+// Without branches: the nodes are clamped into the grid and the result selected, which keeps
+// lavapipe's vector code free of masked writes.
+vec4 interpolate_weights(Grid g, float x, float y) {
+  const float u = (x + g.a) * g.inv_step;
+  const float v = (y + g.a) * g.inv_step;
+  const float last = float(g.n - 1);
+  const bool inside = u >= 0.0 && v >= 0.0 && u <= last && v <= last;
+  const int i = clamp(int(u), 0, g.n - 2);
+  const int j = clamp(int(v), 0, g.n - 2);
   const float fu = u - float(i);
   const float fv = v - float(j);
-  const int g00 = offset + j * n + i;
+  const int k00 = j * g.n + i;
   vec4 w00, w10, w01, w11;
-  weight_pair(g00, w00, w10);
-  weight_pair(g00 + n, w01, w11);
-  return ((1.0 - fu) * (1.0 - fv)) * w00 + (fu * (1.0 - fv)) * w10 + ((1.0 - fu) * fv) * w01 + (fu * fv) * w11;
+  weight_pair(g, k00, w00, w10);
+  weight_pair(g, k00 + g.n, w01, w11);
+  const vec4 w = ((1.0 - fu) * (1.0 - fv)) * w00 + (fu * (1.0 - fv)) * w10 + ((1.0 - fu) * fv) * w01 + (fu * fv) * w11;
+  return inside ? w : vec4(0.0);
 }
 
 // Linear interpolation in r = sqrt(r2) of a radial profile at r = i * step; zero beyond.
 // Signed indices: CPUs (lavapipe) convert float to int in one instruction, to uint in several.
-vec4 interpolate_radial(int offset, int n, float inv_step, float r2) {
-  const float u = sqrt(max(r2, 0.0)) * inv_step;
-  if (!(u <= float(n - 1))) return vec4(0.0);
-  const int i = min(int(u), n - 2);
+vec4 interpolate_radial(Grid g, float r2) {
+  const float u = sqrt(max(r2, 0.0)) * g.inv_step;
+  const int i = clamp(int(u), 0, g.n - 2);
   const float f = u - float(i);
   vec4 w0, w1;
-  weight_pair(offset + i, w0, w1);
-  return (1.0 - f) * w0 + f * w1;
+  weight_pair(g, i, w0, w1);
+  const vec4 w = (1.0 - f) * w0 + f * w1;
+  return u <= float(g.n - 1) ? w : vec4(0.0);
 }
 
 // w . Lambda(-chi) S (DESIGN 3).
@@ -69,9 +88,15 @@ float stokes_response(vec4 w, float cos2chi, float sin2chi, vec4 S) {
 }
 
 // The float64 path: (w_I, Omega_pix B_TT / Omega~) interpolated in double from double coordinates.
-dvec2 interpolate_weights64(uint offset, uint n, double a, double inv_step, double x, double y) {
-  const double u = (x + a) * inv_step;
-  const double v = (y + a) * inv_step;
+dvec2 weight64(uint k) {
+  const uvec4 t = texelFetch(weights64, int(k));
+  return dvec2(packDouble2x32(t.xy), packDouble2x32(t.zw));
+}
+
+dvec2 interpolate_weights64(Grid grid, double x, double y) {
+  const uint offset = grid.offset64, n = uint(grid.n);
+  const double u = (x + grid.a64) * grid.inv_step64;
+  const double v = (y + grid.a64) * grid.inv_step64;
   const double last = double(n - 1u);
   if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return dvec2(0.0);
   const uint i = min(uint(u), n - 2u);
@@ -79,16 +104,17 @@ dvec2 interpolate_weights64(uint offset, uint n, double a, double inv_step, doub
   const double fu = u - double(i);
   const double fv = v - double(j);
   const uint g00 = offset + j * n + i;
-  return ((1.0 - fu) * (1.0 - fv)) * weights64[g00] + (fu * (1.0 - fv)) * weights64[g00 + 1u] +
-         ((1.0 - fu) * fv) * weights64[g00 + n] + (fu * fv) * weights64[g00 + n + 1u];
+  return ((1.0 - fu) * (1.0 - fv)) * weight64(g00) + (fu * (1.0 - fv)) * weight64(g00 + 1u) +
+         ((1.0 - fu) * fv) * weight64(g00 + n) + (fu * fv) * weight64(g00 + n + 1u);
 }
 
-dvec2 interpolate_radial64(uint offset, uint n, double inv_step, double r2) {
-  const double u = sqrt(max(r2, 0.0lf)) * inv_step;
+dvec2 interpolate_radial64(Grid grid, double r2) {
+  const uint offset = grid.offset64, n = uint(grid.n);
+  const double u = sqrt(max(r2, 0.0lf)) * grid.inv_step64;
   if (!(u <= double(n - 1u))) return dvec2(0.0);
   const uint i = min(uint(u), n - 2u);
   const double f = u - double(i);
-  return (1.0 - f) * weights64[offset + i] + f * weights64[offset + i + 1u];
+  return (1.0 - f) * weight64(offset + i) + f * weight64(offset + i + 1u);
 }
 
 #endif

@@ -19,6 +19,7 @@ layout(local_size_x = PISCO_WG_SIZE) in;
 layout(constant_id = PISCO_SPEC_RADIAL) const bool RADIAL = false;    // weights as a radial profile
 layout(constant_id = PISCO_SPEC_FLOAT64) const bool FLOAT64 = false;  // the float64 path
 layout(constant_id = PISCO_SPEC_PARTS) const int PARTS = 1;           // invocations per sample
+layout(constant_id = PISCO_SPEC_COLUMNS) const int COLUMNS = 4;       // weights stored per node: 2 or 4
 
 shared float s_sum[PISCO_WG_SIZE], s_comp[PISCO_WG_SIZE];
 shared double s_s0[PISCO_WG_SIZE], s_n0[PISCO_WG_SIZE];
@@ -28,17 +29,15 @@ struct RingEntry {
   double z;
   uint first;
   uint count;
-  uint shifted;
-  uint pad;
+  bool shifted;
 };
 
-// 32-byte records read in one load as four 64-bit integers (integers: no float64 rounding or flushing
-// can touch the float bits they carry).
-layout(std430, binding = PISCO_BINDING_SKY) readonly buffer SkyBuffer { u64vec4 sky[]; };
-layout(std430, binding = PISCO_BINDING_SKY_LO) readonly buffer SkyLoBuffer { vec4 sky_lo[]; };
-layout(std430, binding = PISCO_BINDING_RINGS) readonly buffer RingBuffer { RingEntry rings[]; };
-layout(std430, binding = PISCO_BINDING_WEIGHTS) readonly buffer WeightBuffer { u64vec4 weight_pairs[]; };
-layout(std430, binding = PISCO_BINDING_WEIGHTS64) readonly buffer Weight64Buffer { dvec2 weights64[]; };
+// Texels of float32 bits, fetched as integers so that no conversion can touch them.
+layout(binding = PISCO_BINDING_SKY) uniform usamplerBuffer sky;
+layout(binding = PISCO_BINDING_SKY_LO) uniform usamplerBuffer sky_lo;
+layout(binding = PISCO_BINDING_RINGS) uniform usamplerBuffer rings;
+layout(binding = PISCO_BINDING_WEIGHTS) uniform usamplerBuffer weight_pairs;
+layout(binding = PISCO_BINDING_WEIGHTS64) uniform usamplerBuffer weights64;
 layout(std430, binding = PISCO_BINDING_POINTING) readonly buffer PointingBuffer { double pointing[]; };
 layout(std430, binding = PISCO_BINDING_TOD) writeonly buffer TodBuffer { double tod[]; };
 layout(std430, binding = PISCO_BINDING_COUNT) writeonly buffer CountBuffer { uint counts[]; };
@@ -52,27 +51,25 @@ struct Sums {
   double s0, n0;
 };
 
-void accumulate(SampleFrame f, dvec3 theta_p64, dvec3 phi_p64, uint begin, uint end, inout Sums acc) {
-  for (uint p = begin; p < end; ++p) {
-    const u64vec4 rec = sky[p];
-    const vec4 a = uintBitsToFloat(uvec4(unpack32(rec.x), unpack32(rec.y)));
-    const vec4 b = uintBitsToFloat(uvec4(unpack32(rec.z), unpack32(rec.w)));
+// The pixels [b0, b0 + l0) then [b1, b1 + l1), in one loop.
+void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, uint l0, uint b1, uint l1, inout Sums acc) {
+  const uint jump = b1 - (b0 + l0);  // from the end of the first range to the start of the second
+  for (uint q = 0u; q < l0 + l1; ++q) {
+    const uint p = b0 + q + (q >= l0 ? jump : 0u);
+    const vec4 a = uintBitsToFloat(texelFetch(sky, int(2u * p)));
+    const vec4 b = uintBitsToFloat(texelFetch(sky, int(2u * p + 1u)));
     vec3 xyz;
     float r2, cos2chi, sin2chi;
     pixel_geometry(f, a.xyz, xyz, r2, cos2chi, sin2chi);
-    const vec4 w = RADIAL ? interpolate_radial(int(pc.grid_offset), int(pc.grid_n), pc.grid_inv_step32, r2)
-                          : interpolate_weights(int(pc.grid_offset), int(pc.grid_n), pc.grid_a32, pc.grid_inv_step32, xyz.x,
-                                                xyz.y);
+    const vec4 w = RADIAL ? interpolate_radial(g, r2) : interpolate_weights(g, xyz.x, xyz.y);
     precise const float y = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.xyz)) - acc.comp;
     precise const float t = acc.sum + y;
     acc.comp = (t - acc.sum) - y;
     acc.sum = t;
     if (FLOAT64) {
-      const dvec3 k = dvec3(a.xyz) + dvec3(sky_lo[p].xyz);
+      const dvec3 k = dvec3(a.xyz) + dvec3(uintBitsToFloat(texelFetch(sky_lo, int(p)).xyz));
       const double x64 = dot(k, theta_p64), y64 = dot(k, phi_p64);
-      const dvec2 w64 = RADIAL ? interpolate_radial64(pc.grid_offset, pc.grid_n, pc.grid_inv_step, x64 * x64 + y64 * y64)
-                               : interpolate_weights64(pc.grid_offset, pc.grid_n, pc.grid_a, pc.grid_inv_step, x64,
-                                                       y64);
+      const dvec2 w64 = RADIAL ? interpolate_radial64(g, x64 * x64 + y64 * y64) : interpolate_weights64(g, x64, y64);
       acc.s0 += w64.x;
       acc.n0 += w64.y;
     }
@@ -100,6 +97,17 @@ void main() {
     const dvec3 ph = dvec3(-sp, cp, 0.0lf);
     const dvec3 theta_p64 = cs * th + ss * ph;
     const dvec3 phi_p64 = -ss * th + cs * ph;
+    // Push constants read once, outside the pixel loops (lavapipe would read them again per lane
+    // and per pixel).
+    Grid g;
+    g.offset = int(pc.grid_offset);
+    g.offset64 = pc.grid_offset64;
+    g.n = int(pc.grid_n);
+    g.a = pc.grid_a32;
+    g.inv_step = pc.grid_inv_step32;
+    g.a64 = pc.grid_a;
+    g.inv_step64 = pc.grid_inv_step;
+    const double cos_rho_max = pc.cos_rho_max;
     SampleFrame f;  // the float32 frame: the float64 one, rounded
     f.theta_p = vec3(theta_p64);
     f.phi_p = vec3(phi_p64);
@@ -124,20 +132,18 @@ void main() {
     // One pixel loop for every range of the disc (a single copy of the pixel code): ring iz's first
     // range, then its second (zero length when absent).
     for (int iz = first_ring + part; iz <= last_ring; iz += PARTS) {
+      const RingEntry ring = ring_entry(iz);
       uint b0, l0, b1, l1;
       if (iz < irmin || iz > irmax) {
-        b0 = rings[iz - 1].first;
-        l0 = rings[iz - 1].count;
+        b0 = ring.first;
+        l0 = ring.count;
         b1 = 0u;
         l1 = 0u;
       } else {
-        ring_ranges(iz, z0, xa, phi, pc.cos_rho_max, b0, l0, b1, l1);
+        ring_ranges(ring, z0, xa, phi, cos_rho_max, b0, l0, b1, l1);
       }
       count += l0 + l1;
-      for (int r = 0; r < 2; ++r) {
-        const uint begin = r == 0 ? b0 : b1;
-        accumulate(f, theta_p64, phi_p64, begin, begin + (r == 0 ? l0 : l1), acc);
-      }
+      accumulate(f, g, theta_p64, phi_p64, b0, l0, b1, l1, acc);
     }
   }
 

@@ -6,14 +6,18 @@
 // Samples per workgroup: one invocation convolves one sample.
 #define PISCO_WG_SIZE 32
 
-#define PISCO_BINDING_SKY 0        // 32 bytes per pixel: (kx, ky, kz, I - I0, Q, U, V, 0) in float32
-#define PISCO_BINDING_SKY_LO 1     // vec4 per pixel: k - float(k), so that float(k) + lo = k in float64
-#define PISCO_BINDING_RINGS 2      // RingEntry per ring (src/core/disc.hpp)
-#define PISCO_BINDING_WEIGHTS 3    // 32 bytes per node: its w and its neighbour's; every detector's grid
-#define PISCO_BINDING_WEIGHTS64 4  // dvec2 (w_I, Omega_pix B_TT / Omega~) per node, float64
-#define PISCO_BINDING_POINTING 5   // 3 doubles (theta, phi, psi) per sample of the chunk
-#define PISCO_BINDING_TOD 6        // 1 double per sample of the chunk
-#define PISCO_BINDING_COUNT 7      // 1 uint per sample: pixels in its disc
+// Bindings. The sky, its residuals and the weights are uniform texel buffers of
+// R32G32B32A32_UINT texels holding float32 bits: lavapipe fetches a texel for eight invocations with
+// eight vector loads, where a storage-buffer load becomes a loop over the invocations with a bounds
+// check each, and GPUs read them through the texture cache.
+#define PISCO_BINDING_SKY 0        // texels, 2 per pixel: (kx, ky, kz, I - I0), (Q, U, V, 0)
+#define PISCO_BINDING_SKY_LO 1     // texels, 1 per pixel: k - float(k), so that float(k) + lo = k in float64
+#define PISCO_BINDING_RINGS 2      // texels, 1 per ring: z (low word, high word), first pixel, count | shifted << 31
+#define PISCO_BINDING_WEIGHTS 3    // texels: each node's COLUMNS weights, then its neighbour's; every detector's grid
+#define PISCO_BINDING_WEIGHTS64 4  // texels, 1 per node: float64 (w_I, Omega_pix B_TT / Omega~), low word first
+#define PISCO_BINDING_POINTING 5   // storage: 3 doubles (theta, phi, psi) per sample of the chunk
+#define PISCO_BINDING_TOD 6        // storage: 1 double per sample of the chunk
+#define PISCO_BINDING_COUNT 7      // storage: 1 uint per sample: pixels in its disc
 #define PISCO_BINDINGS 8
 
 #define PISCO_FLAG_PER_SAMPLE 2u  // divide each sample by its own sum of Omega_pix B_TT / Omega~
@@ -22,11 +26,15 @@
 #define PISCO_SPEC_RADIAL 0   // the detector's weights are a radial profile in r = sin(rho)
 #define PISCO_SPEC_FLOAT64 1  // run the float64 path: I0 sum_k w_I(k) and the per-sample norm
 #define PISCO_SPEC_PARTS 2    // invocations per sample (a power of two <= PISCO_WG_SIZE)
+#define PISCO_SPEC_COLUMNS 3  // weights stored per node: 2 (w_I, w_Q; w_U = w_V = 0) or 4
 
 #ifdef __cplusplus
 #include <cstdint>
 namespace pisco::detail::vk {
 using uint = std::uint32_t;
+constexpr bool is_texel_binding(uint b) {
+  return b <= PISCO_BINDING_WEIGHTS64;
+}
 struct PushConstants {
 #else
 layout(push_constant) uniform PushConstants {
@@ -41,14 +49,16 @@ layout(push_constant) uniform PushConstants {
   float cos_zeta;
   float sin_zeta;
   uint grid_n;            // nodes per axis (radial: along r)
-  uint grid_offset;       // first node of this detector's grid in the weight buffers
+  uint grid_offset;       // first texel of this detector's grid in the weight texels
+  uint grid_offset64;     // its first node in the float64 weights
   uint nside;
   uint flags;             // PISCO_FLAG_*
   uint sample_count;      // samples in this chunk
   uint groups_x;          // workgroups along x: sample = (group.y * groups_x + group.x) * (WG / parts) + local / parts
+  uint pad;
 #ifdef __cplusplus
 };
-static_assert(sizeof(PushConstants) == 80, "push constants must match the GLSL block");
+static_assert(sizeof(PushConstants) == 88, "push constants must match the GLSL block");
 }  // namespace pisco::detail::vk
 #else
 } pc;

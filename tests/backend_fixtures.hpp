@@ -80,8 +80,11 @@ struct Scene {
   pisco::FocalPlane focal_plane;
 };
 
-// A PSB pair with mismatched elliptical beams carrying cross-polar lobes and Mueller leakage, and a
-// third detector with a round beam (stored as a radial profile), over cmb_like_sky(nside, 7, monopole).
+// A PSB pair with mismatched elliptical beams carrying cross-polar lobes and Mueller leakage, a
+// detector with a round beam (stored as a radial profile), one with a plain elliptical beam and one
+// with a round beam and in-phase cross-polar response, over cmb_like_sky(nside, 7, monopole). The
+// five cover both weight layouts (2D grid, radial profile) with and without w_U and w_V, which the
+// GPU kernels store in different ways.
 inline Scene backend_scene(int nside, double monopole = 0.0) {
   constexpr double deg = std::numbers::pi / 180;
   Scene s{cmb_like_sky(nside, 7, monopole), {}, {}};
@@ -99,8 +102,15 @@ inline Scene backend_scene(int nside, double monopole = 0.0) {
   pisco::BeamOptions r;
   r.rho_max = 4 * deg;
   s.beams.push_back(pisco::Beamsor::gaussian(1.5 * deg, r));
+  s.beams.push_back(pisco::Beamsor::elliptical_gaussian(1.7 * deg, 1.3 * deg, 60 * deg, r));
+  pisco::BeamOptions rx = r;
+  rx.cross_polar = 0.05;
+  rx.cross_polar_pattern = pisco::CrossPolarPattern::uniform;
+  s.beams.push_back(pisco::Beamsor::gaussian(1.5 * deg, rx));
   s.focal_plane.add_pair("psb", 22.5 * deg, 0, 1, 0.01, 1.0, 0.98);
   s.focal_plane.add({"round", -10 * deg, 0.0, 1.02, 2});
+  s.focal_plane.add({"ellip", 40 * deg, 0.0, 1.0, 3});
+  s.focal_plane.add({"roundx", 70 * deg, 0.02, 1.0, 4});
   return s;
 }
 

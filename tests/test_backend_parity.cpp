@@ -93,6 +93,42 @@ TEST(BackendParity, PerSampleNormalizationMatchesTheReference) {
   }
 }
 
+// B1 with beams of compact support well inside their discs: B vanishes beyond 2 deg, rho_max is
+// 6 deg, and the second beam is lopsided (nothing on one side of its axis, so that its weights jump
+// from large values to zero) and leaks Q into U.
+TEST(BackendParity, CompactBeamsMatchTheReference) {
+  SKIP_WITHOUT_DEVICE();
+  const double rho0 = 2 * deg;
+  auto compact = [rho0](double rho, double sigma, bool lopsided) {
+    pisco::Mueller m{};
+    if (rho >= rho0 || (lopsided && std::cos(sigma) < -0.3)) return m;
+    const double b = (1 - rho / rho0) * (1 - rho / rho0) * (lopsided ? 1 + 0.6 * std::cos(sigma) : 1.0);
+    m[0][0] = m[1][1] = m[2][2] = b;
+    if (lopsided) m[1][2] = 0.05 * b;
+    return m;
+  };
+  std::vector<pisco::Beamsor> beams{
+      pisco::Beamsor::from_field([&](double r, double s) { return compact(r, s, false); }, 6 * deg, 0.2 * deg,
+                                 "compact round", rho0, true),
+      pisco::Beamsor::from_field([&](double r, double s) { return compact(r, s, true); }, 6 * deg, 0.2 * deg,
+                                 "compact lopsided", rho0, false)};
+  pisco::FocalPlane fp;
+  fp.add({"round", 0.0, 0.0, 1.0, 0});
+  fp.add({"lopsided", 30 * deg, 0.0, 1.0, 1});
+  const pisco::Sky sky = cmb_like_sky(64, 21);
+  const pisco::Pointing p = random_pointing(1500, 22);
+  pisco::Engine cpu(sky, beams, fp, options("cpu"));
+  pisco::Engine dev(sky, beams, fp, options(backend));
+  for (std::size_t d = 0; d < fp.size(); ++d) {
+    const Stats st = compare(run(cpu, d, p), run(dev, d, p));
+    std::cout << fp[d].name << ": relative rms error " << st.rms_err / st.rms_ref << ", max error / rms "
+              << st.max_err / st.rms_ref << "\n";
+    EXPECT_EQ(st.non_finite, 0u);
+    EXPECT_LE(st.rms_err, 1e-5 * st.rms_ref) << fp[d].name;
+    EXPECT_LE(st.max_err, 1e-4 * st.rms_ref) << fp[d].name;
+  }
+}
+
 // B1: chunks of 1, an odd size and the device's own give the same TOD, bit for bit.
 TEST(BackendParity, ChunkSizesGiveTheSameTod) {
   SKIP_WITHOUT_DEVICE();

@@ -82,7 +82,7 @@ Scene scene(int nside, double monopole) {
   pisco::BeamOptions w;
   w.rho_max = 20 * deg;
   s.beams.push_back(pisco::Beamsor::gaussian(6 * deg, w));
-  s.focal_plane.add({"wide", 40 * deg, 0.02, 1.0, 3});
+  s.focal_plane.add({"wide", 40 * deg, 0.02, 1.0, s.beams.size() - 1});
   return s;
 }
 

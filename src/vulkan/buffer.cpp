@@ -60,6 +60,14 @@ Buffer::Buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage
   }
 }
 
+void Buffer::make_texel_view(VkFormat format) {
+  VkBufferViewCreateInfo vi{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
+  vi.buffer = buffer_;
+  vi.format = format;
+  vi.range = VK_WHOLE_SIZE;
+  PISCO_VK(device_->fn().vkCreateBufferView(device_->handle(), &vi, nullptr, &view_));
+}
+
 void Buffer::invalidate() const {
   if (coherent_ || !mapped_) return;
   VkMappedMemoryRange r{VK_STRUCTURE_TYPE_MAPPED_MEMORY_RANGE};
@@ -72,9 +80,11 @@ void Buffer::invalidate() const {
 void Buffer::release() noexcept {
   if (!device_) return;
   const auto& fn = device_->fn();
+  if (view_) fn.vkDestroyBufferView(device_->handle(), view_, nullptr);
   if (mapped_) fn.vkUnmapMemory(device_->handle(), memory_);
   if (buffer_) fn.vkDestroyBuffer(device_->handle(), buffer_, nullptr);
   if (memory_) fn.vkFreeMemory(device_->handle(), memory_, nullptr);
+  view_ = VK_NULL_HANDLE;
   buffer_ = VK_NULL_HANDLE;
   memory_ = VK_NULL_HANDLE;
   mapped_ = nullptr;
@@ -83,7 +93,7 @@ void Buffer::release() noexcept {
 Buffer::~Buffer() { release(); }
 
 Buffer::Buffer(Buffer&& o) noexcept
-    : device_(o.device_), buffer_(std::exchange(o.buffer_, VK_NULL_HANDLE)),
+    : device_(o.device_), buffer_(std::exchange(o.buffer_, VK_NULL_HANDLE)), view_(std::exchange(o.view_, VK_NULL_HANDLE)),
       memory_(std::exchange(o.memory_, VK_NULL_HANDLE)), size_(o.size_), mapped_(std::exchange(o.mapped_, nullptr)),
       coherent_(o.coherent_) {}
 
@@ -92,6 +102,7 @@ Buffer& Buffer::operator=(Buffer&& o) noexcept {
     release();
     device_ = o.device_;
     buffer_ = std::exchange(o.buffer_, VK_NULL_HANDLE);
+    view_ = std::exchange(o.view_, VK_NULL_HANDLE);
     memory_ = std::exchange(o.memory_, VK_NULL_HANDLE);
     size_ = o.size_;
     mapped_ = std::exchange(o.mapped_, nullptr);

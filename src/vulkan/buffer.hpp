@@ -27,6 +27,10 @@ class Buffer {
   Buffer& operator=(const Buffer&) = delete;
 
   VkBuffer handle() const noexcept { return buffer_; }
+  // A view of the whole buffer as texels of `format`, for uniform texel buffer bindings; owned by
+  // the buffer and destroyed with it.
+  void make_texel_view(VkFormat format);
+  VkBufferView texel_view() const noexcept { return view_; }
   VkDeviceSize size() const noexcept { return size_; }
   void* mapped() const noexcept { return mapped_; }  // null for device memory
   bool coherent() const noexcept { return coherent_; }
@@ -37,6 +41,7 @@ class Buffer {
   void release() noexcept;
   const Device* device_ = nullptr;
   VkBuffer buffer_ = VK_NULL_HANDLE;
+  VkBufferView view_ = VK_NULL_HANDLE;
   VkDeviceMemory memory_ = VK_NULL_HANDLE;
   VkDeviceSize size_ = 0;
   void* mapped_ = nullptr;

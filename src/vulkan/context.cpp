@@ -223,6 +223,7 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
     d.api_version = props.properties.apiVersion;
     d.subgroup_size = sub.subgroupSize;
     d.max_storage_buffer_range = props.properties.limits.maxStorageBufferRange;
+    d.max_texel_buffer_elements = props.properties.limits.maxTexelBufferElements;
     d.max_groups_x = props.properties.limits.maxComputeWorkGroupCount[0];
     d.max_groups_y = props.properties.limits.maxComputeWorkGroupCount[1];
     std::uint32_t nq = 0;

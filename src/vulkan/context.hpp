@@ -51,6 +51,7 @@ struct DeviceInfo {
   std::uint32_t queue_family = 0;
   std::uint32_t subgroup_size = 0;
   VkDeviceSize max_storage_buffer_range = 0;
+  std::uint32_t max_texel_buffer_elements = 0;
   std::uint32_t max_groups_x = 0, max_groups_y = 0;
   std::string unusable;  // why the kernels cannot run on it ("" when they can)
   std::string type_name() const;

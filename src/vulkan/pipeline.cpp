@@ -3,6 +3,13 @@
 #include "vulkan/check.hpp"
 
 namespace pisco::detail::vk {
+namespace {
+
+VkDescriptorType descriptor_type(std::uint32_t binding) {
+  return is_texel_binding(binding) ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+}
+
+}  // namespace
 
 ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint32_t> spirv, std::uint32_t max_sets)
     : device_(device) {
@@ -17,7 +24,7 @@ ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint
     std::array<VkDescriptorSetLayoutBinding, PISCO_BINDINGS> bindings{};
     for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) {
       bindings[b].binding = b;
-      bindings[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      bindings[b].descriptorType = descriptor_type(b);
       bindings[b].descriptorCount = 1;
       bindings[b].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
     }
@@ -34,11 +41,14 @@ ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint
     pli.pPushConstantRanges = &range;
     PISCO_VK(fn.vkCreatePipelineLayout(dev, &pli, nullptr, &layout_));
 
-    VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, PISCO_BINDINGS * max_sets};
+    std::uint32_t texel = 0;
+    for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) texel += is_texel_binding(b) ? 1 : 0;
+    const std::array<VkDescriptorPoolSize, 2> sizes{{{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (PISCO_BINDINGS - texel) * max_sets},
+                                                     {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texel * max_sets}}};
     VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pi.maxSets = max_sets;
-    pi.poolSizeCount = 1;
-    pi.pPoolSizes = &size;
+    pi.poolSizeCount = std::uint32_t(sizes.size());
+    pi.pPoolSizes = sizes.data();
     PISCO_VK(fn.vkCreateDescriptorPool(dev, &pi, nullptr, &pool_));
   } catch (...) {
     release();
@@ -64,7 +74,7 @@ void ComputePipeline::release() noexcept {
   module_ = VK_NULL_HANDLE;
 }
 
-VkDescriptorSet ComputePipeline::make_set(const std::array<VkBuffer, PISCO_BINDINGS>& buffers) {
+VkDescriptorSet ComputePipeline::make_set(const std::array<const Buffer*, PISCO_BINDINGS>& buffers) {
   const auto& fn = device_.fn();
   VkDescriptorSetAllocateInfo ai{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
   ai.descriptorPool = pool_;
@@ -73,15 +83,21 @@ VkDescriptorSet ComputePipeline::make_set(const std::array<VkBuffer, PISCO_BINDI
   VkDescriptorSet set = VK_NULL_HANDLE;
   PISCO_VK(fn.vkAllocateDescriptorSets(device_.handle(), &ai, &set));
   std::array<VkDescriptorBufferInfo, PISCO_BINDINGS> infos{};
+  std::array<VkBufferView, PISCO_BINDINGS> views{};
   std::array<VkWriteDescriptorSet, PISCO_BINDINGS> writes{};
   for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) {
-    infos[b] = {buffers[b], 0, VK_WHOLE_SIZE};
     writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
     writes[b].dstSet = set;
     writes[b].dstBinding = b;
     writes[b].descriptorCount = 1;
-    writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-    writes[b].pBufferInfo = &infos[b];
+    writes[b].descriptorType = descriptor_type(b);
+    if (is_texel_binding(b)) {
+      views[b] = buffers[b]->texel_view();
+      writes[b].pTexelBufferView = &views[b];
+    } else {
+      infos[b] = {buffers[b]->handle(), 0, VK_WHOLE_SIZE};
+      writes[b].pBufferInfo = &infos[b];
+    }
   }
   fn.vkUpdateDescriptorSets(device_.handle(), PISCO_BINDINGS, writes.data(), 0, nullptr);
   return set;

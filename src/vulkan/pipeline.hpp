@@ -1,5 +1,5 @@
-// The compute pipelines of one embedded SPIR-V kernel: its descriptor set layout (PISCO_BINDINGS storage
-// buffers, shaders/interface.h), push constants, a pool of descriptor sets, and one pipeline per
+// The compute pipelines of one embedded SPIR-V kernel: its descriptor set layout (PISCO_BINDINGS
+// storage and uniform texel buffers, shaders/interface.h), push constants, a pool of descriptor sets, and one pipeline per
 // set of specialization-constant values, created when first used.
 #pragma once
 
@@ -12,6 +12,7 @@
 #include <span>
 
 #include "interface.h"
+#include "vulkan/buffer.hpp"
 #include "vulkan/context.hpp"
 
 namespace pisco::detail::vk {
@@ -23,10 +24,10 @@ class ComputePipeline {
   ComputePipeline(const ComputePipeline&) = delete;
   ComputePipeline& operator=(const ComputePipeline&) = delete;
 
-  // A descriptor set with buffers[b] at binding b.
-  VkDescriptorSet make_set(const std::array<VkBuffer, PISCO_BINDINGS>& buffers);
+  // A descriptor set with buffers[b] at binding b (its texel view for a texel binding).
+  VkDescriptorSet make_set(const std::array<const Buffer*, PISCO_BINDINGS>& buffers);
   // Values of the kernel's specialization constants, by constant_id (booleans as 0 or 1).
-  using Specialization = std::array<std::uint32_t, 3>;
+  using Specialization = std::array<std::uint32_t, 4>;
   // Creates the pipeline specialized with `spec` now rather than at its first use.
   void prepare(const Specialization& spec) { pipeline(spec); }
   // Records: bind the pipeline specialized with `spec`, bind `set`, push `push`, dispatch (x, y)

@@ -29,6 +29,29 @@ constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 
 double mib(double bytes) { return bytes / double(1 << 20); }
 
+// The detector's weights in float32, 4 per node, with those below 2^-64 of the largest set to zero.
+// A Gaussian's tail reaches float32's subnormal range within a Table 1 disc (below 1.2e-38 from
+// about 13 sigma), and CPUs take a slow microcode path for every operation on a subnormal number:
+// on lavapipe, the third of a 10 deg disc's pixels beyond 13 sigma made the whole disc take about
+// twice as long. What is dropped adds up to less than 1e-12 of the response.
+std::vector<float> float32_weights(const PreparedDetector& d) {
+  double largest = 0.0;
+  for (const double w : d.weights) largest = std::max(largest, std::abs(w));
+  const double cutoff = std::ldexp(largest, -64);
+  std::vector<float> w32(d.weights.size());
+  for (std::size_t k = 0; k < w32.size(); ++k) w32[k] = std::abs(d.weights[k]) < cutoff ? 0.0f : float(d.weights[k]);
+  return w32;
+}
+
+// Weights stored per beam node: 2 when the detector's w_U and w_V vanish everywhere (any beam
+// without cross-polar response or Mueller leakage into U and V), so that a node and its neighbour fit
+// one 16-byte texel; 4 otherwise.
+std::uint32_t weight_columns(const PreparedDetector& d) {
+  for (std::size_t k = 0; k < d.weights.size(); k += 4)
+    if (d.weights[k + 2] != 0.0 || d.weights[k + 3] != 0.0) return 4;
+  return 2;
+}
+
 // x - double(float(x)): what float(x) lacks of x. Kept out of line: GCC 12's vectorizer at -O3 folds
 // x - double(float(x)) to zero when this runs inside the pixel loop below.
 [[gnu::noinline]] float float_residual(double x) {
@@ -60,7 +83,9 @@ class VulkanBackend final : public Backend {
 
   void setup(const vk::DeviceInfo& info, const EngineOptions& options);
   void release() noexcept;
-  Buffer upload(const void* data, std::size_t bytes, const char* what);
+  // A device buffer holding `bytes` of `data`; with a texel view of R32G32B32A32_UINT texels when
+  // `texels` (shaders/interface.h).
+  Buffer upload(const void* data, std::size_t bytes, const char* what, bool texels);
   void make_slots(std::size_t chunk);
   double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
   vk::ComputePipeline::Specialization specialization(const PreparedDetector& det) const;
@@ -74,7 +99,8 @@ class VulkanBackend final : public Backend {
   std::unique_ptr<vk::ComputePipeline> pipeline_;
   VkCommandPool pool_ = VK_NULL_HANDLE;
   Buffer sky_, sky_lo_, rings_, weights_, weights64_;
-  std::vector<std::uint32_t> grid_offset_;  // per detector, in nodes
+  std::vector<std::uint32_t> grid_offset_;    // per detector, in texels of weights_
+  std::vector<std::uint32_t> grid_offset64_;  // per detector, in nodes of weights64_
   double monopole_ = 0.0;
   bool float64_ = false;
   std::size_t chunk_ = 0;
@@ -118,11 +144,11 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   const bool per_sample = in_->normalization == Normalization::per_sample;
   float64_ = monopole_ != 0.0 || per_sample;
 
-  const double range = double(info.max_storage_buffer_range);
-  if (32.0 * double(npix) > range)
-    throw Error("vulkan: an NSIDE " + std::to_string(sky.nside) + " sky needs " + std::to_string(int(mib(32.0 * double(npix)))) +
-                " MiB in one storage buffer, but " + info.name + " binds at most " + std::to_string(int(mib(range))) +
-                " MiB (maxStorageBufferRange); use a GPU or the cpu backend");
+  const double max_texels = double(info.max_texel_buffer_elements);
+  if (2.0 * double(npix) > max_texels)
+    throw Error("vulkan: an NSIDE " + std::to_string(sky.nside) + " sky needs " + std::to_string(2 * npix) +
+                " texels in one texel buffer, but " + info.name + " binds at most " +
+                std::to_string(info.max_texel_buffer_elements) + " (maxTexelBufferElements); use the cpu backend");
   std::vector<float> sky32(8 * npix), lo(float64_ ? 4 * npix : 4);
   for (std::size_t p = 0; p < npix; ++p) {
     const double* px = &sky.pixels[8 * p];
@@ -136,21 +162,33 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
     sky32[8 * p + 6] = float(px[7]);
     sky32[8 * p + 7] = 0.0f;
   }
-  sky_ = upload(sky32.data(), sky32.size() * sizeof(float), "the sky");
-  sky_lo_ = upload(lo.data(), lo.size() * sizeof(float), "the sky's float64 pixel vectors");
-  rings_ = upload(sky.rings.data(), sky.rings.size() * sizeof(RingEntry), "the ring table");
+  sky_ = upload(sky32.data(), sky32.size() * sizeof(float), "the sky", true);
+  sky_lo_ = upload(lo.data(), lo.size() * sizeof(float), "the sky's float64 pixel vectors", true);
+  std::vector<std::uint32_t> rings;  // shaders/interface.h
+  for (const RingEntry& r : sky.rings) {
+    std::uint64_t z = 0;
+    static_assert(sizeof(z) == sizeof(r.z));
+    std::memcpy(&z, &r.z, sizeof(z));
+    rings.insert(rings.end(), {std::uint32_t(z), std::uint32_t(z >> 32), r.first, r.count | (r.shifted ? 1u << 31 : 0u)});
+  }
+  rings_ = upload(rings.data(), rings.size() * sizeof(std::uint32_t), "the ring table", true);
 
   std::vector<float> w32;
   std::vector<double> w64;
   for (const PreparedDetector& d : in_->detectors) {
-    // Each node with its neighbour along x (or r): (w[k], w[k + 1]), 8 floats, read in one load.
-    grid_offset_.push_back(std::uint32_t(w32.size() / 8));
-    const std::size_t nodes = d.weights.size() / 4;
+    // Each node with its neighbour along x (or r), (w[k], w[k + 1]) in 2 x columns floats, so that
+    // the pair is one texel (2 columns) or two neighbouring ones (4 columns).
+    grid_offset_.push_back(std::uint32_t(w32.size() / 4));
+    grid_offset64_.push_back(std::uint32_t(w64.size() / 2));
+    const std::size_t columns = weight_columns(d);
+    const std::vector<float> dw = float32_weights(d);
+    const std::size_t nodes = dw.size() / 4;
     for (std::size_t k = 0; k < nodes; ++k)
-      for (std::size_t m = 0; m < 8; ++m) {
-        const std::size_t src = 4 * k + m;
-        w32.push_back(src < d.weights.size() ? float(d.weights[src]) : 0.0f);
-      }
+      for (std::size_t m = 0; m < 2; ++m)
+        for (std::size_t c = 0; c < columns; ++c) {
+          const std::size_t src = 4 * (k + m) + c;
+          w32.push_back(src < dw.size() ? dw[src] : 0.0f);
+        }
     if (float64_)
       for (std::size_t k = 0; k < nodes; ++k) {
         w64.push_back(d.weights[4 * k]);
@@ -158,11 +196,13 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
       }
   }
   if (w64.empty()) w64.assign(2, 0.0);
-  if (4.0 * double(w32.size()) > range)
-    throw Error("vulkan: the beam grids need " + std::to_string(int(mib(4.0 * double(w32.size())))) + " MiB, but " +
-                info.name + " binds at most " + std::to_string(int(mib(range))) + " MiB; use a coarser grid_step");
-  weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids");
-  weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids");
+  // The float32 grids take at least one texel a node, the float64 ones exactly one.
+  if (double(w32.size() / 4) > max_texels)
+    throw Error("vulkan: the beam grids need " + std::to_string(w32.size() / 4) + " texels, but " + info.name +
+                " binds at most " + std::to_string(info.max_texel_buffer_elements) +
+                " (maxTexelBufferElements); use a coarser grid_step");
+  weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids", true);
+  weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids", true);
 
   // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
   const std::size_t by_range = info.max_storage_buffer_range / (3 * sizeof(double));
@@ -175,12 +215,14 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   device_->check_validation("setting up");
 }
 
-Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* what) {
+Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* what, bool texels) {
   const auto& fn = device_->fn();
   try {
     Buffer staging(*device_, bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::upload);
     std::memcpy(staging.mapped(), data, bytes);
-    Buffer target(*device_, bytes, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
+    const VkBufferUsageFlags usage = texels ? VkBufferUsageFlags(VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT) : storage;
+    Buffer target(*device_, bytes, usage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
+    if (texels) target.make_texel_view(VK_FORMAT_R32G32B32A32_UINT);
     VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
     ai.commandPool = pool_;
     ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
@@ -246,15 +288,15 @@ void VulkanBackend::make_slots(std::size_t chunk) {
     PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &s.cmd));
     VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
     PISCO_VK(fn.vkCreateFence(device_->handle(), &fi, nullptr, &s.fence));
-    std::array<VkBuffer, PISCO_BINDINGS> b{};
-    b[PISCO_BINDING_SKY] = sky_.handle();
-    b[PISCO_BINDING_SKY_LO] = sky_lo_.handle();
-    b[PISCO_BINDING_RINGS] = rings_.handle();
-    b[PISCO_BINDING_WEIGHTS] = weights_.handle();
-    b[PISCO_BINDING_WEIGHTS64] = weights64_.handle();
-    b[PISCO_BINDING_POINTING] = s.pointing.handle();
-    b[PISCO_BINDING_TOD] = s.tod.handle();
-    b[PISCO_BINDING_COUNT] = s.counts.handle();
+    std::array<const Buffer*, PISCO_BINDINGS> b{};
+    b[PISCO_BINDING_SKY] = &sky_;
+    b[PISCO_BINDING_SKY_LO] = &sky_lo_;
+    b[PISCO_BINDING_RINGS] = &rings_;
+    b[PISCO_BINDING_WEIGHTS] = &weights_;
+    b[PISCO_BINDING_WEIGHTS64] = &weights64_;
+    b[PISCO_BINDING_POINTING] = &s.pointing;
+    b[PISCO_BINDING_TOD] = &s.tod;
+    b[PISCO_BINDING_COUNT] = &s.counts;
     s.set = pipeline_->make_set(b);
   }
 }
@@ -296,6 +338,7 @@ vk::ComputePipeline::Specialization VulkanBackend::specialization(const Prepared
   spec[PISCO_SPEC_RADIAL] = det.radial ? 1u : 0u;
   spec[PISCO_SPEC_FLOAT64] = float64_ ? 1u : 0u;
   spec[PISCO_SPEC_PARTS] = parts;
+  spec[PISCO_SPEC_COLUMNS] = weight_columns(det);
   return spec;
 }
 
@@ -369,6 +412,7 @@ std::uint64_t VulkanBackend::convolve(std::size_t detector, const PointingView& 
   push.sin_zeta = float(det.sin_zeta);
   push.grid_n = std::uint32_t(det.grid_n);
   push.grid_offset = grid_offset_.at(detector);
+  push.grid_offset64 = grid_offset64_.at(detector);
   push.nside = std::uint32_t(in_->sky.nside);
   push.flags = in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u;
   const vk::ComputePipeline::Specialization spec = specialization(det);
