@@ -30,7 +30,7 @@ struct BackendEntry {
   std::function<BackendInfo()> probe;
   std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const EngineOptions&)> create;
   // When set, replaces `priority` for "auto" once the backend is known to be available (the vulkan
-  // backend ranks below the float64 reference when its only device is a CPU, where it is slower).
+  // backend ranks below the float64 reference when its only device is a CPU: docs/vulkan.md says why).
   std::function<int()> auto_priority = nullptr;
 };
 
