@@ -8,7 +8,6 @@
 // monopole, I0 sum_k w_I(k), and the per-sample normalization when asked for.
 #version 460
 #extension GL_GOOGLE_include_directive : require
-#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 
 #include "interface.h"
 
@@ -32,7 +31,7 @@ struct RingEntry {
   bool shifted;
 };
 
-// Texels of float32 bits, fetched as integers so that no conversion can touch them.
+// Texels fetched as integers, so that no conversion can touch the float32 and float64 bits they carry.
 layout(binding = PISCO_BINDING_SKY) uniform usamplerBuffer sky;
 layout(binding = PISCO_BINDING_SKY_LO) uniform usamplerBuffer sky_lo;
 layout(binding = PISCO_BINDING_RINGS) uniform usamplerBuffer rings;

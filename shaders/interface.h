@@ -6,10 +6,10 @@
 // Samples per workgroup: one invocation convolves one sample.
 #define PISCO_WG_SIZE 32
 
-// Bindings. The sky, its residuals and the weights are uniform texel buffers of
-// R32G32B32A32_UINT texels holding float32 bits: lavapipe fetches a texel for eight invocations with
-// eight vector loads, where a storage-buffer load becomes a loop over the invocations with a bounds
-// check each, and GPUs read them through the texture cache.
+// Bindings. The read-only tables (0 to 4) are uniform texel buffers of R32G32B32A32_UINT texels
+// carrying the bits of float32, float64 and integer values as each binding says: lavapipe fetches a
+// texel for eight invocations with eight vector loads, where a storage-buffer load becomes a loop
+// over the invocations with a bounds check each, and GPUs read them through the texture cache.
 #define PISCO_BINDING_SKY 0        // texels, 2 per pixel: (kx, ky, kz, I - I0), (Q, U, V, 0)
 #define PISCO_BINDING_SKY_LO 1     // texels, 1 per pixel: k - float(k), so that float(k) + lo = k in float64
 #define PISCO_BINDING_RINGS 2      // texels, 1 per ring: z (low word, high word), first pixel, count | shifted << 31

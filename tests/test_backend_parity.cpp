@@ -241,6 +241,24 @@ TEST(BackendParity, OutOfMemoryFallsBackToSmallerChunks) {
                            "even for one-sample chunks");
 }
 
+// Tables larger than the device binds in one texel buffer are a clear error at set-up, naming the
+// NSIDE (or the grids), the texels needed and the limit.
+TEST(BackendParity, TablesBeyondTheTexelLimitAreAClearError) {
+  SKIP_WITHOUT_DEVICE();
+  if (backend != "vulkan") GTEST_SKIP() << "fault injection is the vulkan backend's";
+  const Scene s = scene(32);  // 12,288 pixels: 24,576 sky texels
+  {
+    FaultInjection f("texels-max:24575");
+    pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, options(backend)); },
+                             "an NSIDE 32 sky needs 24576 texels in one texel buffer, but");
+    pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, options(backend)); },
+                             "binds at most 24575 (maxTexelBufferElements)");
+  }
+  FaultInjection f("texels-max:24576");  // the sky fits, the five detectors' grids do not
+  pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, options(backend)); },
+                           "the beam grids need");
+}
+
 TEST(BackendParity, LostDeviceIsAClearError) {
   SKIP_WITHOUT_DEVICE();
   if (backend != "vulkan") GTEST_SKIP() << "fault injection is the vulkan backend's";

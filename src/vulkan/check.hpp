@@ -22,10 +22,12 @@ struct OutOfMemory : Error {
 // Fault injection for the tests of the error paths, from the environment variable
 // PISCO_VK_TEST_FAULT: "oom-above:BYTES" makes every streaming buffer larger than BYTES fail to
 // allocate as if the device were out of memory; "lose-device-after:N" makes the device fail as lost
-// once N chunks have completed. Unset (always, outside tests): no effect.
+// once N chunks have completed; "texels-max:N" makes the device bind at most N texels in a texel
+// buffer. Unset (always, outside tests): no effect.
 struct Faults {
   std::size_t oom_above = 0;         // 0: none
   long lose_device_after = -1;       // -1: never
+  std::size_t texels_max = 0;        // 0: the device's own limit
 };
 Faults injected_faults();
 

@@ -37,7 +37,7 @@ double mib(double bytes) { return bytes / double(1 << 20); }
 std::vector<float> float32_weights(const PreparedDetector& d) {
   double largest = 0.0;
   for (const double w : d.weights) largest = std::max(largest, std::abs(w));
-  const double cutoff = std::ldexp(largest, -64);
+  const double cutoff = std::max(std::ldexp(largest, -64), double(std::numeric_limits<float>::min()));
   std::vector<float> w32(d.weights.size());
   for (std::size_t k = 0; k < w32.size(); ++k) w32[k] = std::abs(d.weights[k]) < cutoff ? 0.0f : float(d.weights[k]);
   return w32;
@@ -88,7 +88,7 @@ class VulkanBackend final : public Backend {
   Buffer upload(const void* data, std::size_t bytes, const char* what, bool texels);
   void make_slots(std::size_t chunk);
   double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
-  vk::ComputePipeline::Specialization specialization(const PreparedDetector& det) const;
+  vk::ComputePipeline::Specialization specialization(std::size_t detector) const;
   void submit(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push,
               const PointingView& pointing,
               std::size_t begin, std::size_t n);
@@ -101,6 +101,7 @@ class VulkanBackend final : public Backend {
   Buffer sky_, sky_lo_, rings_, weights_, weights64_;
   std::vector<std::uint32_t> grid_offset_;    // per detector, in texels of weights_
   std::vector<std::uint32_t> grid_offset64_;  // per detector, in nodes of weights64_
+  std::vector<std::uint32_t> columns_;        // per detector: weight columns stored (2 or 4)
   double monopole_ = 0.0;
   bool float64_ = false;
   std::size_t chunk_ = 0;
@@ -144,11 +145,13 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   const bool per_sample = in_->normalization == Normalization::per_sample;
   float64_ = monopole_ != 0.0 || per_sample;
 
-  const double max_texels = double(info.max_texel_buffer_elements);
+  // Texel indices are signed 32-bit integers in the kernel.
+  double max_texels = std::min(double(info.max_texel_buffer_elements), double(std::numeric_limits<std::int32_t>::max()));
+  if (const std::size_t f = vk::injected_faults().texels_max) max_texels = std::min(max_texels, double(f));
   if (2.0 * double(npix) > max_texels)
     throw Error("vulkan: an NSIDE " + std::to_string(sky.nside) + " sky needs " + std::to_string(2 * npix) +
                 " texels in one texel buffer, but " + info.name + " binds at most " +
-                std::to_string(info.max_texel_buffer_elements) + " (maxTexelBufferElements); use the cpu backend");
+                std::to_string(std::uint64_t(max_texels)) + " (maxTexelBufferElements); use the cpu backend");
   std::vector<float> sky32(8 * npix), lo(float64_ ? 4 * npix : 4);
   for (std::size_t p = 0; p < npix; ++p) {
     const double* px = &sky.pixels[8 * p];
@@ -181,6 +184,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
     grid_offset_.push_back(std::uint32_t(w32.size() / 4));
     grid_offset64_.push_back(std::uint32_t(w64.size() / 2));
     const std::size_t columns = weight_columns(d);
+    columns_.push_back(std::uint32_t(columns));
     const std::vector<float> dw = float32_weights(d);
     const std::size_t nodes = dw.size() / 4;
     for (std::size_t k = 0; k < nodes; ++k)
@@ -199,7 +203,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   // The float32 grids take at least one texel a node, the float64 ones exactly one.
   if (double(w32.size() / 4) > max_texels)
     throw Error("vulkan: the beam grids need " + std::to_string(w32.size() / 4) + " texels, but " + info.name +
-                " binds at most " + std::to_string(info.max_texel_buffer_elements) +
+                " binds at most " + std::to_string(std::uint64_t(max_texels)) +
                 " (maxTexelBufferElements); use a coarser grid_step");
   weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids", true);
   weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids", true);
@@ -211,7 +215,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   chunk = std::max<std::size_t>(1, std::min({chunk, by_range, by_groups}));
   make_slots(chunk);
   // Compile, at set-up, the pipelines the detectors will use.
-  for (const PreparedDetector& d : in_->detectors) pipeline_->prepare(specialization(d));
+  for (std::size_t d = 0; d < in_->detectors.size(); ++d) pipeline_->prepare(specialization(d));
   device_->check_validation("setting up");
 }
 
@@ -324,7 +328,8 @@ double VulkanBackend::disc_pixels(const PreparedDetector& det) const {
   return 12.0 * double(in_->sky.nside) * double(in_->sky.nside) * (1.0 - det.cos_rho_max) / 2.0;
 }
 
-vk::ComputePipeline::Specialization VulkanBackend::specialization(const PreparedDetector& det) const {
+vk::ComputePipeline::Specialization VulkanBackend::specialization(std::size_t detector) const {
+  const PreparedDetector& det = in_->detectors.at(detector);
   const double disc = disc_pixels(det);
   std::uint32_t parts = 1;
   while (parts < PISCO_WG_SIZE && disc / parts > 16384.0) parts *= 2;
@@ -338,7 +343,7 @@ vk::ComputePipeline::Specialization VulkanBackend::specialization(const Prepared
   spec[PISCO_SPEC_RADIAL] = det.radial ? 1u : 0u;
   spec[PISCO_SPEC_FLOAT64] = float64_ ? 1u : 0u;
   spec[PISCO_SPEC_PARTS] = parts;
-  spec[PISCO_SPEC_COLUMNS] = weight_columns(det);
+  spec[PISCO_SPEC_COLUMNS] = columns_.at(detector);
   return spec;
 }
 
@@ -415,7 +420,7 @@ std::uint64_t VulkanBackend::convolve(std::size_t detector, const PointingView& 
   push.grid_offset64 = grid_offset64_.at(detector);
   push.nside = std::uint32_t(in_->sky.nside);
   push.flags = in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u;
-  const vk::ComputePipeline::Specialization spec = specialization(det);
+  const vk::ComputePipeline::Specialization spec = specialization(detector);
 
   // Chunks of at most chunk_ samples and about 1e9 pixel evaluations, so that no submission runs
   // for long enough to meet a driver's watchdog on large discs.
