@@ -29,7 +29,8 @@ constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 
 double mib(double bytes) { return bytes / double(1 << 20); }
 
-// The detector's weights in float32, 4 per node, with those below 2^-64 of the largest set to zero.
+// The detector's weights in float32, 4 per node, with those below 2^-64 of the largest (and any below
+// float32's smallest normal number) set to zero.
 // A Gaussian's tail reaches float32's subnormal range within a Table 1 disc (below 1.2e-38 from
 // about 13 sigma), and CPUs take a slow microcode path for every operation on a subnormal number:
 // on lavapipe, the third of a 10 deg disc's pixels beyond 13 sigma made the whole disc take about
