@@ -84,9 +84,9 @@ class VulkanBackend final : public Backend {
 
   void setup(const vk::DeviceInfo& info, const EngineOptions& options);
   void release() noexcept;
-  // A device buffer holding `bytes` of `data`; with a texel view of R32G32B32A32_UINT texels when
-  // `texels` (shaders/interface.h).
-  Buffer upload(const void* data, std::size_t bytes, const char* what, bool texels);
+  // A device-local uniform texel buffer holding `bytes` of `data`, viewed as R32G32B32A32_UINT texels
+  // (shaders/interface.h): every table the kernel reads.
+  Buffer upload(const void* data, std::size_t bytes, const char* what);
   void make_slots(std::size_t chunk);
   double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
   vk::ComputePipeline::Specialization specialization(std::size_t detector) const;
@@ -166,8 +166,8 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
     sky32[8 * p + 6] = float(px[7]);
     sky32[8 * p + 7] = 0.0f;
   }
-  sky_ = upload(sky32.data(), sky32.size() * sizeof(float), "the sky", true);
-  sky_lo_ = upload(lo.data(), lo.size() * sizeof(float), "the sky's float64 pixel vectors", true);
+  sky_ = upload(sky32.data(), sky32.size() * sizeof(float), "the sky");
+  sky_lo_ = upload(lo.data(), lo.size() * sizeof(float), "the sky's float64 pixel vectors");
   std::vector<std::uint32_t> rings;  // shaders/interface.h
   for (const RingEntry& r : sky.rings) {
     std::uint64_t z = 0;
@@ -175,7 +175,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
     std::memcpy(&z, &r.z, sizeof(z));
     rings.insert(rings.end(), {std::uint32_t(z), std::uint32_t(z >> 32), r.first, r.count | (r.shifted ? 1u << 31 : 0u)});
   }
-  rings_ = upload(rings.data(), rings.size() * sizeof(std::uint32_t), "the ring table", true);
+  rings_ = upload(rings.data(), rings.size() * sizeof(std::uint32_t), "the ring table");
 
   std::vector<float> w32;
   std::vector<double> w64;
@@ -206,8 +206,8 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
     throw Error("vulkan: the beam grids need " + std::to_string(w32.size() / 4) + " texels, but " + info.name +
                 " binds at most " + std::to_string(std::uint64_t(max_texels)) +
                 " (maxTexelBufferElements); use a coarser grid_step");
-  weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids", true);
-  weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids", true);
+  weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids");
+  weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids");
 
   // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
   const std::size_t by_range = info.max_storage_buffer_range / (3 * sizeof(double));
@@ -220,14 +220,14 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   device_->check_validation("setting up");
 }
 
-Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* what, bool texels) {
+Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* what) {
   const auto& fn = device_->fn();
   try {
     Buffer staging(*device_, bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::upload);
     std::memcpy(staging.mapped(), data, bytes);
-    const VkBufferUsageFlags usage = texels ? VkBufferUsageFlags(VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT) : storage;
-    Buffer target(*device_, bytes, usage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::device);
-    if (texels) target.make_texel_view(VK_FORMAT_R32G32B32A32_UINT);
+    Buffer target(*device_, bytes, VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                  MemoryUse::device);
+    target.make_texel_view(VK_FORMAT_R32G32B32A32_UINT);
     VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
     ai.commandPool = pool_;
     ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
@@ -336,7 +336,7 @@ vk::ComputePipeline::Specialization VulkanBackend::specialization(std::size_t de
   while (parts < PISCO_WG_SIZE && disc / parts > 16384.0) parts *= 2;
   // lavapipe (a CPU device) ends an invocation after 65,535 loop iterations without an error.
   if (device_->info().type == VK_PHYSICAL_DEVICE_TYPE_CPU && disc / parts > 60000.0)
-    throw Error("vulkan: discs of rho_max = " + std::to_string(std::acos(det.cos_rho_max) * 180 / 3.141592653589793) +
+    throw Error("vulkan: discs of rho_max = " + std::to_string(std::acos(det.cos_rho_max) * 180 / std::numbers::pi) +
                 " deg at NSIDE " + std::to_string(in_->sky.nside) + " hold about " + std::to_string(std::size_t(disc)) +
                 " pixels, more than " + device_->info().name +
                 " can sum in one workgroup; use a smaller rho_max, a GPU or the cpu backend");
