@@ -4,7 +4,7 @@
 # Works from any directory, as root or as a user with sudo.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-packages=(build-essential cmake ninja-build pkg-config libhealpix-cxx-dev libcfitsio-dev libglm-dev
+packages=(build-essential cmake ninja-build pkg-config libhealpix-cxx-dev libcfitsio-dev
           libgtest-dev libtomlplusplus-dev libcli11-dev libhdf5-dev healpy-data python3-healpy python3-numpy python3-matplotlib
           libvulkan-dev libvulkan-volk-dev glslang-tools mesa-vulkan-drivers vulkan-validationlayers)
 

@@ -81,7 +81,7 @@ vec4 interpolate_radial(Grid g, float r2) {
   return u <= float(g.n - 1) ? w : vec4(0.0);
 }
 
-// w . Lambda(-chi) S (DESIGN 3).
+// w . Lambda(-chi) S (docs/physics.md, "The measurement equation").
 float stokes_response(vec4 w, float cos2chi, float sin2chi, vec4 S) {
   return w.x * S.x + w.y * (S.y * cos2chi + S.z * sin2chi) + w.z * (S.z * cos2chi - S.y * sin2chi) +
          w.w * S.w;

@@ -1,4 +1,4 @@
-// The convolution kernel (DESIGN 3, 6, 7): one invocation per sample, walking its disc ring by ring
+// The convolution kernel (docs/vulkan.md, "The kernel"): one invocation per sample, walking its disc ring by ring
 // as the float64 reference does (src/core/cpu_backend.cpp). Large discs are split: PARTS invocations of one workgroup take every PARTS-th ring of the sample
 // and add their sums in shared memory (lavapipe also stops any invocation after 65,535 loop
 // iterations in all, so a disc of more pixels must be split there).
@@ -43,6 +43,7 @@ layout(std430, binding = PISCO_BINDING_COUNT) writeonly buffer CountBuffer { uin
 
 #include "contribution.glsl"
 #include "disc.glsl"
+#include "frame.glsl"
 
 // The running sums of one sample: Kahan-compensated float32, float64 monopole weight and norm.
 struct Sums {
@@ -85,17 +86,15 @@ void main() {
   Sums acc = Sums(0.0, 0.0, 0.0lf, 0.0lf);
   uint count = 0u;
   if (live) {
-    // The antenna frame (DESIGN 2), from float64 trigonometry of the pointing.
-    const double theta = pointing[3u * sid];
-    const double phi = pointing[3u * sid + 1u];  // wrapped into [0, 2 pi) by the host
-    const double psi = pointing[3u * sid + 2u];
-    const double ct = pisco_cos(theta), st = pisco_sin(theta);
-    const double cp = pisco_cos(phi), sp = pisco_sin(phi);
-    const double cs = pisco_cos(psi), ss = pisco_sin(psi);
-    const dvec3 th = dvec3(ct * cp, ct * sp, -st);
-    const dvec3 ph = dvec3(-sp, cp, 0.0lf);
-    const dvec3 theta_p64 = cs * th + ss * ph;
-    const dvec3 phi_p64 = -ss * th + cs * ph;
+    // The detector's antenna basis and line of sight in float64 (frame.glsl): from the boresight's
+    // angles or quaternion, with the detector's offset applied.
+    const dvec4 b = dvec4(pointing[4u * sid], pointing[4u * sid + 1u], pointing[4u * sid + 2u], pointing[4u * sid + 3u]);
+    const dvec4 offset_quat = dvec4(pc.offset_quat[0], pc.offset_quat[1], pc.offset_quat[2], pc.offset_quat[3]);
+    dvec3 theta_p64, phi_p64, p64;
+    double theta, phi;
+    pisco_sample_frame((pc.flags & PISCO_FLAG_QUATERNION) != 0u, (pc.flags & PISCO_FLAG_OFFSET) != 0u, b, offset_quat,
+                       theta_p64, phi_p64, p64, theta, phi);
+    const double ct = pisco_cos(theta);
     // Push constants read once, outside the pixel loops (lavapipe would read them again per lane
     // and per pixel).
     Grid g;
@@ -110,7 +109,7 @@ void main() {
     SampleFrame f;  // the float32 frame: the float64 one, rounded
     f.theta_p = vec3(theta_p64);
     f.phi_p = vec3(phi_p64);
-    f.p = vec3(dvec3(st * cp, st * sp, ct));
+    f.p = vec3(p64);
     f.e_c = pc.cos_zeta * f.theta_p + pc.sin_zeta * f.phi_p;
 
     // The disc: for_each_disc_range of src/core/disc.hpp, with the polar caps as whole rings.

@@ -1,4 +1,4 @@
-// Disc selection from the ring table (DESIGN 6): src/core/disc.hpp line for line, in float64, with
+// Disc selection from the ring table (docs/physics.md, "Disc selection"): src/core/disc.hpp line for line, in float64, with
 // `precise` so that the compiler contracts nothing the reference computes in two roundings. One
 // invocation handles one ring and produces at most two contiguous pixel ranges.
 #ifndef PISCO_DISC_GLSL

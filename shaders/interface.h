@@ -15,12 +15,14 @@
 #define PISCO_BINDING_RINGS 2      // texels, 1 per ring: z (low word, high word), first pixel, count | shifted << 31
 #define PISCO_BINDING_WEIGHTS 3    // texels: each node's COLUMNS weights, then its neighbour's; every detector's grid
 #define PISCO_BINDING_WEIGHTS64 4  // texels, 1 per node: float64 (w_I, Omega_pix B_TT / Omega~), low word first
-#define PISCO_BINDING_POINTING 5   // storage: 3 doubles (theta, phi, psi) per sample of the chunk
+#define PISCO_BINDING_POINTING 5   // storage: 4 doubles per sample: (theta, phi, psi, 0) or a quaternion (x, y, z, w)
 #define PISCO_BINDING_TOD 6        // storage: 1 double per sample of the chunk
 #define PISCO_BINDING_COUNT 7      // storage: 1 uint per sample: pixels in its disc
 #define PISCO_BINDINGS 8
 
 #define PISCO_FLAG_PER_SAMPLE 2u  // divide each sample by its own sum of Omega_pix B_TT / Omega~
+#define PISCO_FLAG_QUATERNION 4u  // the pointing is boresight quaternions, not angles
+#define PISCO_FLAG_OFFSET 8u      // the detector is off the boresight: apply offset_quat
 
 // Specialization constant ids: one pipeline per combination in use.
 #define PISCO_SPEC_RADIAL 0   // the detector's weights are a radial profile in r = sin(rho)
@@ -44,6 +46,7 @@ layout(push_constant) uniform PushConstants {
   double monopole;        // I0, subtracted from the float32 sky and added back in float64
   double grid_a;          // half-width of the beam grid (= sin rho_max)
   double grid_inv_step;   // 1 / node spacing
+  double offset_quat[4];  // the detector's offset from the boresight (x, y, z, w)
   float grid_a32;
   float grid_inv_step32;
   float cos_zeta;
@@ -58,7 +61,7 @@ layout(push_constant) uniform PushConstants {
   uint pad;
 #ifdef __cplusplus
 };
-static_assert(sizeof(PushConstants) == 88, "push constants must match the GLSL block");
+static_assert(sizeof(PushConstants) == 120, "push constants must match the GLSL block");
 }  // namespace pisco::detail::vk
 #else
 } pc;

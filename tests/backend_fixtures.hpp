@@ -1,4 +1,4 @@
-// Inputs and comparisons shared by the backend tests (VALIDATION B): a CMB-like sky, pointings that
+// Inputs and comparisons shared by the backend tests (docs/validation.md, "B"): a CMB-like sky, pointings that
 // reach the poles and cross phi = 0, the error statistics of a TOD against the reference, and why a
 // backend cannot run here.
 #pragma once
@@ -17,6 +17,7 @@
 #include "pisco/focal_plane.hpp"
 #include "pisco/pointing.hpp"
 #include "pisco/sky.hpp"
+#include "pisco/units.hpp"
 
 namespace pisco_test {
 
@@ -40,7 +41,8 @@ inline pisco::Sky cmb_like_sky(int nside, std::uint64_t seed, double monopole = 
 
 // Random pointings over the sphere, with some within 1 deg of each pole and across phi = 0.
 inline pisco::Pointing random_pointing(std::size_t n, std::uint64_t seed) {
-  constexpr double pi = std::numbers::pi, deg = pi / 180;
+  constexpr double pi = std::numbers::pi;
+  using pisco::deg;
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
   pisco::Pointing p;
@@ -86,7 +88,7 @@ struct Scene {
 // five cover both weight layouts (2D grid, radial profile) with and without w_U and w_V, which the
 // GPU kernels store in different ways.
 inline Scene backend_scene(int nside, double monopole = 0.0) {
-  constexpr double deg = std::numbers::pi / 180;
+  using pisco::deg;
   Scene s{cmb_like_sky(nside, 7, monopole), {}, {}};
   pisco::BeamOptions a;
   a.rho_max = 5 * deg;

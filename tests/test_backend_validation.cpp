@@ -1,4 +1,4 @@
-// VALIDATION C and D through a device backend (PISCO_TEST_BACKEND): the same bars as the float64
+// Cases C and D of docs/validation.md through a device backend (PISCO_TEST_BACKEND): the same bars as the float64
 // reference meets (tests/test_point_source.cpp, tests/test_ideal_cmb.cpp), with the float32 kernels.
 // Skipped, with the reason printed, where the backend has no device.
 #include <gtest/gtest.h>

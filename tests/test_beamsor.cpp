@@ -1,4 +1,4 @@
-// VALIDATION A4 and the beamsor builders: the integral normalization against an independent
+// A4 (docs/validation.md, "A") and the beamsor builders: the integral normalization against an independent
 // quadrature of the analytic profile, grid sampling, cross-polar terms and input errors.
 #include <gtest/gtest.h>
 
@@ -11,11 +11,12 @@
 #include "support.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/error.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 const double fwhm_to_sigma = 1.0 / std::sqrt(8 * std::log(2.0));
 
 // Adaptive Simpson: independent of the builder's composite Gauss-Legendre rule.

@@ -22,6 +22,7 @@
 #include "support.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/error.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
@@ -29,7 +30,7 @@ namespace fs = std::filesystem;
 using pisco::Beamsor;
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 const double fwhm_to_sigma = 1.0 / std::sqrt(8 * std::log(2.0));
 
 class BeamsorFits : public ::testing::Test {

@@ -1,4 +1,4 @@
-// Constant-elevation scans and focal-plane offsets (DESIGN 5), against geometric invariants computed
+// Constant-elevation scans and focal-plane offsets (docs/config.md, "[scan]"), against geometric invariants computed
 // independently: the distance to the zenith, the azimuth recovered by the inverse transform, the
 // sidereal day, and distances and bearings in the boresight frame.
 #include <gtest/gtest.h>
@@ -14,7 +14,7 @@
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 
 pisco::CesScan class_like() {
   pisco::CesScan s;

@@ -1,6 +1,6 @@
 // The cuda backend without a GPU: chunk sizing, device choice, the monopole split, and the kernel's
 // per-sample float32 arithmetic (src/cuda/sample.hpp, the functions convolve.cu runs) executed on the
-// host with the warp emulated lane by lane, held to the precision contract of VALIDATION B against
+// host with the warp emulated lane by lane, held to the precision contract of docs/validation.md, "B", against
 // the float64 reference. On a GPU, test_cuda checks the device itself against the same bars.
 #include <gtest/gtest.h>
 
@@ -17,6 +17,7 @@
 #include "cuda/device_data.hpp"
 #include "cuda/sample.hpp"
 #include "pisco/engine.hpp"
+#include "pisco/units.hpp"
 #include "backend_fixtures.hpp"
 #include "support.hpp"
 
@@ -24,7 +25,7 @@ namespace {
 
 namespace pc = pisco::detail::cuda;
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 
 TEST(CudaChunk, RequestedSizeIsKeptAndCapped) {
   EXPECT_EQ(pc::fit_chunk(7, 0), 7u);
@@ -38,12 +39,6 @@ TEST(CudaChunk, DefaultFitsHalfTheFreeMemory) {
   EXPECT_EQ(pc::fit_chunk(0, free_bytes), 500u);
   EXPECT_LE(pc::fit_chunk(0, free_bytes) * pc::bytes_per_chunk_sample, free_bytes / 2);
   EXPECT_EQ(pc::fit_chunk(0, 0), 1u);
-}
-
-TEST(CudaChunk, HalvingStopsAtOneSample) {
-  EXPECT_EQ(pc::halve_chunk(262144), 131072u);
-  EXPECT_EQ(pc::halve_chunk(3), 1u);
-  pisco_test::expect_error([] { pc::halve_chunk(1); }, "out of device or pinned host memory");
 }
 
 TEST(CudaDeviceChoice, AutoIndexAndName) {
@@ -96,12 +91,12 @@ struct HostDevice {
   std::vector<pc::KernelDetector> detectors;
   bool monopole = false, per_sample = false;
 
-  explicit HostDevice(const pisco::detail::EngineInputs& in) {
-    const double i0 = pisco::detail::float32_monopole(in.sky);
+  HostDevice(const pisco::detail::EngineInputs& in, const pisco::Sky& maps) {
+    const double i0 = pisco::detail::float32_monopole(maps);
     monopole = i0 != 0.0;
     per_sample = in.normalization == pisco::Normalization::per_sample;
-    pixels = pc::pixel_records(in.sky, i0);
-    vectors = pc::pixel_vectors(in.sky);
+    pixels = pc::pixel_records(maps, i0);
+    vectors = pc::pixel_vectors(maps);
     sky = {pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0};
     for (const auto& d : in.detectors) {
       weights.push_back(pc::float_weights(d));
@@ -134,9 +129,9 @@ template <bool Radial, bool Monopole, bool PerSample>
 Emulated emulate(const pc::KernelSky& sky, const pc::KernelDetector& det, const pisco::Pointing& p) {
   Emulated out;
   for (std::size_t i = 0; i < p.size(); ++i) {
-    const double theta = p.theta[i];
-    const double phi = pisco::detail::wrap_phi(p.phi[i]);
-    const auto fd = pc::sample_frame(theta, phi, p.psi[i], det);
+    const double in[4] = {p.theta[i], p.phi[i], p.psi[i], 0.0};
+    double theta = 0.0, phi = 0.0;
+    const auto fd = pc::sample_frame(in, false, det, theta, phi);
     const auto f = pc::to_float(fd);
     std::uint32_t first[pc::batch_ranges], offset[pc::batch_ranges + 1];
     pc::LaneSums lanes[pc::warp_lanes];
@@ -189,13 +184,13 @@ std::vector<double> reference(const Scene& s, std::size_t d, const pisco::Pointi
 TEST(CudaHostKernel, MonopoleIsSplitOnlyWhereItMatters) {
   const Scene plain = scene(16, 0.0);
   const Scene mono = scene(16, 2.725);
-  EXPECT_EQ(pisco::detail::float32_monopole(pisco::detail::prepare_sky(plain.sky)), 0.0);
-  const double i0 = pisco::detail::float32_monopole(pisco::detail::prepare_sky(mono.sky));
+  EXPECT_EQ(pisco::detail::float32_monopole(plain.sky), 0.0);
+  const double i0 = pisco::detail::float32_monopole(mono.sky);
   EXPECT_NEAR(i0, 2.725, 1e-5);
   pisco::Sky flat(8);
   for (std::size_t i = 0; i < flat.npix(); ++i) flat.I()[i] = -3.0;
-  EXPECT_EQ(pisco::detail::float32_monopole(pisco::detail::prepare_sky(flat)), -3.0);
-  const auto records = pc::pixel_records(pisco::detail::prepare_sky(flat), -3.0);
+  EXPECT_EQ(pisco::detail::float32_monopole(flat), -3.0);
+  const auto records = pc::pixel_records(flat, -3.0);
   EXPECT_EQ(records[5].i, 0.0f);
 }
 
@@ -205,7 +200,7 @@ TEST(CudaHostKernel, Float32SamplesMatchTheReference) {
     const Scene s = scene(64, 0.0);
     const pisco::Pointing p = random_pointing(1500, 11);
     const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, norm);
-    const HostDevice dev(in);
+    const HostDevice dev(in, s.sky);
     EXPECT_FALSE(dev.monopole);
     for (std::size_t d = 0; d < s.focal_plane.size(); ++d) {
       double ref_pixels = 0;
@@ -230,7 +225,7 @@ TEST(CudaHostKernel, MonopoleSkyKeepsTheAnisotropies) {
     const Scene a = scene(64, 0.0);
     const pisco::Pointing p = random_pointing(1000, 14);
     const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, norm);
-    const HostDevice dev(in);
+    const HostDevice dev(in, s.sky);
     EXPECT_TRUE(dev.monopole);
     for (std::size_t d = 0; d < s.focal_plane.size(); ++d) {
       const std::vector<double> ref = reference(s, d, p, norm);
@@ -250,8 +245,8 @@ TEST(CudaHostKernel, WithoutTheSplitTheMonopoleSkyFails) {
   const Scene a = scene(32, 0.0);
   const pisco::Pointing p = random_pointing(300, 15);
   const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, pisco::Normalization::integral);
-  HostDevice dev(in);
-  dev.pixels = pc::pixel_records(in.sky, 0.0);  // the monopole left in float32
+  HostDevice dev(in, s.sky);
+  dev.pixels = pc::pixel_records(s.sky, 0.0);  // the monopole left in float32
   dev.sky.pixels = dev.pixels.data();
   dev.sky.monopole = 0.0;
   dev.monopole = false;

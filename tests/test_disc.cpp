@@ -1,4 +1,4 @@
-// VALIDATION A3: the ring-table disc selection returns exactly HEALPix query_disc's pixel set.
+// A3 (docs/validation.md, "A"): the ring-table disc selection returns exactly HEALPix query_disc's pixel set.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -12,11 +12,12 @@
 
 #include "core/disc.hpp"
 #include "core/prepared.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 
 rangeset<std::int64_t> ours(const std::vector<pisco::detail::RingEntry>& rings, int nside, double theta,
                             double phi, double rho) {

@@ -204,4 +204,109 @@ TEST(Engine, BackendsAndErrors) {
   EXPECT_NE(message([&] { engine.convolve(9, s.ptg, tod); }).find("detector index 9"), std::string::npos);
 }
 
+// The scene's detectors moved off the boresight: every offset spelling, gamma included.
+pisco::FocalPlane offset_focal_plane(const pisco::FocalPlane& fp) {
+  std::vector<pisco::Detector> dets = fp.detectors();
+  const double offsets[][3] = {{2 * deg, -1 * deg, 0.3}, {-4 * deg, 3 * deg, -1.2}, {0, 6 * deg, 0}, {1 * deg, 0, 2.5}};
+  for (std::size_t i = 0; i < dets.size(); ++i) dets[i].set_offset(offsets[i % 4][0], offsets[i % 4][1], offsets[i % 4][2]);
+  return pisco::FocalPlane(dets);
+}
+
+double rms_of(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x * x;
+  return std::sqrt(s / double(v.size()));
+}
+
+double max_abs_diff(const std::vector<double>& a, const std::vector<double>& b) {
+  double m = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) m = std::max(m, std::abs(a[i] - b[i]));
+  return m;
+}
+
+// The engine owns the offsets: a detector off the boresight, given the boresight's pointing (as
+// angles or as quaternions), gets the TOD of its own pointing (expanded on the host and given to a
+// detector on the boresight), not the boresight's.
+TEST(Engine, OffsetDetectorsGetTheirOwnPointingInEveryForm) {
+  Scene s;
+  const pisco::FocalPlane moved = offset_focal_plane(s.fp);
+  pisco::Engine on_boresight(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2});
+  pisco::Engine offset(s.sky, s.beams, moved, {.backend = "cpu", .threads = 2});
+  std::vector<pisco::Quat> quats;
+  for (std::size_t i = 0; i < s.ptg.size(); ++i)
+    quats.push_back(pisco::quat_from_pointing(s.ptg.theta[i], s.ptg.phi[i], s.ptg.psi[i]));
+  double worst_angles = 0, worst_quats = 0;
+  for (std::size_t det = 0; det < s.fp.size(); ++det) {
+    pisco::Pointing own;
+    pisco::detector_pointing(s.ptg.view(), moved[det].offset, own);
+    std::vector<double> expected(s.ptg.size(), NAN), boresight(s.ptg.size(), NAN), from_angles(s.ptg.size(), NAN),
+        from_quats(s.ptg.size(), NAN);
+    on_boresight.convolve(det, own, expected);
+    on_boresight.convolve(det, s.ptg, boresight);
+    offset.convolve(det, s.ptg, from_angles);
+    offset.convolve(det, pisco::QuatPointingView{quats}, from_quats);
+    const double scale = rms_of(expected);
+    worst_angles = std::max(worst_angles, max_abs_diff(from_angles, expected) / scale);
+    worst_quats = std::max(worst_quats, max_abs_diff(from_quats, expected) / scale);
+    EXPECT_GT(max_abs_diff(from_angles, boresight) / scale, 1e-3) << "detector " << det << " got the boresight's TOD";
+  }
+  std::cout << "offset detectors: boresight angles vs expanded pointing, max |diff|/rms " << worst_angles
+            << "; boresight quaternions " << worst_quats << "\n";
+  EXPECT_LT(worst_angles, 1e-12);
+  EXPECT_LT(worst_quats, 1e-12);
+}
+
+TEST(Engine, AccumulateAddsIntoTheTod) {
+  Scene s;
+  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2});
+  std::vector<double> d(s.ptg.size()), sum(s.ptg.size());
+  engine.convolve(2, s.ptg, d);
+  for (std::size_t i = 0; i < sum.size(); ++i) sum[i] = 0.25 * double(i) - 3;
+  std::vector<double> expected(sum.size());
+  for (std::size_t i = 0; i < sum.size(); ++i) expected[i] = sum[i] + d[i];
+  engine.convolve(2, s.ptg, sum, /*accumulate=*/true);
+  EXPECT_EQ(sum, expected);
+}
+
+// submit() and wait(): several submissions in flight, for several detectors, give what convolve()
+// gives, bit for bit.
+TEST(Engine, SubmitThenWaitEqualsConvolve) {
+  Scene s;
+  const pisco::FocalPlane moved = offset_focal_plane(s.fp);
+  pisco::Engine engine(s.sky, s.beams, moved, {.backend = "cpu", .threads = 2});
+  std::vector<std::vector<double>> direct(moved.size()), queued(moved.size());
+  for (std::size_t det = 0; det < moved.size(); ++det) {
+    direct[det].assign(s.ptg.size(), NAN);
+    queued[det].assign(s.ptg.size(), NAN);
+    engine.convolve(det, s.ptg, direct[det]);
+  }
+  std::uint64_t last = 0;
+  for (std::size_t off = 0; off < s.ptg.size(); off += 37)
+    for (std::size_t det = 0; det < moved.size(); ++det) {
+      const std::size_t n = std::min<std::size_t>(37, s.ptg.size() - off);
+      last = engine.submit(det, s.ptg.view().subspan(off, n), std::span<double>(queued[det]).subspan(off, n));
+    }
+  engine.wait(last);
+  for (std::size_t det = 0; det < moved.size(); ++det) EXPECT_EQ(queued[det], direct[det]) << "detector " << det;
+}
+
+TEST(Engine, BadQuaternionsAndOffsetsAreNamed) {
+  Scene s;
+  const auto message = pisco_test::error_of;
+  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu"});
+  std::vector<pisco::Quat> q(20);
+  std::vector<double> tod(q.size());
+  q[7] = {0.1, 0, 0, 1};
+  std::string m = message([&] { engine.convolve(1, pisco::QuatPointingView{q}, tod); });
+  EXPECT_NE(m.find("sample 7"), std::string::npos) << m;
+  EXPECT_NE(m.find("'p0b'"), std::string::npos) << m;
+  q[7] = {0, 0, NAN, 1};
+  EXPECT_NE(message([&] { engine.convolve(1, pisco::QuatPointingView{q}, tod); }).find("sample 7"), std::string::npos);
+  std::vector<pisco::Detector> dets = s.fp.detectors();
+  dets[2].offset = {0, 0, 0, 2};
+  m = message([&] { pisco::Engine(s.sky, s.beams, pisco::FocalPlane(dets)); });
+  EXPECT_NE(m.find("'single'"), std::string::npos) << m;
+  EXPECT_NE(m.find("unit quaternion"), std::string::npos) << m;
+}
+
 }  // namespace

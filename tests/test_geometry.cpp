@@ -1,4 +1,4 @@
-// VALIDATION A1-A2: the trigonometry-free antenna coordinates and polarization angle of
+// A1-A2 (docs/validation.md, "A"): the trigonometry-free antenna coordinates and polarization angle of
 // core/contribution.hpp against the paper's Appendix A (spherical trigonometry).
 #include <gtest/gtest.h>
 
@@ -8,6 +8,7 @@
 #include <random>
 
 #include "core/contribution.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
@@ -17,7 +18,7 @@ using pisco::detail::SampleFrame;
 using pisco::detail::Vec3;
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 
 double angle_diff(double a, double b) { return std::remainder(a - b, 2 * pi); }
 
@@ -94,7 +95,7 @@ TEST(Geometry, AgreesWithAppendixANearNorthPole) { check_random(1e-4, 1 * deg, 5
 TEST(Geometry, AgreesWithAppendixANearSouthPole) { check_random(pi - 1 * deg, pi - 1e-4, 5000, 3, "within 1 deg of the south pole"); }
 
 TEST(Geometry, BeamCentreChiIsPsiPlusZeta) {
-  // VALIDATION A2: at the beam centre chi = psi0 + zeta, (x, y, z) = (0, 0, 1).
+  // A2: at the beam centre chi = psi0 + zeta, (x, y, z) = (0, 0, 1).
   std::mt19937_64 rng(4);
   std::uniform_real_distribution<double> u(0, 1);
   double worst = 0;
@@ -111,7 +112,7 @@ TEST(Geometry, BeamCentreChiIsPsiPlusZeta) {
 }
 
 TEST(Geometry, IdealDetectorResponse) {
-  // VALIDATION A2: with w = s/2 [(1+eps), (1-eps), 0, 0] the response is
+  // A2: with w = s/2 [(1+eps), (1-eps), 0, 0] the response is
   // s/2 [(1+eps) I + (1-eps)(Q cos 2chi + U sin 2chi)].
   const double s = 1.3, eps = 0.07, I = 2.0, Q = -0.4, U = 0.9, V = 0.2;
   const double w[4] = {s / 2 * (1 + eps), s / 2 * (1 - eps), 0, 0};

@@ -1,4 +1,4 @@
-// Binned I/Q/U map-maker (DESIGN 8): exact round trips, the condition-number cut, streaming.
+// Binned I/Q/U map-maker (docs/physics.md, "Map-making and spectra"): exact round trips, the condition-number cut, streaming.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,11 +11,12 @@
 #include "pisco/error.hpp"
 #include "pisco/mapmaker.hpp"
 #include "pisco/scan.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 
 struct Maps {
   std::vector<double> I, Q, U;
@@ -197,8 +198,8 @@ TEST(Mapmaker, ChunkedAddEqualsOneAdd) {
 }
 
 TEST(Mapmaker, BadInputsAreReportedAndLeaveTheMapsIntact) {
-  expect_error([] { pisco::BinnedMapmaker(12); }, "nside");
-  expect_error([] { pisco::BinnedMapmaker(0); }, "nside");
+  expect_error([] { pisco::BinnedMapmaker(12); }, "BinnedMapmaker: NSIDE = 12 is not a power of two");
+  expect_error([] { pisco::BinnedMapmaker(0); }, "NSIDE = 0");
   expect_error([] { pisco::BinnedMapmaker(8, -1.0); }, "rcond_min");
   expect_error([] { pisco::BinnedMapmaker(8, std::nan("")); }, "rcond_min");
 

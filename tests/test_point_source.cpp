@@ -1,4 +1,4 @@
-// VALIDATION C (paper 6.1): a polarized point source observed by a raster scan and binned into maps,
+// Case C of docs/validation.md (paper 6.1): a polarized point source observed by a raster scan and binned into maps,
 // against the same single-pixel map smoothed by HEALPix C++ (src/validation/validation.cpp).
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// VALIDATION E (paper 6.3) at test scale: random pointing offsets from the pixel centres give a
+// Case E of docs/validation.md (paper 6.3) at test scale: random pointing offsets from the pixel centres give a
 // spurious BB; symmetric offsets suppress it; an unpolarized sky shows no T->P.
 #include <gtest/gtest.h>
 

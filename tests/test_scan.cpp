@@ -1,4 +1,4 @@
-// Scan generators (DESIGN 5): pixel-centre, random-offset and raster scans.
+// Scan generators (docs/config.md, "[scan]"): pixel-centre, random-offset and raster scans.
 #include <gtest/gtest.h>
 
 #include <algorithm>

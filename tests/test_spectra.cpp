@@ -1,4 +1,5 @@
-// C_l tables, sky synthesis, anafast and the beam and pixel windows (DESIGN 8).
+// C_l tables, sky synthesis, anafast and the beam and pixel windows (docs/physics.md,
+// "Map-making and spectra").
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -17,11 +18,12 @@
 #include "support.hpp"
 #include "pisco/error.hpp"
 #include "pisco/spectra.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 
 using pisco_test::expect_error;
 
@@ -189,7 +191,7 @@ TEST(Spectra, UnseenPixelsCountAsZero) {
   expect_error([&] { pisco::anafast(nan_map, sky.Q(), sky.U(), nside, 23); }, "pixel 17");
   expect_error([&] { pisco::anafast(std::span<const double>(I).first(100), sky.Q(), sky.U(), nside, 23); },
                "I map has 100 pixels");
-  expect_error([&] { pisco::anafast(I, sky.Q(), sky.U(), 6, 23); }, "nside");
+  expect_error([&] { pisco::anafast(I, sky.Q(), sky.U(), 6, 23); }, "anafast: NSIDE = 6");
 }
 
 TEST(Spectra, GaussianBeamWindow) {
@@ -233,7 +235,7 @@ TEST(Spectra, PixelWindowFromHealpyData) {
   EXPECT_EQ(p[1], 0.0);
   EXPECT_NEAR(p[2], 0.99997725, 1e-8);
   expect_error([] { pisco::pixel_window(64, 257, false); }, "pixel_window_n0064.fits");
-  expect_error([] { pisco::pixel_window(3, 10, false); }, "nside");
+  expect_error([] { pisco::pixel_window(3, 10, false); }, "pixel_window: NSIDE = 3");
 }
 
 TEST(Spectra, DeconvolveWindowsAndDl) {

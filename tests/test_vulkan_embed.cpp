@@ -6,7 +6,6 @@
 #include <vulkan/vulkan.h>
 
 #include <cmath>
-#include <numbers>
 
 #include "backend_fixtures.hpp"
 #include "pisco/pisco.hpp"
@@ -35,8 +34,8 @@ TEST(VulkanEmbed, ApplicationLoaderAndPiscoCoexist) {
   pisco::Sky sky(16);
   for (std::size_t i = 0; i < sky.npix(); ++i) sky.I()[i] = std::sin(0.01 * double(i));
   pisco::BeamOptions o;
-  o.rho_max = 10 * std::numbers::pi / 180;
-  std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(4 * std::numbers::pi / 180, o)};
+  o.rho_max = 10 * pisco::deg;
+  std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(4 * pisco::deg, o)};
   pisco::FocalPlane fp;
   fp.add({"d", 0, 0, 1, 0});
   pisco::Pointing p;
@@ -52,7 +51,7 @@ TEST(VulkanEmbed, ApplicationLoaderAndPiscoCoexist) {
   double rms = 0;
   for (double r : ref) rms += r * r;
   rms = std::sqrt(rms / double(ref.size()));
-  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_NEAR(tod[i], ref[i], 1e-4 * rms) << i;  // VALIDATION B1
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_NEAR(tod[i], ref[i], 1e-4 * rms) << i;  // B1, docs/validation.md, "B"
   EXPECT_EQ(application_devices(), before);
 }
 

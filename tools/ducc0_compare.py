@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The Table 1 workload (VALIDATION G) through ducc0's harmonic total convolution, beside pisco-vk bench.
+"""The Table 1 workload (docs/validation.md, "G") through ducc0's harmonic total convolution, beside pisco-vk bench.
 
 Workload: a full-sky NSIDE 128 input, every NSIDE 128 pixel centre at psi = 0, 45, 90 deg for a PSB pair
 (2 detectors, zeta = 0 and -90 deg): 1,179,648 samples, a Gaussian beam of FWHM 1.5 deg.
@@ -12,10 +12,10 @@ pixel-centre scan at NSIDE 16 against ducc0's, on a band-limited sky synthesized
 receives directly. They differ by pisco's pixel-space quadrature (the sky sampled at NSIDE 128 pixel
 centres, the disc cut at rho_max = 5 deg); the relative RMS difference is printed.
 
-Convention (VALIDATION G): ducc0 gives d = I + Q cos 2psi + U sin 2psi when the E and B beam
+Convention: ducc0 gives d = I + Q cos 2psi + U sin 2psi when the E and B beam
 coefficients of healpy's blm layout are multiplied by -sqrt(2); the beam is built from healpy's
 gauss_beam (healpy's blm_gauss omits the polarization factor). pisco's ideal detector measures half of
-that (D = s/2 [1, cos 2chi, sin 2chi, 0], DESIGN 3).
+that (D = s/2 [1, cos 2chi, sin 2chi, 0]; docs/physics.md, "The measurement equation").
 
 The script runs itself inside its own virtual environment (default ~/.cache/pisco/ducc0-venv), created
 with python3 -m venv and filled with pip install ducc0 numpy healpy h5py where they are missing.

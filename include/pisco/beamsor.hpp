@@ -1,6 +1,6 @@
 // Beamsors: fields of 4x4 Mueller matrices over beam directions (paper section 3), sampled on a
 // regular grid in the orthographic coordinates (x, y) = (sin rho cos sigma, sin rho sin sigma) of the
-// antenna basis, |x|, |y| <= sin rho_max (DESIGN 4).
+// antenna basis, |x|, |y| <= sin rho_max (docs/physics.md, "Beamsors").
 #pragma once
 
 #include <array>
@@ -10,6 +10,8 @@
 #include <span>
 #include <string>
 #include <vector>
+
+#include "pisco/units.hpp"
 
 namespace pisco {
 
@@ -28,7 +30,7 @@ enum class CrossPolarPattern {
 };
 
 struct BeamOptions {
-  double rho_max = 0.08726646259971647;  // radians (5 deg); must be in (0, pi/2)
+  double rho_max = 5 * deg;              // radians; must be in (0, pi/2)
   double grid_step = 0.0;                // radians; 0 = 1/20 of the smallest FWHM
   double cross_polar = 0.0;              // kappa: cross-polar / co-polar field amplitude ratio
   CrossPolarPattern cross_polar_pattern = CrossPolarPattern::uniform;
@@ -52,10 +54,12 @@ class Beamsor {
   // With `radial`, the field must not depend on sigma: it is stored as a radial profile in
   // r = sin(rho), sampled radial_oversampling times finer than grid_step, so that its interpolation
   // is exactly invariant under rotations about the beam axis (an ideal round beam then leaks no
-  // temperature into polarization, VALIDATION C).
+  // temperature into polarization: docs/validation.md, "C").
   static Beamsor from_field(const Field& field, double rho_max, double grid_step,
                             std::string description, double feature_scale = 0.0, bool radial = false);
   static constexpr int radial_oversampling = 8;
+  // The most grid nodes per axis any builder accepts (a 2D grid of 8192^2 nodes is 512 MiB per element).
+  static constexpr int max_grid_nodes = 8192;
 
   // The paper's HEALPix beamsor files: a FITS binary table of up to 16 HEALPix maps with columns
   // named B_TT, B_QT, ... (B_XY = row Y, column X; absent columns are zero), beam axis at the north

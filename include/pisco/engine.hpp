@@ -47,9 +47,30 @@ class Engine {
   Engine(Engine&&) noexcept;
   Engine& operator=(Engine&&) noexcept;
 
-  // TOD of detector `detector` for the given pointing chunk; tod.size() must equal pointing.size().
-  // Every sample of tod is written. Throws pisco::Error on a bad sample (naming its index).
-  void convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod);
+  // TOD of detector `detector` for a chunk of boresight pointing, as angles or as quaternions; the
+  // engine applies the detector's offset (Detector::offset) on the device. tod.size() must equal the
+  // pointing's size. Every sample of tod is written, or, with `accumulate`, added to what tod holds
+  // (as a framework operator adds a signal into its detector data). Throws pisco::Error on a bad
+  // sample (naming the detector and the sample's index).
+  void convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate = false);
+  void convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
+                bool accumulate = false);
+
+  // The same, asynchronously: the pointing is read (copied to the device's staging memory) before
+  // submit() returns, and the call returns a ticket as soon as the work is queued; tod must stay
+  // valid, and is written, by the time wait(ticket) returns. Submissions complete in order, so
+  // waiting for one waits for every earlier one. While the device convolves one submission, the
+  // caller prepares the next and reads back the previous: upload, compute and download overlap
+  // whatever the size of the caller's chunks. The device holds at most two chunks in flight: a
+  // submit() that finds both busy first completes the oldest.
+  std::uint64_t submit(std::size_t detector, const PointingView& boresight, std::span<double> tod,
+                       bool accumulate = false);
+  std::uint64_t submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
+                       bool accumulate = false);
+  // Waits for submission `ticket` and every earlier one; without a ticket, for all. Rethrows the
+  // error of a failed submission.
+  void wait(std::uint64_t ticket);
+  void wait();
 
   std::string backend_name() const;
   std::string device_name() const;
@@ -61,9 +82,13 @@ class Engine {
   static std::vector<BackendInfo> backends();
 
  private:
+  template <class View>
+  std::uint64_t submit_view(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate);
+
   FocalPlane focal_plane_;
   std::unique_ptr<detail::Backend> backend_;
   std::uint64_t samples_ = 0, pixels_ = 0;
+  std::uint64_t next_ticket_ = 1;
 };
 
 }  // namespace pisco

@@ -1,5 +1,5 @@
 // Errors: every bad input is reported by throwing pisco::Error with a message that names the file,
-// key, value or sample and what was expected (DESIGN 12).
+// key, value or sample and what was expected (docs/formats.md, "Errors and partial files").
 #pragma once
 
 #include <stdexcept>

@@ -2,8 +2,11 @@
 #pragma once
 
 #include <cstddef>
+#include <filesystem>
 #include <string>
 #include <vector>
+
+#include "pisco/quaternion.hpp"
 
 namespace pisco {
 
@@ -13,12 +16,16 @@ struct Detector {
   double epsilon = 0.0;  // cross-polar leakage: polarization efficiency is 1 - epsilon
   double gain = 1.0;     // responsivity s
   std::size_t beam = 0;  // index of this detector's beamsor in the engine's beam list
-  // Offset from the boresight in focal-plane coordinates (radians): the detector's beam axis lies at
-  // distance sqrt(xi^2 + eta^2) from the boresight towards atan2(eta, xi), measured from the
-  // boresight's theta' axis towards phi' (azimuthal-equidistant), and its own theta' axis is the
-  // boresight's carried along that great circle, then turned by gamma. Zero: on the boresight.
-  double xi = 0.0, eta = 0.0, gamma = 0.0;
-  bool has_offset() const noexcept { return xi != 0.0 || eta != 0.0 || gamma != 0.0; }
+  // Offset from the boresight: the rotation from the boresight's antenna basis to the detector's
+  // (pisco::offset_quat), identity on the boresight. Its other spelling is focal-plane coordinates
+  // (xi, eta, gamma): set_offset() and offset_xi_eta_gamma() convert through quaternion.hpp. The
+  // engine applies it to every pointing it is given, angles or quaternions.
+  Quat offset{};
+  void set_offset(double xi, double eta, double gamma) noexcept { offset = offset_quat(xi, eta, gamma); }
+  void offset_xi_eta_gamma(double& xi, double& eta, double& gamma) const noexcept {
+    offset_from_quat(offset, xi, eta, gamma);
+  }
+  bool has_offset() const noexcept { return offset.x != 0.0 || offset.y != 0.0 || offset.z != 0.0; }
 };
 
 class FocalPlane {
@@ -40,5 +47,24 @@ class FocalPlane {
  private:
   std::vector<Detector> detectors_;
 };
+
+// A TOAST 3 focal plane file, as toast.instrument.Focalplane.save_hdf5 writes it (docs/formats.md,
+// "TOAST focal planes"): the compound dataset `focalplane`, one row per detector, with the units of its
+// columns in `focalplane.__table_column_meta__`. Each row becomes a Detector: name; epsilon =
+// pol_leakage (or (1 - eta)/(1 + eta) from pol_efficiency eta when only that column exists); gain =
+// 2 / (1 + epsilon), so that the TOD is TOAST's I + (1 - epsilon)/(1 + epsilon) (Q cos 2a + U sin 2a);
+// zeta = psi_pol (0 without the column); offset = quat R_z(-zeta), so that the detector's polarization
+// axis (offset R_z(zeta) x^) is TOAST's quat x^; beam = `beam` for every detector. TOAST's xi, eta and
+// gamma columns are another spelling of quat and are not read.
+struct ToastFocalPlane {
+  std::vector<Detector> detectors;  // in the table's row order
+  std::vector<double> fwhm;         // per detector, radians (column fwhm); empty without the column
+  double sample_rate = 0.0;         // Hz, the table's meta sample_rate; 0 when absent
+};
+// Throws pisco::Error naming the file, the row (from 0) and detector, and the column: for a file that
+// is not HDF5, a missing `focalplane` dataset or `name` / `quat` column, an empty table, a quaternion
+// that is not finite or not unit to within 1e-6, duplicate names, or an angle column in a unit other
+// than rad, deg, arcmin or arcsec.
+ToastFocalPlane read_toast_focal_plane(const std::filesystem::path& file, std::size_t beam = 0);
 
 }  // namespace pisco

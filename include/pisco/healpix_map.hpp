@@ -1,4 +1,5 @@
-// HEALPix helpers for maps that are not skies: binned maps, hit maps.
+// HEALPix helpers shared by skies, maps, scans and files: the NSIDE the library accepts, the UNSEEN
+// marker, writing maps that are not skies (binned maps, hit maps), and pixel lookup.
 #pragma once
 
 #include <cstddef>
@@ -8,6 +9,23 @@
 #include <vector>
 
 namespace pisco {
+
+// The largest NSIDE accepted anywhere in the library (skies, maps, scans, spectra, FITS files). Pixel
+// geometry goes through HEALPix C++'s Healpix_Base, whose pixel indices are 32-bit ints:
+// 12 NSIDE^2 = 805,306,368 pixels at NSIDE 8192, while NSIDE 16384 would need 3.2e9.
+inline constexpr int max_nside = 8192;
+
+// Throws pisco::Error("<where>: NSIDE = <nside> is not a power of two in [1, 8192]") unless nside is
+// a power of two in [1, max_nside]. `where` names the function, file or key the value came from.
+void check_nside(long long nside, const std::string& where);
+
+// HEALPix's marker of a pixel without data (healpy's UNSEEN): unsolved pixels of binned maps.
+inline constexpr double unseen = -1.6375e30;
+// True for UNSEEN to within 1e-5 relative, as healpy compares it (files may round it to float32).
+inline bool is_unseen(double value) noexcept {
+  const double d = value - unseen;
+  return (d < 0 ? -d : d) <= 1e-5 * -unseen;
+}
 
 struct MapColumn {
   std::string name;                 // TTYPE, e.g. I_STOKES or HITS

@@ -1,4 +1,5 @@
-// Binned I/Q/U map-making from TOD, streamed chunk by chunk (DESIGN 8).
+// Binned I/Q/U map-making from TOD, streamed chunk by chunk (docs/physics.md, "Map-making and
+// spectra").
 #pragma once
 
 #include <cstddef>
@@ -7,18 +8,17 @@
 #include <vector>
 
 #include "pisco/focal_plane.hpp"
+#include "pisco/healpix_map.hpp"
 #include "pisco/pointing.hpp"
 
 namespace pisco {
 
 struct BinnedMaps {
   int nside = 0;
-  std::vector<double> I, Q, U;            // HEALPix RING; unsolved pixels are UNSEEN (-1.6375e30)
+  std::vector<double> I, Q, U;            // HEALPix RING; unsolved pixels are pisco::unseen
   std::vector<std::uint32_t> hits;        // samples per pixel
   std::vector<double> rcond;              // reciprocal condition number of each pixel's 3x3 matrix
 };
-
-inline constexpr double unseen = -1.6375e30;
 
 class BinnedMapmaker {
  public:

@@ -1,10 +1,13 @@
-// Scan generators: deterministic (theta, phi, psi) streams for one detector (DESIGN 5).
+// Scan generators: deterministic (theta, phi, psi) streams for one detector (docs/config.md, "[scan]").
 #pragma once
 
+#include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
 #include "pisco/pointing.hpp"
+#include "pisco/quaternion.hpp"
 
 namespace pisco {
 
@@ -52,6 +55,63 @@ struct CesScan {
   double azimuth(std::size_t i) const;
   // Local sidereal time at sample i (radians).
   double local_sidereal_time(std::size_t i) const;
+};
+
+// A spinning, precessing satellite at L2 (the scanning strategy of litebird_sim's
+// SpinningScanningStrategy and TOAST 3's SimSatellite). Three rotations, each right-handed and at a
+// constant rate, computed in double directly from the time of each sample
+// t = start_time + i / sample_rate (no accumulation: any split into chunks gives the same bits):
+// - the boresight turns about the spin axis, at spin_boresight_angle (beta) from it, one turn per
+//   spin_period; spin phase 2 pi t / spin_period + spin_phase;
+// - the spin axis turns about the anti-sun direction (the precession axis), at spin_sun_angle
+//   (alpha) from it, one turn per precession_period; phase 2 pi t / precession_period +
+//   precession_phase;
+// - the anti-sun direction moves along the ecliptic, 2 pi per `year`, at ecliptic longitude
+//   2 pi t / year: t = 0 is an instant when the anti-sun direction is at longitude 0 (the Sun at
+//   180 deg, the September equinox), as in litebird_sim (float times) and TOAST. start_time =
+//   L / (2 pi) year puts it at longitude L. The yearly motion is uniform (no ephemeris: the Earth's
+//   orbital eccentricity puts the true anti-sun direction up to 1.9 deg from it) and the orbit about
+//   L2 is ignored.
+// At precession phase 0 the spin axis lies in the plane of the anti-sun direction and the north
+// ecliptic pole, north of the ecliptic; at spin phase 0 the boresight is at its closest to the
+// anti-sun direction (|alpha - beta| from it).
+// The boresight quaternion is, in the ecliptic frame (the composition of litebird_sim's
+// spin_to_ecliptic with its bore2spin quaternion R_y(beta), boresight_rotangle = spin_rotangle = 0):
+//   q = R_z(2 pi t / year) R_x(precession angle) R_y(pi/2 - alpha) R_z(spin angle) R_y(beta),
+// then turned into the output frame (equatorial or galactic) by a fixed rotation on the left.
+// Orientation: the boresight's theta' (q x^ q*, where a detector at zeta = 0 points) lies in the
+// plane of the spin axis and the line of sight, pointing away from the spin axis, across the scan;
+// phi' (q y^ q*) points along the boresight's motion about the spin axis (spin axis x line of
+// sight), the scan direction. This is litebird_sim's frame; TOAST's satellite_scanning gives the
+// boresight's x axis along the scan direction and its y axis towards the spin axis, which is this
+// frame turned by +90 deg about the line of sight (x_TOAST = phi', y_TOAST = -theta': a direction at
+// angle z from TOAST's x axis towards its y axis is at zeta = z + 90 deg here).
+struct SatelliteScan {
+  double spin_sun_angle = 0.7853981633974483;        // alpha, radians, within [0, pi]
+  double spin_boresight_angle = 0.8726646259971648;  // beta, radians, within (0, pi)
+  double precession_period = 192.348 * 60;           // seconds (LiteBIRD)
+  double spin_period = 20.0 * 60;                    // seconds (LiteBIRD: 0.05 rpm)
+  double sample_rate = 19.0;                         // Hz
+  double start_time = 0.0;                           // seconds from the reference epoch above
+  double precession_phase = 0.0, spin_phase = 0.0;   // radians at t = 0
+  double year = 365.25 * 86400;                      // seconds: one turn of the anti-sun direction
+  // Coordinates of the output (and of the sky map): ecliptic, or equatorial (the J2000 mean equator,
+  // through the J2000 obliquity 23.4392911 deg) or galactic (IAU 1958: north galactic pole at RA 192.85948 deg,
+  // Dec 27.12825 deg, galactic longitude of the north celestial pole 122.93192 deg, J2000).
+  enum class Frame { ecliptic, equatorial, galactic } frame = Frame::ecliptic;
+  std::size_t samples = 0;                           // total number of samples
+
+  // Checks the parameters; throws pisco::Error naming the field.
+  void check() const;
+  // Boresight quaternions of samples [first, first + count), appended to `out` (cleared first).
+  void generate(std::size_t first, std::size_t count, std::vector<Quat>& out) const;
+  // Time of sample i, seconds from the reference epoch: start_time + i / sample_rate.
+  double time(std::size_t i) const;
+  // The spin axis and the anti-sun direction at sample i, unit vectors in the output frame.
+  std::array<double, 3> spin_axis(std::size_t i) const;
+  std::array<double, 3> anti_sun(std::size_t i) const;
+  // The fixed rotation from ecliptic coordinates to `frame` (v_frame = q v_ecliptic q*).
+  static Quat ecliptic_to(Frame frame) noexcept;
 };
 
 }  // namespace pisco

@@ -1,4 +1,5 @@
-// Sky synthesis from a C_l table and power spectra through HEALPix C++ (DESIGN 8).
+// Sky synthesis from a C_l table and power spectra through HEALPix C++ (docs/physics.md,
+// "Map-making and spectra").
 #pragma once
 
 #include <cstdint>

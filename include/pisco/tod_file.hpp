@@ -1,4 +1,4 @@
-// TOD and pointing files (DESIGN 9): HDF5, one group per detector.
+// TOD and pointing files (docs/formats.md, "TOD files" and "Pointing files"): HDF5, one group per detector.
 //
 // Layout of a TOD file ("pisco-tod-1"):
 //   /                      string attributes given by the caller (units, nside, beam, backend, device,
@@ -8,7 +8,7 @@
 //   /<detector>/signal     float64 or float32, one value per sample
 //   /<detector>/theta,phi,psi   float64 pointing [rad], only when written with_pointing
 //
-// A pointing input file (DESIGN 5, per-detector form) has the same layout without `signal`: groups named
+// A pointing input file (per-detector form) has the same layout without `signal`: groups named
 // after detectors, each holding float64 (or float32) 1-D datasets theta, phi, psi of equal length.
 // A TOD file written with_pointing is therefore also a pointing file.
 //

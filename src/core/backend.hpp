@@ -10,25 +10,53 @@
 
 #include "core/prepared.hpp"
 #include "pisco/engine.hpp"
+#include "pisco/error.hpp"
 
 namespace pisco::detail {
+
+// An error in a submission of `detector`: the engine names the detector in its message.
+struct SubmissionError : Error {
+  SubmissionError(std::size_t det, const std::string& what) : Error(what), detector(det) {}
+  std::size_t detector;
+};
+
+// One chunk of boresight pointing as a backend receives it: angles or quaternions, validated.
+struct PointingInput {
+  PointingView angles;
+  QuatPointingView quats;
+  bool quaternions = false;
+  std::size_t size() const noexcept { return quaternions ? quats.size() : angles.size(); }
+  PointingInput subspan(std::size_t offset, std::size_t count) const {
+    PointingInput p = *this;
+    if (quaternions) p.quats = quats.subspan(offset, count);
+    else p.angles = angles.subspan(offset, count);
+    return p;
+  }
+};
 
 class Backend {
  public:
   virtual ~Backend() = default;
   virtual std::string name() const = 0;
   virtual std::string device() const = 0;
-  // pointing has been validated and has tod.size() samples; every sample of tod must be written.
-  // Returns the number of sky pixels evaluated.
-  virtual std::uint64_t convolve(std::size_t detector, const PointingView& pointing,
-                                 std::span<double> tod) = 0;
+  // Queues the TOD of `pointing` (tod.size() samples, validated) for `detector`: written into tod,
+  // or added to it with `accumulate`. The pointing is read before submit() returns; tod must stay
+  // valid until wait() has returned for `ticket` (tickets increase with every submission).
+  virtual void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
+                      std::uint64_t ticket) = 0;
+  // Completes every submission up to `ticket`, in order. Returns the number of sky pixels they
+  // evaluated. On an error, every pending submission is abandoned and the error names the
+  // detector and samples of the submission that failed.
+  virtual std::uint64_t wait(std::uint64_t ticket) = 0;
 };
 
 struct BackendEntry {
   std::string name;
   int priority;  // "auto" picks the available backend with the highest priority
   std::function<BackendInfo()> probe;
-  std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const EngineOptions&)> create;
+  // Makes the backend; it packs the sky's pixels from `sky` into what it keeps, during the call only.
+  std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const Sky&, const EngineOptions&)>
+      create;
   // When set, replaces `priority` for "auto" once the backend is known to be available (the vulkan
   // backend ranks below the float64 reference when its only device is a CPU: docs/vulkan.md says why).
   std::function<int()> auto_priority = nullptr;

@@ -1,4 +1,5 @@
-// Beamsor builders, grid sampling, interpolation and the integral normalization (DESIGN 4).
+// Beamsor builders, grid sampling, interpolation and the integral normalization (docs/physics.md,
+// "Beamsors").
 #include "pisco/beamsor.hpp"
 
 #include <algorithm>
@@ -6,23 +7,18 @@
 #include <numbers>
 #include <sstream>
 
+#include "core/text.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr int max_grid_nodes = 8192;
-
-std::string deg(double rad) {
-  std::ostringstream s;
-  s << rad * 180.0 / pi << " deg";
-  return s.str();
-}
+using detail::degrees_text;
 
 void check_rho_max(double rho_max, const char* who) {
   if (!(rho_max > 0.0 && rho_max < pi / 2))
-    throw Error(std::string(who) + ": rho_max = " + deg(rho_max) +
+    throw Error(std::string(who) + ": rho_max = " + degrees_text(rho_max) +
                 " is outside (0, 90) deg; beams are limited to the front hemisphere");
 }
 
@@ -100,11 +96,11 @@ Beamsor::Field gaussian_field(double sx, double sy, double angle, const BeamOpti
 
 void check_fwhm(double fwhm, double rho_max, const char* what) {
   if (!(std::isfinite(fwhm) && fwhm > 0.0))
-    throw Error(std::string("beam: ") + what + " must be a positive finite angle, got " + deg(fwhm));
+    throw Error(std::string("beam: ") + what + " must be a positive finite angle, got " + degrees_text(fwhm));
   if (fwhm / 2 >= rho_max)
-    throw Error(std::string("beam: ") + what + " = " + deg(fwhm) +
+    throw Error(std::string("beam: ") + what + " = " + degrees_text(fwhm) +
                 " is wider than the beam grid: its half-maximum radius does not fit within rho_max = " +
-                deg(rho_max));
+                degrees_text(rho_max));
 }
 
 }  // namespace
@@ -171,14 +167,14 @@ Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step
                             std::string description, double feature_scale, bool radial) {
   check_rho_max(rho_max, "beam");
   if (!(std::isfinite(grid_step) && grid_step > 0.0))
-    throw Error("beam: grid_step must be a positive finite angle, got " + deg(grid_step));
+    throw Error("beam: grid_step must be a positive finite angle, got " + degrees_text(grid_step));
   Beamsor b;
   b.rho_max_ = rho_max;
   b.a_ = std::sin(rho_max);
   const double nodes = std::ceil(2.0 * b.a_ / grid_step) + 1.0;
   if (nodes > max_grid_nodes)
-    throw Error("beam: grid_step = " + deg(grid_step) + " needs " + std::to_string(nodes) +
-                " nodes per axis for rho_max = " + deg(rho_max) + "; at most " +
+    throw Error("beam: grid_step = " + degrees_text(grid_step) + " needs " + std::to_string(nodes) +
+                " nodes per axis for rho_max = " + degrees_text(rho_max) + "; at most " +
                 std::to_string(max_grid_nodes) + " are allowed");
   b.radial_ = radial;
   if (radial) {
@@ -229,7 +225,7 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
     << " arcmin";
   const bool radial = fwhm_x == fwhm_y && (options.cross_polar == 0.0 ||
                                            options.cross_polar_pattern == CrossPolarPattern::uniform);
-  if (radial) d << " (radial profile every " << step / radial_oversampling * 180 / pi * 60 << " arcmin)";
+  if (radial) d << " (radial profile every " << step / radial_oversampling / deg * 60 << " arcmin)";
   return from_field(gaussian_field(fwhm_x * to_sigma, fwhm_y * to_sigma, angle, options),
                     options.rho_max, step, d.str(), smallest, radial);
 }

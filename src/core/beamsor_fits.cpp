@@ -1,4 +1,5 @@
-// HEALPix beamsor files, the PISCO paper's representation (DESIGN 4, 9, 12): a FITS binary table of
+// HEALPix beamsor files, the PISCO paper's representation (docs/formats.md, "Beamsor files (HEALPix
+// FITS)"; docs/physics.md, "Beamsors"): a FITS binary table of
 // up to 16 full-sky HEALPix maps named B_TT, B_QT, ... (B_XY = Mueller row Y, column X), with the
 // beam axis at the north pole and sigma = longitude.
 //
@@ -36,7 +37,9 @@
 #include <pointing.h>
 
 #include "core/fits_table.hpp"
+#include "core/text.hpp"
 #include "pisco/beamsor.hpp"
+#include "pisco/healpix_map.hpp"
 
 namespace pisco {
 namespace {
@@ -46,15 +49,7 @@ namespace fs = std::filesystem;
 using namespace detail;  // core/fits_table.hpp
 
 constexpr double pi = std::numbers::pi;
-constexpr int max_grid_nodes = 8192;   // per axis, as for every other beamsor builder
-constexpr double healpix_unseen = -1.6375e30;
 constexpr const char* stokes_letters = "TQUV";
-
-std::string deg(double rad) {
-  std::ostringstream s;
-  s << rad * 180.0 / pi << " deg";
-  return s.str();
-}
 
 // B_XY names row Y, column X (X leaks into Y); elements are stored at [row * 4 + col].
 std::string element_name(int e) {
@@ -163,7 +158,7 @@ void clean_element(const fs::path& file, int e, std::vector<double>& v, long lon
     if (!std::isfinite(v[p]))
       fail(file, "column " + element_name(e) + " has a non-finite value at pixel " +
                      std::to_string(p) + " (RING); beam values must be finite");
-    if (std::abs(v[p] - healpix_unseen) > 1e-5 * std::abs(healpix_unseen)) continue;
+    if (!is_unseen(v[p])) continue;
     if (static_cast<long long>(p) < cap_pixels)
       fail(file, "column " + element_name(e) + " is UNSEEN at pixel " + std::to_string(p) +
                      " (RING), inside rho_max; the beam must be defined over the whole cap");
@@ -173,10 +168,10 @@ void clean_element(const fs::path& file, int e, std::vector<double>& v, long lon
 
 void check_read_arguments(const fs::path& file, double rho_max, double grid_step) {
   if (!(rho_max > 0.0 && rho_max < pi / 2))
-    fail(file, "rho_max = " + deg(rho_max) +
+    fail(file, "rho_max = " + degrees_text(rho_max) +
                    " is outside (0, 90) deg; beams are limited to the front hemisphere");
   if (!(std::isfinite(grid_step) && grid_step >= 0.0))
-    fail(file, "grid_step = " + deg(grid_step) +
+    fail(file, "grid_step = " + degrees_text(grid_step) +
                    " must be a finite angle >= 0 (0 = the file's pixel size)");
 }
 
@@ -216,17 +211,17 @@ double pixel_sum_omega(const fs::path& file, const BeamMaps& m, double rho_max) 
   for (long long p = 0; p < m.cap_pixels; ++p) sum += m.values[0][static_cast<std::size_t>(p)];
   const double omega = sum * 4 * pi / (12.0 * m.nside * m.nside);
   if (!(omega > 0.0))
-    fail(file, "the sum of B_TT over the pixels within rho_max = " + deg(rho_max) + " is " +
+    fail(file, "the sum of B_TT over the pixels within rho_max = " + degrees_text(rho_max) + " is " +
                    std::to_string(omega) + " sr; expected a positive beam solid angle");
   return omega;
 }
 
 int grid_nodes(const fs::path& file, double half_width, double step, double rho_max) {
   const double nodes = std::ceil(2.0 * half_width / step) + 1.0;
-  if (nodes > max_grid_nodes)
-    fail(file, "grid_step = " + deg(step) + " needs " + std::to_string(nodes) +
-                   " nodes per axis for rho_max = " + deg(rho_max) + "; at most " +
-                   std::to_string(max_grid_nodes) + " are allowed: choose a larger grid_step");
+  if (nodes > Beamsor::max_grid_nodes)
+    fail(file, "grid_step = " + degrees_text(step) + " needs " + std::to_string(nodes) +
+                   " nodes per axis for rho_max = " + degrees_text(rho_max) + "; at most " +
+                   std::to_string(Beamsor::max_grid_nodes) + " are allowed: choose a larger grid_step");
   return std::max(3, static_cast<int>(nodes));
 }
 
@@ -363,7 +358,7 @@ void write_beam_file(const fs::path& temporary, const fs::path& file, const Beam
 }  // namespace
 
 void Beamsor::write_healpix_fits(const std::filesystem::path& file, int nside) const {
-  detail::check_nside(file, nside);
+  check_nside(nside, file.string());
   std::vector<int> present;
   for (int e = 0; e < 16; ++e)
     if (!elements_[e].empty()) present.push_back(e);

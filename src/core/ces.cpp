@@ -1,4 +1,4 @@
-// Constant-elevation scans from a ground site (DESIGN 5, paper section 7).
+// Constant-elevation scans from a ground site (docs/config.md, "[scan]"; paper section 7).
 #include <cmath>
 #include <numbers>
 #include <string>

@@ -1,11 +1,11 @@
-// The per-pixel contribution of the measurement equation (DESIGN 2-3), written once for the float64
+// The per-pixel contribution of the measurement equation (docs/physics.md, "Antenna basis, co-polarization and chi" and "The measurement equation"), written once for the float64
 // reference and the CUDA kernels; shaders/contribution.glsl mirrors it line by line.
 //
 // For one sample with antenna basis (theta', phi', p') and detector angle zeta, let
 //   e_c = cos(zeta) theta' + sin(zeta) phi'         (co-polarization at the beam centre)
 // and, for a sky pixel with unit vector k,
 //   x = k.theta', y = k.phi', z = k.p', t = k.e_c = cos(zeta) x + sin(zeta) y.
-// DESIGN 2's Ludwig-3 co-polarization vector E = e0 theta' + e1 phi' + e2 p' with
+// the Ludwig-3 co-polarization vector (docs/physics.md) E = e0 theta' + e1 phi' + e2 p' with
 //   e = (cos zeta - x t/(1+z), sin zeta - y t/(1+z), -t)
 // simplifies, using x theta' + y phi' = k - z p', to   E = e_c - t/(1+z) (k + p').
 // Against the pixel's meridian basis scaled by sin(theta_k) (which leaves 2chi unchanged),
@@ -14,7 +14,7 @@
 //   s = E.phi~   = (kx e_c,y - ky e_c,x) - t/(1+z) (kx p'_y - ky p'_x)
 //   cos 2chi = (c^2 - s^2)/(c^2 + s^2),  sin 2chi = 2 c s/(c^2 + s^2).
 // No trigonometric function is evaluated per pixel. The beam weight is interpolated at the
-// orthographic coordinates (x, y), which are the beamsor grid's coordinates (DESIGN 4).
+// orthographic coordinates (x, y), which are the beamsor grid's coordinates (docs/physics.md, "Beamsors").
 #pragma once
 
 #include "core/hd.hpp"
@@ -38,7 +38,7 @@ struct SampleFrame {
   Vec3<T> e_c;                // cos(zeta) theta' + sin(zeta) phi'
 };
 
-// Antenna basis of DESIGN 2 from trigonometric values of the pointing and of zeta.
+// Antenna basis (docs/physics.md) from trigonometric values of the pointing and of zeta.
 template <class T>
 PISCO_HD SampleFrame<T> make_frame(T cos_theta, T sin_theta, T cos_phi, T sin_phi, T cos_psi,
                                    T sin_psi, T cos_zeta, T sin_zeta) {
@@ -63,7 +63,7 @@ PISCO_HD SampleFrame<T> make_frame(T cos_theta, T sin_theta, T cos_phi, T sin_ph
 // k.theta' (|k| = 1) loses the beam coordinate to cancellation (6e-8 absolute, 1e-5 of the beam's
 // slope), while d.theta' keeps it to float32's relative precision; and r^2 = x^2 + y^2 is taken as
 // |d|^2 - (d.p')^2, which does not depend on psi at all, so that a round beam weighs a pixel the same
-// at every boresight angle and leaks no temperature into polarization (VALIDATION C). With
+// at every boresight angle and leaks no temperature into polarization (docs/validation.md, "C"). With
 // z = 1 + d.p', k.e_c = d.e_c and k.p'_perp = d.p'_perp, the expressions of the header are unchanged.
 template <class T>
 struct PixelGeometry {
@@ -131,7 +131,7 @@ PISCO_HD void interpolate_radial(const T* profile, int n, T inv_step, T r2, T w[
   for (int m = 0; m < 4; ++m) w[m] = (T(1) - f) * g0[m] + f * g1[m];
 }
 
-// w . Lambda(-chi) S: the detector-weighted Stokes response of one pixel (DESIGN 3).
+// w . Lambda(-chi) S: the detector-weighted Stokes response of one pixel (docs/physics.md, "The measurement equation").
 template <class T>
 PISCO_HD T stokes_response(const T w[4], T cos2chi, T sin2chi, T I, T Q, T U, T V) {
   return w[0] * I + w[1] * (Q * cos2chi + U * sin2chi) + w[2] * (U * cos2chi - Q * sin2chi) + w[3] * V;

@@ -4,10 +4,12 @@
 #include <cmath>
 #include <memory>
 #include <thread>
+#include <utility>
 
 #include "core/backend.hpp"
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
+#include "core/frame.hpp"
 #include "core/thread_pool.hpp"
 
 namespace pisco::detail {
@@ -22,11 +24,10 @@ namespace {
 #endif
 
 template <bool PerSample, bool Radial>
-inline __attribute__((always_inline)) double sample(const PreparedSky& sky, const PreparedDetector& det,
-                                                    double theta, double phi, double psi, std::uint64_t& count) {
-  phi = wrap_phi(phi);
-  const SampleFrame<double> f = make_frame(std::cos(theta), std::sin(theta), std::cos(phi), std::sin(phi),
-                                           std::cos(psi), std::sin(psi), det.cos_zeta, det.sin_zeta);
+inline __attribute__((always_inline)) double sample(const PreparedSky& sky, const double* pixels,
+                                                    const PreparedDetector& det,
+                                                    const SampleFrame<double>& f, double theta, double phi,
+                                                    std::uint64_t& count) {
   const double* grid = det.weights.data();
   const double* norm_grid = det.norm_weights.data();
   double sum = 0.0, norm = 0.0;
@@ -34,7 +35,7 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
                       [&](std::uint32_t begin, std::uint32_t end) {
                         count += end - begin;
                         for (std::uint32_t p = begin; p < end; ++p) {
-                          const double* px = &sky.pixels[std::size_t(p) * 8];
+                          const double* px = &pixels[std::size_t(p) * 8];
                           const Vec3<double> k{px[0], px[1], px[2]};
                           if constexpr (PerSample) {
                             const PixelGeometry<double> g = pixel_geometry(f, k);
@@ -58,49 +59,64 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
   return sum;
 }
 
-// Samples [begin, end) of one chunk; returns the number of pixels evaluated.
-PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const PreparedDetector& det,
-                                                bool per_sample, const double* theta, const double* phi,
-                                                const double* psi, double* tod, std::size_t begin,
-                                                std::size_t end) {
+// Samples [begin, end) of one chunk; returns the number of pixels evaluated. The detector's basis
+// and line of sight come from frame.hpp, for either pointing form (offset applied there).
+PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const double* pixels,
+                                                const PreparedDetector& det,
+                                                bool per_sample, const PointingInput& in, double* tod,
+                                                bool accumulate, std::size_t begin, std::size_t end) {
   std::uint64_t count = 0;
   for (std::size_t i = begin; i < end; ++i) {
+    double theta = 0.0, phi = 0.0;
+    const SampleFrame<double> f =
+        in.quaternions
+            ? quat_sample({in.quats.quats[i].x, in.quats.quats[i].y, in.quats.quats[i].z, in.quats.quats[i].w},
+                          det.offset, det.cos_zeta, det.sin_zeta, theta, phi)
+            : angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta,
+                           det.sin_zeta, theta, phi);
+    double d;
     if (det.radial)
-      tod[i] = per_sample ? sample<true, true>(sky, det, theta[i], phi[i], psi[i], count)
-                          : sample<false, true>(sky, det, theta[i], phi[i], psi[i], count);
+      d = per_sample ? sample<true, true>(sky, pixels, det, f, theta, phi, count)
+                     : sample<false, true>(sky, pixels, det, f, theta, phi, count);
     else
-      tod[i] = per_sample ? sample<true, false>(sky, det, theta[i], phi[i], psi[i], count)
-                          : sample<false, false>(sky, det, theta[i], phi[i], psi[i], count);
+      d = per_sample ? sample<true, false>(sky, pixels, det, f, theta, phi, count)
+                     : sample<false, false>(sky, pixels, det, f, theta, phi, count);
+    tod[i] = accumulate ? tod[i] + d : d;
   }
   return count;
 }
 
 class CpuBackend final : public Backend {
  public:
-  CpuBackend(std::shared_ptr<const EngineInputs> inputs, unsigned threads)
+  CpuBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, unsigned threads)
       : in_(std::move(inputs)),
-        pool_(threads ? threads : std::max(1u, std::thread::hardware_concurrency())) {}
+        pool_(threads ? threads : std::max(1u, std::thread::hardware_concurrency())),
+        pixels_(reference_pixels(sky, unsigned(pool_.size()))) {}
 
   std::string name() const override { return "cpu"; }
   std::string device() const override {
     return "float64 reference, " + std::to_string(pool_.size()) + " threads";
   }
 
-  std::uint64_t convolve(std::size_t detector, const PointingView& pointing,
-                         std::span<double> tod) override {
+  // The reference computes at submit(): its results are ready when the call returns.
+  void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
+              std::uint64_t) override {
     const PreparedDetector& det = in_->detectors.at(detector);
     std::atomic<std::uint64_t> pixels{0};
     const bool per_sample = in_->normalization == Normalization::per_sample;
     pool_.parallel_for(pointing.size(), 64, [&](std::size_t begin, std::size_t end) {
-      pixels += convolve_samples(in_->sky, det, per_sample, pointing.theta.data(), pointing.phi.data(),
-                                 pointing.psi.data(), tod.data(), begin, end);
+      pixels += convolve_samples(in_->sky, pixels_.data(), det, per_sample, pointing, tod.data(), accumulate, begin, end);
     });
-    return pixels;
+    evaluated_ += pixels;
   }
+
+  std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
  private:
   std::shared_ptr<const EngineInputs> in_;
   ThreadPool pool_;
+  std::vector<double> pixels_;  // reference_pixels(): 8 doubles a pixel
+  std::uint64_t evaluated_ = 0;
 };
 
 }  // namespace
@@ -113,8 +129,8 @@ BackendEntry cpu_backend_entry() {
                                    std::to_string(std::max(1u, std::thread::hardware_concurrency())) +
                                    " hardware threads"};
           },
-          [](std::shared_ptr<const EngineInputs> in, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<CpuBackend>(std::move(in), o.threads);
+          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+            return std::make_unique<CpuBackend>(std::move(in), sky, o.threads);
           }};
 }
 

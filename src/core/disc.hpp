@@ -1,4 +1,4 @@
-// Disc selection from a ring table (DESIGN 6): the RING pixels whose centres lie within rho of a
+// Disc selection from a ring table (docs/physics.md, "Disc selection"): the RING pixels whose centres lie within rho of a
 // pointing, the same set as HEALPix C++ query_disc(..., inclusive = false), produced as one or two
 // contiguous index ranges per ring crossing the disc. Written once for the reference and the CUDA
 // kernels; shaders/disc.glsl mirrors it. Double precision throughout: the result must be exact.

@@ -60,27 +60,68 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   const detail::BackendEntry& entry = detail::choose_backend(options.backend);
   auto inputs = std::make_shared<const detail::EngineInputs>(
       detail::prepare_inputs(sky, beams, focal_plane, options.normalization));
-  backend_ = entry.create(std::move(inputs), options);
+  backend_ = entry.create(std::move(inputs), sky, options);
 }
 
 Engine::~Engine() = default;
 Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 
-void Engine::convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) {
+namespace {
+detail::PointingInput input_of(const PointingView& v) { return {v, {}, false}; }
+detail::PointingInput input_of(const QuatPointingView& v) { return {{}, v, true}; }
+}  // namespace
+
+template <class View>
+std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
+                                  bool accumulate) {
   if (detector >= focal_plane_.size())
     throw Error("convolve: detector index " + std::to_string(detector) + " but the focal plane has " +
                 std::to_string(focal_plane_.size()) + " detectors");
-  if (tod.size() != pointing.size())
-    throw Error("convolve: the TOD buffer has " + std::to_string(tod.size()) +
-                " samples but the pointing has " + std::to_string(pointing.size()));
-  check_pointing(pointing, ("pointing of detector '" + focal_plane_[detector].name + "'").c_str());
+  const std::string& name = focal_plane_[detector].name;
+  if (tod.size() != boresight.size())
+    throw Error("convolve: the TOD buffer of detector '" + name + "' has " + std::to_string(tod.size()) +
+                " samples but the pointing has " + std::to_string(boresight.size()));
+  check_pointing(boresight, ("pointing of detector '" + name + "'").c_str());
+  const std::uint64_t ticket = next_ticket_++;
   try {
-    pixels_ += backend_->convolve(detector, pointing, tod);
+    backend_->submit(detector, input_of(boresight), tod, accumulate, ticket);
+  } catch (const detail::SubmissionError& e) {
+    throw Error("convolving detector '" + focal_plane_[e.detector].name + "': " + e.what());
   } catch (const Error& e) {
-    throw Error("convolving detector '" + focal_plane_[detector].name + "': " + e.what());
+    throw Error("convolving detector '" + name + "': " + e.what());
   }
-  samples_ += pointing.size();
+  samples_ += boresight.size();
+  return ticket;
+}
+
+std::uint64_t Engine::submit(std::size_t detector, const PointingView& boresight, std::span<double> tod,
+                             bool accumulate) {
+  return submit_view(detector, boresight, tod, accumulate);
+}
+
+std::uint64_t Engine::submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
+                             bool accumulate) {
+  return submit_view(detector, boresight, tod, accumulate);
+}
+
+void Engine::wait(std::uint64_t ticket) {
+  try {
+    pixels_ += backend_->wait(ticket);
+  } catch (const detail::SubmissionError& e) {
+    throw Error("convolving detector '" + focal_plane_[e.detector].name + "': " + e.what());
+  }
+}
+
+void Engine::wait() { wait(next_ticket_ - 1); }
+
+void Engine::convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate) {
+  wait(submit(detector, boresight, tod, accumulate));
+}
+
+void Engine::convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
+                      bool accumulate) {
+  wait(submit(detector, boresight, tod, accumulate));
 }
 
 std::string Engine::backend_name() const { return backend_->name(); }

@@ -10,6 +10,7 @@
 #include <error_handling.h>
 
 #include "pisco/error.hpp"
+#include "pisco/healpix_map.hpp"
 
 namespace pisco::detail {
 
@@ -125,12 +126,6 @@ std::optional<std::string> string_key(const FitsFile& f, const char* key) {
   return std::string(value);
 }
 
-void check_nside(const fs::path& file, long long nside) {
-  if (nside < 1 || nside > max_nside || (nside & (nside - 1)) != 0)
-    fail(file, "NSIDE = " + std::to_string(nside) + " is not a power of two in [1, " +
-                   std::to_string(max_nside) + "]");
-}
-
 int read_nside(const FitsFile& f, const std::string& if_missing) {
   long long nside = 0;
   int status = 0;
@@ -140,7 +135,7 @@ int read_nside(const FitsFile& f, const std::string& if_missing) {
     fail(f.path(), if_missing);
   }
   check(status, f.path(), "reading NSIDE (expected an integer)");
-  check_nside(f.path(), nside);
+  pisco::check_nside(nside, f.path().string());
   return static_cast<int>(nside);
 }
 

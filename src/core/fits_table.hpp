@@ -15,8 +15,6 @@
 
 namespace pisco::detail {
 
-inline constexpr int max_nside = 8192;  // Healpix_Base's 32-bit pixel indices
-
 // Throws pisco::Error("<file>: <what>").
 [[noreturn]] void fail(const std::filesystem::path& file, const std::string& what);
 
@@ -72,10 +70,8 @@ void goto_first_binary_table(const FitsFile& f, const std::string& expected);
 // A string key of the current HDU; nullopt when it is absent.
 std::optional<std::string> string_key(const FitsFile& f, const char* key);
 
-// Fails unless nside is a power of two in [1, max_nside].
-void check_nside(const std::filesystem::path& file, long long nside);
-
-// The NSIDE key, checked with check_nside; fails with `if_missing` when the key is absent.
+// The NSIDE key, checked with pisco::check_nside (healpix_map.hpp); fails with `if_missing` when the
+// key is absent.
 int read_nside(const FitsFile& f, const std::string& if_missing);
 
 // The name (TTYPEn) of column `col`. When it cannot be read, CFITSIO's message stack is cleared and

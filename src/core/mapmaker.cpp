@@ -101,9 +101,7 @@ void check_inputs(const Detector& det, const PointingView& ptg, std::span<const 
 }  // namespace
 
 BinnedMapmaker::BinnedMapmaker(int nside, double rcond_min) : nside_(nside), rcond_min_(rcond_min) {
-  if (nside < 1 || nside > 8192 || (nside & (nside - 1)) != 0)
-    throw Error("BinnedMapmaker: nside = " + std::to_string(nside) +
-                " is not a power of two in [1, 8192]");
+  check_nside(nside, "BinnedMapmaker");
   if (!std::isfinite(rcond_min) || rcond_min < 0.0 || rcond_min > 1.0)
     throw Error("BinnedMapmaker: rcond_min = " + std::to_string(rcond_min) +
                 " must be in [0, 1]");

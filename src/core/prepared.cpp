@@ -1,7 +1,9 @@
 #include "core/prepared.hpp"
 
 #include <cmath>
+#include <algorithm>
 #include <numbers>
+#include <thread>
 #include <string>
 
 #include <healpix_base.h>
@@ -24,19 +26,43 @@ std::vector<RingEntry> make_ring_table(int nside) {
   return rings;
 }
 
-double float32_monopole(const PreparedSky& sky) {
-  const std::size_t npix = sky.pixels.size() / 8;
+double float32_monopole(const Sky& sky) {
+  const std::size_t npix = sky.npix();
   if (npix == 0) return 0.0;
+  const auto& I = sky.I();
   double mean = 0.0;
-  for (std::size_t i = 0; i < npix; ++i) mean += sky.pixels[i * 8 + 4];
+  for (std::size_t i = 0; i < npix; ++i) mean += I[i];
   mean /= double(npix);
   double var = 0.0;
   for (std::size_t i = 0; i < npix; ++i) {
-    const double d = sky.pixels[i * 8 + 4] - mean;
+    const double d = I[i] - mean;
     var += d * d;
   }
   const double rms = std::sqrt(var / double(npix));
   return std::abs(mean) > 0.1 * rms ? mean : 0.0;
+}
+
+struct PixelVectors::Impl {
+  Healpix_Base base;
+};
+
+PixelVectors::PixelVectors(int nside) : impl_(std::make_unique<Impl>(Impl{Healpix_Base(nside, RING, SET_NSIDE)})) {}
+PixelVectors::~PixelVectors() = default;
+
+void PixelVectors::get(std::size_t first, std::size_t count, double* xyz, unsigned threads) const {
+  auto run = [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const vec3 k = impl_->base.pix2vec(static_cast<int>(first + i));
+      xyz[3 * i] = k.x;
+      xyz[3 * i + 1] = k.y;
+      xyz[3 * i + 2] = k.z;
+    }
+  };
+  threads = std::max(1u, std::min<unsigned>(threads, unsigned(count / 4096 + 1)));
+  std::vector<std::thread> pool;
+  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(run, count * t / threads, count * (t + 1) / threads);
+  run(0, count / threads);
+  for (auto& t : pool) t.join();
 }
 
 PreparedSky prepare_sky(const Sky& sky) {
@@ -44,23 +70,33 @@ PreparedSky prepare_sky(const Sky& sky) {
   PreparedSky p;
   p.nside = sky.nside();
   p.pixel_area = sky.pixel_area();
-  const Healpix_Base base(sky.nside(), RING, SET_NSIDE);
-  const std::size_t npix = sky.npix();
-  p.pixels.resize(npix * 8);
-  for (std::size_t i = 0; i < npix; ++i) {
-    const vec3 k = base.pix2vec(static_cast<int>(i));
-    double* px = &p.pixels[i * 8];
-    px[0] = k.x;
-    px[1] = k.y;
-    px[2] = k.z;
-    px[3] = 0.0;
-    px[4] = sky.I()[i];
-    px[5] = sky.Q()[i];
-    px[6] = sky.U()[i];
-    px[7] = sky.V()[i];
-  }
+  p.npix = sky.npix();
   p.rings = make_ring_table(sky.nside());
   return p;
+}
+
+std::vector<double> reference_pixels(const Sky& sky, unsigned threads) {
+  const std::size_t npix = sky.npix();
+  std::vector<double> pixels(npix * 8);
+  const PixelVectors vectors(sky.nside());
+  constexpr std::size_t piece = std::size_t(1) << 16;
+  std::vector<double> xyz(3 * piece);
+  for (std::size_t first = 0; first < npix; first += piece) {
+    const std::size_t n = std::min(piece, npix - first);
+    vectors.get(first, n, xyz.data(), threads);
+    for (std::size_t j = 0; j < n; ++j) {
+      double* px = &pixels[(first + j) * 8];
+      px[0] = xyz[3 * j];
+      px[1] = xyz[3 * j + 1];
+      px[2] = xyz[3 * j + 2];
+      px[3] = 0.0;
+      px[4] = sky.I()[first + j];
+      px[5] = sky.Q()[first + j];
+      px[6] = sky.U()[first + j];
+      px[7] = sky.V()[first + j];
+    }
+  }
+  return pixels;
 }
 
 PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double pixel_area,
@@ -68,6 +104,11 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
   if (!std::isfinite(d.zeta) || !std::isfinite(d.epsilon) || !std::isfinite(d.gain))
     throw Error("detector '" + d.name + "': zeta, epsilon and gain must be finite");
   PreparedDetector p;
+  const Quat& o = d.offset;
+  if (!std::isfinite(norm(o)) || std::abs(norm(o) - 1.0) > 1e-6)
+    throw Error("detector '" + d.name + "': the offset quaternion (" + std::to_string(o.x) + ", " + std::to_string(o.y) +
+                ", " + std::to_string(o.z) + ", " + std::to_string(o.w) + ") is not a unit quaternion (x, y, z, w)");
+  p.offset = make_offset({o.x, o.y, o.z, o.w});  // rotation_matrix() is exact for any norm
   p.cos_zeta = std::cos(d.zeta);
   p.sin_zeta = std::sin(d.zeta);
   p.rho_max = beam.rho_max();

@@ -1,13 +1,17 @@
-// Engine inputs prepared once, in the layout every backend consumes: the sky as a pixel table, the
-// ring table of the disc selection, and one weight grid per detector (DESIGN 3: the 16-element
-// beamsor collapsed to the 4-vector w a total-power detector needs).
+// Engine inputs prepared once, in the layout every backend consumes: the sky's geometry and ring table
+// of the disc selection, and one weight grid per detector (docs/physics.md, "The measurement
+// equation": the 16-element beamsor collapsed to the 4-vector w a total-power detector needs). The
+// sky's pixels are packed by each backend itself, straight from pisco::Sky into the layout it keeps
+// (SkyPacker), so that no full-sky copy is made that the backend does not hold.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "core/disc.hpp"
+#include "core/frame.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/focal_plane.hpp"
@@ -18,13 +22,27 @@ namespace pisco::detail {
 struct PreparedSky {
   int nside = 0;
   double pixel_area = 0.0;
-  // 8 doubles per pixel: unit vector kx, ky, kz, 0, then I, Q, U, V (one cache line per pixel).
-  std::vector<double> pixels;
+  std::size_t npix = 0;
   std::vector<RingEntry> rings;
+};
+
+// Pixel centres' unit vectors of a RING sky, in pieces: what each backend packs beside the Stokes
+// values. Thread-safe (const).
+class PixelVectors {
+ public:
+  explicit PixelVectors(int nside);
+  ~PixelVectors();
+  // The unit vectors of pixels [first, first + count) into xyz (3 doubles each), on `threads` threads.
+  void get(std::size_t first, std::size_t count, double* xyz, unsigned threads = 1) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
 };
 
 struct PreparedDetector {
   double cos_zeta = 1.0, sin_zeta = 0.0;
+  DetectorOffset offset;  // from the boresight; inactive on it
   double rho_max = 0.0, cos_rho_max = 1.0;
   bool radial = false;  // weights are a radial profile in r = sin(rho) rather than a 2D grid
   int grid_n = 0;
@@ -43,10 +61,13 @@ struct EngineInputs {
 };
 
 PreparedSky prepare_sky(const Sky& sky);
-// The monopole the float32 backends take out of the sky (DESIGN 7): the mean I0 of I when it matters
-// for float32, that is when |I0| > 0.1 x the RMS of I - I0; 0 otherwise. They add I0 sum_k w_I(k)
-// back in float64.
-double float32_monopole(const PreparedSky& sky);
+// The float64 reference's pixel table: 8 doubles per pixel, the unit vector kx, ky, kz, 0, then
+// I, Q, U, V (one cache line per pixel).
+std::vector<double> reference_pixels(const Sky& sky, unsigned threads);
+// The monopole the float32 backends take out of the sky (docs/vulkan.md, "Precision"): the mean I0 of
+// I when it matters for float32, that is when |I0| > 0.1 x the RMS of I - I0; 0 otherwise. They add
+// I0 sum_k w_I(k) back in float64.
+double float32_monopole(const Sky& sky);
 PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
                                   Normalization normalization);
 EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,

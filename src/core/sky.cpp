@@ -1,27 +1,28 @@
-// The in-memory sky: four full-sky HEALPix maps in RING ordering (DESIGN 1).
+// The in-memory sky: four full-sky HEALPix maps in RING ordering (docs/physics.md, "The sky").
 #include "pisco/sky.hpp"
 
 #include <cmath>
 #include <numbers>
 
 #include "pisco/error.hpp"
+#include "pisco/healpix_map.hpp"
 
 namespace pisco {
 namespace {
-
-// Healpix_Base (32-bit pixel indices) and the engine's pixel tables stop at NSIDE 8192.
-constexpr int max_nside = 8192;
-
-bool is_power_of_two(int n) { return n > 0 && (n & (n - 1)) == 0; }
 
 constexpr const char* stokes_names[4] = {"I", "Q", "U", "V"};
 
 }  // namespace
 
+// Declared in healpix_map.hpp: the one NSIDE check of the library.
+void check_nside(long long nside, const std::string& where) {
+  if (nside < 1 || nside > max_nside || (nside & (nside - 1)) != 0)
+    throw Error(where + ": NSIDE = " + std::to_string(nside) + " is not a power of two in [1, " +
+                std::to_string(max_nside) + "]");
+}
+
 Sky::Sky(int nside, std::string units) : nside_(nside), units_(std::move(units)) {
-  if (!is_power_of_two(nside) || nside > max_nside)
-    throw Error("sky: NSIDE = " + std::to_string(nside) +
-                " is not a power of two in [1, " + std::to_string(max_nside) + "]");
+  check_nside(nside, "sky");
   const std::size_t npix = 12 * static_cast<std::size_t>(nside) * static_cast<std::size_t>(nside);
   for (auto& map : maps_) map.assign(npix, 0.0);
 }

@@ -1,4 +1,4 @@
-// HEALPix FITS maps in and out of a Sky (DESIGN 9, 12).
+// HEALPix FITS maps in and out of a Sky (docs/formats.md, "Sky maps and output maps (HEALPix FITS)").
 //
 // The files follow the layout HEALPix C++ and healpy write and read: an empty primary HDU, then a
 // binary table with one column per Stokes map and the keys NSIDE, ORDERING, POLCCONV, ... Pixel
@@ -208,7 +208,7 @@ void write_map_table(const FitsFile& f, int nside, const std::vector<MapColumn>&
 // see a half-written map and a failure leaves nothing behind.
 void write_healpix_map(const std::filesystem::path& file, int nside, const std::vector<MapColumn>& columns,
                        const std::string& units) {
-  detail::check_nside(file, nside);
+  check_nside(nside, file.string());
   if (units.size() > 68) fail(file, "units '" + units + "' exceed 68 characters");
   if (columns.empty()) fail(file, "no map columns to write");
   for (const auto& c : columns)

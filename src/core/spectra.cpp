@@ -20,21 +20,15 @@
 #include <xcomplex.h>
 
 #include "pisco/error.hpp"
+#include "pisco/healpix_map.hpp"
 
 namespace pisco {
 namespace {
 
 constexpr double two_pi = 2.0 * std::numbers::pi;
-constexpr double unseen_value = -1.6375e30;
 
 using AlmD = Alm<xcomplex<double>>;
 using MapD = Healpix_Map<double>;
-
-void check_nside(const char* fn, int nside) {
-  if (nside < 1 || nside > 8192 || (nside & (nside - 1)) != 0)
-    throw Error(std::string(fn) + ": nside = " + std::to_string(nside) +
-                " is not a power of two in [1, 8192]");
-}
 
 void check_lmax(const char* fn, int lmax) {
   if (lmax < 0) throw Error(std::string(fn) + ": lmax = " + std::to_string(lmax) + " is negative");
@@ -99,7 +93,6 @@ arr<double> to_arr(const std::vector<double>& v, int lmax) {
   return a;
 }
 
-bool is_unseen(double x) { return std::abs(x - unseen_value) <= 1e-5 * std::abs(unseen_value); }
 
 // A RING Healpix_Map of the values, UNSEEN as zero (anafast's treatment of masked pixels);
 // NaN and infinities are errors rather than silently poisoning every a_lm.
@@ -198,7 +191,7 @@ Spectra read_cl_table(const std::filesystem::path& file, int lmax, bool bb_zero)
 }
 
 Sky synthesize_sky(const Spectra& cls, int nside, std::uint64_t seed) {
-  check_nside("synthesize_sky", nside);
+  check_nside(nside, "synthesize_sky");
   if (cls.TT.empty()) throw Error("synthesize_sky: the TT spectrum is empty");
   if (cls.EE.size() != cls.TT.size() || cls.BB.size() != cls.TT.size() ||
       cls.TE.size() != cls.TT.size())
@@ -236,7 +229,7 @@ Sky synthesize_sky(const Spectra& cls, int nside, std::uint64_t seed) {
 
 Spectra anafast(std::span<const double> I, std::span<const double> Q, std::span<const double> U,
                 int nside, int lmax, int iterations) {
-  check_nside("anafast", nside);
+  check_nside(nside, "anafast");
   check_lmax("anafast", lmax);
   if (iterations < 0)
     throw Error("anafast: iterations = " + std::to_string(iterations) + " is negative");
@@ -277,7 +270,7 @@ std::vector<double> gaussian_beam_window(double fwhm, int lmax, bool polarizatio
 }
 
 std::vector<double> pixel_window(int nside, int lmax, bool polarization) {
-  check_nside("pixel_window", nside);
+  check_nside(nside, "pixel_window");
   check_lmax("pixel_window", lmax);
   const std::filesystem::path file = pixel_window_file(nside);
   if (!std::filesystem::exists(file))

@@ -1,6 +1,6 @@
 // Every CUDA runtime call goes through PISCO_CUDA_CHECK, which throws pisco::Error naming the call,
 // the file and line, and the runtime's own message. Out-of-memory is its own type so that the driver
-// can retry with smaller chunks (DESIGN 12).
+// can retry with smaller chunks (docs/formats.md, "Errors and partial files").
 #pragma once
 
 #include <cuda_runtime_api.h>

@@ -13,11 +13,5 @@ std::size_t fit_chunk(std::size_t requested, std::size_t free_device_bytes) {
   return std::max<std::size_t>(1, std::min(default_chunk_samples, fitted));
 }
 
-std::size_t halve_chunk(std::size_t failed) {
-  if (failed <= 1)
-    throw Error("cuda: out of device or pinned host memory even for a chunk of one sample (" +
-                std::to_string(bytes_per_chunk_sample) + " bytes beside the sky and beams)");
-  return failed / 2;
-}
 
 }  // namespace pisco::detail::cuda

@@ -1,14 +1,15 @@
-// Chunk sizing for the streamed pointing (DESIGN 7): device memory stays bounded by the sky, the beams
-// and two chunks whatever the TOD length.
+// Chunk sizing for the streamed pointing (docs/cuda.md, "Streaming"): device memory stays bounded by
+// the sky, the beams and two chunks whatever the TOD length.
 #pragma once
 
 #include <cstddef>
 
 namespace pisco::detail::cuda {
 
-// Device (and pinned host) bytes per sample of chunk capacity: theta, phi, psi in, TOD out, two slots.
+// Device (and pinned host) bytes per sample of chunk capacity: 4 pointing doubles in (angles or a
+// quaternion), the TOD out, two slots.
 constexpr std::size_t chunk_slots = 2;
-constexpr std::size_t bytes_per_chunk_sample = chunk_slots * 4 * sizeof(double);
+constexpr std::size_t bytes_per_chunk_sample = chunk_slots * 5 * sizeof(double);
 // Samples per chunk when the user asks for none: large enough to keep an H100 busy (one chunk is
 // ~2 ms of work at 5 deg discs), small enough that the Table 1 workload streams in several chunks so
 // that upload, compute and download overlap.
@@ -18,8 +19,5 @@ constexpr std::size_t max_chunk_samples = std::size_t(1) << 30;  // kernel sampl
 // The chunk capacity: `requested` when non-zero (capped at max_chunk_samples), otherwise the default
 // capped so that the slots take at most half of `free_device_bytes`; at least 1.
 std::size_t fit_chunk(std::size_t requested, std::size_t free_device_bytes);
-
-// The next capacity to try after an allocation failed; throws pisco::Error when `failed` is 1.
-std::size_t halve_chunk(std::size_t failed);
 
 }  // namespace pisco::detail::cuda

@@ -1,4 +1,4 @@
-// The convolution kernel (DESIGN 3, 6, 7): one warp per sample. The per-sample arithmetic lives in
+// The convolution kernel (docs/cuda.md, "Kernel"): one warp per sample. The per-sample arithmetic lives in
 // sample.hpp, shared with the host tests; this file adds the warp plumbing and the launcher.
 #include "cuda/check.hpp"
 #include "cuda/convolve.cuh"
@@ -26,9 +26,8 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
   const std::size_t i = std::size_t(blockIdx.x) * warps_per_block + warp;
   if (i >= chunk.count) return;  // whole warps only
 
-  const double theta = chunk.theta[i];
-  const double phi = wrap_phi(chunk.phi[i]);
-  const SampleFrame<double> fd = sample_frame(theta, phi, chunk.psi[i], det);
+  double theta = 0.0, phi = 0.0;
+  const SampleFrame<double> fd = sample_frame(chunk.pointing + 4 * i, chunk.quaternions, det, theta, phi);
   const SampleFrame<float> f = to_float(fd);
   std::uint32_t* my_first = first[warp];
   std::uint32_t* my_offset = offset[warp];

@@ -11,9 +11,8 @@
 namespace pisco::detail::cuda {
 
 struct ChunkArgs {
-  const double* theta;  // count samples each
-  const double* phi;
-  const double* psi;
+  const double* pointing;  // 4 doubles a sample: (theta, phi, psi, 0) or a quaternion (x, y, z, w)
+  bool quaternions;
   double* tod;
   unsigned long long* pixels;  // incremented by the disc size of every sample
   std::uint32_t count;

@@ -1,4 +1,4 @@
-# The cuda backend (DESIGN 7): built when nvcc is found. The CUDA runtime is linked statically, so
+# The cuda backend (docs/cuda.md): built when nvcc is found. The CUDA runtime is linked statically, so
 # libpisco loads and runs on machines without the toolkit or the driver (the backend then reports
 # itself unavailable, with the runtime's reason). Included from src/CMakeLists.txt at directory scope,
 # where enable_language(CUDA) is allowed.

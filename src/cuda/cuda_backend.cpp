@@ -1,4 +1,4 @@
-// The cuda backend (DESIGN 7): the sky, the ring table and the detectors' weights are uploaded once;
+// The cuda backend (docs/cuda.md, "Streaming"): the sky, the ring table and the detectors' weights are uploaded once;
 // pointing then streams through two slots, each with its own stream, pinned host buffers and device
 // buffers, so that while one chunk computes the host fills the other and the copy engines move the
 // third's data. The kernel is convolve.cu; what it computes per sample is sample.hpp.
@@ -7,6 +7,7 @@
 #include <memory>
 
 #include "core/backend.hpp"
+#include "core/streaming.hpp"
 #include "cuda/buffer.hpp"
 #include "cuda/check.hpp"
 #include "cuda/chunk.hpp"
@@ -27,31 +28,31 @@ struct DetectorData {
 // One of the two chunk slots.
 struct Slot {
   Stream stream;
-  PinnedArray<double> host_in, host_out;  // theta | phi | psi, each `capacity` long; TOD
+  PinnedArray<double> host_in, host_out;  // 4 pointing doubles a sample; TOD
   PinnedArray<unsigned long long> host_pixels;
   DeviceArray<double> dev_in, dev_out;
   DeviceArray<unsigned long long> dev_pixels;
-  std::size_t offset = 0, count = 0;
-  bool busy = false;
+  SlotJob job;
 
   explicit Slot(std::size_t capacity)
-      : host_in(3 * capacity), host_out(capacity), host_pixels(1), dev_in(3 * capacity), dev_out(capacity),
+      : host_in(4 * capacity), host_out(capacity), host_pixels(1), dev_in(4 * capacity), dev_out(capacity),
         dev_pixels(1) {}
 };
 
 class CudaBackend final : public Backend {
  public:
-  CudaBackend(std::shared_ptr<const EngineInputs> inputs, const EngineOptions& options)
+  CudaBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& maps, const EngineOptions& options)
       : in_(std::move(inputs)), device_(open_device(options.device)) {
     check_kernel_image(device_.description());
     const PreparedSky& sky = in_->sky;
     per_sample_ = in_->normalization == Normalization::per_sample;
-    const double monopole = float32_monopole(sky);
+    const double monopole = float32_monopole(maps);
     monopole_term_ = monopole != 0.0;
     const bool exact = monopole_term_ || per_sample_;
 
-    pixels_ = upload(pixel_records(sky, monopole));
-    if (exact) vectors_ = upload(pixel_vectors(sky));
+    // Each host table lives only until its upload.
+    pixels_ = upload(pixel_records(maps, monopole));
+    if (exact) vectors_ = upload(pixel_vectors(maps));
     rings_ = upload(sky.rings);
     sky_ = {pixels_.data(), vectors_.data(), rings_.data(), sky.nside, monopole};
 
@@ -67,15 +68,13 @@ class CudaBackend final : public Backend {
     PISCO_CUDA_CHECK(cudaMemGetInfo(&free_bytes, &total_bytes));
     capacity_ = fit_chunk(options.chunk_samples, free_bytes);
     slots_.reserve(chunk_slots);
-    for (;;) {
-      try {
-        for (std::size_t s = 0; s < chunk_slots; ++s) slots_.emplace_back(capacity_);
-        break;
-      } catch (const DeviceOutOfMemory&) {
-        slots_.clear();
-        capacity_ = halve_chunk(capacity_);
-      }
-    }
+    capacity_ = fit_chunk_halving<DeviceOutOfMemory>(
+        capacity_,
+        [&](std::size_t n) {
+          for (std::size_t s = 0; s < chunk_slots; ++s) slots_.emplace_back(n);
+        },
+        [&] { slots_.clear(); }, "cuda: " + device_.description());
+    ring_ = SlotRing<Slot>(slots_);
   }
 
   ~CudaBackend() override {
@@ -87,60 +86,80 @@ class CudaBackend final : public Backend {
     return device_.description() + ", chunks of " + std::to_string(capacity_) + " samples";
   }
 
-  std::uint64_t convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) override {
+  void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
+              std::uint64_t ticket) override {
     make_current(device_);
     const DetectorData& det = detectors_.at(detector);
     const bool radial = in_->detectors.at(detector).radial;
-    std::uint64_t pixels = 0;
-    auto finish = [&](Slot& s) {
-      PISCO_CUDA_CHECK(cudaStreamSynchronize(s.stream.get()));
-      std::memcpy(tod.data() + s.offset, s.host_out.data(), s.count * sizeof(double));
-      pixels += *s.host_pixels.data();
-      s.busy = false;
-    };
+    SlotJob current;
     try {
-      std::size_t chunk = 0, count = 0;
-      for (std::size_t offset = 0; offset < pointing.size(); offset += count, ++chunk) {
-        Slot& s = slots_[chunk % slots_.size()];
-        if (s.busy) finish(s);  // the chunk two back: its buffers are free again
-        count = std::min(capacity_, pointing.size() - offset);
-        s.offset = offset;
-        s.count = count;
-        enqueue(s, det.kernel, radial, pointing, offset, count);
-        s.busy = true;
+      for (std::size_t offset = 0; offset < pointing.size(); offset += capacity_) {
+        const std::size_t count = std::min(capacity_, pointing.size() - offset);
+        Slot& s = ring_.acquire([&](Slot& done) {
+          current = done.job;
+          return complete(done);
+        });
+        current = SlotJob{false, ticket, detector, offset, pointing.size(), tod.subspan(offset, count), accumulate};
+        enqueue(s, det.kernel, radial, pointing.subspan(offset, count));
+        s.job = current;
+        s.job.busy = true;
       }
-      for (std::size_t k = 0; k < slots_.size(); ++k) {  // oldest first
-        Slot& s = slots_[(chunk + k) % slots_.size()];
-        if (s.busy) finish(s);
-      }
-    } catch (...) {
-      for (Slot& s : slots_) {
-        cudaStreamSynchronize(s.stream.get());
-        s.busy = false;
-      }
-      throw;
+    } catch (const Error& e) {
+      fail(current, e.what());
     }
-    return pixels;
+  }
+
+  std::uint64_t wait(std::uint64_t ticket) override {
+    make_current(device_);
+    SlotJob current;
+    try {
+      ring_.drain(ticket, [&](Slot& done) {
+        current = done.job;
+        return complete(done);
+      });
+    } catch (const Error& e) {
+      fail(current, e.what());
+    }
+    return ring_.take_pixels();
   }
 
  private:
-  void enqueue(Slot& s, const KernelDetector& det, bool radial, const PointingView& pointing,
-               std::size_t offset, std::size_t count) {
+  std::uint64_t complete(Slot& s) {
+    PISCO_CUDA_CHECK(cudaStreamSynchronize(s.stream.get()));
+    deliver(s.job, s.host_out.data());
+    return *s.host_pixels.data();
+  }
+
+  [[noreturn]] void fail(const SlotJob& job, const std::string& what) {
+    for (Slot& s : slots_) cudaStreamSynchronize(s.stream.get());
+    ring_.abandon();
+    throw SubmissionError(job.detector, what + " (device " + device_.description() + ", detector " +
+                                            std::to_string(job.detector) + ", samples " + std::to_string(job.first) +
+                                            " to " + std::to_string(job.first + job.tod.size() - 1) +
+                                            " of a chunk of " + std::to_string(job.total) + ")");
+  }
+
+  void enqueue(Slot& s, const KernelDetector& det, bool radial, const PointingInput& pointing) {
     const cudaStream_t stream = s.stream.get();
-    const std::size_t bytes = count * sizeof(double);
+    const std::size_t count = pointing.size();
     double* host = s.host_in.data();
-    double* dev = s.dev_in.data();
-    const double* sources[3] = {pointing.theta.data(), pointing.phi.data(), pointing.psi.data()};
-    for (std::size_t a = 0; a < 3; ++a) {
-      std::memcpy(host + a * capacity_, sources[a] + offset, bytes);
-      PISCO_CUDA_CHECK(
-          cudaMemcpyAsync(dev + a * capacity_, host + a * capacity_, bytes, cudaMemcpyHostToDevice, stream));
+    if (pointing.quaternions) {
+      std::memcpy(host, pointing.quats.quats.data(), count * sizeof(Quat));
+    } else {
+      for (std::size_t i = 0; i < count; ++i) {
+        host[4 * i] = pointing.angles.theta[i];
+        host[4 * i + 1] = pointing.angles.phi[i];
+        host[4 * i + 2] = pointing.angles.psi[i];
+        host[4 * i + 3] = 0.0;
+      }
     }
+    PISCO_CUDA_CHECK(cudaMemcpyAsync(s.dev_in.data(), host, 4 * count * sizeof(double), cudaMemcpyHostToDevice, stream));
     PISCO_CUDA_CHECK(cudaMemsetAsync(s.dev_pixels.data(), 0, sizeof(unsigned long long), stream));
-    const ChunkArgs args{dev, dev + capacity_, dev + 2 * capacity_, s.dev_out.data(), s.dev_pixels.data(),
+    const ChunkArgs args{s.dev_in.data(), pointing.quaternions, s.dev_out.data(), s.dev_pixels.data(),
                          std::uint32_t(count)};
     launch_convolve(sky_, det, args, radial, monopole_term_, per_sample_, stream);
-    PISCO_CUDA_CHECK(cudaMemcpyAsync(s.host_out.data(), s.dev_out.data(), bytes, cudaMemcpyDeviceToHost, stream));
+    PISCO_CUDA_CHECK(
+        cudaMemcpyAsync(s.host_out.data(), s.dev_out.data(), count * sizeof(double), cudaMemcpyDeviceToHost, stream));
     PISCO_CUDA_CHECK(cudaMemcpyAsync(s.host_pixels.data(), s.dev_pixels.data(), sizeof(unsigned long long),
                                      cudaMemcpyDeviceToHost, stream));
   }
@@ -155,6 +174,7 @@ class CudaBackend final : public Backend {
   std::vector<DetectorData> detectors_;
   std::size_t capacity_ = 0;
   std::vector<Slot> slots_;
+  SlotRing<Slot> ring_;
 };
 
 }  // namespace
@@ -163,8 +183,8 @@ class CudaBackend final : public Backend {
 BackendEntry cuda_backend_entry() {
   // Above vulkan and cpu: on an NVIDIA machine "auto" runs the native backend.
   return {"cuda", 20, [] { return cuda::probe(); },
-          [](std::shared_ptr<const EngineInputs> in, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<cuda::CudaBackend>(std::move(in), o);
+          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+            return std::make_unique<cuda::CudaBackend>(std::move(in), sky, o);
           }};
 }
 

@@ -1,6 +1,6 @@
-// Device choice from EngineOptions::device, apart from the runtime so that it is testable anywhere:
-// "auto" (or empty) is device 0, a number is an index, anything else the first device whose name
-// contains it (case-insensitive). Throws pisco::Error naming the request and the devices present.
+// Device choice from EngineOptions::device for the cuda backend, apart from the runtime so that it is
+// testable anywhere: the rule of core/device_choice.hpp with every device usable and of equal rank,
+// so "auto" (or empty) is device 0. Throws pisco::Error naming the request and the devices present.
 #pragma once
 
 #include <string>

@@ -1,25 +1,41 @@
 #include "cuda/device_data.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <thread>
 
 namespace pisco::detail::cuda {
 
-std::vector<PixelRecord> pixel_records(const PreparedSky& sky, double monopole) {
-  const std::size_t npix = sky.pixels.size() / 8;
+std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole) {
+  const std::size_t npix = sky.npix();
   std::vector<PixelRecord> out(npix);
-  for (std::size_t i = 0; i < npix; ++i) {
-    const double* px = &sky.pixels[i * 8];
-    out[i] = {float(px[0]), float(px[1]), float(px[2]), float(px[4] - monopole),
-              float(px[5]),  float(px[6]), float(px[7]), 0.0f};
+  const PixelVectors vectors(sky.nside());
+  constexpr std::size_t piece = std::size_t(1) << 16;
+  std::vector<double> xyz(3 * piece);
+  for (std::size_t first = 0; first < npix; first += piece) {
+    const std::size_t n = std::min(piece, npix - first);
+    vectors.get(first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
+    for (std::size_t j = 0; j < n; ++j) {
+      const std::size_t i = first + j;
+      out[i] = {float(xyz[3 * j]), float(xyz[3 * j + 1]), float(xyz[3 * j + 2]), float(sky.I()[i] - monopole),
+                float(sky.Q()[i]),  float(sky.U()[i]),      float(sky.V()[i]),      0.0f};
+    }
   }
   return out;
 }
 
-std::vector<double> pixel_vectors(const PreparedSky& sky) {
-  const std::size_t npix = sky.pixels.size() / 8;
-  std::vector<double> out(npix * 4);
-  for (std::size_t i = 0; i < npix; ++i)
-    for (int c = 0; c < 3; ++c) out[i * 4 + c] = sky.pixels[i * 8 + c];
+std::vector<double> pixel_vectors(const Sky& sky) {
+  const std::size_t npix = sky.npix();
+  std::vector<double> out(npix * 4, 0.0);
+  const PixelVectors vectors(sky.nside());
+  constexpr std::size_t piece = std::size_t(1) << 16;
+  std::vector<double> xyz(3 * piece);
+  for (std::size_t first = 0; first < npix; first += piece) {
+    const std::size_t n = std::min(piece, npix - first);
+    vectors.get(first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
+    for (std::size_t j = 0; j < n; ++j)
+      for (int c = 0; c < 3; ++c) out[(first + j) * 4 + c] = xyz[3 * j + c];
+  }
   return out;
 }
 
@@ -50,6 +66,7 @@ KernelDetector kernel_detector(const PreparedDetector& det, const float* weights
   k.cos_rho_max = det.cos_rho_max;
   k.cos_zeta = det.cos_zeta;
   k.sin_zeta = det.sin_zeta;
+  k.offset = det.offset;
   return k;
 }
 

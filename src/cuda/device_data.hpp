@@ -12,10 +12,10 @@ namespace pisco::detail::cuda {
 
 
 // One record per pixel, I - monopole in float32.
-std::vector<PixelRecord> pixel_records(const PreparedSky& sky, double monopole);
+std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole);
 
 // 4 doubles per pixel (kx, ky, kz, 0), the unit vectors of the reference.
-std::vector<double> pixel_vectors(const PreparedSky& sky);
+std::vector<double> pixel_vectors(const Sky& sky);
 
 // The detector's weights converted to float32, 4 per node as in the reference.
 std::vector<float> float_weights(const PreparedDetector& det);

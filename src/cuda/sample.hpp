@@ -1,6 +1,6 @@
 // What the CUDA kernel computes for one sample, written as host/device functions so that the host can
 // run the very same float32 arithmetic (tests/test_cuda_host.cpp checks the precision contract of
-// DESIGN 7 without a GPU). The kernel (convolve.cu) adds only the warp plumbing: shared memory for the
+// docs/validation.md, "B", without a GPU). The kernel (convolve.cu) adds only the warp plumbing: shared memory for the
 // range batch, __syncwarp and the shuffle reduction.
 //
 // One warp per sample. Every lane walks the disc's ring ranges (for_each_disc_range in double, as the
@@ -22,6 +22,7 @@
 
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
+#include "core/frame.hpp"
 #include "core/hd.hpp"
 
 namespace pisco::detail::cuda {
@@ -52,6 +53,7 @@ struct KernelDetector {
   double grid_a_d, grid_inv_step_d;
   double rho_max, cos_rho_max;
   double cos_zeta, sin_zeta;
+  DetectorOffset offset;  // from the boresight
 };
 
 // Per-lane partial sums.
@@ -61,8 +63,14 @@ struct LaneSums {
   double norm = 0.0;                // sum of the normalization weight, float64
 };
 
-PISCO_HD SampleFrame<double> sample_frame(double theta, double phi, double psi, const KernelDetector& det) {
-  return make_frame(cos(theta), sin(theta), cos(phi), sin(phi), cos(psi), sin(psi), det.cos_zeta, det.sin_zeta);
+// The detector's basis and line of sight for one sample of a chunk: `pointing` holds 4 doubles a
+// sample, (theta, phi, psi, 0) or a boresight quaternion (x, y, z, w) (frame.hpp).
+PISCO_HD SampleFrame<double> sample_frame(const double* pointing, bool quaternions, const KernelDetector& det,
+                                          double& theta, double& phi) {
+  if (quaternions)
+    return quat_sample({pointing[0], pointing[1], pointing[2], pointing[3]}, det.offset, det.cos_zeta, det.sin_zeta,
+                       theta, phi);
+  return angle_sample(pointing[0], pointing[1], pointing[2], det.offset, det.cos_zeta, det.sin_zeta, theta, phi);
 }
 
 PISCO_HD SampleFrame<float> to_float(const SampleFrame<double>& f) {

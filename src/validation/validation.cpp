@@ -19,7 +19,6 @@ namespace pisco::validation {
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
 const double fwhm = 1.5 * deg;
 
 struct Maps {

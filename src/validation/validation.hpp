@@ -1,4 +1,4 @@
-// The validation cases of VALIDATION.md that compare the engine with references no part of the
+// The validation cases of docs/validation.md (C, D, E) that compare the engine with references no part of the
 // project computes itself (HEALPix C++ harmonic smoothing, exact spectra). Used by the test suite
 // (which asserts each figure) and by `pisco-vk validate` (which prints them as a table).
 #pragma once

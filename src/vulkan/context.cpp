@@ -1,12 +1,11 @@
 #include "vulkan/context.hpp"
 
 #include <algorithm>
-#include <cctype>
-#include <charconv>
 #include <cstdlib>
 #include <cstring>
 #include <utility>
 
+#include "core/device_choice.hpp"
 #include "vulkan/check.hpp"
 #include "interface.h"
 
@@ -250,20 +249,7 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
 }
 
 namespace {
-std::string lower(std::string s) {
-  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
-std::string listing(const std::vector<DeviceInfo>& devices) {
-  if (devices.empty()) return "no Vulkan device was found";
-  std::string s = "devices:";
-  for (const auto& d : devices)
-    s += " " + std::to_string(d.index) + ": " + d.describe() + (d.unusable.empty() ? "" : " (" + d.unusable + ")") + ";";
-  s.pop_back();
-  return s;
-}
-
+// The preference of `auto`: a discrete GPU, then integrated, virtual and CPU devices.
 int rank(const DeviceInfo& d) {
   switch (d.type) {
     case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU: return 4;
@@ -276,31 +262,10 @@ int rank(const DeviceInfo& d) {
 }  // namespace
 
 DeviceInfo choose_device(const std::vector<DeviceInfo>& devices, const std::string& selector) {
-  const DeviceInfo* pick = nullptr;
-  if (selector.empty() || selector == "auto") {
-    for (const auto& d : devices)
-      if (d.unusable.empty() && (!pick || rank(d) > rank(*pick))) pick = &d;
-    if (!pick) throw Error("vulkan: no usable device; " + listing(devices));
-    return *pick;
-  }
-  const bool numeric = std::all_of(selector.begin(), selector.end(), [](char c) { return std::isdigit(static_cast<unsigned char>(c)); });
-  if (numeric) {
-    std::size_t i = 0;
-    const auto [end, ec] = std::from_chars(selector.data(), selector.data() + selector.size(), i);
-    if (ec != std::errc() || end != selector.data() + selector.size() || i >= devices.size())
-      throw Error("vulkan: device '" + selector + "' does not exist; " + listing(devices));
-    pick = &devices[i];
-  } else {
-    for (const auto& d : devices)
-      if (lower(d.name).find(lower(selector)) != std::string::npos) {
-        pick = &d;
-        break;
-      }
-    if (!pick) throw Error("vulkan: no device named '" + selector + "'; " + listing(devices));
-  }
-  if (!pick->unusable.empty())
-    throw Error("vulkan: device '" + selector + "' (" + pick->describe() + ") " + pick->unusable);
-  return *pick;
+  std::vector<DeviceCandidate> candidates;
+  candidates.reserve(devices.size());
+  for (const auto& d : devices) candidates.push_back({d.name, d.describe(), rank(d), d.unusable});
+  return devices[detail::choose_device("vulkan", "Vulkan", candidates, selector)];
 }
 
 Device::Device(std::shared_ptr<Instance> instance, DeviceInfo info) : instance_(std::move(instance)), info_(std::move(info)) {

@@ -1,4 +1,4 @@
-// Vulkan instance and device (DESIGN 7). The instance is shared by every engine of the process and
+// Vulkan instance and device (docs/vulkan.md, "Loading Vulkan inside a host application"). The instance is shared by every engine of the process and
 // loaded through volk; each device keeps its own function table (VolkDeviceTable), so that several
 // devices, and the host application's own use of Vulkan, never share global device entry points.
 // With PISCO_VK_VALIDATION=1 in the environment the Khronos validation layer is enabled (an error if
@@ -60,9 +60,10 @@ struct DeviceInfo {
 
 std::vector<DeviceInfo> enumerate_devices(const Instance& instance);
 
-// The device named by `selector`: "auto" (a usable discrete GPU first, then integrated, virtual and
-// cpu devices), an index into enumerate_devices(), or a case-insensitive part of the device's name.
-// Throws pisco::Error naming the selector and listing the devices when none fits.
+// The device named by `selector`, by the rule of core/device_choice.hpp: "auto" (a usable discrete GPU
+// first, then integrated, virtual and cpu devices), an index into enumerate_devices(), or a
+// case-insensitive part of the device's name. Throws pisco::Error naming the selector and listing the
+// devices when none fits.
 DeviceInfo choose_device(const std::vector<DeviceInfo>& devices, const std::string& selector);
 
 class Device {

@@ -1,4 +1,4 @@
-# The vulkan backend (DESIGN 7): GLSL compute shaders compiled to SPIR-V at build time and embedded in
+# The vulkan backend (docs/vulkan.md): GLSL compute shaders compiled to SPIR-V at build time and embedded in
 # libpisco; Vulkan 1.2 loaded at run time through volk (Debian's libvulkan-volk-dev), whose global
 # function pointers are compiled with hidden visibility so that they never clash with the Vulkan loader
 # of an application that embeds the library. Device-level calls go through a per-device VolkDeviceTable.

@@ -1,4 +1,4 @@
-// The vulkan backend (DESIGN 6-7): the sky, ring table and weight grids are uploaded once; pointing
+// The vulkan backend (docs/vulkan.md; docs/physics.md, "Disc selection" and "Device backends"): the sky, ring table and weight grids are uploaded once; pointing
 // then streams through two slots of bounded size, so that the host fills one chunk and reads the
 // previous one back while the device convolves the other. Device memory is sky + beams + two chunks,
 // whatever the length of the TOD.
@@ -6,12 +6,15 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <functional>
+#include <thread>
 #include <limits>
 #include <memory>
 #include <numbers>
 
 #include "convolve.spv.h"
 #include "core/backend.hpp"
+#include "core/streaming.hpp"
 #include "interface.h"
 #include "vulkan/buffer.hpp"
 #include "vulkan/check.hpp"
@@ -62,7 +65,7 @@ std::uint32_t weight_columns(const PreparedDetector& d) {
 
 class VulkanBackend final : public Backend {
  public:
-  VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const EngineOptions& options);
+  VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options);
   ~VulkanBackend() override;
 
   std::string name() const override { return "vulkan"; }
@@ -70,7 +73,9 @@ class VulkanBackend final : public Backend {
     return device_->info().describe() + ", chunks of " + std::to_string(chunk_) + " samples" +
            (device_->instance().validation() ? ", with the Khronos validation layer" : "");
   }
-  std::uint64_t convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) override;
+  void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
+              std::uint64_t ticket) override;
+  std::uint64_t wait(std::uint64_t ticket) override;
 
  private:
   struct Slot {
@@ -78,22 +83,28 @@ class VulkanBackend final : public Backend {
     VkCommandBuffer cmd = VK_NULL_HANDLE;
     VkFence fence = VK_NULL_HANDLE;
     VkDescriptorSet set = VK_NULL_HANDLE;
-    std::size_t begin = 0, n = 0;
-    bool pending = false;
+    SlotJob job;
   };
 
-  void setup(const vk::DeviceInfo& info, const EngineOptions& options);
+  void setup(const vk::DeviceInfo& info, const Sky& sky, const EngineOptions& options);
   void release() noexcept;
   // A device-local uniform texel buffer holding `bytes` of `data`, viewed as R32G32B32A32_UINT texels
   // (shaders/interface.h): every table the kernel reads.
   Buffer upload(const void* data, std::size_t bytes, const char* what);
+  // The same for a table of `count` records of `record_bytes`, packed straight into a bounded staging
+  // buffer piece by piece: fill(first, n, dst) writes records [first, first + n) to dst. No host copy
+  // of the whole table is ever made.
+  Buffer upload_records(std::size_t count, std::size_t record_bytes,
+                        const std::function<void(std::size_t, std::size_t, void*)>& fill, const char* what);
   void make_slots(std::size_t chunk);
   double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
   vk::ComputePipeline::Specialization specialization(std::size_t detector) const;
-  void submit(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push,
-              const PointingView& pointing,
-              std::size_t begin, std::size_t n);
-  std::uint64_t collect(Slot& slot, std::span<double> tod);
+  vk::PushConstants push_constants(std::size_t detector, bool quaternions) const;
+  void dispatch(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push,
+                const PointingInput& pointing);
+  std::uint64_t collect(Slot& slot);
+  // Abandons every slot in flight after an error, with the error's context.
+  [[noreturn]] void fail(const SlotJob& job, const std::string& what);
 
   std::shared_ptr<const EngineInputs> in_;
   std::unique_ptr<vk::Device> device_;
@@ -107,17 +118,18 @@ class VulkanBackend final : public Backend {
   bool float64_ = false;
   std::size_t chunk_ = 0;
   std::array<Slot, 2> slots_;
+  SlotRing<Slot> ring_{slots_};
   long lose_device_after_ = vk::injected_faults().lose_device_after;
   long completed_chunks_ = 0;
 };
 
-VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const EngineOptions& options)
+VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options)
     : in_(std::move(inputs)) {
   auto instance = vk::Instance::get();
   const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), options.device);
   device_ = std::make_unique<vk::Device>(std::move(instance), info);
   try {
-    setup(info, options);
+    setup(info, sky, options);
   } catch (const Error& e) {
     release();  // the destructor does not run for a constructor that throws
     throw Error(std::string(e.what()) + " (device " + info.describe() + ")");
@@ -127,7 +139,7 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const E
   }
 }
 
-void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& options) {
+void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const EngineOptions& options) {
   const auto& fn = device_->fn();
 
   VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
@@ -139,10 +151,11 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
       std::uint32_t(slots_.size()));
 
   // The sky in float32 without its monopole I0, which float32 cannot carry next to micro-kelvin
-  // anisotropies (DESIGN 7): I0 sum_k w_I(k) is added back by the kernel's float64 path.
+  // anisotropies (docs/vulkan.md, "Precision"): I0 sum_k w_I(k) is added back by the kernel's float64
+  // path. Packed from the maps straight into the staging buffer, a piece at a time.
   const PreparedSky& sky = in_->sky;
-  const std::size_t npix = sky.pixels.size() / 8;
-  monopole_ = float32_monopole(sky);
+  const std::size_t npix = sky.npix;
+  monopole_ = float32_monopole(sky_maps);
   const bool per_sample = in_->normalization == Normalization::per_sample;
   float64_ = monopole_ != 0.0 || per_sample;
 
@@ -153,21 +166,46 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
     throw Error("vulkan: an NSIDE " + std::to_string(sky.nside) + " sky needs " + std::to_string(2 * npix) +
                 " texels in one texel buffer, but " + info.name + " binds at most " +
                 std::to_string(std::uint64_t(max_texels)) + " (maxTexelBufferElements); use the cpu backend");
-  std::vector<float> sky32(8 * npix), lo(float64_ ? 4 * npix : 4);
-  for (std::size_t p = 0; p < npix; ++p) {
-    const double* px = &sky.pixels[8 * p];
-    for (int c = 0; c < 3; ++c) {
-      sky32[8 * p + c] = float(px[c]);
-      if (float64_) lo[4 * p + c] = float_residual(px[c]);
-    }
-    sky32[8 * p + 3] = float(px[4] - monopole_);
-    sky32[8 * p + 4] = float(px[5]);
-    sky32[8 * p + 5] = float(px[6]);
-    sky32[8 * p + 6] = float(px[7]);
-    sky32[8 * p + 7] = 0.0f;
-  }
-  sky_ = upload(sky32.data(), sky32.size() * sizeof(float), "the sky");
-  sky_lo_ = upload(lo.data(), lo.size() * sizeof(float), "the sky's float64 pixel vectors");
+  const PixelVectors vectors(sky.nside);
+  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
+  std::vector<double> xyz;
+  const double monopole = monopole_;
+  sky_ = upload_records(
+      npix, 8 * sizeof(float),
+      [&](std::size_t first, std::size_t n, void* dst) {
+        xyz.resize(3 * n);
+        vectors.get(first, n, xyz.data(), threads);
+        auto* out = static_cast<float*>(dst);
+        for (std::size_t j = 0; j < n; ++j) {
+          const std::size_t p = first + j;
+          float* rec = out + 8 * j;
+          rec[0] = float(xyz[3 * j]);
+          rec[1] = float(xyz[3 * j + 1]);
+          rec[2] = float(xyz[3 * j + 2]);
+          rec[3] = float(sky_maps.I()[p] - monopole);
+          rec[4] = float(sky_maps.Q()[p]);
+          rec[5] = float(sky_maps.U()[p]);
+          rec[6] = float(sky_maps.V()[p]);
+          rec[7] = 0.0f;
+        }
+      },
+      "the sky");
+  sky_lo_ = upload_records(
+      float64_ ? npix : 1, 4 * sizeof(float),
+      [&](std::size_t first, std::size_t n, void* dst) {
+        auto* out = static_cast<float*>(dst);
+        if (!float64_) {
+          std::fill(out, out + 4 * n, 0.0f);
+          return;
+        }
+        xyz.resize(3 * n);
+        vectors.get(first, n, xyz.data(), threads);
+        for (std::size_t j = 0; j < n; ++j) {
+          for (int c = 0; c < 3; ++c) out[4 * j + c] = float_residual(xyz[3 * j + c]);
+          out[4 * j + 3] = 0.0f;
+        }
+      },
+      "the sky's float64 pixel vectors");
   std::vector<std::uint32_t> rings;  // shaders/interface.h
   for (const RingEntry& r : sky.rings) {
     std::uint64_t z = 0;
@@ -210,7 +248,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
   weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids");
 
   // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
-  const std::size_t by_range = info.max_storage_buffer_range / (3 * sizeof(double));
+  const std::size_t by_range = info.max_storage_buffer_range / (4 * sizeof(double));
   const std::size_t by_groups = std::size_t(info.max_groups_x) * info.max_groups_y;  // one sample per group at worst
   std::size_t chunk = options.chunk_samples ? options.chunk_samples : default_chunk;
   chunk = std::max<std::size_t>(1, std::min({chunk, by_range, by_groups}));
@@ -221,10 +259,20 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const EngineOptions& optio
 }
 
 Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* what) {
+  return upload_records(
+      bytes, 1, [&](std::size_t first, std::size_t n, void* dst) { std::memcpy(dst, static_cast<const char*>(data) + first, n); },
+      what);
+}
+
+Buffer VulkanBackend::upload_records(std::size_t count, std::size_t record_bytes,
+                                     const std::function<void(std::size_t, std::size_t, void*)>& fill,
+                                     const char* what) {
   const auto& fn = device_->fn();
+  const std::size_t bytes = count * record_bytes;
   try {
-    Buffer staging(*device_, bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::upload);
-    std::memcpy(staging.mapped(), data, bytes);
+    // Staging of at most 64 MiB (whole texels and records), reused for every piece.
+    const std::size_t per_piece = std::max<std::size_t>(1, std::min(count, (std::size_t(64) << 20) / record_bytes / 16 * 16));
+    Buffer staging(*device_, per_piece * record_bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, MemoryUse::upload);
     Buffer target(*device_, bytes, VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                   MemoryUse::device);
     target.make_texel_view(VK_FORMAT_R32G32B32A32_UINT);
@@ -244,22 +292,27 @@ Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* wh
         device.fn().vkFreeCommandBuffers(device.handle(), pool, 1, &cmd);
       }
     } guard{*device_, pool_, cmd};
-    VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-    PISCO_VK(fn.vkBeginCommandBuffer(cmd, &bi));
-    const VkBufferCopy region{0, 0, bytes};
-    fn.vkCmdCopyBuffer(cmd, staging.handle(), target.handle(), 1, &region);
-    VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-    barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-    barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-    fn.vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier,
-                            0, nullptr, 0, nullptr);
-    PISCO_VK(fn.vkEndCommandBuffer(cmd));
-    VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-    si.commandBufferCount = 1;
-    si.pCommandBuffers = &cmd;
-    PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, VK_NULL_HANDLE));
-    PISCO_VK(fn.vkQueueWaitIdle(device_->queue()));
+    for (std::size_t first = 0; first < count; first += per_piece) {
+      const std::size_t n = std::min(per_piece, count - first);
+      fill(first, n, staging.mapped());
+      PISCO_VK(fn.vkResetCommandBuffer(cmd, 0));
+      VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+      bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+      PISCO_VK(fn.vkBeginCommandBuffer(cmd, &bi));
+      const VkBufferCopy region{0, first * record_bytes, n * record_bytes};
+      fn.vkCmdCopyBuffer(cmd, staging.handle(), target.handle(), 1, &region);
+      VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+      barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+      barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+      fn.vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier,
+                              0, nullptr, 0, nullptr);
+      PISCO_VK(fn.vkEndCommandBuffer(cmd));
+      VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+      si.commandBufferCount = 1;
+      si.pCommandBuffers = &cmd;
+      PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, VK_NULL_HANDLE));
+      PISCO_VK(fn.vkQueueWaitIdle(device_->queue()));
+    }
     return target;
   } catch (const vk::OutOfMemory& e) {
     throw Error("vulkan: out of memory uploading " + std::string(what) + " (" + std::to_string(int(mib(double(bytes)))) +
@@ -270,20 +323,19 @@ Buffer VulkanBackend::upload(const void* data, std::size_t bytes, const char* wh
 // Two slots of `chunk` samples; on out-of-memory, half the chunk, down to one sample.
 void VulkanBackend::make_slots(std::size_t chunk) {
   const auto& fn = device_->fn();
-  for (;;) {
-    try {
-      for (Slot& s : slots_) {
-        s.pointing = Buffer(*device_, chunk * 3 * sizeof(double), storage, MemoryUse::upload);
-        s.tod = Buffer(*device_, chunk * sizeof(double), storage, MemoryUse::readback);
-        s.counts = Buffer(*device_, chunk * sizeof(std::uint32_t), storage, MemoryUse::readback);
-      }
-      break;
-    } catch (const vk::OutOfMemory&) {
-      for (Slot& s : slots_) s = Slot{};
-      if (chunk == 1) throw Error("vulkan: out of memory on " + device_->info().name + " even for one-sample chunks");
-      chunk /= 2;
-    }
-  }
+  chunk = fit_chunk_halving<vk::OutOfMemory>(
+      chunk,
+      [&](std::size_t n) {
+        for (Slot& s : slots_) {
+          s.pointing = Buffer(*device_, n * 4 * sizeof(double), storage, MemoryUse::upload);
+          s.tod = Buffer(*device_, n * sizeof(double), storage, MemoryUse::readback);
+          s.counts = Buffer(*device_, n * sizeof(std::uint32_t), storage, MemoryUse::readback);
+        }
+      },
+      [&] {
+        for (Slot& s : slots_) s = Slot{};
+      },
+      "vulkan: " + device_->info().name);
   chunk_ = chunk;
   for (Slot& s : slots_) {
     VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
@@ -348,17 +400,49 @@ vk::ComputePipeline::Specialization VulkanBackend::specialization(std::size_t de
   return spec;
 }
 
-void VulkanBackend::submit(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push_in,
-                           const PointingView& pointing, std::size_t begin, std::size_t n) {
+vk::PushConstants VulkanBackend::push_constants(std::size_t detector, bool quaternions) const {
+  const PreparedDetector& det = in_->detectors.at(detector);
+  vk::PushConstants push{};
+  push.rho_max = det.rho_max;
+  push.cos_rho_max = det.cos_rho_max;
+  push.monopole = monopole_;
+  push.grid_a = det.grid_a;
+  push.grid_inv_step = det.grid_inv_step;
+  push.offset_quat[0] = det.offset.quat.x;
+  push.offset_quat[1] = det.offset.quat.y;
+  push.offset_quat[2] = det.offset.quat.z;
+  push.offset_quat[3] = det.offset.quat.w;
+  push.grid_a32 = float(det.grid_a);
+  push.grid_inv_step32 = float(det.grid_inv_step);
+  push.cos_zeta = float(det.cos_zeta);
+  push.sin_zeta = float(det.sin_zeta);
+  push.grid_n = std::uint32_t(det.grid_n);
+  push.grid_offset = grid_offset_.at(detector);
+  push.grid_offset64 = grid_offset64_.at(detector);
+  push.nside = std::uint32_t(in_->sky.nside);
+  push.flags = (in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) |
+               (quaternions ? PISCO_FLAG_QUATERNION : 0u) | (det.offset.active ? PISCO_FLAG_OFFSET : 0u);
+  return push;
+}
+
+// Fills the slot's pointing (4 doubles a sample, shaders/interface.h) and queues its kernel.
+void VulkanBackend::dispatch(Slot& slot, const vk::ComputePipeline::Specialization& spec,
+                             const vk::PushConstants& push_in, const PointingInput& pointing) {
   const auto& fn = device_->fn();
   constexpr double twopi = 2 * std::numbers::pi;
+  const std::size_t n = pointing.size();
   auto* p = static_cast<double*>(slot.pointing.mapped());
-  for (std::size_t i = 0; i < n; ++i) {
-    double phi = pointing.phi[begin + i];
-    if (!(phi >= 0.0 && phi < twopi)) phi = wrap_phi(phi);  // as the reference does
-    p[3 * i] = pointing.theta[begin + i];
-    p[3 * i + 1] = phi;
-    p[3 * i + 2] = pointing.psi[begin + i];
+  if (pointing.quaternions) {
+    std::memcpy(p, pointing.quats.quats.data(), n * sizeof(Quat));
+  } else {
+    for (std::size_t i = 0; i < n; ++i) {
+      double phi = pointing.angles.phi[i];
+      if (!(phi >= 0.0 && phi < twopi)) phi = wrap_phi(phi);  // as the reference does
+      p[4 * i] = pointing.angles.theta[i];
+      p[4 * i + 1] = phi;
+      p[4 * i + 2] = pointing.angles.psi[i];
+      p[4 * i + 3] = 0.0;
+    }
   }
   vk::PushConstants push = push_in;
   push.sample_count = std::uint32_t(n);
@@ -384,84 +468,78 @@ void VulkanBackend::submit(Slot& slot, const vk::ComputePipeline::Specialization
   si.commandBufferCount = 1;
   si.pCommandBuffers = &slot.cmd;
   PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, slot.fence));
-  slot.begin = begin;
-  slot.n = n;
-  slot.pending = true;
 }
 
-std::uint64_t VulkanBackend::collect(Slot& slot, std::span<double> tod) {
+std::uint64_t VulkanBackend::collect(Slot& slot) {
   const auto& fn = device_->fn();
-  slot.pending = false;
   PISCO_VK(fn.vkWaitForFences(device_->handle(), 1, &slot.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()));
   if (lose_device_after_ >= 0 && completed_chunks_++ >= lose_device_after_)
     vk::fail(VK_ERROR_DEVICE_LOST, "vkWaitForFences (PISCO_VK_TEST_FAULT)");
   slot.tod.invalidate();
   slot.counts.invalidate();
-  std::memcpy(tod.data() + slot.begin, slot.tod.mapped(), slot.n * sizeof(double));
+  deliver(slot.job, static_cast<const double*>(slot.tod.mapped()));
   const auto* counts = static_cast<const std::uint32_t*>(slot.counts.mapped());
   std::uint64_t pixels = 0;
-  for (std::size_t i = 0; i < slot.n; ++i) pixels += counts[i];
+  for (std::size_t i = 0; i < slot.job.tod.size(); ++i) pixels += counts[i];
   return pixels;
 }
 
-std::uint64_t VulkanBackend::convolve(std::size_t detector, const PointingView& pointing, std::span<double> tod) {
-  const PreparedDetector& det = in_->detectors.at(detector);
-  vk::PushConstants push{};
-  push.rho_max = det.rho_max;
-  push.cos_rho_max = det.cos_rho_max;
-  push.monopole = monopole_;
-  push.grid_a = det.grid_a;
-  push.grid_inv_step = det.grid_inv_step;
-  push.grid_a32 = float(det.grid_a);
-  push.grid_inv_step32 = float(det.grid_inv_step);
-  push.cos_zeta = float(det.cos_zeta);
-  push.sin_zeta = float(det.sin_zeta);
-  push.grid_n = std::uint32_t(det.grid_n);
-  push.grid_offset = grid_offset_.at(detector);
-  push.grid_offset64 = grid_offset64_.at(detector);
-  push.nside = std::uint32_t(in_->sky.nside);
-  push.flags = in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u;
-  const vk::ComputePipeline::Specialization spec = specialization(detector);
+void VulkanBackend::fail(const SlotJob& job, const std::string& what) {
+  ring_.abandon();
+  device_->fn().vkDeviceWaitIdle(device_->handle());
+  throw SubmissionError(job.detector, what + " (device " + device_->info().name + ", detector " +
+                                          std::to_string(job.detector) + ", samples " + std::to_string(job.first) +
+                                          " to " + std::to_string(job.first + job.tod.size() - 1) + " of a chunk of " +
+                                          std::to_string(job.total) + ")");
+}
 
+void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod,
+                           bool accumulate, std::uint64_t ticket) {
+  const PreparedDetector& det = in_->detectors.at(detector);
+  const vk::PushConstants push = push_constants(detector, pointing.quaternions);
+  const vk::ComputePipeline::Specialization spec = specialization(detector);
   // Chunks of at most chunk_ samples and about 1e9 pixel evaluations, so that no submission runs
   // for long enough to meet a driver's watchdog on large discs.
   const double disc = disc_pixels(det);
   const std::size_t chunk = std::max<std::size_t>(1, std::min<std::size_t>(chunk_, std::size_t(1e9 / std::max(disc, 1.0))));
-  std::uint64_t pixels = 0;
-  std::size_t next = 0, at = 0, len = 0;  // the chunk in hand, for error messages
+  SlotJob current;
   try {
-    for (std::size_t begin = 0; begin < pointing.size(); begin += chunk, ++next) {
-      Slot& slot = slots_[next % slots_.size()];
-      if (slot.pending) {
-        at = slot.begin;
-        len = slot.n;
-        pixels += collect(slot, tod);
-      }
-      at = begin;
-      len = std::min(chunk, pointing.size() - begin);
-      submit(slot, spec, push, pointing, begin, len);
-    }
-    for (std::size_t i = 0; i < slots_.size(); ++i) {  // the last chunks, in order
-      Slot& slot = slots_[(next + i) % slots_.size()];
-      if (slot.pending) {
-        at = slot.begin;
-        len = slot.n;
-        pixels += collect(slot, tod);
-      }
+    for (std::size_t begin = 0; begin < pointing.size(); begin += chunk) {
+      const std::size_t n = std::min(chunk, pointing.size() - begin);
+      Slot& slot = ring_.acquire([&](Slot& s) {
+        current = s.job;
+        return collect(s);
+      });
+      current = SlotJob{false, ticket, detector, begin, pointing.size(), tod.subspan(begin, n), accumulate};
+      dispatch(slot, spec, push, pointing.subspan(begin, n));
+      slot.job = current;
+      slot.job.busy = true;
     }
   } catch (const Error& e) {
-    for (Slot& s : slots_) s.pending = false;
-    device_->fn().vkDeviceWaitIdle(device_->handle());
-    throw Error(std::string(e.what()) + " (device " + device_->info().name + ", detector " + std::to_string(detector) +
-                ", samples " + std::to_string(at) + " to " + std::to_string(at + len - 1) + " of " +
-                std::to_string(pointing.size()) + ")");
+    fail(current, e.what());
   } catch (...) {
-    for (Slot& s : slots_) s.pending = false;
+    ring_.abandon();
     device_->fn().vkDeviceWaitIdle(device_->handle());
     throw;
   }
-  device_->check_validation("convolving detector " + std::to_string(detector));
-  return pixels;
+}
+
+std::uint64_t VulkanBackend::wait(std::uint64_t ticket) {
+  SlotJob current;
+  try {
+    ring_.drain(ticket, [&](Slot& s) {
+      current = s.job;
+      return collect(s);
+    });
+  } catch (const Error& e) {
+    fail(current, e.what());
+  } catch (...) {
+    ring_.abandon();
+    device_->fn().vkDeviceWaitIdle(device_->handle());
+    throw;
+  }
+  device_->check_validation("convolving");
+  return ring_.take_pixels();
 }
 
 }  // namespace
@@ -488,8 +566,8 @@ BackendEntry vulkan_backend_entry() {
               return BackendInfo{"vulkan", false, e.what()};
             }
           },
-          [](std::shared_ptr<const EngineInputs> in, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<VulkanBackend>(std::move(in), o);
+          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+            return std::make_unique<VulkanBackend>(std::move(in), sky, o);
           },
           [] {
             try {

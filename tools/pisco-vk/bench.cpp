@@ -1,4 +1,4 @@
-// `pisco-vk bench`: the paper's Table 1 workload (VALIDATION G): a full-sky NSIDE 128 sky, every
+// `pisco-vk bench`: the paper's Table 1 workload (docs/validation.md, "G"): a full-sky NSIDE 128 sky, every
 // pixel centre at psi = 0, 45, 90 deg for two detectors (1,179,648 samples), a 1.5 deg Gaussian beam
 // on a grid as fine as a beam NSIDE of 512.
 #include "bench.hpp"
@@ -15,7 +15,7 @@
 namespace pisco_cli {
 namespace {
 
-constexpr double deg = std::numbers::pi / 180;
+using pisco::deg;
 
 // The paper's GTX 1080 wall times (Table 1), ms, by rho_max in degrees.
 const std::map<double, std::pair<int, double>> paper = {

@@ -222,9 +222,7 @@ void read_detectors(const toml::table& root, const std::string& where, const fs:
       det.epsilon = d.number("epsilon", 0.0);
       det.gain = d.number("gain", 1.0);
       det.beam = beam_index(d, "beam", beams, true);
-      det.xi = d.number("xi_deg", 0.0) * deg;
-      det.eta = d.number("eta_deg", 0.0) * deg;
-      det.gamma = d.number("gamma_deg", 0.0) * deg;
+      det.set_offset(d.number("xi_deg", 0.0) * deg, d.number("eta_deg", 0.0) * deg, d.number("gamma_deg", 0.0) * deg);
       d.finish();
       out.push_back(det);
     }
@@ -250,8 +248,11 @@ void read_detectors(const toml::table& root, const std::string& where, const fs:
       const double xi_b = p.number("xi_b_deg").value_or(xi / deg) * deg, eta_b = p.number("eta_b_deg").value_or(eta / deg) * deg;
       const double gamma = p.number("gamma_deg", 0.0) * deg;
       p.finish();
-      out.push_back({*name + "a", zeta, eps, ga, ba, xi, eta, gamma});
-      out.push_back({*name + "b", zeta - std::numbers::pi / 2, eps, gb, bb, xi_b, eta_b, gamma});
+      pisco::Detector a{*name + "a", zeta, eps, ga, ba}, b{*name + "b", zeta - std::numbers::pi / 2, eps, gb, bb};
+      a.set_offset(xi, eta, gamma);
+      b.set_offset(xi_b, eta_b, gamma);
+      out.push_back(a);
+      out.push_back(b);
     }
   }
   t.string("file");  // handled by the caller
@@ -276,10 +277,53 @@ double parse_utc(Table& t, const std::string& key, const std::string& text) {
   return days * 86400.0 + h * 3600.0 + mi * 60.0 + sec;
 }
 
+// [scan] type = "satellite": a spinning, precessing spacecraft (pisco::SatelliteScan; every key is
+// checked here so that its error names it).
+void read_satellite(Table& t, ScanConfig& s) {
+  pisco::SatelliteScan& c = s.satellite;
+  auto angle = [&](const std::string& key, double fallback, bool open_interval) {
+    const double v = t.number(key, fallback);
+    if (!std::isfinite(v) || v < 0 || v > 180 || (open_interval && (v == 0 || v == 180)))
+      t.fail(key, std::string("expected an angle within ") + (open_interval ? "(0, 180)" : "[0, 180]") + " deg, got " +
+                      std::to_string(v));
+    return v * deg;
+  };
+  auto finite = [&](const std::string& key, double fallback) {
+    const double v = t.number(key, fallback);
+    if (!std::isfinite(v)) t.fail(key, "expected a finite number");
+    return v;
+  };
+  c.spin_sun_angle = angle("spin_sun_angle_deg", 45.0, false);
+  c.spin_boresight_angle = angle("spin_boresight_angle_deg", 50.0, true);
+  c.precession_period = t.positive("precession_period_min", 192.348) * 60;
+  c.spin_period = t.positive("spin_period_min", 20.0) * 60;
+  c.sample_rate = t.positive("sample_rate_hz", 19.0);
+  c.start_time = finite("start_time_s", 0.0);
+  c.precession_phase = finite("precession_phase_deg", 0.0) * deg;
+  c.spin_phase = finite("spin_phase_deg", 0.0) * deg;
+  const std::string frame = t.choice("frame", "ecliptic", {"ecliptic", "equatorial", "galactic"});
+  c.frame = frame == "ecliptic"     ? pisco::SatelliteScan::Frame::ecliptic
+            : frame == "equatorial" ? pisco::SatelliteScan::Frame::equatorial
+                                    : pisco::SatelliteScan::Frame::galactic;
+  const double hours = t.positive("duration_hours", 1.0);
+  const double samples = std::round(hours * 3600 * c.sample_rate);
+  if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
+  if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
+  c.samples = static_cast<std::size_t>(samples);
+  s.nside = static_cast<int>(t.integer("nside", 64));  // the maps' default NSIDE
+  if (s.nside < 1 || s.nside > 8192 || (s.nside & (s.nside - 1)) != 0)
+    t.fail("nside", "expected a power of two from 1 to 8192, got " + std::to_string(s.nside));
+  try {
+    c.check();
+  } catch (const pisco::Error& e) {
+    t.fail("type", e.what());
+  }
+}
+
 ScanConfig read_scan(Table t) {
   ScanConfig s;
-  s.type = t.choice("type", "pixel_centres", {"pixel_centres", "random_offsets", "raster", "ces", "file"});
-  if (s.type != "ces" && s.type != "file")
+  s.type = t.choice("type", "pixel_centres", {"pixel_centres", "random_offsets", "raster", "ces", "satellite", "file"});
+  if (s.type != "ces" && s.type != "satellite" && s.type != "file")
     for (double p : t.numbers("psi_deg", {0.0, 45.0, 90.0})) s.psi.push_back(p * deg);
   if (s.type == "ces") {
     pisco::CesScan& c = s.ces;
@@ -302,6 +346,8 @@ ScanConfig read_scan(Table t) {
     } catch (const pisco::Error& e) {
       t.fail("type", e.what());
     }
+  } else if (s.type == "satellite") {
+    read_satellite(t, s);
   } else if (s.type == "file") {
     s.file = t.path("file");
     if (s.file.empty()) t.fail("file", "a scan of type \"file\" needs file = \"pointing.h5\"");
@@ -366,8 +412,33 @@ OutputConfig read_output(Table t) {
 
 }  // namespace
 
+namespace {
+
+// Whether a focal plane file is a TOAST table (HDF5): by its extension, else by the HDF5 signature at
+// its start.
+bool is_hdf5_focal_plane(const fs::path& file) {
+  const std::string ext = file.extension().string();
+  if (ext == ".h5" || ext == ".hdf5" || ext == ".he5" || ext == ".hdf") return true;
+  std::ifstream in(file, std::ios::binary);
+  char head[8] = {};
+  return in.read(head, sizeof head) && std::string(head, sizeof head) == std::string("\x89HDF\r\n\x1a\n", 8);
+}
+
+// A TOAST focal plane (pisco::read_toast_focal_plane), every detector with beam `beam`.
+std::vector<pisco::Detector> load_toast_focal_plane(const fs::path& file, std::size_t beam) {
+  return pisco::read_toast_focal_plane(file, beam).detectors;
+}
+
+}  // namespace
+
 std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::vector<BeamConfig>& beams) {
   std::vector<pisco::Detector> out;
+  if (is_hdf5_focal_plane(file)) {
+    if (beams.size() != 1)
+      throw pisco::Error(file.string() + ": a TOAST focal plane gives every detector one beam: name it with "
+                                         "[focal_plane] beam (there are " + std::to_string(beams.size()) + " beams)");
+    return load_toast_focal_plane(file, 0);
+  }
   if (file.extension() == ".toml") {
     const toml::table root = parse(file, nullptr);
     read_detectors(root, "focal plane", file, beams, out);
@@ -408,6 +479,7 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
     if (f.size() != header.size())
       throw pisco::Error(where + "expected " + std::to_string(header.size()) + " fields, got " + std::to_string(f.size()));
     pisco::Detector d;
+    double xi = 0.0, eta = 0.0, gamma = 0.0;
     for (std::size_t i = 0; i < f.size(); ++i) {
       auto num = [&](const std::string& s) {
         try {
@@ -423,9 +495,9 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
       else if (header[i] == "zeta_deg") d.zeta = num(f[i]) * deg;
       else if (header[i] == "epsilon") d.epsilon = num(f[i]);
       else if (header[i] == "gain") d.gain = num(f[i]);
-      else if (header[i] == "xi_deg") d.xi = num(f[i]) * deg;
-      else if (header[i] == "eta_deg") d.eta = num(f[i]) * deg;
-      else if (header[i] == "gamma_deg") d.gamma = num(f[i]) * deg;
+      else if (header[i] == "xi_deg") xi = num(f[i]) * deg;
+      else if (header[i] == "eta_deg") eta = num(f[i]) * deg;
+      else if (header[i] == "gamma_deg") gamma = num(f[i]) * deg;
       else {
         auto it = std::find_if(beams.begin(), beams.end(), [&](const BeamConfig& b) { return b.name == f[i]; });
         if (it == beams.end()) throw pisco::Error(where + "no beam named '" + f[i] + "' in [beams]");
@@ -433,6 +505,7 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
       }
     }
     if (d.name.empty()) throw pisco::Error(where + "empty detector name");
+    d.set_offset(xi, eta, gamma);
     out.push_back(d);
   }
   if (out.empty()) throw pisco::Error(file.string() + ": no detectors in the focal plane table");
@@ -461,7 +534,15 @@ SimulationConfig load_config(const fs::path& file) {
   const fs::path fp_file = fpt.path("file");
   if (!fp_file.empty()) {
     if (fp->contains("detectors") || fp->contains("pairs")) fpt.fail("file", "give either a file or detectors/pairs, not both");
-    c.detectors = load_focal_plane(fp_file, c.beams);
+    if (is_hdf5_focal_plane(fp_file)) {
+      // A TOAST table has no beam column: one beam for all its detectors.
+      c.detectors = load_toast_focal_plane(fp_file, beam_index(fpt, "beam", c.beams, true));
+    } else {
+      if (fpt.has("beam"))
+        fpt.fail("beam", "only for a TOAST focal plane (HDF5); a CSV or TOML table names each detector's beam itself");
+      c.detectors = load_focal_plane(fp_file, c.beams);
+    }
+    fpt.finish();
   } else {
     read_detectors(*fp, "focal_plane", file, c.beams, c.detectors);
     if (c.detectors.empty()) fpt.fail("detectors", "no [[focal_plane.detectors]] or [[focal_plane.pairs]]");

@@ -1,4 +1,4 @@
-// The simulation file of `pisco-vk run` (DESIGN 9): one TOML file naming the sky, beams, focal plane,
+// The simulation file of `pisco-vk run` (docs/config.md): one TOML file naming the sky, beams, focal plane,
 // scan, engine and outputs. docs/config.md documents every key.
 #pragma once
 
@@ -35,7 +35,7 @@ struct BeamConfig {
 };
 
 struct ScanConfig {
-  std::string type;              // pixel_centres, random_offsets, raster, ces, file
+  std::string type;              // pixel_centres, random_offsets, raster, ces, satellite, file
   int nside = 64;
   std::vector<double> psi;       // radians
   double f = 0.1;
@@ -44,6 +44,7 @@ struct ScanConfig {
   double theta = 0, phi = 0, radius = 0;  // raster centre and radius, radians
   std::filesystem::path file;
   pisco::CesScan ces;            // type = "ces"
+  pisco::SatelliteScan satellite;  // type = "satellite"
 };
 
 struct EngineConfig {

@@ -1,4 +1,4 @@
-// pisco-vk: the command line of PISCO-VK (DESIGN 10), a thin layer over the library.
+// pisco-vk: the command line of PISCO-VK (README.md, "The command line"), a thin layer over the library.
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -75,14 +75,14 @@ int main(int argc, char** argv) {
 
   app.add_subcommand("devices", "List the backends compiled in, the devices found, and why a backend is missing.");
 
-  auto* bench = app.add_subcommand("bench", "Benchmark the paper's Table 1 workload (VALIDATION G).");
+  auto* bench = app.add_subcommand("bench", "Benchmark the paper's Table 1 workload (docs/validation.md, case G).");
   pisco_cli::BenchOptions bench_options;
   bench->add_option("--rho-max", bench_options.rho_max_deg, "Disc radii in degrees (default: 5 10).");
   bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, vulkan, cuda (default: auto).");
   bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend (default: auto).");
   bench->add_option("--threads", bench_options.threads, "CPU backend threads (default: all).");
 
-  auto* val = app.add_subcommand("validate", "Run the paper's validation cases (VALIDATION.md C, D) and print a pass/fail table.");
+  auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E) and print a pass/fail table.");
   bool full = false;
   std::string validate_backend = "cpu";
   val->add_flag("--full", full, "Paper scale (C at three beam resolutions, D with an NSIDE 512 sky); minutes on a CPU.");

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <numbers>
 #include <optional>
+#include <array>
 #include <sstream>
 
 #include "progress.hpp"
@@ -78,25 +79,51 @@ pisco::Beamsor make_beam(const BeamConfig& b, const fs::path& config) {
   }
 }
 
-// The boresight pointing of the generated scans, produced chunk by chunk (a week of
-// constant-elevation scanning is never held in memory whole).
+// One chunk of boresight pointing, in the form its scan produces: angles for the generated ground and
+// test scans, quaternions for the satellite scan and pointing files.
+struct BoresightChunk {
+  pisco::Pointing angles;
+  std::vector<pisco::Quat> quats;
+  bool quaternions = false;
+  std::size_t first = 0;
+  std::size_t size() const { return quaternions ? quats.size() : angles.size(); }
+};
+
+// The boresight pointing of the scan, produced chunk by chunk (a week of constant-elevation
+// scanning, a year of satellite scanning or a season's pointing file is never held in memory whole).
 class Boresight {
  public:
   explicit Boresight(const ScanConfig& s) : scan_(s) {
     if (s.type == "pixel_centres") all_ = pisco::pixel_centre_scan(s.nside, s.psi);
     else if (s.type == "random_offsets") all_ = pisco::random_offset_scan(s.nside, s.psi, s.f, s.seed, s.symmetric);
     else if (s.type == "raster") all_ = pisco::raster_scan(s.theta, s.phi, s.radius, s.nside, s.psi);
+    else if (s.type == "file") file_.emplace(s.file);
   }
-  std::size_t size() const { return scan_.type == "ces" ? scan_.ces.samples : all_.size(); }
-  pisco::PointingView chunk(std::size_t first, std::size_t count) {
-    if (scan_.type != "ces") return all_.view().subspan(first, count);
-    scan_.ces.generate(first, count, buffer_);
-    return buffer_.view();
+  bool quaternions() const { return scan_.type == "satellite" || file_.has_value(); }
+  std::size_t size() const {
+    if (scan_.type == "ces") return scan_.ces.samples;
+    if (scan_.type == "satellite") return scan_.satellite.samples;
+    if (file_) return file_->size();
+    return all_.size();
+  }
+  void fill(std::size_t first, std::size_t count, BoresightChunk& out) const {
+    out.first = first;
+    out.quaternions = quaternions();
+    if (scan_.type == "ces") scan_.ces.generate(first, count, out.angles);
+    else if (scan_.type == "satellite") scan_.satellite.generate(first, count, out.quats);
+    else if (file_) file_->read(first, count, out.quats);
+    else {
+      const pisco::PointingView v = all_.view().subspan(first, count);
+      out.angles.theta.assign(v.theta.begin(), v.theta.end());
+      out.angles.phi.assign(v.phi.begin(), v.phi.end());
+      out.angles.psi.assign(v.psi.begin(), v.psi.end());
+    }
   }
 
  private:
   ScanConfig scan_;
-  pisco::Pointing all_, buffer_;
+  pisco::Pointing all_;
+  std::optional<pisco::BoresightFile> file_;
 };
 
 std::string utc_now() {
@@ -155,11 +182,17 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   pisco::Engine engine(sky, beams, fp, c.engine.options);
   say("backend: %s (%s)\n", engine.backend_name().c_str(), engine.device_name().c_str());
 
-  const bool from_file = c.scan.type == "file";
+  // Pointing files hold either boresight quaternions (the engine applies each detector's offset) or
+  // each detector's own angles (per-detector groups, read whole).
+  const bool per_detector_file = c.scan.type == "file" && !pisco::BoresightFile::holds_boresight(c.scan.file);
   std::optional<Boresight> boresight;
   std::size_t samples_per_detector = 0;
-  if (from_file) {
+  if (per_detector_file) {
     for (const auto& d : fp.detectors()) {
+      if (d.has_offset())
+        throw pisco::Error(c.scan.file.string() + ": the file gives detector '" + d.name +
+                           "' its own pointing, but the focal plane also gives it an offset from the boresight " +
+                           "(expected a boresight pointing file, or detectors without offsets)");
       const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
       if (samples_per_detector == 0) samples_per_detector = n;
       if (n != samples_per_detector)
@@ -196,37 +229,75 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   }
 
   Progress progress(total, quiet);
-  std::vector<double> tod(std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1)));
+  const std::size_t chunk = std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1));
   const auto tc = std::chrono::steady_clock::now();
-  // One detector's chunk: convolve, bin, write.
-  auto process = [&](std::size_t d, std::size_t off, const pisco::PointingView& v) {
-    const std::span<double> chunk(tod.data(), v.size());
-    engine.convolve(d, v, chunk);
-    if (mapper) mapper->add(fp[d], v, chunk);
-    if (tod_file) tod_file->write(d, off, chunk, c.output.tod_pointing ? &v : nullptr);
-    progress.advance(v.size());
+  // The run as a stream of jobs (a detector's chunk), two in flight: while the engine convolves job
+  // j, job j - 1 is binned and written and job j + 1's pointing is prepared, so that the device never
+  // waits for the host (Engine::submit). Jobs alternate between two TOD buffers, and time chunks
+  // between two boresight buffers: the pending job is never more than one behind.
+  struct Job {
+    std::size_t detector = 0, first = 0, count = 0;
+    int bslot = 0;  // its boresight chunk
+    int slot = 0;   // its TOD buffer
+    std::uint64_t ticket = 0;
   };
-  if (from_file) {
-    for (std::size_t d = 0; d < fp.size(); ++d) {
-      const pisco::Pointing ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
-      for (std::size_t off = 0; off < ptg.size(); off += tod.size())
-        process(d, off, ptg.view().subspan(off, std::min(tod.size(), ptg.size() - off)));
+  std::array<std::vector<double>, 2> tod;
+  for (auto& t : tod) t.resize(chunk);
+  std::array<BoresightChunk, 2> bore;
+  std::array<pisco::Pointing, 2> file_pointing;  // per-detector files: the detector's pointing, whole
+  std::optional<Job> pending;
+  pisco::Pointing own;
+  auto finish = [&](const Job& j) {
+    engine.wait(j.ticket);
+    const std::span<double> t(tod[j.slot].data(), j.count);
+    const pisco::Detector& det = fp[j.detector];
+    if (mapper || (tod_file && c.output.tod_pointing)) {
+      const BoresightChunk& b = bore[j.bslot];
+      if (per_detector_file)
+        pisco::detector_pointing(file_pointing[j.detector % 2].view().subspan(j.first, j.count), det.offset, own);
+      else if (b.quaternions)
+        pisco::detector_pointing(pisco::QuatPointingView{b.quats}, det.offset, own);
+      else
+        pisco::detector_pointing(b.angles.view(), det.offset, own);
     }
-  } else {
-    // Time chunks outermost: the boresight chunk is made once and offset for each detector.
-    pisco::Pointing offset;
-    for (std::size_t off = 0; off < samples_per_detector; off += tod.size()) {
-      const pisco::PointingView b = boresight->chunk(off, std::min(tod.size(), samples_per_detector - off));
-      for (std::size_t d = 0; d < fp.size(); ++d) {
-        if (!fp[d].has_offset()) {
-          process(d, off, b);
-          continue;
-        }
-        pisco::offset_pointing(b, fp[d].xi, fp[d].eta, fp[d].gamma, offset);
-        process(d, off, offset.view());
+    const pisco::PointingView detector_view = own.view();
+    if (mapper) mapper->add(det, detector_view, t);
+    if (tod_file) tod_file->write(j.detector, j.first, t, c.output.tod_pointing ? &detector_view : nullptr);
+    progress.advance(j.count);
+  };
+  int next_slot = 0;
+  auto submit = [&](Job j, auto submit_view) {
+    j.slot = next_slot;
+    next_slot ^= 1;
+    j.ticket = submit_view(std::span<double>(tod[j.slot].data(), j.count));
+    if (pending) finish(*pending);
+    pending = j;
+  };
+  if (per_detector_file) {
+    for (std::size_t d = 0; d < fp.size(); ++d) {
+      pisco::Pointing& ptg = file_pointing[d % 2];
+      ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
+      for (std::size_t off = 0; off < ptg.size(); off += chunk) {
+        const std::size_t n = std::min(chunk, ptg.size() - off);
+        submit(Job{d, off, n}, [&](std::span<double> t) { return engine.submit(d, ptg.view().subspan(off, n), t); });
       }
     }
+  } else {
+    // Time chunks outermost: each boresight chunk is made once for all detectors.
+    int bslot = 0;
+    for (std::size_t off = 0; off < samples_per_detector; off += chunk) {
+      const std::size_t n = std::min(chunk, samples_per_detector - off);
+      BoresightChunk& b = bore[bslot];  // the other is still the pending job's
+      boresight->fill(off, n, b);
+      for (std::size_t d = 0; d < fp.size(); ++d) {
+        submit(Job{d, off, n, bslot}, [&](std::span<double> t) {
+          return b.quaternions ? engine.submit(d, pisco::QuatPointingView{b.quats}, t) : engine.submit(d, b.angles.view(), t);
+        });
+      }
+      bslot ^= 1;
+    }
   }
+  if (pending) finish(*pending);
   progress.finish();
   const double conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
   std::vector<fs::path> written;

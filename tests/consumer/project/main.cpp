@@ -2,13 +2,13 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
-#include <numbers>
+#include <span>
 #include <vector>
 
 #include <pisco/pisco.hpp>  // the umbrella header: every installed header must compile from the prefix
 
 int main() try {
-  constexpr double deg = std::numbers::pi / 180;
+  using pisco::deg;  // pisco/units.hpp: radians per degree
   // NSIDE 64 (0.92 deg pixels) resolves the 1.5 deg beam: with the default integral normalization
   // the TOD is then within ~2e-3 of I/2; at NSIDE 16 (3.7 deg pixels) it is off by up to 0.9.
   pisco::Sky sky(64);
@@ -26,7 +26,7 @@ int main() try {
   pisco::Pointing pointing;
   for (int i = 0; i < 8; ++i) pointing.push_back(0.3 + 0.3 * i, 0.7 * i, 0.1 * i);
   std::vector<double> tod(pointing.size());
-  engine.convolve(0, pointing, tod);
+  engine.convolve(0, pointing.view(), std::span<double>(tod));
 
   int bad = 0;
   for (std::size_t i = 0; i < tod.size(); ++i) {

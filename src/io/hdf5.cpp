@@ -1,0 +1,301 @@
+#include "io/hdf5.hpp"
+
+#include <algorithm>
+#include <cstdio>
+
+#include "pisco/error.hpp"
+
+namespace pisco::detail::hdf5 {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::recursive_mutex& hdf5_mutex() {
+  static std::recursive_mutex m;
+  return m;
+}
+
+herr_t walk_error(unsigned n, const H5E_error2_t* e, void* data) {
+  if (n == 0 && e != nullptr && e->desc != nullptr) *static_cast<std::string*>(data) = e->desc;
+  return 0;
+}
+
+herr_t collect_link_name(hid_t, const char* name, const H5L_info_t*, void* data) {
+  static_cast<std::vector<std::string>*>(data)->emplace_back(name);
+  return 0;
+}
+
+herr_t collect_attribute_name(hid_t, const char* name, const H5A_info_t*, void* data) {
+  static_cast<std::vector<std::string>*>(data)->emplace_back(name);
+  return 0;
+}
+
+// "the root group" or "group '/a/b'", as messages name a group.
+std::string group_text(const std::string& path) { return path == "/" ? "the root group" : "group " + in_quotes(path); }
+
+}  // namespace
+
+// ---------------------------------------------------------------- session, errors, text
+
+Session::Session() : lock_(hdf5_mutex()) {
+  saved_ = H5Eget_auto2(H5E_DEFAULT, &func_, &data_) >= 0;
+  H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+}
+
+Session::~Session() {
+  H5Eclear2(H5E_DEFAULT);
+  if (saved_) H5Eset_auto2(H5E_DEFAULT, func_, data_);
+}
+
+std::string hdf5_detail() {
+  std::string desc;
+  H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, walk_error, &desc);
+  H5Eclear2(H5E_DEFAULT);
+  return desc.empty() ? std::string() : " (HDF5: " + desc + ")";
+}
+
+void fail(const std::string& where, const std::string& what) { throw Error(where + ": " + what + hdf5_detail()); }
+
+Handle checked(hid_t id, Handle::Closer close, const std::string& where, const std::string& what) {
+  if (id < 0) fail(where, what);
+  return Handle(id, close);
+}
+
+void check(herr_t status, const std::string& where, const std::string& what) {
+  if (status < 0) fail(where, what);
+}
+
+std::string in_quotes(const std::string& s) { return "'" + s + "'"; }
+
+std::string format_double(double v) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.17g", v);
+  return buffer;
+}
+
+bool valid_link_name(const std::string& name) {
+  return !name.empty() && name.find('/') == std::string::npos && name != "." && name != "..";
+}
+
+// ---------------------------------------------------------------- files
+
+Handle file_access_plist(const std::string& where) {
+  Handle fapl = checked(H5Pcreate(H5P_FILE_ACCESS), H5Pclose, where, "cannot create a file access list");
+  check(H5Pset_fclose_degree(fapl.get(), H5F_CLOSE_STRONG), where, "cannot set the file close degree");
+#if H5_VERSION_GE(1, 10, 7)
+  check(H5Pset_file_locking(fapl.get(), true, true), where, "cannot set file locking");
+#endif
+  return fapl;
+}
+
+Handle open_read_only(const fs::path& file) {
+  const std::string where = file.string();
+  std::error_code ec;
+  const fs::file_status status = fs::status(file, ec);
+  if (!fs::exists(status)) throw Error(where + ": no such file (expected an HDF5 file)");
+  if (fs::is_directory(status)) throw Error(where + ": is a directory (expected an HDF5 file)");
+  const htri_t is_hdf5 = H5Fis_hdf5(file.c_str());
+  if (is_hdf5 < 0) fail(where, "cannot read the file (expected an HDF5 file)");
+  if (is_hdf5 == 0) throw Error(where + ": not an HDF5 file");
+  Handle fapl = file_access_plist(where);
+  return checked(H5Fopen(file.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose, where,
+                 "cannot open the HDF5 file for reading");
+}
+
+// ---------------------------------------------------------------- links and groups
+
+bool has_link(hid_t loc, const std::string& name, const std::string& where, const std::string& what) {
+  const htri_t exists = H5Lexists(loc, name.c_str(), H5P_DEFAULT);
+  if (exists < 0) fail(where, "cannot look up " + what);
+  return exists > 0;
+}
+
+std::vector<std::string> list_members(hid_t loc, const std::string& group_path, const std::string& where,
+                                      Members which) {
+  const std::string group = group_text(group_path);
+  Handle g = checked(H5Gopen2(loc, group_path.c_str(), H5P_DEFAULT), H5Gclose, where, "cannot open " + group);
+  Handle gcpl = checked(H5Gget_create_plist(g.get()), H5Pclose, where,
+                        group_path == "/" ? "cannot get the root group's creation properties"
+                                          : "cannot get the creation properties of " + group);
+  unsigned order_flags = 0;
+  check(H5Pget_link_creation_order(gcpl.get(), &order_flags), where, "cannot get the link creation order");
+  const H5_index_t index = (order_flags & H5P_CRT_ORDER_INDEXED) ? H5_INDEX_CRT_ORDER : H5_INDEX_NAME;
+  std::vector<std::string> links;
+  check(H5Literate(g.get(), index, H5_ITER_INC, nullptr, collect_link_name, &links), where, "cannot list " + group);
+  if (which == Members::all) return links;
+  const H5I_type_t wanted = which == Members::groups ? H5I_GROUP : H5I_DATASET;
+  std::vector<std::string> out;
+  for (const std::string& name : links) {
+    const hid_t object = H5Oopen(g.get(), name.c_str(), H5P_DEFAULT);
+    if (object < 0) {  // a dangling soft or external link
+      H5Eclear2(H5E_DEFAULT);
+      continue;
+    }
+    Handle guard(object, H5Oclose);
+    if (H5Iget_type(object) == wanted) out.push_back(name);
+  }
+  return out;
+}
+
+Handle open_group(hid_t loc, const std::string& path, const std::string& where) {
+  if (path != "/" && !has_link(loc, path, where, "group " + in_quotes(path)))
+    throw Error(where + ": no group " + in_quotes(path));
+  Handle object = checked(H5Oopen(loc, path.c_str(), H5P_DEFAULT), H5Oclose, where, "cannot open " + in_quotes(path));
+  if (H5Iget_type(object.get()) != H5I_GROUP) throw Error(where + ": " + in_quotes(path) + " is not a group");
+  return object;
+}
+
+// ---------------------------------------------------------------- datasets
+
+std::size_t Dataset::elements() const {
+  std::size_t n = 1;
+  for (hsize_t d : shape) n *= static_cast<std::size_t>(d);
+  return n;
+}
+
+Dataset open_dataset(hid_t loc, const std::string& name, const std::string& path, const std::string& where,
+                     const std::string& expected) {
+  const std::string q = in_quotes(path);
+  const std::string tail = expected.empty() ? std::string() : " (expected " + expected + ")";
+  if (!has_link(loc, name, where, "dataset " + q)) throw Error(where + ": no dataset " + q + tail);
+  const hid_t object = H5Oopen(loc, name.c_str(), H5P_DEFAULT);
+  if (object < 0) fail(where, "cannot open " + q);
+  const H5I_type_t kind = H5Iget_type(object);
+  H5Oclose(object);
+  if (kind != H5I_DATASET) throw Error(where + ": " + q + " is not a dataset" + tail);
+  Dataset out;
+  out.path = path;
+  out.handle = checked(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), H5Dclose, where, "cannot open dataset " + q);
+  Handle type = checked(H5Dget_type(out.handle.get()), H5Tclose, where, "cannot get the type of " + q);
+  out.type_class = H5Tget_class(type.get());
+  Handle space = checked(H5Dget_space(out.handle.get()), H5Sclose, where, "cannot get the dataspace of " + q);
+  const int rank = H5Sget_simple_extent_ndims(space.get());
+  if (rank < 0) fail(where, "cannot get the rank of " + q);
+  out.shape.resize(static_cast<std::size_t>(rank));
+  if (rank > 0 && H5Sget_simple_extent_dims(space.get(), out.shape.data(), nullptr) < 0)
+    fail(where, "cannot get the size of " + q);
+  return out;
+}
+
+void require_float(const Dataset& dataset, int rank, const std::string& where, const std::string& expected) {
+  const std::string q = in_quotes(dataset.path);
+  if (dataset.type_class != H5T_FLOAT)
+    throw Error(where + ": dataset " + q + " is not floating point (expected " + expected + ")");
+  if (dataset.shape.size() != static_cast<std::size_t>(rank))
+    throw Error(where + ": dataset " + q + " has " + std::to_string(dataset.shape.size()) +
+                " dimensions (expected " + expected + ")");
+}
+
+std::vector<double> read_float64(const Dataset& dataset, const std::string& where) {
+  std::vector<double> values(dataset.elements());
+  if (!values.empty())
+    check(H5Dread(dataset.handle.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()), where,
+          "cannot read dataset " + in_quotes(dataset.path));
+  return values;
+}
+
+Float64Array read_float64_dataset(hid_t loc, const std::string& name, const std::string& path, int rank,
+                                  const std::string& where, const std::string& expected) {
+  const Dataset dataset = open_dataset(loc, name, path, where, expected);
+  require_float(dataset, rank, where, expected);
+  Float64Array out;
+  out.shape.assign(dataset.shape.begin(), dataset.shape.end());
+  out.values = read_float64(dataset, where);
+  return out;
+}
+
+// ---------------------------------------------------------------- attributes
+
+std::vector<std::string> attribute_names(hid_t obj, const std::string& where, const std::string& what) {
+  std::vector<std::string> names;
+  check(H5Aiterate2(obj, H5_INDEX_NAME, H5_ITER_INC, nullptr, collect_attribute_name, &names), where,
+        "cannot list " + what);
+  return names;
+}
+
+bool attribute_as_text(hid_t attr, std::string& out, const std::string& where, const std::string& what) {
+  Handle type = checked(H5Aget_type(attr), H5Tclose, where, "cannot get the type of " + what);
+  Handle space = checked(H5Aget_space(attr), H5Sclose, where, "cannot get the dataspace of " + what);
+  if (H5Sget_simple_extent_npoints(space.get()) != 1) return false;
+  const H5T_class_t cls = H5Tget_class(type.get());
+  if (cls == H5T_STRING) {
+    const htri_t variable = H5Tis_variable_str(type.get());
+    if (variable < 0) fail(where, "cannot inspect the string type of " + what);
+    if (variable > 0) {
+      Handle mem = checked(H5Tcopy(H5T_C_S1), H5Tclose, where, "cannot create a string type for " + what);
+      check(H5Tset_size(mem.get(), H5T_VARIABLE), where, "cannot size a string type for " + what);
+      check(H5Tset_cset(mem.get(), H5Tget_cset(type.get())), where, "cannot set the character set for " + what);
+      char* text = nullptr;
+      check(H5Aread(attr, mem.get(), &text), where, "cannot read " + what);
+      out = text != nullptr ? text : "";
+      H5free_memory(text);
+      return true;
+    }
+    const std::size_t size = H5Tget_size(type.get());
+    std::string buffer(size + 1, '\0');
+    check(H5Aread(attr, type.get(), buffer.data()), where, "cannot read " + what);
+    buffer.resize(std::min(buffer.find('\0'), size));
+    if (H5Tget_strpad(type.get()) == H5T_STR_SPACEPAD) buffer.erase(buffer.find_last_not_of(' ') + 1);
+    out = buffer;
+    return true;
+  }
+  if (cls == H5T_INTEGER) {
+    if (H5Tget_sign(type.get()) == H5T_SGN_NONE) {
+      unsigned long long v = 0;
+      check(H5Aread(attr, H5T_NATIVE_ULLONG, &v), where, "cannot read " + what);
+      out = std::to_string(v);
+    } else {
+      long long v = 0;
+      check(H5Aread(attr, H5T_NATIVE_LLONG, &v), where, "cannot read " + what);
+      out = std::to_string(v);
+    }
+    return true;
+  }
+  if (cls == H5T_FLOAT) {
+    double v = 0.0;
+    check(H5Aread(attr, H5T_NATIVE_DOUBLE, &v), where, "cannot read " + what);
+    out = format_double(v);
+    return true;
+  }
+  return false;
+}
+
+std::optional<std::string> read_string_attribute(hid_t obj, const std::string& name,
+                                                 const std::string& object_path, const std::string& where) {
+  const std::string what = "attribute " + in_quotes(name) + " of " + in_quotes(object_path);
+  const htri_t exists = H5Aexists(obj, name.c_str());
+  if (exists < 0) fail(where, "cannot look up " + what);
+  if (exists == 0) return std::nullopt;
+  Handle attr = checked(H5Aopen(obj, name.c_str(), H5P_DEFAULT), H5Aclose, where, "cannot open " + what);
+  Handle type = checked(H5Aget_type(attr.get()), H5Tclose, where, "cannot get the type of " + what);
+  std::string value;
+  if (H5Tget_class(type.get()) != H5T_STRING || !attribute_as_text(attr.get(), value, where, what))
+    throw Error(where + ": " + what + " is not a string (expected one string)");
+  return value;
+}
+
+void write_string_attribute(hid_t loc, const std::string& key, const std::string& value, const std::string& where) {
+  const std::string what = "attribute " + in_quotes(key);
+  Handle type = checked(H5Tcopy(H5T_C_S1), H5Tclose, where, "cannot create the string type for " + what);
+  check(H5Tset_size(type.get(), H5T_VARIABLE), where, "cannot size the string type for " + what);
+  check(H5Tset_cset(type.get(), H5T_CSET_UTF8), where, "cannot set UTF-8 for " + what);
+  Handle space = checked(H5Screate(H5S_SCALAR), H5Sclose, where, "cannot create the dataspace for " + what);
+  Handle attr = checked(H5Acreate2(loc, key.c_str(), type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose,
+                        where, "cannot create " + what);
+  const char* text = value.c_str();
+  check(H5Awrite(attr.get(), type.get(), &text), where, "cannot write " + what);
+  if (!attr.close()) fail(where, "cannot close " + what);
+}
+
+void write_scalar_attribute(hid_t loc, const char* key, hid_t file_type, hid_t mem_type, const void* value,
+                            const std::string& where, const std::string& group) {
+  const std::string what = "attribute " + in_quotes(key) + " of group " + in_quotes("/" + group);
+  Handle space = checked(H5Screate(H5S_SCALAR), H5Sclose, where, "cannot create the dataspace for " + what);
+  Handle attr = checked(H5Acreate2(loc, key, file_type, space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose, where,
+                        "cannot create " + what);
+  check(H5Awrite(attr.get(), mem_type, value), where, "cannot write " + what);
+  if (!attr.close()) fail(where, "cannot close " + what);
+}
+
+}  // namespace pisco::detail::hdf5

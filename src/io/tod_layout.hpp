@@ -1,0 +1,10 @@
+// Names of PISCO's TOD and pointing files (layout: include/pisco/tod_file.hpp, docs/formats.md), shared
+// by the writer and the readers.
+#pragma once
+
+namespace pisco::detail::tod {
+
+inline constexpr const char* format = "pisco-tod-1";                    // root attribute pisco_format
+inline constexpr const char* pointing_names[3] = {"theta", "phi", "psi"};  // datasets of a detector group
+
+}  // namespace pisco::detail::tod

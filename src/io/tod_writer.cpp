@@ -1,0 +1,281 @@
+// The TodWriter: TOD files written chunk by chunk under a temporary name, renamed by commit()
+// (layout: include/pisco/tod_file.hpp; docs/formats.md, "TOD files").
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <set>
+#include <system_error>
+
+#include "io/hdf5.hpp"
+#include "io/tod_layout.hpp"
+#include "pisco/error.hpp"
+#include "pisco/tod_file.hpp"
+
+namespace pisco {
+
+namespace fs = std::filesystem;
+using namespace detail::hdf5;
+namespace tod = detail::tod;
+
+namespace {
+
+constexpr hsize_t kChunkSamples = 16384;  // 128 KiB of float64 per chunk
+
+// Disjoint, non-adjacent intervals [start, end) of written samples.
+void add_interval(std::map<std::size_t, std::size_t>& intervals, std::size_t start, std::size_t end) {
+  auto it = intervals.upper_bound(start);
+  if (it != intervals.begin()) {
+    auto previous = std::prev(it);
+    if (previous->second >= start) {
+      start = previous->first;
+      end = std::max(end, previous->second);
+      intervals.erase(previous);
+    }
+  }
+  while (it != intervals.end() && it->first <= end) {
+    end = std::max(end, it->second);
+    it = intervals.erase(it);
+  }
+  intervals.emplace(start, end);
+}
+
+}  // namespace
+
+// ================================================================ TodWriter
+
+struct TodWriter::Impl {
+  std::string where;      // the final file, for messages
+  fs::path temporary;
+  Handle file;
+  std::vector<std::string> names;
+  std::size_t samples = 0;
+  TodPrecision precision = TodPrecision::float64;
+  bool with_pointing = false;
+  bool committed = false;
+  bool closed = false;
+  std::vector<std::map<std::size_t, std::size_t>> written;  // per detector
+  // The datasets of the detector written last (signal, theta, phi, psi): only one detector's are kept
+  // open, so HDF5's chunk caches stay bounded whatever the number of detectors.
+  std::size_t open_detector = static_cast<std::size_t>(-1);
+  Handle datasets[4];
+  std::vector<float> buffer;
+
+  ~Impl() {
+    Session session;
+    for (Handle& d : datasets) d.reset();
+    file.reset();
+    if (!committed && !temporary.empty()) {
+      std::error_code ec;
+      fs::remove(temporary, ec);
+    }
+  }
+
+  void open_datasets(std::size_t detector) {
+    if (open_detector == detector) return;
+    for (Handle& d : datasets) d.reset();
+    open_detector = static_cast<std::size_t>(-1);
+    const std::string& name = names[detector];
+    Handle group = checked(H5Gopen2(file.get(), name.c_str(), H5P_DEFAULT), H5Gclose, where,
+                           "cannot open group " + in_quotes("/" + name) + " of the temporary file");
+    datasets[0] = checked(H5Dopen2(group.get(), "signal", H5P_DEFAULT), H5Dclose, where,
+                          "cannot open dataset " + in_quotes("/" + name + "/signal"));
+    if (with_pointing)
+      for (int k = 0; k < 3; ++k)
+        datasets[k + 1] = checked(H5Dopen2(group.get(), tod::pointing_names[k], H5P_DEFAULT), H5Dclose, where,
+                                  "cannot open dataset " + in_quotes("/" + name + "/" + tod::pointing_names[k]));
+    open_detector = detector;
+  }
+
+  void write_slab(int which, const char* name, std::size_t detector, std::size_t offset, std::size_t count,
+                  hid_t mem_type, const void* data) {
+    const std::string what = "dataset " + in_quotes("/" + names[detector] + "/" + name);
+    const hsize_t start[1] = {offset}, size[1] = {count};
+    Handle memory = checked(H5Screate_simple(1, size, nullptr), H5Sclose, where,
+                            "cannot create the memory dataspace for " + what);
+    Handle space = checked(H5Dget_space(datasets[which].get()), H5Sclose, where,
+                           "cannot get the dataspace of " + what);
+    check(H5Sselect_hyperslab(space.get(), H5S_SELECT_SET, start, nullptr, size, nullptr), where,
+          "cannot select samples " + std::to_string(offset) + ".." + std::to_string(offset + count - 1) +
+              " of " + what);
+    check(H5Dwrite(datasets[which].get(), mem_type, memory.get(), space.get(), H5P_DEFAULT, data), where,
+          "cannot write samples " + std::to_string(offset) + ".." + std::to_string(offset + count - 1) +
+              " of " + what);
+  }
+};
+
+TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,
+                     TodPrecision precision, bool with_pointing,
+                     const std::map<std::string, std::string>& attributes)
+    : file_(file),
+      temporary_(fs::path(file.string() + ".tmp-" + std::to_string(::getpid()))),
+      samples_(samples_per_detector) {
+  Session session;
+  const std::string where = file.string();
+  if (file.empty() || !file.has_filename()) throw Error(where + ": not a file name (expected a TOD file path)");
+  std::error_code ec;
+  if (fs::is_directory(file, ec)) throw Error(where + ": is a directory (expected a TOD file path)");
+  const fs::path parent = file.parent_path();
+  if (!parent.empty() && !fs::is_directory(parent, ec))
+    throw Error(where + ": directory " + in_quotes(parent.string()) + " does not exist");
+  if (focal_plane.size() == 0) throw Error(where + ": the focal plane has no detectors (nothing to write)");
+  std::set<std::string> seen;
+  for (const Detector& d : focal_plane.detectors()) {
+    if (!valid_link_name(d.name))
+      throw Error(where + ": detector name " + in_quotes(d.name) +
+                  " cannot name an HDF5 group (expected a non-empty name without '/')");
+    if (!seen.insert(d.name).second)
+      throw Error(where + ": detector name " + in_quotes(d.name) + " appears twice (expected unique names)");
+  }
+
+  impl_ = std::make_unique<Impl>();
+  Impl& s = *impl_;
+  s.where = where;
+  s.names.reserve(focal_plane.size());
+  for (const Detector& d : focal_plane.detectors()) s.names.push_back(d.name);
+  s.samples = samples_per_detector;
+  s.precision = precision;
+  s.with_pointing = with_pointing;
+  s.written.resize(focal_plane.size());
+
+  Handle fcpl = checked(H5Pcreate(H5P_FILE_CREATE), H5Pclose, where, "cannot create a file creation list");
+  // Track link creation order so that readers list detectors in focal-plane order.
+  check(H5Pset_link_creation_order(fcpl.get(), H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED), where,
+        "cannot set the link creation order");
+  Handle fapl = file_access_plist(where);
+  s.file = checked(H5Fcreate(temporary_.c_str(), H5F_ACC_TRUNC, fcpl.get(), fapl.get()), H5Fclose, where,
+                   "cannot create the temporary file " + in_quotes(temporary_.string()));
+  s.temporary = temporary_;  // from here on, the Impl removes the temporary file if anything fails
+
+  for (const auto& [key, value] : attributes) {
+    if (key == "pisco_format") continue;  // always written below
+    if (key.empty()) throw Error(where + ": an attribute has an empty name");
+    write_string_attribute(s.file.get(), key, value, where);
+  }
+  write_string_attribute(s.file.get(), "pisco_format", tod::format, where);
+
+  const hsize_t dims[1] = {static_cast<hsize_t>(samples_per_detector)};
+  Handle space = checked(H5Screate_simple(1, dims, nullptr), H5Sclose, where, "cannot create the TOD dataspace");
+  Handle dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
+  if (samples_per_detector > 0) {
+    const hsize_t chunk[1] = {std::min<hsize_t>(dims[0], kChunkSamples)};
+    check(H5Pset_chunk(dcpl.get(), 1, chunk), where, "cannot set the dataset chunk size");
+  }
+  // Samples never written read back as NaN (commit() refuses such a file anyway).
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  check(H5Pset_fill_value(dcpl.get(), H5T_NATIVE_DOUBLE, &nan), where, "cannot set the dataset fill value");
+  const hid_t signal_type = precision == TodPrecision::float32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
+
+  for (const Detector& d : focal_plane.detectors()) {
+    const std::string group_path = in_quotes("/" + d.name);
+    Handle group = checked(H5Gcreate2(s.file.get(), d.name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+                           H5Gclose, where, "cannot create group " + group_path);
+    write_scalar_attribute(group.get(), "zeta", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.zeta, where, d.name);
+    write_scalar_attribute(group.get(), "epsilon", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.epsilon, where, d.name);
+    write_scalar_attribute(group.get(), "gain", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.gain, where, d.name);
+    const std::uint64_t beam = d.beam;
+    write_scalar_attribute(group.get(), "beam", H5T_STD_U64LE, H5T_NATIVE_UINT64, &beam, where, d.name);
+    Handle signal = checked(H5Dcreate2(group.get(), "signal", signal_type, space.get(), H5P_DEFAULT, dcpl.get(),
+                                       H5P_DEFAULT),
+                            H5Dclose, where, "cannot create dataset " + in_quotes("/" + d.name + "/signal"));
+    if (!signal.close()) fail(where, "cannot close dataset " + in_quotes("/" + d.name + "/signal"));
+    if (with_pointing)
+      for (const char* name : tod::pointing_names) {
+        const std::string path = in_quotes("/" + d.name + "/" + name);
+        Handle ds = checked(H5Dcreate2(group.get(), name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, dcpl.get(),
+                                       H5P_DEFAULT),
+                            H5Dclose, where, "cannot create dataset " + path);
+        if (!ds.close()) fail(where, "cannot close dataset " + path);
+      }
+    if (!group.close()) fail(where, "cannot close group " + group_path);
+  }
+}
+
+TodWriter::~TodWriter() = default;
+TodWriter::TodWriter(TodWriter&&) noexcept = default;
+TodWriter& TodWriter::operator=(TodWriter&&) noexcept = default;
+
+void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const double> signal,
+                      const PointingView* pointing) {
+  Session session;
+  const std::string where = file_.string();
+  if (!impl_) throw Error(where + ": TodWriter::write() on a moved-from writer");
+  Impl& s = *impl_;
+  if (s.closed) throw Error(where + ": TodWriter::write() after commit()");
+  if (detector >= s.names.size())
+    throw Error(where + ": detector index " + std::to_string(detector) + " is beyond the focal plane (" +
+                std::to_string(s.names.size()) + " detectors)");
+  const std::string& name = s.names[detector];
+  const std::size_t count = signal.size();
+  if (offset > s.samples || count > s.samples - offset) {
+    const std::string range = count <= std::numeric_limits<std::size_t>::max() - offset
+                                  ? "samples [" + std::to_string(offset) + ", " + std::to_string(offset + count) + ")"
+                                  : std::to_string(count) + " samples from offset " + std::to_string(offset);
+    throw Error(where + ": detector " + in_quotes(name) + ": " + range + " are beyond the " +
+                std::to_string(s.samples) + " samples per detector (expected offset + size <= " +
+                std::to_string(s.samples) + ")");
+  }
+  if (s.with_pointing) {
+    if (pointing == nullptr)
+      throw Error(where + ": detector " + in_quotes(name) +
+                  ": the file is written with pointing, but write() got no pointing chunk");
+    if (pointing->theta.size() != count || pointing->phi.size() != count || pointing->psi.size() != count)
+      throw Error(where + ": detector " + in_quotes(name) + ": pointing chunk of (" +
+                  std::to_string(pointing->theta.size()) + ", " + std::to_string(pointing->phi.size()) + ", " +
+                  std::to_string(pointing->psi.size()) + ") samples for " + std::to_string(count) +
+                  " signal samples (expected equal lengths)");
+  }
+  if (count == 0) return;
+
+  s.open_datasets(detector);
+  if (s.precision == TodPrecision::float32) {
+    s.buffer.resize(count);
+    std::transform(signal.begin(), signal.end(), s.buffer.begin(), [](double v) { return static_cast<float>(v); });
+    s.write_slab(0, "signal", detector, offset, count, H5T_NATIVE_FLOAT, s.buffer.data());
+  } else {
+    s.write_slab(0, "signal", detector, offset, count, H5T_NATIVE_DOUBLE, signal.data());
+  }
+  if (s.with_pointing) {
+    s.write_slab(1, "theta", detector, offset, count, H5T_NATIVE_DOUBLE, pointing->theta.data());
+    s.write_slab(2, "phi", detector, offset, count, H5T_NATIVE_DOUBLE, pointing->phi.data());
+    s.write_slab(3, "psi", detector, offset, count, H5T_NATIVE_DOUBLE, pointing->psi.data());
+  }
+  add_interval(s.written[detector], offset, offset + count);
+}
+
+void TodWriter::commit() {
+  Session session;
+  const std::string where = file_.string();
+  if (!impl_) throw Error(where + ": TodWriter::commit() on a moved-from writer");
+  Impl& s = *impl_;
+  if (s.closed) throw Error(where + ": TodWriter::commit() called twice");
+  for (std::size_t d = 0; d < s.names.size(); ++d) {
+    const auto& intervals = s.written[d];
+    if (s.samples == 0) break;
+    if (intervals.size() == 1 && intervals.begin()->first == 0 && intervals.begin()->second == s.samples)
+      continue;
+    const std::size_t first_missing =
+        (intervals.empty() || intervals.begin()->first > 0) ? 0 : intervals.begin()->second;
+    throw Error(where + ": detector " + in_quotes(s.names[d]) + ": sample " + std::to_string(first_missing) +
+                " of " + std::to_string(s.samples) + " was never written (expected every sample before commit())");
+  }
+  bool ok = true;
+  for (Handle& d : s.datasets) ok = d.close() && ok;
+  s.open_detector = static_cast<std::size_t>(-1);
+  if (!ok) fail(where, "cannot close the datasets of the temporary file " + in_quotes(s.temporary.string()));
+  if (!s.file.close()) {
+    s.closed = true;
+    fail(where, "cannot close the temporary file " + in_quotes(s.temporary.string()));
+  }
+  s.closed = true;
+  std::error_code ec;
+  fs::rename(s.temporary, file_, ec);
+  if (ec)
+    throw Error(where + ": cannot rename the temporary file " + in_quotes(s.temporary.string()) + " to it: " +
+                ec.message());
+  s.committed = true;
+}
+
+}  // namespace pisco
