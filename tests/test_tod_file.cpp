@@ -23,6 +23,8 @@
 #include "pisco/error.hpp"
 #include "pisco/focal_plane.hpp"
 #include "pisco/pointing.hpp"
+#include "pisco/quaternion.hpp"
+#include "pisco/quaternion.hpp"
 #include "pisco/tod_file.hpp"
 
 namespace {
@@ -236,6 +238,20 @@ TEST_F(TodFile, WithPointingWritesThetaPhiPsi) {
     EXPECT_EQ(p.theta, pointing[d].theta);
     EXPECT_EQ(p.phi, pointing[d].phi);
     EXPECT_EQ(p.psi, pointing[d].psi);
+    // The same pointing as the detector's rotation: its axes are the antenna basis of the angles.
+    const std::vector<pisco::Quat> q = pisco::read_tod_quats(file, d == 0 ? "z_det" : "a_det");
+    ASSERT_EQ(q.size(), n);
+    double worst = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      double t, f, s;
+      pisco::quat_to_pointing(q[i], t, f, s);
+      const auto los = pisco::rotate(q[i], {0, 0, 1});
+      const double st = std::sin(p.theta[i]);
+      worst = std::max({worst, std::abs(los[0] - st * std::cos(p.phi[i])), std::abs(los[1] - st * std::sin(p.phi[i])),
+                        std::abs(los[2] - std::cos(p.theta[i])), std::abs(pisco::norm(q[i]) - 1)});
+      if (st > 1e-6) worst = std::max(worst, std::abs(std::remainder(s - p.psi[i], 2 * std::numbers::pi)));
+    }
+    EXPECT_LT(worst, 1e-13);
   }
   std::cout << "checking: a file written without pointing has no theta dataset, and says so\n";
   const fs::path plain = dir_ / "plain.h5";

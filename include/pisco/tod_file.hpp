@@ -7,6 +7,8 @@
 //                          tracked), with attributes zeta [rad], epsilon, gain (float64), beam (uint64)
 //   /<detector>/signal     float64 or float32, one value per sample
 //   /<detector>/theta,phi,psi   float64 pointing [rad], only when written with_pointing
+//   /<detector>/quat       float64 (samples, 4): the same pointing as the rotation of the detector's
+//                          antenna basis, x, y, z, w (quaternion.hpp), only when written with_pointing
 //
 // A pointing input file (per-detector form) has the same layout without `signal`: groups named
 // after detectors, each holding float64 (or float32) 1-D datasets theta, phi, psi of equal length.
@@ -85,6 +87,9 @@ std::vector<TodFileDetector> read_tod_detectors(const std::filesystem::path& fil
 
 // The whole `signal` dataset of one detector, converted to double.
 std::vector<double> read_tod_signal(const std::filesystem::path& file, const std::string& detector);
+
+// The detector quaternions (`quat`, (samples, 4)) of a TOD file written with pointing.
+std::vector<Quat> read_tod_quats(const std::filesystem::path& file, const std::string& detector);
 
 // The root attributes of a file: string attributes as they are, numeric scalar attributes formatted as
 // text; pisco_format included.

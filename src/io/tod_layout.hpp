@@ -6,5 +6,6 @@ namespace pisco::detail::tod {
 
 inline constexpr const char* format = "pisco-tod-1";                    // root attribute pisco_format
 inline constexpr const char* pointing_names[3] = {"theta", "phi", "psi"};  // datasets of a detector group
+inline constexpr const char* quat_name = "quat";  // the detector's rotation (samples, 4), with the angles
 
 }  // namespace pisco::detail::tod

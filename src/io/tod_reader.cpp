@@ -108,6 +108,22 @@ std::vector<double> read_tod_signal(const fs::path& file, const std::string& det
   return read_float64(ds, where);
 }
 
+std::vector<Quat> read_tod_quats(const fs::path& file, const std::string& detector) {
+  Session session;
+  const std::string where = file.string();
+  Handle h = open_read_only(file);
+  Handle group = open_detector_group(h.get(), where, detector);
+  const std::string expected = "a float64 dataset 'quat' of shape (samples, 4), written with tod_pointing";
+  const Float64Array a = read_float64_dataset(group.get(), tod::quat_name, "/" + detector + "/" + tod::quat_name, 2,
+                                              where, expected);
+  if (a.shape[1] != 4)
+    throw Error(where + ": dataset " + in_quotes("/" + detector + "/" + tod::quat_name) + " has " +
+                std::to_string(a.shape[1]) + " columns (expected " + expected + ")");
+  std::vector<Quat> out(a.shape[0]);
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = {a.values[4 * i], a.values[4 * i + 1], a.values[4 * i + 2], a.values[4 * i + 3]};
+  return out;
+}
+
 std::map<std::string, std::string> read_tod_attributes(const fs::path& file) {
   Session session;
   const std::string where = file.string();

@@ -10,6 +10,7 @@
 #include <system_error>
 
 #include "io/hdf5.hpp"
+#include "pisco/quaternion.hpp"
 #include "io/tod_layout.hpp"
 #include "pisco/error.hpp"
 #include "pisco/tod_file.hpp"
@@ -60,8 +61,9 @@ struct TodWriter::Impl {
   // The datasets of the detector written last (signal, theta, phi, psi): only one detector's are kept
   // open, so HDF5's chunk caches stay bounded whatever the number of detectors.
   std::size_t open_detector = static_cast<std::size_t>(-1);
-  Handle datasets[4];
+  Handle datasets[5];  // signal, theta, phi, psi, quat
   std::vector<float> buffer;
+  std::vector<Quat> quats;
 
   ~Impl() {
     Session session;
@@ -82,18 +84,23 @@ struct TodWriter::Impl {
                            "cannot open group " + in_quotes("/" + name) + " of the temporary file");
     datasets[0] = checked(H5Dopen2(group.get(), "signal", H5P_DEFAULT), H5Dclose, where,
                           "cannot open dataset " + in_quotes("/" + name + "/signal"));
-    if (with_pointing)
+    if (with_pointing) {
       for (int k = 0; k < 3; ++k)
         datasets[k + 1] = checked(H5Dopen2(group.get(), tod::pointing_names[k], H5P_DEFAULT), H5Dclose, where,
                                   "cannot open dataset " + in_quotes("/" + name + "/" + tod::pointing_names[k]));
+      datasets[4] = checked(H5Dopen2(group.get(), tod::quat_name, H5P_DEFAULT), H5Dclose, where,
+                            "cannot open dataset " + in_quotes("/" + name + "/" + tod::quat_name));
+    }
     open_detector = detector;
   }
 
+  // Samples [offset, offset + count) of dataset `which`; `columns` values a sample (1, or 4 for quat).
   void write_slab(int which, const char* name, std::size_t detector, std::size_t offset, std::size_t count,
-                  hid_t mem_type, const void* data) {
+                  hid_t mem_type, const void* data, hsize_t columns = 1) {
     const std::string what = "dataset " + in_quotes("/" + names[detector] + "/" + name);
-    const hsize_t start[1] = {offset}, size[1] = {count};
-    Handle memory = checked(H5Screate_simple(1, size, nullptr), H5Sclose, where,
+    const int rank = columns == 1 ? 1 : 2;
+    const hsize_t start[2] = {offset, 0}, size[2] = {count, columns};
+    Handle memory = checked(H5Screate_simple(rank, size, nullptr), H5Sclose, where,
                             "cannot create the memory dataspace for " + what);
     Handle space = checked(H5Dget_space(datasets[which].get()), H5Sclose, where,
                            "cannot get the dataspace of " + what);
@@ -167,6 +174,15 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
   const double nan = std::numeric_limits<double>::quiet_NaN();
   check(H5Pset_fill_value(dcpl.get(), H5T_NATIVE_DOUBLE, &nan), where, "cannot set the dataset fill value");
   const hid_t signal_type = precision == TodPrecision::float32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
+  // The detector quaternions: (samples, 4), chunked along samples.
+  const hsize_t quat_dims[2] = {static_cast<hsize_t>(samples_per_detector), 4};
+  Handle quat_space = checked(H5Screate_simple(2, quat_dims, nullptr), H5Sclose, where,
+                              "cannot create the quaternion dataspace");
+  Handle quat_dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
+  if (samples_per_detector > 0) {
+    const hsize_t chunk[2] = {std::min<hsize_t>(quat_dims[0], kChunkSamples), 4};
+    check(H5Pset_chunk(quat_dcpl.get(), 2, chunk), where, "cannot set the dataset chunk size");
+  }
 
   for (const Detector& d : focal_plane.detectors()) {
     const std::string group_path = in_quotes("/" + d.name);
@@ -181,7 +197,7 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
                                        H5P_DEFAULT),
                             H5Dclose, where, "cannot create dataset " + in_quotes("/" + d.name + "/signal"));
     if (!signal.close()) fail(where, "cannot close dataset " + in_quotes("/" + d.name + "/signal"));
-    if (with_pointing)
+    if (with_pointing) {
       for (const char* name : tod::pointing_names) {
         const std::string path = in_quotes("/" + d.name + "/" + name);
         Handle ds = checked(H5Dcreate2(group.get(), name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, dcpl.get(),
@@ -189,6 +205,16 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
                             H5Dclose, where, "cannot create dataset " + path);
         if (!ds.close()) fail(where, "cannot close dataset " + path);
       }
+      const std::string path = in_quotes("/" + d.name + "/" + tod::quat_name);
+      Handle ds = checked(H5Dcreate2(group.get(), tod::quat_name, H5T_IEEE_F64LE, quat_space.get(), H5P_DEFAULT,
+                                     quat_dcpl.get(), H5P_DEFAULT),
+                          H5Dclose, where, "cannot create dataset " + path);
+      write_string_attribute(ds.get(), "layout",
+                             "the detector's antenna basis as a rotation, x, y, z, w (scalar last): q z^ q* is the "
+                             "line of sight, q x^ q* the axis zeta is measured from",
+                             where);
+      if (!ds.close()) fail(where, "cannot close dataset " + path);
+    }
     if (!group.close()) fail(where, "cannot close group " + group_path);
   }
 }
@@ -241,6 +267,10 @@ void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const 
     s.write_slab(1, "theta", detector, offset, count, H5T_NATIVE_DOUBLE, pointing->theta.data());
     s.write_slab(2, "phi", detector, offset, count, H5T_NATIVE_DOUBLE, pointing->phi.data());
     s.write_slab(3, "psi", detector, offset, count, H5T_NATIVE_DOUBLE, pointing->psi.data());
+    s.quats.resize(count);
+    for (std::size_t i = 0; i < count; ++i)
+      s.quats[i] = quat_from_pointing(pointing->theta[i], pointing->phi[i], pointing->psi[i]);
+    s.write_slab(4, tod::quat_name, detector, offset, count, H5T_NATIVE_DOUBLE, s.quats.data(), 4);
   }
   add_interval(s.written[detector], offset, offset + count);
 }

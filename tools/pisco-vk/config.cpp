@@ -536,6 +536,8 @@ SimulationConfig load_config(const fs::path& file) {
     if (fp->contains("detectors") || fp->contains("pairs")) fpt.fail("file", "give either a file or detectors/pairs, not both");
     if (is_hdf5_focal_plane(fp_file)) {
       // A TOAST table has no beam column: one beam for all its detectors.
+      if (!fpt.has("beam") && c.beams.size() != 1)
+        fpt.fail("beam", "a TOAST focal plane gives all its detectors one beam: name one of the [beams] tables");
       c.detectors = load_toast_focal_plane(fp_file, beam_index(fpt, "beam", c.beams, true));
     } else {
       if (fpt.has("beam"))
