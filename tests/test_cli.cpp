@@ -211,6 +211,55 @@ TEST_F(Cli, ConstantElevationScanWithOffsetsMatchesTheLibrary) {
   EXPECT_LE(err, 1e-5 * rms);
 }
 
+// A pointing file of boresight quaternions and a focal plane with offsets: the command line's TOD is
+// the library's for the same quaternions, and the recorded detector quaternions carry the offsets. A
+// bad quaternion in the file ends the run with one error naming the file and the sample, and no output.
+TEST_F(Cli, BoresightPointingFileRunsAndBadSamplesLeaveNoOutput) {
+  pisco::SatelliteScan sat;
+  sat.spin_period = 60;
+  sat.precession_period = 600;
+  sat.sample_rate = 5;
+  sat.samples = 900;
+  std::vector<pisco::Quat> q;
+  sat.generate(0, sat.samples, q);
+  const fs::path bore = dir_ / "bore.h5";
+  pisco::BoresightFile::write(bore, q);
+  const std::string fp =
+      "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\nxi_deg = 1.5\neta_deg = -2.0\ngamma_deg = 20\n";
+  const std::string scan = "[scan]\ntype = \"file\"\nfile = \"" + bore.string() + "\"\n";
+  const fs::path cfg = write("file.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                 "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n",
+                                                 fp, scan, "tod_pointing = true\nspectra = false\nmaps = false\n"));
+  const Result r = run("run " + cfg.string() + " -q");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const pisco::Sky sky = pisco::synthesize_sky(pisco::read_cl_table(pisco::default_cl_file(), 64, true), 32, 3);
+  pisco::BeamOptions o;
+  o.rho_max = 8 * pisco::deg;
+  std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(4 * pisco::deg, o)};
+  pisco::FocalPlane lib;
+  lib.add_pair("p", 0, 0, 0);
+  std::vector<pisco::Detector> dets = lib.detectors();
+  for (auto& d : dets) d.set_offset(1.5 * pisco::deg, -2.0 * pisco::deg, 20 * pisco::deg);
+  pisco::Engine engine(sky, beams, pisco::FocalPlane(dets));
+  std::vector<double> tod(q.size());
+  engine.convolve(0, pisco::QuatPointingView{q}, tod);
+  EXPECT_EQ(pisco::read_tod_signal(dir_ / "out" / "tod.h5", "pa"), tod);
+  const std::vector<pisco::Quat> recorded = pisco::read_tod_quats(dir_ / "out" / "tod.h5", "pa");
+  ASSERT_EQ(recorded.size(), q.size());
+  double worst = 0;
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    const auto want = pisco::rotate(q[i] * dets[0].offset, {0, 0, 1}), got = pisco::rotate(recorded[i], {0, 0, 1});
+    worst = std::max({worst, std::abs(want[0] - got[0]), std::abs(want[1] - got[1]), std::abs(want[2] - got[2])});
+  }
+  EXPECT_LT(worst, 1e-14) << "recorded lines of sight";
+
+  q[123] = {0.0, 0.0, 0.0, 1.01};
+  pisco::BoresightFile::write(bore, q);
+  fs::remove_all(dir_ / "out");
+  expect_error("run " + cfg.string() + " -q", "sample 123 has norm");
+  expect_no_output();
+}
+
 TEST_F(Cli, TensorModesScaleWithR) {
   // r = 1: the synthesized sky's BB follows the shipped tensor template within cosmic variance.
   const fs::path cfg = write("r.toml", config("[sky]\nnside = 64\nlmax = 128\nseed = 9\nr = 1.0\n", "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n",
