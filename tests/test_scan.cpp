@@ -168,20 +168,20 @@ TEST(Scan, RasterIsTheQueryDiscSetAtEachAngle) {
 
 TEST(Scan, BadInputsNameTheArgument) {
   const std::vector<double> ok = {0.0};
-  expect_error([&] { pisco::pixel_centre_scan(3, ok); }, "nside");
-  expect_error([&] { pisco::pixel_centre_scan(0, ok); }, "nside");
-  expect_error([&] { pisco::pixel_centre_scan(-4, ok); }, "nside");
+  expect_error([&] { pisco::pixel_centre_scan(3, ok); }, "NSIDE =");
+  expect_error([&] { pisco::pixel_centre_scan(0, ok); }, "NSIDE =");
+  expect_error([&] { pisco::pixel_centre_scan(-4, ok); }, "NSIDE =");
   expect_error([&] { pisco::pixel_centre_scan(8, {}); }, "psis");
   expect_error([&] { pisco::pixel_centre_scan(8, {0.0, std::nan("")}); }, "psis[1]");
   expect_error([&] { pisco::random_offset_scan(8, ok, -0.1, 1); }, "f =");
   expect_error([&] { pisco::random_offset_scan(8, ok, INFINITY, 1); }, "f =");
-  expect_error([&] { pisco::random_offset_scan(12, ok, 0.1, 1); }, "nside");
+  expect_error([&] { pisco::random_offset_scan(12, ok, 0.1, 1); }, "NSIDE =");
   expect_error([&] { pisco::raster_scan(1.0, 0.0, 0.0, 8, ok); }, "radius");
   expect_error([&] { pisco::raster_scan(1.0, 0.0, pi, 8, ok); }, "radius");
   expect_error([&] { pisco::raster_scan(1.0, 0.0, std::nan(""), 8, ok); }, "radius");
   expect_error([&] { pisco::raster_scan(-0.1, 0.0, 0.1, 8, ok); }, "theta0");
   expect_error([&] { pisco::raster_scan(1.0, INFINITY, 0.1, 8, ok); }, "phi0");
-  expect_error([&] { pisco::raster_scan(1.0, 0.0, 0.1, 6, ok); }, "nside");
+  expect_error([&] { pisco::raster_scan(1.0, 0.0, 0.1, 6, ok); }, "NSIDE =");
   expect_error([&] { pisco::raster_scan(1.0, 0.0, 0.1, 8, {}); }, "psis");
 }
 

@@ -15,8 +15,12 @@ namespace pisco {
 // 12 NSIDE^2 = 805,306,368 pixels at NSIDE 8192, while NSIDE 16384 would need 3.2e9.
 inline constexpr int max_nside = 8192;
 
-// Throws pisco::Error("<where>: NSIDE = <nside> is not a power of two in [1, 8192]") unless nside is
-// a power of two in [1, max_nside]. `where` names the function, file or key the value came from.
+// Whether nside is a power of two in [1, max_nside].
+constexpr bool valid_nside(long long nside) noexcept {
+  return nside >= 1 && nside <= max_nside && (nside & (nside - 1)) == 0;
+}
+// Throws pisco::Error("<where>: NSIDE = <nside> is not a power of two in [1, 8192]") unless
+// valid_nside(nside). `where` names the function, file or key the value came from.
 void check_nside(long long nside, const std::string& where);
 
 // HEALPix's marker of a pixel without data (healpy's UNSEEN): unsolved pixels of binned maps.

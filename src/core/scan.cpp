@@ -10,6 +10,7 @@
 
 #include "core/disc.hpp"
 #include "pisco/error.hpp"
+#include "pisco/healpix_map.hpp"
 
 namespace pisco {
 namespace {
@@ -20,11 +21,6 @@ constexpr double two_pi = 2.0 * std::numbers::pi;
 // 64-bit pixel indices, so that every NSIDE HEALPix supports is addressable.
 using Base = T_Healpix_Base<int64>;
 
-void check_nside(const char* fn, int nside) {
-  if (nside < 1 || nside > (1 << 29) || (nside & (nside - 1)) != 0)
-    throw Error(std::string(fn) + ": nside = " + std::to_string(nside) +
-                " is not a power of two in [1, 2^29]");
-}
 
 void check_psis(const char* fn, const std::vector<double>& psis) {
   if (psis.empty()) throw Error(std::string(fn) + ": psis is empty; give at least one angle");
@@ -56,7 +52,7 @@ double centred_uniform(std::mt19937_64& rng) { return double(rng() >> 11) * 0x1.
 }  // namespace
 
 Pointing pixel_centre_scan(int nside, const std::vector<double>& psis) {
-  check_nside("pixel_centre_scan", nside);
+  pisco::check_nside(nside, "pixel_centre_scan");
   check_psis("pixel_centre_scan", psis);
   const Base base = ring_base(nside);
   Pointing out;
@@ -71,7 +67,7 @@ Pointing pixel_centre_scan(int nside, const std::vector<double>& psis) {
 
 Pointing random_offset_scan(int nside, const std::vector<double>& psis, double f,
                             std::uint64_t seed, bool symmetric) {
-  check_nside("random_offset_scan", nside);
+  pisco::check_nside(nside, "random_offset_scan");
   check_psis("random_offset_scan", psis);
   if (!std::isfinite(f) || f < 0.0)
     throw Error("random_offset_scan: f = " + std::to_string(f) +
@@ -113,7 +109,7 @@ Pointing raster_scan(double theta0, double phi0, double radius, int nside,
   if (!std::isfinite(phi0)) throw Error("raster_scan: phi0 is not finite");
   if (!std::isfinite(radius) || radius <= 0.0 || radius >= pi)
     throw Error("raster_scan: radius = " + std::to_string(radius) + " rad must be in (0, pi)");
-  check_nside("raster_scan", nside);
+  pisco::check_nside(nside, "raster_scan");
   check_psis("raster_scan", psis);
   const Base base = ring_base(nside);
   // Non-inclusive: only pixels whose centres lie within the radius.
@@ -133,8 +129,7 @@ Pointing raster_scan(double theta0, double phi0, double radius, int nside,
 namespace pisco {
 
 std::size_t ang2pix(int nside, double theta, double phi) {
-  if (nside < 1 || (nside & (nside - 1)) != 0)
-    throw Error("ang2pix: NSIDE " + std::to_string(nside) + " is not a power of two");
+  pisco::check_nside(nside, "ang2pix");
   if (!(theta >= 0 && theta <= std::numbers::pi) || !std::isfinite(phi))
     throw Error("ang2pix: theta must be in [0, pi] and phi finite");
   return static_cast<std::size_t>(T_Healpix_Base<int64>(nside, RING, SET_NSIDE).ang2pix(pointing(theta, phi)));

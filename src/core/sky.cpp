@@ -16,7 +16,7 @@ constexpr const char* stokes_names[4] = {"I", "Q", "U", "V"};
 
 // Declared in healpix_map.hpp: the one NSIDE check of the library.
 void check_nside(long long nside, const std::string& where) {
-  if (nside < 1 || nside > max_nside || (nside & (nside - 1)) != 0)
+  if (!valid_nside(nside))
     throw Error(where + ": NSIDE = " + std::to_string(nside) + " is not a power of two in [1, " +
                 std::to_string(max_nside) + "]");
 }

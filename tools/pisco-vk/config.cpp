@@ -45,7 +45,14 @@ class Table {
     if (!n) return fallback;
     if (auto v = n->value_exact<std::int64_t>()) return *v;
     fail(key, "expected an integer");
+  }  // An NSIDE: read as a 64-bit integer, then checked to be a power of two in [1, max_nside].
+  int nside(const std::string& key, std::int64_t fallback) {
+    const std::int64_t n = integer(key, fallback);
+    if (!pisco::valid_nside(n))
+      fail(key, "expected a power of two from 1 to " + std::to_string(pisco::max_nside) + ", got " + std::to_string(n));
+    return static_cast<int>(n);
   }
+
   bool boolean(const std::string& key, bool fallback) {
     used_.insert(key);
     const toml::node* n = t_.get(key);
@@ -142,9 +149,7 @@ SkyConfig read_sky(Table t) {
     s.point_source = {p[0] * deg, p[1] * deg, p[2], p[3], p[4], p[5]};
     s.units = t.string("units", "K");
   }
-  s.nside = static_cast<int>(t.integer("nside", 128));
-  if (s.nside < 1 || s.nside > 8192 || (s.nside & (s.nside - 1)) != 0)
-    t.fail("nside", "expected a power of two from 1 to 8192, got " + std::to_string(s.nside));
+  s.nside = t.nside("nside", 128);
   s.lmax = static_cast<int>(t.integer("lmax", 0));
   s.r = t.number("r", 0.0);
   s.seed = static_cast<std::uint64_t>(t.integer("seed", 1));
@@ -310,9 +315,7 @@ void read_satellite(Table& t, ScanConfig& s) {
   if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
   if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
   c.samples = static_cast<std::size_t>(samples);
-  s.nside = static_cast<int>(t.integer("nside", 64));  // the maps' default NSIDE
-  if (s.nside < 1 || s.nside > 8192 || (s.nside & (s.nside - 1)) != 0)
-    t.fail("nside", "expected a power of two from 1 to 8192, got " + std::to_string(s.nside));
+  s.nside = t.nside("nside", 64);  // the maps' default NSIDE
   try {
     c.check();
   } catch (const pisco::Error& e) {
@@ -340,7 +343,7 @@ ScanConfig read_scan(Table t) {
     c.boresight_angles.clear();
     for (double b : t.numbers("boresight_deg", {0.0})) c.boresight_angles.push_back(b * deg);
     c.boresight_period = t.positive("boresight_period_hours", 24.0) * 3600;
-    s.nside = static_cast<int>(t.integer("nside", 128));  // the maps' default NSIDE
+    s.nside = t.nside("nside", 128);  // the maps' default NSIDE
     try {
       c.check();
     } catch (const pisco::Error& e) {
@@ -352,9 +355,7 @@ ScanConfig read_scan(Table t) {
     s.file = t.path("file");
     if (s.file.empty()) t.fail("file", "a scan of type \"file\" needs file = \"pointing.h5\"");
   } else {
-    s.nside = static_cast<int>(t.integer("nside", 64));
-    if (s.nside < 1 || s.nside > 8192 || (s.nside & (s.nside - 1)) != 0)
-      t.fail("nside", "expected a power of two from 1 to 8192, got " + std::to_string(s.nside));
+    s.nside = t.nside("nside", 64);
   }
   if (s.type == "random_offsets") {
     s.f = t.number("f", 0.1);
@@ -396,9 +397,11 @@ OutputConfig read_output(Table t) {
                         : pisco::TodPrecision::float32;
   o.tod_pointing = t.boolean("tod_pointing", false);
   o.maps = t.boolean("maps", true);
-  o.maps_nside = static_cast<int>(t.integer("maps_nside", 0));
-  if (o.maps_nside != 0 && (o.maps_nside < 1 || o.maps_nside > 8192 || (o.maps_nside & (o.maps_nside - 1)) != 0))
-    t.fail("maps_nside", "expected a power of two from 1 to 8192 (or 0: the scan's), got " + std::to_string(o.maps_nside));
+  const std::int64_t maps_nside = t.integer("maps_nside", 0);
+  if (maps_nside != 0 && !pisco::valid_nside(maps_nside))
+    t.fail("maps_nside", "expected a power of two from 1 to " + std::to_string(pisco::max_nside) +
+                             " (or 0: the scan's), got " + std::to_string(maps_nside));
+  o.maps_nside = static_cast<int>(maps_nside);
   o.rcond_min = t.number("rcond_min", 1e-3);
   o.spectra = t.boolean("spectra", true);
   o.lmax = static_cast<int>(t.integer("lmax", 0));
