@@ -117,4 +117,80 @@ dvec2 interpolate_radial64(Grid grid, double r2) {
   return (1.0 - f) * weight64(offset + i) + f * weight64(offset + i + 1u);
 }
 
+// Half-wave plates at the aperture (docs/physics.md, "Half-wave plates"): the float64 weights of a
+// plate detector are 3 texels a node, (w_I, wn), (w_Q, w_U), (w_V, 0); M0 is 8 texels, row by row.
+dvec4 plate_weight64(uint k) {
+  const uvec4 a = texelFetch(weights64, int(3u * k)), b = texelFetch(weights64, int(3u * k + 1u)),
+              c = texelFetch(weights64, int(3u * k + 2u));
+  return dvec4(packDouble2x32(a.xy), packDouble2x32(b.xy), packDouble2x32(b.zw), packDouble2x32(c.xy));
+}
+
+double plate_norm_at(uint k) { return packDouble2x32(texelFetch(weights64, int(3u * k)).zw); }
+
+dvec4 plate_weights64(Grid grid, double x, double y) {
+  const uint offset = grid.offset64, n = uint(grid.n);
+  const double u = (x + grid.a64) * grid.inv_step64;
+  const double v = (y + grid.a64) * grid.inv_step64;
+  const double last = double(n - 1u);
+  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return dvec4(0.0);
+  const uint i = min(uint(u), n - 2u);
+  const uint j = min(uint(v), n - 2u);
+  const double fu = u - double(i);
+  const double fv = v - double(j);
+  const uint g00 = offset + j * n + i;
+  return ((1.0 - fu) * (1.0 - fv)) * plate_weight64(g00) + (fu * (1.0 - fv)) * plate_weight64(g00 + 1u) +
+         ((1.0 - fu) * fv) * plate_weight64(g00 + n) + (fu * fv) * plate_weight64(g00 + n + 1u);
+}
+
+dvec4 plate_radial64(Grid grid, double r2) {
+  const uint offset = grid.offset64, n = uint(grid.n);
+  const double u = sqrt(max(r2, 0.0lf)) * grid.inv_step64;
+  if (!(u <= double(n - 1u))) return dvec4(0.0);
+  const uint i = min(uint(u), n - 2u);
+  const double f = u - double(i);
+  return (1.0 - f) * plate_weight64(offset + i) + f * plate_weight64(offset + i + 1u);
+}
+
+// The per-sample normalization weight of a plate detector at (x, y).
+double plate_norm64(Grid grid, bool radial, double x, double y) {
+  const uint offset = grid.offset64, n = uint(grid.n);
+  if (radial) {
+    const double u = sqrt(max(x * x + y * y, 0.0lf)) * grid.inv_step64;
+    if (!(u <= double(n - 1u))) return 0.0lf;
+    const uint i = min(uint(u), n - 2u);
+    const double f = u - double(i);
+    return (1.0 - f) * plate_norm_at(offset + i) + f * plate_norm_at(offset + i + 1u);
+  }
+  const double u = (x + grid.a64) * grid.inv_step64;
+  const double v = (y + grid.a64) * grid.inv_step64;
+  const double last = double(n - 1u);
+  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return 0.0lf;
+  const uint i = min(uint(u), n - 2u);
+  const uint j = min(uint(v), n - 2u);
+  const double fu = u - double(i);
+  const double fv = v - double(j);
+  const uint g00 = offset + j * n + i;
+  return ((1.0 - fu) * (1.0 - fv)) * plate_norm_at(g00) + (fu * (1.0 - fv)) * plate_norm_at(g00 + 1u) +
+         ((1.0 - fu) * fv) * plate_norm_at(g00 + n) + (fu * fv) * plate_norm_at(g00 + n + 1u);
+}
+
+// M(theta) = R(-theta) M0 R(theta) with c = cos 2 theta, s = sin 2 theta, as columns: mt[j][i] = M_ij.
+// R(theta) rows (1,0,0,0), (0,c,s,0), (0,-s,c,0), (0,0,0,1).
+void plate_mueller(uint offset, double c, double s, out dmat4 mt) {
+  dmat4 m0;  // m0[j][i] = (M0)_ij
+  for (int r = 0; r < 4; ++r) {
+    const uvec4 t0 = texelFetch(weights64, int(offset) + 2 * r), t1 = texelFetch(weights64, int(offset) + 2 * r + 1);
+    m0[0][r] = packDouble2x32(t0.xy);
+    m0[1][r] = packDouble2x32(t0.zw);
+    m0[2][r] = packDouble2x32(t1.xy);
+    m0[3][r] = packDouble2x32(t1.zw);
+  }
+  dmat4 rot = dmat4(1.0lf);  // rot[j][i] = R(theta)_ij
+  rot[1][1] = c;
+  rot[2][1] = s;
+  rot[1][2] = -s;
+  rot[2][2] = c;
+  mt = transpose(rot) * m0 * rot;
+}
+
 #endif

@@ -19,6 +19,7 @@ layout(constant_id = PISCO_SPEC_RADIAL) const bool RADIAL = false;    // weights
 layout(constant_id = PISCO_SPEC_FLOAT64) const bool FLOAT64 = false;  // the float64 path
 layout(constant_id = PISCO_SPEC_PARTS) const int PARTS = 1;           // invocations per sample
 layout(constant_id = PISCO_SPEC_COLUMNS) const int COLUMNS = 4;       // weights stored per node: 2 or 4
+layout(constant_id = PISCO_SPEC_PLATE) const bool PLATE = false;      // a half-wave plate at the aperture
 
 shared float s_sum[PISCO_WG_SIZE], s_comp[PISCO_WG_SIZE];
 shared double s_s0[PISCO_WG_SIZE], s_n0[PISCO_WG_SIZE];
@@ -40,6 +41,7 @@ layout(binding = PISCO_BINDING_WEIGHTS64) uniform usamplerBuffer weights64;
 layout(std430, binding = PISCO_BINDING_POINTING) readonly buffer PointingBuffer { double pointing[]; };
 layout(std430, binding = PISCO_BINDING_TOD) writeonly buffer TodBuffer { double tod[]; };
 layout(std430, binding = PISCO_BINDING_COUNT) writeonly buffer CountBuffer { uint counts[]; };
+layout(std430, binding = PISCO_BINDING_PLATE) readonly buffer PlateBuffer { double plate_angle[]; };
 
 #include "contribution.glsl"
 #include "disc.glsl"
@@ -52,7 +54,10 @@ struct Sums {
 };
 
 // The pixels [b0, b0 + l0) then [b1, b1 + l1), in one loop.
-void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, uint l0, uint b1, uint l1, inout Sums acc) {
+// With PLATE, `m` is M(theta) with m[j] its column j (w * m = w M), and `m0` M(theta)'s column 0 in
+// float64, for the monopole's weight sum_a w_a M_a0.
+void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, uint l0, uint b1, uint l1, mat4 m,
+                dvec4 m0, inout Sums acc) {
   const uint jump = b1 - (b0 + l0);  // from the end of the first range to the start of the second
   for (uint q = 0u; q < l0 + l1; ++q) {
     const uint p = b0 + q + (q >= l0 ? jump : 0u);
@@ -61,7 +66,8 @@ void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, 
     vec3 xyz;
     float r2, cos2chi, sin2chi;
     pixel_geometry(f, a.xyz, xyz, r2, cos2chi, sin2chi);
-    const vec4 w = RADIAL ? interpolate_radial(g, r2) : interpolate_weights(g, xyz.x, xyz.y);
+    vec4 w = RADIAL ? interpolate_radial(g, r2) : interpolate_weights(g, xyz.x, xyz.y);
+    if (PLATE) w = w * m;  // the effective weights w M(theta)
     precise const float y = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.xyz)) - acc.comp;
     precise const float t = acc.sum + y;
     acc.comp = (t - acc.sum) - y;
@@ -69,9 +75,15 @@ void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, 
     if (FLOAT64) {
       const dvec3 k = dvec3(a.xyz) + dvec3(uintBitsToFloat(texelFetch(sky_lo, int(p)).xyz));
       const double x64 = dot(k, theta_p64), y64 = dot(k, phi_p64);
-      const dvec2 w64 = RADIAL ? interpolate_radial64(g, x64 * x64 + y64 * y64) : interpolate_weights64(g, x64, y64);
-      acc.s0 += w64.x;
-      acc.n0 += w64.y;
+      if (PLATE) {
+        const dvec4 w64 = RADIAL ? plate_radial64(g, x64 * x64 + y64 * y64) : plate_weights64(g, x64, y64);
+        acc.s0 += dot(w64, m0);
+        acc.n0 += plate_norm64(g, RADIAL, x64, y64);
+      } else {
+        const dvec2 w64 = RADIAL ? interpolate_radial64(g, x64 * x64 + y64 * y64) : interpolate_weights64(g, x64, y64);
+        acc.s0 += w64.x;
+        acc.n0 += w64.y;
+      }
     }
   }
 }
@@ -106,6 +118,17 @@ void main() {
     g.a64 = pc.grid_a;
     g.inv_step64 = pc.grid_inv_step;
     const double cos_rho_max = pc.cos_rho_max;
+    // The plate's Mueller matrix at this sample's angle, in float64: M(theta) = R(-theta) M0 R(theta).
+    mat4 m = mat4(1.0);
+    dvec4 m0 = dvec4(1.0lf, 0.0lf, 0.0lf, 0.0lf);
+    if (PLATE) {
+      const double th = plate_angle[sid];
+      const double c = pisco_cos(2.0lf * th), s = pisco_sin(2.0lf * th);
+      dmat4 mt;  // mt[j][i] = M_ij (column-major)
+      plate_mueller(pc.plate_offset64, c, s, mt);
+      m = mat4(mt);
+      m0 = mt[0];
+    }
     SampleFrame f;  // the float32 frame: the float64 one, rounded
     f.theta_p = vec3(theta_p64);
     f.phi_p = vec3(phi_p64);
@@ -141,7 +164,7 @@ void main() {
         ring_ranges(ring, z0, xa, phi, cos_rho_max, b0, l0, b1, l1);
       }
       count += l0 + l1;
-      accumulate(f, g, theta_p64, phi_p64, b0, l0, b1, l1, acc);
+      accumulate(f, g, theta_p64, phi_p64, b0, l0, b1, l1, m, m0, acc);
     }
   }
 

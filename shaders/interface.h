@@ -14,11 +14,13 @@
 #define PISCO_BINDING_SKY_LO 1     // texels, 1 per pixel: k - float(k), so that float(k) + lo = k in float64
 #define PISCO_BINDING_RINGS 2      // texels, 1 per ring: z (low word, high word), first pixel, count | shifted << 31
 #define PISCO_BINDING_WEIGHTS 3    // texels: each node's COLUMNS weights, then its neighbour's; every detector's grid
-#define PISCO_BINDING_WEIGHTS64 4  // texels, 1 per node: float64 (w_I, Omega_pix B_TT / Omega~), low word first
+#define PISCO_BINDING_WEIGHTS64 4  // texels, 1 per node: float64 (w_I, Omega_pix B_TT / Omega~), low word first;
+                                   // with PLATE 3 per node: (w_I, wn), (w_Q, w_U), (w_V, 0); and the plates' M0
 #define PISCO_BINDING_POINTING 5   // storage: 4 doubles per sample: (theta, phi, psi, 0) or a quaternion (x, y, z, w)
 #define PISCO_BINDING_TOD 6        // storage: 1 double per sample of the chunk
 #define PISCO_BINDING_COUNT 7      // storage: 1 uint per sample: pixels in its disc
-#define PISCO_BINDINGS 8
+#define PISCO_BINDING_PLATE 8      // storage: 1 double per sample: the plate's angle from the detector's axis
+#define PISCO_BINDINGS 9
 
 #define PISCO_FLAG_PER_SAMPLE 2u  // divide each sample by its own sum of Omega_pix B_TT / Omega~
 #define PISCO_FLAG_QUATERNION 4u  // the pointing is boresight quaternions, not angles
@@ -29,6 +31,7 @@
 #define PISCO_SPEC_FLOAT64 1  // run the float64 path: I0 sum_k w_I(k) and the per-sample norm
 #define PISCO_SPEC_PARTS 2    // invocations per sample (a power of two <= PISCO_WG_SIZE)
 #define PISCO_SPEC_COLUMNS 3  // weights stored per node: 2 (w_I, w_Q; w_U = w_V = 0) or 4
+#define PISCO_SPEC_PLATE 4    // a half-wave plate at the aperture: effective weights w M(theta) per pixel
 
 #ifdef __cplusplus
 #include <cstdint>
@@ -58,7 +61,7 @@ layout(push_constant) uniform PushConstants {
   uint flags;             // PISCO_FLAG_*
   uint sample_count;      // samples in this chunk
   uint groups_x;          // workgroups along x: sample = (group.y * groups_x + group.x) * (WG / parts) + local / parts
-  uint pad;
+  uint plate_offset64;    // PLATE: the first texel of the plate's M0 (8 texels, 16 float64 row by row)
 #ifdef __cplusplus
 };
 static_assert(sizeof(PushConstants) == 120, "push constants must match the GLSL block");

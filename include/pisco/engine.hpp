@@ -26,7 +26,11 @@ struct EngineOptions {
   std::string device = "auto";  // vulkan/cuda: device index, or part of its name; "auto" prefers a discrete GPU
   std::size_t chunk_samples = 0;  // vulkan/cuda: samples per device chunk; 0 = fitted to the device's limits
   Normalization normalization = Normalization::integral;
-  unsigned threads = 0;         // cpu backend: worker threads, 0 = all hardware threads
+  unsigned threads = 0;         // cpu backend: worker threads, 0 = all hardware threads; at most max_threads()
+  // UNSEEN pixels of the sky (a masked map, Sky::read_fits with UnseenPolicy::flag): an error by
+  // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
+  // hold one.
+  UnseenPolicy unseen = UnseenPolicy::error;
 };
 
 struct BackendInfo {
@@ -35,7 +39,10 @@ struct BackendInfo {
   std::string detail;  // device found, or why the backend is unavailable
 };
 
-namespace detail { class Backend; }
+namespace detail {
+class Backend;
+struct EngineInputs;
+}  // namespace detail
 
 class Engine {
  public:
@@ -50,11 +57,14 @@ class Engine {
   // TOD of detector `detector` for a chunk of boresight pointing, as angles or as quaternions; the
   // engine applies the detector's offset (Detector::offset) on the device. tod.size() must equal the
   // pointing's size. Every sample of tod is written, or, with `accumulate`, added to what tod holds
-  // (as a framework operator adds a signal into its detector data). Throws pisco::Error on a bad
-  // sample (naming the detector and the sample's index).
-  void convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate = false);
+  // (as a framework operator adds a signal into its detector data). A detector with a half-wave plate
+  // (Detector::hwp) needs `hwp_angle`, the plate's angle per sample in the focal-plane frame
+  // (radians, TOAST's `hwp_angle`); others must be given none. Throws pisco::Error on a bad sample
+  // (naming the detector and the sample's index).
+  void convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate = false,
+                std::span<const double> hwp_angle = {});
   void convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                bool accumulate = false);
+                bool accumulate = false, std::span<const double> hwp_angle = {});
 
   // The same, asynchronously: the pointing is read (copied to the device's staging memory) before
   // submit() returns, and the call returns a ticket as soon as the work is queued; tod must stay
@@ -63,10 +73,11 @@ class Engine {
   // caller prepares the next and reads back the previous: upload, compute and download overlap
   // whatever the size of the caller's chunks. The device holds at most two chunks in flight: a
   // submit() that finds both busy first completes the oldest.
+  // (The plate angles, like the pointing, are read before submit() returns.)
   std::uint64_t submit(std::size_t detector, const PointingView& boresight, std::span<double> tod,
-                       bool accumulate = false);
+                       bool accumulate = false, std::span<const double> hwp_angle = {});
   std::uint64_t submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                       bool accumulate = false);
+                       bool accumulate = false, std::span<const double> hwp_angle = {});
   // Waits for submission `ticket` and every earlier one; without a ticket, for all. Rethrows the
   // error of a failed submission.
   void wait(std::uint64_t ticket);
@@ -81,14 +92,38 @@ class Engine {
   // Backends compiled into the library, with availability on this machine.
   static std::vector<BackendInfo> backends();
 
+  // Masked skies (EngineOptions::unseen = UnseenPolicy::flag): flags[i] = 1 where the disc of sample
+  // i (the detector's, its offset applied; the convolution's own disc selection, HEALPix query_disc
+  // with inclusive = false) holds a pixel that is UNSEEN in the sky, 0 elsewhere; returns the number
+  // flagged. flags.size() must equal the pointing's size. Computed on the host at the call; with no
+  // UNSEEN pixel (or another policy) every flag is 0. Such samples are convolved with those pixels
+  // taken as 0: leave them out of maps (BinnedMapmaker::add's flags).
+  std::size_t flag_samples(std::size_t detector, const PointingView& boresight, std::span<std::uint8_t> flags) const;
+  std::size_t flag_samples(std::size_t detector, const QuatPointingView& boresight,
+                           std::span<std::uint8_t> flags) const;
+  // The number of UNSEEN sky pixels taken as 0 (policies zero and flag).
+  std::size_t unseen_pixels() const noexcept { return unseen_pixels_; }
+  // The largest EngineOptions::threads: 64 per hardware thread of this machine.
+  static unsigned max_threads() noexcept;
+
  private:
   template <class View>
-  std::uint64_t submit_view(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate);
+  std::uint64_t submit_view(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
+                            std::span<const double> hwp_angle);
+  void finish_pending(std::uint64_t ticket);
+
+  // Work the engine itself completes when a submission is done (plates between the optics and the
+  // detector: the combination of their row detectors).
+  struct Pending;
 
   FocalPlane focal_plane_;
+  std::shared_ptr<const detail::EngineInputs> inputs_;
   std::unique_ptr<detail::Backend> backend_;
   std::uint64_t samples_ = 0, pixels_ = 0;
   std::uint64_t next_ticket_ = 1;
+  std::vector<std::unique_ptr<Pending>> pending_;
+  std::vector<std::uint32_t> masked_;  // UnseenPolicy::flag: the sky's UNSEEN pixels, ascending
+  std::size_t unseen_pixels_ = 0;
 };
 
 }  // namespace pisco

@@ -2,10 +2,12 @@
 #pragma once
 
 #include <cstddef>
+#include <optional>
 #include <filesystem>
 #include <string>
 #include <vector>
 
+#include "pisco/hwp.hpp"
 #include "pisco/quaternion.hpp"
 
 namespace pisco {
@@ -26,6 +28,9 @@ struct Detector {
     offset_from_quat(offset, xi, eta, gamma);
   }
   bool has_offset() const noexcept { return offset.x != 0.0 || offset.y != 0.0 || offset.z != 0.0; }
+  // A half-wave plate in front of the detector (hwp.hpp): its TOD is then modulated per sample by the
+  // plate's angle, which the caller gives with every pointing chunk.
+  std::optional<HalfWavePlate> hwp;
 };
 
 class FocalPlane {

@@ -26,8 +26,12 @@ class BinnedMapmaker {
   explicit BinnedMapmaker(int nside, double rcond_min = 1e-3);
 
   // Adds a chunk: the pixel of each sample is that of its beam centre, and the model is the
-  // detector's D(gamma) = s/2 [(1+eps), (1-eps) cos 2gamma, (1-eps) sin 2gamma], gamma = psi + zeta.
-  void add(const Detector& detector, const PointingView& pointing, std::span<const double> tod);
+  // detector's D(gamma) = s/2 [(1+eps), (1-eps) cos 2gamma, (1-eps) sin 2gamma], gamma = psi + zeta;
+  // with a half-wave plate (Detector::hwp), the plate-modulated D(0) M(hwp_angle - plate gamma)
+  // R(gamma) (hwp.hpp), and `hwp_angle` (the plate's angle per sample) is then required.
+  // Samples with a non-zero flag (`flags`: empty, or one per sample; Engine::flag_samples) are left out.
+  void add(const Detector& detector, const PointingView& pointing, std::span<const double> tod,
+           std::span<const double> hwp_angle = {}, std::span<const std::uint8_t> flags = {});
   // Solves every pixel; may be called again after more add() calls.
   BinnedMaps solve() const;
 

@@ -25,11 +25,15 @@ struct PointingInput {
   PointingView angles;
   QuatPointingView quats;
   bool quaternions = false;
+  // Aperture half-wave plates: the plate's angle from the detector's axis per sample (hwp_angle -
+  // gamma); empty for detectors without one.
+  std::span<const double> plate_angle;
   std::size_t size() const noexcept { return quaternions ? quats.size() : angles.size(); }
   PointingInput subspan(std::size_t offset, std::size_t count) const {
     PointingInput p = *this;
     if (quaternions) p.quats = quats.subspan(offset, count);
     else p.angles = angles.subspan(offset, count);
+    if (!plate_angle.empty()) p.plate_angle = plate_angle.subspan(offset, count);
     return p;
   }
 };

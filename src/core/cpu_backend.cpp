@@ -11,6 +11,7 @@
 #include "core/disc.hpp"
 #include "core/frame.hpp"
 #include "core/thread_pool.hpp"
+#include "core/plate.hpp"
 
 namespace pisco::detail {
 namespace {
@@ -23,11 +24,13 @@ namespace {
 #define PISCO_CPU_CLONES
 #endif
 
-template <bool PerSample, bool Radial>
+// One sample. With a plate (Plate), `plate` is M(theta) row-major and each pixel's weights are the
+// effective w M(theta) (docs/physics.md, "Half-wave plates").
+template <bool PerSample, bool Radial, bool Plate>
 inline __attribute__((always_inline)) double sample(const PreparedSky& sky, const double* pixels,
                                                     const PreparedDetector& det,
                                                     const SampleFrame<double>& f, double theta, double phi,
-                                                    std::uint64_t& count) {
+                                                    const double* plate, std::uint64_t& count) {
   const double* grid = det.weights.data();
   const double* norm_grid = det.norm_weights.data();
   double sum = 0.0, norm = 0.0;
@@ -37,18 +40,28 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
                         for (std::uint32_t p = begin; p < end; ++p) {
                           const double* px = &pixels[std::size_t(p) * 8];
                           const Vec3<double> k{px[0], px[1], px[2]};
-                          if constexpr (PerSample) {
+                          if constexpr (PerSample || Plate) {
                             const PixelGeometry<double> g = pixel_geometry(f, k);
-                            double w[4], wn[4];
-                            if constexpr (Radial) {
+                            double w[4];
+                            if constexpr (Radial)
                               interpolate_radial(grid, det.grid_n, det.grid_inv_step, g.r2, w);
-                              interpolate_radial(norm_grid, det.grid_n, det.grid_inv_step, g.r2, wn);
-                            } else {
+                            else
                               interpolate_weights(grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, w);
-                              interpolate_weights(norm_grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wn);
+                            if constexpr (Plate) {
+                              double v[4];
+                              effective_weights(w, plate, v);
+                              sum += stokes_response(v, g.cos2chi, g.sin2chi, px[4], px[5], px[6], px[7]);
+                            } else {
+                              sum += stokes_response(w, g.cos2chi, g.sin2chi, px[4], px[5], px[6], px[7]);
                             }
-                            sum += stokes_response(w, g.cos2chi, g.sin2chi, px[4], px[5], px[6], px[7]);
-                            norm += wn[0];
+                            if constexpr (PerSample) {
+                              double wn[4];
+                              if constexpr (Radial)
+                                interpolate_radial(norm_grid, det.grid_n, det.grid_inv_step, g.r2, wn);
+                              else
+                                interpolate_weights(norm_grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wn);
+                              norm += wn[0];
+                            }
                           } else {
                             sum += pixel_contribution<Radial>(f, k, px[4], px[5], px[6], px[7], grid, det.grid_n,
                                                       det.grid_a, det.grid_inv_step);
@@ -59,13 +72,27 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
   return sum;
 }
 
+// M(theta) = R(-theta) M0 R(theta), row-major (core/plate.hpp).
+inline void plate_matrix(const PreparedDetector& det, double theta, double* m) {
+  plate_at(&det.plate_mueller[0][0], std::cos(2 * theta), std::sin(2 * theta), m);
+}
+
+template <bool Radial, bool Plate>
+inline double sample_of(const PreparedSky& sky, const double* pixels, const PreparedDetector& det, bool per_sample,
+                        const SampleFrame<double>& f, double theta, double phi, const double* plate,
+                        std::uint64_t& count) {
+  return per_sample ? sample<true, Radial, Plate>(sky, pixels, det, f, theta, phi, plate, count)
+                    : sample<false, Radial, Plate>(sky, pixels, det, f, theta, phi, plate, count);
+}
+
 // Samples [begin, end) of one chunk; returns the number of pixels evaluated. The detector's basis
 // and line of sight come from frame.hpp, for either pointing form (offset applied there).
 PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const double* pixels,
-                                                const PreparedDetector& det,
-                                                bool per_sample, const PointingInput& in, double* tod,
-                                                bool accumulate, std::size_t begin, std::size_t end) {
+                                                const PreparedDetector& det, bool per_sample, const PointingInput& in,
+                                                double* tod, bool accumulate, std::size_t begin, std::size_t end) {
   std::uint64_t count = 0;
+  const bool plate = det.plate == PreparedDetector::Plate::aperture;
+  double m[16];
   for (std::size_t i = begin; i < end; ++i) {
     double theta = 0.0, phi = 0.0;
     const SampleFrame<double> f =
@@ -75,12 +102,14 @@ PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const do
             : angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta,
                            det.sin_zeta, theta, phi);
     double d;
-    if (det.radial)
-      d = per_sample ? sample<true, true>(sky, pixels, det, f, theta, phi, count)
-                     : sample<false, true>(sky, pixels, det, f, theta, phi, count);
-    else
-      d = per_sample ? sample<true, false>(sky, pixels, det, f, theta, phi, count)
-                     : sample<false, false>(sky, pixels, det, f, theta, phi, count);
+    if (plate) {
+      plate_matrix(det, in.plate_angle[i], m);
+      d = det.radial ? sample_of<true, true>(sky, pixels, det, per_sample, f, theta, phi, m, count)
+                     : sample_of<false, true>(sky, pixels, det, per_sample, f, theta, phi, m, count);
+    } else {
+      d = det.radial ? sample_of<true, false>(sky, pixels, det, per_sample, f, theta, phi, nullptr, count)
+                     : sample_of<false, false>(sky, pixels, det, per_sample, f, theta, phi, nullptr, count);
+    }
     tod[i] = accumulate ? tod[i] + d : d;
   }
   return count;

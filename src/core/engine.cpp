@@ -1,8 +1,13 @@
 #include "pisco/engine.hpp"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 
 #include "core/backend.hpp"
+#include "core/masked_sky.hpp"
+#include "core/prepared.hpp"
+#include "pisco/hwp.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {
@@ -57,24 +62,37 @@ const BackendEntry& choose_backend(const std::string& name) {
 Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
                const EngineOptions& options)
     : focal_plane_(focal_plane) {
+  detail::check_engine_options(options);
   const detail::BackendEntry& entry = detail::choose_backend(options.backend);
-  auto inputs = std::make_shared<const detail::EngineInputs>(
-      detail::prepare_inputs(sky, beams, focal_plane, options.normalization));
-  backend_ = entry.create(std::move(inputs), sky, options);
+  // A masked sky: the backends get a copy with its UNSEEN pixels 0, for the set-up only (masked_sky.hpp).
+  std::optional<Sky> zeroed;
+  const Sky& used = detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_);
+  inputs_ = std::make_shared<const detail::EngineInputs>(
+      detail::prepare_inputs(used, beams, focal_plane, options.normalization));
+  backend_ = entry.create(inputs_, used, options);
 }
 
 Engine::~Engine() = default;
 Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 
+struct Engine::Pending {
+  std::uint64_t ticket = 0;  // the last backend submission it needs
+  std::size_t detector = 0;
+  std::span<double> tod;
+  bool accumulate = false;
+  std::vector<double> plate_angle;          // theta per sample
+  std::array<std::vector<double>, 4> rows;  // s_T, s_Q, s_U, s_V
+};
+
 namespace {
-detail::PointingInput input_of(const PointingView& v) { return {v, {}, false}; }
-detail::PointingInput input_of(const QuatPointingView& v) { return {{}, v, true}; }
+detail::PointingInput input_of(const PointingView& v) { return {v, {}, false, {}}; }
+detail::PointingInput input_of(const QuatPointingView& v) { return {{}, v, true, {}}; }
 }  // namespace
 
 template <class View>
 std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
-                                  bool accumulate) {
+                                  bool accumulate, std::span<const double> hwp_angle) {
   if (detector >= focal_plane_.size())
     throw Error("convolve: detector index " + std::to_string(detector) + " but the focal plane has " +
                 std::to_string(focal_plane_.size()) + " detectors");
@@ -83,11 +101,47 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
     throw Error("convolve: the TOD buffer of detector '" + name + "' has " + std::to_string(tod.size()) +
                 " samples but the pointing has " + std::to_string(boresight.size()));
   check_pointing(boresight, ("pointing of detector '" + name + "'").c_str());
-  const std::uint64_t ticket = next_ticket_++;
+  const detail::PreparedDetector& det = inputs_->detectors.at(detector);
+  const bool plate = det.plate != detail::PreparedDetector::Plate::none;
+  if (plate && hwp_angle.size() != tod.size())
+    throw Error("convolve: detector '" + name + "' has a half-wave plate: expected " + std::to_string(tod.size()) +
+                " plate angles (hwp_angle), got " + std::to_string(hwp_angle.size()));
+  if (!plate && !hwp_angle.empty())
+    throw Error("convolve: detector '" + name + "' has no half-wave plate, but plate angles (hwp_angle) were given");
+  auto pending = std::make_unique<Pending>();
+  if (plate) {
+    pending->plate_angle.resize(tod.size());
+    for (std::size_t i = 0; i < tod.size(); ++i) {
+      if (!std::isfinite(hwp_angle[i]))
+        throw Error("convolve: detector '" + name + "': plate angle (hwp_angle) of sample " + std::to_string(i) +
+                    " is not finite");
+      pending->plate_angle[i] = hwp_angle[i] - det.plate_gamma;
+    }
+  }
+  detail::PointingInput input = input_of(boresight);
+  std::uint64_t ticket = 0;
+  std::size_t failing = detector;
   try {
-    backend_->submit(detector, input_of(boresight), tod, accumulate, ticket);
+    if (det.plate == detail::PreparedDetector::Plate::detector) {
+      // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
+      for (int r = 0; r < 4; ++r) {
+        pending->rows[r].assign(tod.size(), 0.0);
+        ticket = next_ticket_++;
+        backend_->submit(det.rows[r], input, pending->rows[r], false, ticket);
+      }
+      pending->ticket = ticket;
+      pending->detector = detector;
+      pending->tod = tod;
+      pending->accumulate = accumulate;
+      pending_.push_back(std::move(pending));
+    } else {
+      if (plate) input.plate_angle = pending->plate_angle;
+      ticket = next_ticket_++;
+      backend_->submit(detector, input, tod, accumulate, ticket);
+    }
   } catch (const detail::SubmissionError& e) {
-    throw Error("convolving detector '" + focal_plane_[e.detector].name + "': " + e.what());
+    failing = e.detector < focal_plane_.size() ? e.detector : detector;
+    throw Error("convolving detector '" + focal_plane_[failing].name + "': " + e.what());
   } catch (const Error& e) {
     throw Error("convolving detector '" + name + "': " + e.what());
   }
@@ -95,33 +149,60 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   return ticket;
 }
 
+// The plates between the optics and the detector whose rows are done: d = D(0) M(theta) s.
+void Engine::finish_pending(std::uint64_t ticket) {
+  std::size_t done = 0;
+  for (; done < pending_.size() && pending_[done]->ticket <= ticket; ++done) {
+    Pending& p = *pending_[done];
+    const detail::PreparedDetector& det = inputs_->detectors.at(p.detector);
+    Mueller m0{};
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) m0[i][j] = det.plate_mueller[i][j];
+    for (std::size_t i = 0; i < p.tod.size(); ++i) {
+      const Mueller m = rotated_mueller(m0, p.plate_angle[i]);
+      double d = 0.0;
+      for (int b = 0; b < 4; ++b) d += (det.d0[0] * m[0][b] + det.d0[1] * m[1][b]) * p.rows[b][i];
+      p.tod[i] = p.accumulate ? p.tod[i] + d : d;
+    }
+  }
+  pending_.erase(pending_.begin(), pending_.begin() + std::ptrdiff_t(done));
+}
+
 std::uint64_t Engine::submit(std::size_t detector, const PointingView& boresight, std::span<double> tod,
-                             bool accumulate) {
-  return submit_view(detector, boresight, tod, accumulate);
+                             bool accumulate, std::span<const double> hwp_angle) {
+  return submit_view(detector, boresight, tod, accumulate, hwp_angle);
 }
 
 std::uint64_t Engine::submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                             bool accumulate) {
-  return submit_view(detector, boresight, tod, accumulate);
+                             bool accumulate, std::span<const double> hwp_angle) {
+  return submit_view(detector, boresight, tod, accumulate, hwp_angle);
 }
 
 void Engine::wait(std::uint64_t ticket) {
   try {
     pixels_ += backend_->wait(ticket);
   } catch (const detail::SubmissionError& e) {
-    throw Error("convolving detector '" + focal_plane_[e.detector].name + "': " + e.what());
+    pending_.clear();
+    // Row detectors of a plate belong to their focal-plane detector.
+    std::size_t d = e.detector;
+    for (std::size_t i = 0; d >= focal_plane_.size() && i < focal_plane_.size(); ++i)
+      for (std::size_t r : inputs_->detectors[i].rows)
+        if (inputs_->detectors[i].plate == detail::PreparedDetector::Plate::detector && r == e.detector) d = i;
+    throw Error("convolving detector '" + focal_plane_[d < focal_plane_.size() ? d : 0].name + "': " + e.what());
   }
+  finish_pending(ticket);
 }
 
 void Engine::wait() { wait(next_ticket_ - 1); }
 
-void Engine::convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate) {
-  wait(submit(detector, boresight, tod, accumulate));
+void Engine::convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate,
+                      std::span<const double> hwp_angle) {
+  wait(submit(detector, boresight, tod, accumulate, hwp_angle));
 }
 
 void Engine::convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                      bool accumulate) {
-  wait(submit(detector, boresight, tod, accumulate));
+                      bool accumulate, std::span<const double> hwp_angle) {
+  wait(submit(detector, boresight, tod, accumulate, hwp_angle));
 }
 
 std::string Engine::backend_name() const { return backend_->name(); }

@@ -112,16 +112,42 @@ BinnedMapmaker::BinnedMapmaker(int nside, double rcond_min) : nside_(nside), rco
 }
 
 void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
-                         std::span<const double> tod) {
+                         std::span<const double> tod, std::span<const double> hwp_angle,
+                         std::span<const std::uint8_t> flags) {
   // Everything is checked before anything is accumulated, so a bad chunk leaves the maps intact.
   check_inputs(detector, ptg, tod);
+  if (!flags.empty() && flags.size() != tod.size())
+    throw Error("BinnedMapmaker::add: detector '" + detector.name + "': " + std::to_string(flags.size()) +
+                " flags for " + std::to_string(tod.size()) + " TOD samples (expected one per sample, or none)");
+  if (detector.hwp) {
+    if (hwp_angle.size() != tod.size())
+      throw Error("BinnedMapmaker::add: detector '" + detector.name + "' has a half-wave plate: expected " +
+                  std::to_string(tod.size()) + " plate angles, got " + std::to_string(hwp_angle.size()));
+    for (std::size_t i = 0; i < hwp_angle.size(); ++i)
+      if (!std::isfinite(hwp_angle[i]))
+        throw Error("BinnedMapmaker::add: detector '" + detector.name + "': plate angle of sample " +
+                    std::to_string(i) + " is not finite");
+  } else if (!hwp_angle.empty()) {
+    throw Error("BinnedMapmaker::add: detector '" + detector.name + "' has no half-wave plate, but plate angles were given");
+  }
   const Base base(int64(nside_), RING, SET_NSIDE);
   const double co = 0.5 * detector.gain * (1.0 + detector.epsilon);
   const double pol = 0.5 * detector.gain * (1.0 - detector.epsilon);
   for (std::size_t i = 0; i < tod.size(); ++i) {
+    if (!flags.empty() && flags[i] != 0) continue;
     const std::size_t pix = std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i])));
     const double gamma = ptg.psi[i] + detector.zeta;
-    const double a[3] = {co, pol * std::cos(2.0 * gamma), pol * std::sin(2.0 * gamma)};
+    const double c2 = std::cos(2.0 * gamma), s2 = std::sin(2.0 * gamma);
+    double a[3] = {co, pol * c2, pol * s2};
+    if (detector.hwp) {
+      // r = D(0) M(theta) R(gamma), D(0) = (co, pol, 0, 0): the plate-modulated response to I, Q, U.
+      const Mueller m = rotated_mueller(detector.hwp->mueller, hwp_angle[i] - detector.hwp->gamma);
+      double dm[4];
+      for (int b = 0; b < 4; ++b) dm[b] = co * m[0][b] + pol * m[1][b];
+      a[0] = dm[0];
+      a[1] = dm[1] * c2 - dm[2] * s2;
+      a[2] = dm[1] * s2 + dm[2] * c2;
+    }
     double* m = &ata_[6 * pix];
     m[0] += a[0] * a[0];
     m[1] += a[0] * a[1];

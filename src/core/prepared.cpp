@@ -103,6 +103,9 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
                                   Normalization normalization) {
   if (!std::isfinite(d.zeta) || !std::isfinite(d.epsilon) || !std::isfinite(d.gain))
     throw Error("detector '" + d.name + "': zeta, epsilon and gain must be finite");
+  if (d.epsilon < 0.0 || d.epsilon > 1.0)
+    throw Error("detector '" + d.name + "': epsilon = " + std::to_string(d.epsilon) +
+                " (cross-polar leakage) is outside [0, 1]");
   PreparedDetector p;
   const Quat& o = d.offset;
   if (!std::isfinite(norm(o)) || std::abs(norm(o) - 1.0) > 1e-6)
@@ -137,6 +140,30 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
     const auto btt = beam.element(0, 0);
     for (std::size_t k = 0; k < nodes; ++k) p.norm_weights[k * 4] = pixel_area / beam.omega_tilde() * btt[k];
   }
+  p.d0[0] = d.gain / 2 * (1 + d.epsilon);
+  p.d0[1] = d.gain / 2 * (1 - d.epsilon);
+  if (d.hwp) {
+    d.hwp->check("detector '" + d.name + "'");
+    p.plate = d.hwp->placement == HwpPlacement::aperture ? PreparedDetector::Plate::aperture
+                                                          : PreparedDetector::Plate::detector;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) p.plate_mueller[i][j] = d.hwp->mueller[i][j];
+    p.plate_gamma = d.hwp->gamma;
+  }
+  return p;
+}
+
+PreparedDetector prepare_row_detector(const Detector& d, const Beamsor& beam, double pixel_area,
+                                      Normalization normalization, int row) {
+  Detector plain = d;
+  plain.hwp.reset();
+  PreparedDetector p = prepare_detector(plain, beam, pixel_area, normalization);
+  const double scale = pixel_area / beam.omega_tilde();
+  const std::size_t nodes = p.weights.size() / 4;
+  for (int col = 0; col < 4; ++col) {
+    const auto b = beam.element(row, col);
+    for (std::size_t k = 0; k < nodes; ++k) p.weights[k * 4 + col] = b.empty() ? 0.0 : scale * b[k];
+  }
   return p;
 }
 
@@ -151,6 +178,15 @@ EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
       throw Error("detector '" + d.name + "': beam index " + std::to_string(d.beam) +
                   " but only " + std::to_string(beams.size()) + " beamsors were given");
     in.detectors.push_back(prepare_detector(d, beams[d.beam], in.sky.pixel_area, normalization));
+  }
+  // The row detectors of plates between the optics and the detector, after the focal plane's.
+  for (std::size_t i = 0; i < focal_plane.size(); ++i) {
+    if (in.detectors[i].plate != PreparedDetector::Plate::detector) continue;
+    const Detector& d = focal_plane[i];
+    for (int r = 0; r < 4; ++r) {
+      in.detectors[i].rows[r] = in.detectors.size();
+      in.detectors.push_back(prepare_row_detector(d, beams[d.beam], in.sky.pixel_area, normalization, r));
+    }
   }
   return in;
 }

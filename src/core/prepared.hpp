@@ -52,6 +52,18 @@ struct PreparedDetector {
   std::vector<double> weights;
   // Per-sample normalization only: (Omega_pix B_TT / Omega~, 0, 0, 0) per node.
   std::vector<double> norm_weights;
+
+  // Half-wave plate (docs/physics.md, "Half-wave plates"). At the aperture, the backends weigh each
+  // pixel with the effective weights w M(theta), M(theta) = R(-theta) M0 R(theta), theta the plate's
+  // angle from the detector's axis per sample (PointingInput::plate_angle). Between the optics and
+  // the detector, the engine combines four row detectors (rows), each the plain kernel with one row
+  // of the beamsor, as d = D(0) M(theta) (s_T, s_Q, s_U, s_V).
+  enum class Plate { none, aperture, detector };
+  Plate plate = Plate::none;
+  double plate_mueller[4][4] = {};  // M0
+  double plate_gamma = 0.0;
+  double d0[2] = {0.0, 0.0};        // D(0) = (s/2 (1+eps), s/2 (1-eps), 0, 0)
+  std::size_t rows[4] = {0, 0, 0, 0};  // detector placement: the row detectors' indices
 };
 
 struct EngineInputs {
@@ -70,6 +82,10 @@ std::vector<double> reference_pixels(const Sky& sky, unsigned threads);
 double float32_monopole(const Sky& sky);
 PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
                                   Normalization normalization);
+// Row `row` of the detector's beamsor as a detector of its own: weights Omega_pix / Omega~ B_row,.(x, y),
+// no plate (the detector-placement plate's s_row).
+PreparedDetector prepare_row_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
+                                      Normalization normalization, int row);
 EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
                             const FocalPlane& focal_plane, Normalization normalization);
 

@@ -6,10 +6,10 @@
 
 namespace pisco::detail::cuda {
 
-// Device (and pinned host) bytes per sample of chunk capacity: 4 pointing doubles in (angles or a
-// quaternion), the TOD out, two slots.
+// Device (and pinned host) bytes per sample of chunk capacity: 4 pointing doubles (angles or a
+// quaternion) and a plate angle in, the TOD out, two slots.
 constexpr std::size_t chunk_slots = 2;
-constexpr std::size_t bytes_per_chunk_sample = chunk_slots * 5 * sizeof(double);
+constexpr std::size_t bytes_per_chunk_sample = chunk_slots * 6 * sizeof(double);
 // Samples per chunk when the user asks for none: large enough to keep an H100 busy (one chunk is
 // ~2 ms of work at 5 deg discs), small enough that the Table 1 workload streams in several chunks so
 // that upload, compute and download overlap.

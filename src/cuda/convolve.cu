@@ -17,7 +17,7 @@ __device__ __forceinline__ T warp_sum(T v) {
   return v;
 }
 
-template <bool Radial, bool Monopole, bool PerSample>
+template <bool Radial, bool Monopole, bool PerSample, bool Plate>
 __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, KernelDetector det, ChunkArgs chunk) {
   __shared__ std::uint32_t first[warps_per_block][batch_ranges];
   __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
@@ -29,6 +29,8 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
   double theta = 0.0, phi = 0.0;
   const SampleFrame<double> fd = sample_frame(chunk.pointing + 4 * i, chunk.quaternions, det, theta, phi);
   const SampleFrame<float> f = to_float(fd);
+  PlateSample plate;
+  if constexpr (Plate) plate = plate_sample(det, chunk.plate_angle[i]);
   std::uint32_t* my_first = first[warp];
   std::uint32_t* my_offset = offset[warp];
 
@@ -36,7 +38,8 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
   const std::uint32_t pixels =
       walk_disc(sky, det, theta, phi, my_first, my_offset, lane == 0, [&](int count) {
         __syncwarp();  // the batch written by lane 0 is visible to the warp
-        process_batch<Radial, Monopole, PerSample>(sky, det, f, fd, my_first, my_offset, count, lane, acc);
+        process_batch<Radial, Monopole, PerSample, Plate>(sky, det, f, fd, my_first, my_offset, count, lane, acc,
+                                                          &plate);
         __syncwarp();  // every lane is done with it before lane 0 writes the next
       });
 
@@ -49,35 +52,43 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
   }
 }
 
-template <bool Radial, bool Monopole, bool PerSample>
+template <bool Radial, bool Monopole, bool PerSample, bool Plate>
 void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
   const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
-  convolve_kernel<Radial, Monopole, PerSample><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+  convolve_kernel<Radial, Monopole, PerSample, Plate><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+}
+
+template <bool Radial, bool Monopole, bool PerSample>
+void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool plate, cudaStream_t stream) {
+  if (plate)
+    launch<Radial, Monopole, PerSample, true>(sky, det, chunk, stream);
+  else
+    launch<Radial, Monopole, PerSample, false>(sky, det, chunk, stream);
 }
 
 template <bool Radial, bool Monopole>
-void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool per_sample,
+void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool per_sample, bool plate,
             cudaStream_t stream) {
   if (per_sample)
-    launch<Radial, Monopole, true>(sky, det, chunk, stream);
+    launch<Radial, Monopole, true>(sky, det, chunk, plate, stream);
   else
-    launch<Radial, Monopole, false>(sky, det, chunk, stream);
+    launch<Radial, Monopole, false>(sky, det, chunk, plate, stream);
 }
 
 template <bool Radial>
 void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool monopole,
-            bool per_sample, cudaStream_t stream) {
+            bool per_sample, bool plate, cudaStream_t stream) {
   if (monopole)
-    launch<Radial, true>(sky, det, chunk, per_sample, stream);
+    launch<Radial, true>(sky, det, chunk, per_sample, plate, stream);
   else
-    launch<Radial, false>(sky, det, chunk, per_sample, stream);
+    launch<Radial, false>(sky, det, chunk, per_sample, plate, stream);
 }
 
 }  // namespace
 
 void check_kernel_image(const std::string& device) {
   cudaFuncAttributes attributes{};
-  const cudaError_t status = cudaFuncGetAttributes(&attributes, convolve_kernel<false, false, false>);
+  const cudaError_t status = cudaFuncGetAttributes(&attributes, convolve_kernel<false, false, false, false>);
   if (status != cudaSuccess) {
     cudaGetLastError();
     throw Error("cuda: the kernel cannot run on " + device + ": " + cudaGetErrorString(status) +
@@ -87,12 +98,12 @@ void check_kernel_image(const std::string& device) {
 }
 
 void launch_convolve(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial,
-                     bool monopole, bool per_sample, cudaStream_t stream) {
+                     bool monopole, bool per_sample, bool plate, cudaStream_t stream) {
   if (chunk.count == 0) return;
   if (radial)
-    launch<true>(sky, det, chunk, monopole, per_sample, stream);
+    launch<true>(sky, det, chunk, monopole, per_sample, plate, stream);
   else
-    launch<false>(sky, det, chunk, monopole, per_sample, stream);
+    launch<false>(sky, det, chunk, monopole, per_sample, plate, stream);
   PISCO_CUDA_CHECK(cudaGetLastError());
 }
 

@@ -13,6 +13,7 @@ namespace pisco::detail::cuda {
 struct ChunkArgs {
   const double* pointing;  // 4 doubles a sample: (theta, phi, psi, 0) or a quaternion (x, y, z, w)
   bool quaternions;
+  const double* plate_angle;  // aperture plates: the plate's angle from the detector's axis per sample
   double* tod;
   unsigned long long* pixels;  // incremented by the disc size of every sample
   std::uint32_t count;
@@ -25,6 +26,6 @@ struct ChunkArgs {
 void check_kernel_image(const std::string& device);
 
 void launch_convolve(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial,
-                     bool monopole, bool per_sample, cudaStream_t stream);
+                     bool monopole, bool per_sample, bool plate, cudaStream_t stream);
 
 }  // namespace pisco::detail::cuda

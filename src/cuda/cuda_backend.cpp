@@ -22,20 +22,21 @@ namespace {
 struct DetectorData {
   DeviceArray<float> weights;
   DeviceArray<double> exact;  // only where float64 sums are needed
+  DeviceArray<double> plate;  // aperture plates with float64 sums: (w_Q, w_U, w_V, 0) per node
   KernelDetector kernel;
 };
 
 // One of the two chunk slots.
 struct Slot {
   Stream stream;
-  PinnedArray<double> host_in, host_out;  // 4 pointing doubles a sample; TOD
+  PinnedArray<double> host_in, host_out;  // 4 pointing doubles and a plate angle a sample; TOD
   PinnedArray<unsigned long long> host_pixels;
   DeviceArray<double> dev_in, dev_out;
   DeviceArray<unsigned long long> dev_pixels;
   SlotJob job;
 
   explicit Slot(std::size_t capacity)
-      : host_in(4 * capacity), host_out(capacity), host_pixels(1), dev_in(4 * capacity), dev_out(capacity),
+      : host_in(5 * capacity), host_out(capacity), host_pixels(1), dev_in(5 * capacity), dev_out(capacity),
         dev_pixels(1) {}
 };
 
@@ -60,7 +61,8 @@ class CudaBackend final : public Backend {
       DetectorData data;
       data.weights = upload(float_weights(d));
       if (exact) data.exact = upload(exact_weights(d));
-      data.kernel = kernel_detector(d, data.weights.data(), data.exact.data());
+      if (exact && d.plate == PreparedDetector::Plate::aperture) data.plate = upload(plate_weights(d));
+      data.kernel = kernel_detector(d, data.weights.data(), data.exact.data(), data.plate.data());
       detectors_.push_back(std::move(data));
     }
 
@@ -100,7 +102,8 @@ class CudaBackend final : public Backend {
           return complete(done);
         });
         current = SlotJob{false, ticket, detector, offset, pointing.size(), tod.subspan(offset, count), accumulate};
-        enqueue(s, det.kernel, radial, pointing.subspan(offset, count));
+        enqueue(s, det.kernel, radial, in_->detectors.at(detector).plate == PreparedDetector::Plate::aperture,
+                pointing.subspan(offset, count));
         s.job = current;
         s.job.busy = true;
       }
@@ -139,7 +142,7 @@ class CudaBackend final : public Backend {
                                             " of a chunk of " + std::to_string(job.total) + ")");
   }
 
-  void enqueue(Slot& s, const KernelDetector& det, bool radial, const PointingInput& pointing) {
+  void enqueue(Slot& s, const KernelDetector& det, bool radial, bool plate, const PointingInput& pointing) {
     const cudaStream_t stream = s.stream.get();
     const std::size_t count = pointing.size();
     double* host = s.host_in.data();
@@ -153,11 +156,14 @@ class CudaBackend final : public Backend {
         host[4 * i + 3] = 0.0;
       }
     }
-    PISCO_CUDA_CHECK(cudaMemcpyAsync(s.dev_in.data(), host, 4 * count * sizeof(double), cudaMemcpyHostToDevice, stream));
+    // The plate angles after the pointing, in the same copy.
+    if (plate) std::memcpy(host + 4 * count, pointing.plate_angle.data(), count * sizeof(double));
+    const std::size_t doubles = (plate ? 5 : 4) * count;
+    PISCO_CUDA_CHECK(cudaMemcpyAsync(s.dev_in.data(), host, doubles * sizeof(double), cudaMemcpyHostToDevice, stream));
     PISCO_CUDA_CHECK(cudaMemsetAsync(s.dev_pixels.data(), 0, sizeof(unsigned long long), stream));
-    const ChunkArgs args{s.dev_in.data(), pointing.quaternions, s.dev_out.data(), s.dev_pixels.data(),
-                         std::uint32_t(count)};
-    launch_convolve(sky_, det, args, radial, monopole_term_, per_sample_, stream);
+    const ChunkArgs args{s.dev_in.data(), pointing.quaternions, s.dev_in.data() + 4 * count, s.dev_out.data(),
+                         s.dev_pixels.data(), std::uint32_t(count)};
+    launch_convolve(sky_, det, args, radial, monopole_term_, per_sample_, plate, stream);
     PISCO_CUDA_CHECK(
         cudaMemcpyAsync(s.host_out.data(), s.dev_out.data(), count * sizeof(double), cudaMemcpyDeviceToHost, stream));
     PISCO_CUDA_CHECK(cudaMemcpyAsync(s.host_pixels.data(), s.dev_pixels.data(), sizeof(unsigned long long),

@@ -53,10 +53,22 @@ std::vector<double> exact_weights(const PreparedDetector& det) {
   return out;
 }
 
-KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* exact) {
+std::vector<double> plate_weights(const PreparedDetector& det) {
+  const std::size_t nodes = det.weights.size() / 4;
+  std::vector<double> out(nodes * 4, 0.0);
+  for (std::size_t k = 0; k < nodes; ++k)
+    for (int c = 0; c < 3; ++c) out[k * 4 + c] = det.weights[k * 4 + 1 + c];
+  return out;
+}
+
+KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* exact,
+                               const double* plate) {
   KernelDetector k{};
   k.weights = weights;
   k.exact_weights = exact;
+  k.plate_weights = plate;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) k.plate_mueller[4 * i + j] = det.plate_mueller[i][j];
   k.grid_n = det.grid_n;
   k.grid_a = float(det.grid_a);
   k.grid_inv_step = float(det.grid_inv_step);

@@ -23,6 +23,7 @@
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
 #include "core/frame.hpp"
+#include "core/plate.hpp"
 #include "core/hd.hpp"
 
 namespace pisco::detail::cuda {
@@ -48,13 +49,31 @@ struct KernelSky {
 struct KernelDetector {
   const float* weights;         // w per node, 4 floats (reference layout, converted)
   const double* exact_weights;  // (w_I, wn, 0, 0) per node in double; only for the float64 sums
+  const double* plate_weights;  // aperture plates: (w_Q, w_U, w_V, 0) per node in double, for the float64 sums
   int grid_n;
   float grid_a, grid_inv_step;
   double grid_a_d, grid_inv_step_d;
   double rho_max, cos_rho_max;
   double cos_zeta, sin_zeta;
   DetectorOffset offset;  // from the boresight
+  double plate_mueller[16];  // aperture plates: M0, row-major
 };
+
+// One sample's plate (aperture plates): M(theta) row-major in float32 for the pixels' effective
+// weights, and its column 0 in float64 for the monopole's weight sum_a w_a M_a0.
+struct PlateSample {
+  float m[16];
+  double col0[4];
+};
+
+PISCO_HD PlateSample plate_sample(const KernelDetector& det, double theta) {
+  double m[16];
+  plate_at(det.plate_mueller, cos(2.0 * theta), sin(2.0 * theta), m);
+  PlateSample p;
+  for (int i = 0; i < 16; ++i) p.m[i] = float(m[i]);
+  for (int a = 0; a < 4; ++a) p.col0[a] = m[4 * a];
+  return p;
+}
 
 // Per-lane partial sums.
 struct LaneSums {
@@ -90,10 +109,11 @@ PISCO_HD float lane_total(const LaneSums& s) { return s.sum - s.carry; }
 
 // The pixels of one batch that fall to `lane`: positions lane, lane + 32, ... of the concatenated
 // ranges [first[r], first[r] + offset[r+1] - offset[r]), r < count.
-template <bool Radial, bool Monopole, bool PerSample>
+template <bool Radial, bool Monopole, bool PerSample, bool Plate = false>
 PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
                             const SampleFrame<double>& fd, const std::uint32_t* first,
-                            const std::uint32_t* offset, int count, int lane, LaneSums& acc) {
+                            const std::uint32_t* offset, int count, int lane, LaneSums& acc,
+                            const PlateSample* plate = nullptr) {
   const std::uint32_t total = offset[count];
   int r = 0;
   for (std::uint32_t j = std::uint32_t(lane); j < total; j += warp_lanes) {
@@ -101,9 +121,19 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
     const std::uint32_t p = first[r] + (j - offset[r]);
     const PixelRecord px = sky.pixels[p];
     const Vec3<float> k{px.kx, px.ky, px.kz};
-    if constexpr (!Monopole && !PerSample) {
+    if constexpr (!Monopole && !PerSample && !Plate) {
       kahan_add(acc, pixel_contribution<Radial>(f, k, px.i, px.q, px.u, px.v, det.weights, det.grid_n, det.grid_a,
                                                 det.grid_inv_step));
+    } else if constexpr (!Monopole && !PerSample) {
+      // A plate at the aperture: the effective weights w M(theta) (core/plate.hpp).
+      const PixelGeometry<float> g = pixel_geometry(f, k);
+      float wf[4], v[4];
+      if constexpr (Radial)
+        interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.r2, wf);
+      else
+        interpolate_weights(det.weights, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wf);
+      effective_weights(wf, plate->m, v);
+      kahan_add(acc, stokes_response(v, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
     } else {
       // The beam coordinates in float64, from the reference's pixel vectors: they give the float64
       // sums their weights, and the float32 evaluation its (x, y), which float32 pixel vectors would
@@ -119,13 +149,30 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
         interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.r2, wf);
       else
         interpolate_weights(det.weights, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wf);
-      kahan_add(acc, stokes_response(wf, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
+      if constexpr (Plate) {
+        float v[4];
+        effective_weights(wf, plate->m, v);
+        kahan_add(acc, stokes_response(v, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
+      } else {
+        kahan_add(acc, stokes_response(wf, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
+      }
       double w[4];
       if constexpr (Radial)
         interpolate_radial(det.exact_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
       else
         interpolate_weights(det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
-      if constexpr (Monopole) acc.monopole += w[0];
+      if constexpr (Monopole) {
+        if constexpr (Plate) {
+          double wp[4];  // (w_Q, w_U, w_V, 0)
+          if constexpr (Radial)
+            interpolate_radial(det.plate_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wp);
+          else
+            interpolate_weights(det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wp);
+          acc.monopole += w[0] * plate->col0[0] + wp[0] * plate->col0[1] + wp[1] * plate->col0[2] + wp[2] * plate->col0[3];
+        } else {
+          acc.monopole += w[0];
+        }
+      }
       if constexpr (PerSample) acc.norm += w[1];
     }
   }

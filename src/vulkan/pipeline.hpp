@@ -27,7 +27,7 @@ class ComputePipeline {
   // A descriptor set with buffers[b] at binding b (its texel view for a texel binding).
   VkDescriptorSet make_set(const std::array<const Buffer*, PISCO_BINDINGS>& buffers);
   // Values of the kernel's specialization constants, by constant_id (booleans as 0 or 1).
-  using Specialization = std::array<std::uint32_t, 4>;
+  using Specialization = std::array<std::uint32_t, 5>;
   // Creates the pipeline specialized with `spec` now rather than at its first use.
   void prepare(const Specialization& spec) { pipeline(spec); }
   // Records: bind the pipeline specialized with `spec`, bind `set`, push `push`, dispatch (x, y)

@@ -79,7 +79,7 @@ class VulkanBackend final : public Backend {
 
  private:
   struct Slot {
-    Buffer pointing, tod, counts;
+    Buffer pointing, tod, counts, plate;
     VkCommandBuffer cmd = VK_NULL_HANDLE;
     VkFence fence = VK_NULL_HANDLE;
     VkDescriptorSet set = VK_NULL_HANDLE;
@@ -112,7 +112,8 @@ class VulkanBackend final : public Backend {
   VkCommandPool pool_ = VK_NULL_HANDLE;
   Buffer sky_, sky_lo_, rings_, weights_, weights64_;
   std::vector<std::uint32_t> grid_offset_;    // per detector, in texels of weights_
-  std::vector<std::uint32_t> grid_offset64_;  // per detector, in nodes of weights64_
+  std::vector<std::uint32_t> grid_offset64_;  // per detector, in nodes of weights64_ (plate detectors: 3 texels a node)
+  std::vector<std::uint32_t> plate_offset64_;  // per detector, the texel of its plate's M0 in weights64_
   std::vector<std::uint32_t> columns_;        // per detector: weight columns stored (2 or 4)
   double monopole_ = 0.0;
   bool float64_ = false;
@@ -221,7 +222,12 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
     // Each node with its neighbour along x (or r), (w[k], w[k + 1]) in 2 x columns floats, so that
     // the pair is one texel (2 columns) or two neighbouring ones (4 columns).
     grid_offset_.push_back(std::uint32_t(w32.size() / 4));
-    grid_offset64_.push_back(std::uint32_t(w64.size() / 2));
+    const bool plate = d.plate == PreparedDetector::Plate::aperture;
+    // A plate detector's float64 nodes are 3 texels each (shaders/contribution.glsl), from a texel
+    // index divisible by 3.
+    if (plate && float64_)
+      while ((w64.size() / 2) % 3 != 0) w64.insert(w64.end(), {0.0, 0.0});
+    grid_offset64_.push_back(std::uint32_t(w64.size() / 2 / (plate ? 3 : 1)));
     const std::size_t columns = weight_columns(d);
     columns_.push_back(std::uint32_t(columns));
     const std::vector<float> dw = float32_weights(d);
@@ -236,7 +242,13 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
       for (std::size_t k = 0; k < nodes; ++k) {
         w64.push_back(d.weights[4 * k]);
         w64.push_back(per_sample ? d.norm_weights[4 * k] : 0.0);
+        if (plate) w64.insert(w64.end(), {d.weights[4 * k + 1], d.weights[4 * k + 2], d.weights[4 * k + 3], 0.0});
       }
+    // The plate's M0, row by row: 8 texels.
+    plate_offset64_.push_back(std::uint32_t(w64.size() / 2));
+    if (plate)
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) w64.push_back(d.plate_mueller[i][j]);
   }
   if (w64.empty()) w64.assign(2, 0.0);
   // The float32 grids take at least one texel a node, the float64 ones exactly one.
@@ -330,6 +342,7 @@ void VulkanBackend::make_slots(std::size_t chunk) {
           s.pointing = Buffer(*device_, n * 4 * sizeof(double), storage, MemoryUse::upload);
           s.tod = Buffer(*device_, n * sizeof(double), storage, MemoryUse::readback);
           s.counts = Buffer(*device_, n * sizeof(std::uint32_t), storage, MemoryUse::readback);
+          s.plate = Buffer(*device_, n * sizeof(double), storage, MemoryUse::upload);
         }
       },
       [&] {
@@ -354,6 +367,7 @@ void VulkanBackend::make_slots(std::size_t chunk) {
     b[PISCO_BINDING_POINTING] = &s.pointing;
     b[PISCO_BINDING_TOD] = &s.tod;
     b[PISCO_BINDING_COUNT] = &s.counts;
+    b[PISCO_BINDING_PLATE] = &s.plate;
     s.set = pipeline_->make_set(b);
   }
 }
@@ -397,6 +411,7 @@ vk::ComputePipeline::Specialization VulkanBackend::specialization(std::size_t de
   spec[PISCO_SPEC_FLOAT64] = float64_ ? 1u : 0u;
   spec[PISCO_SPEC_PARTS] = parts;
   spec[PISCO_SPEC_COLUMNS] = columns_.at(detector);
+  spec[PISCO_SPEC_PLATE] = det.plate == PreparedDetector::Plate::aperture ? 1u : 0u;
   return spec;
 }
 
@@ -419,6 +434,7 @@ vk::PushConstants VulkanBackend::push_constants(std::size_t detector, bool quate
   push.grid_n = std::uint32_t(det.grid_n);
   push.grid_offset = grid_offset_.at(detector);
   push.grid_offset64 = grid_offset64_.at(detector);
+  push.plate_offset64 = plate_offset64_.at(detector);
   push.nside = std::uint32_t(in_->sky.nside);
   push.flags = (in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) |
                (quaternions ? PISCO_FLAG_QUATERNION : 0u) | (det.offset.active ? PISCO_FLAG_OFFSET : 0u);
@@ -444,6 +460,8 @@ void VulkanBackend::dispatch(Slot& slot, const vk::ComputePipeline::Specializati
       p[4 * i + 3] = 0.0;
     }
   }
+  if (!pointing.plate_angle.empty())
+    std::memcpy(slot.plate.mapped(), pointing.plate_angle.data(), n * sizeof(double));
   vk::PushConstants push = push_in;
   push.sample_count = std::uint32_t(n);
   const std::size_t per_group = PISCO_WG_SIZE / spec[PISCO_SPEC_PARTS];

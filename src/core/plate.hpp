@@ -1,0 +1,37 @@
+// A half-wave plate's Mueller matrix at an angle (docs/physics.md, "Half-wave plates"), written once
+// for the library (pisco::rotated_mueller), the float64 reference and the CUDA kernel;
+// shaders/contribution.glsl's plate_mueller computes the same product.
+#pragma once
+
+#include <cmath>
+
+#include "core/hd.hpp"
+
+namespace pisco::detail {
+
+// out = R(-theta) m0 R(theta), all row-major 4x4, with c = cos 2 theta, s = sin 2 theta and R(theta)
+// rows (1,0,0,0), (0,c,s,0), (0,-s,c,0), (0,0,0,1).
+PISCO_HD void plate_at(const double* m0, double c, double s, double* out) {
+  double mr[16];  // m0 R(theta): columns 1 and 2 mix
+  for (int i = 0; i < 4; ++i) {
+    const double* row = m0 + 4 * i;
+    mr[4 * i] = row[0];
+    mr[4 * i + 1] = c * row[1] - s * row[2];
+    mr[4 * i + 2] = s * row[1] + c * row[2];
+    mr[4 * i + 3] = row[3];
+  }
+  for (int j = 0; j < 4; ++j) {  // R(-theta) (m0 R): rows 1 and 2 mix
+    out[j] = mr[j];
+    out[4 + j] = c * mr[4 + j] - s * mr[8 + j];
+    out[8 + j] = s * mr[4 + j] + c * mr[8 + j];
+    out[12 + j] = mr[12 + j];
+  }
+}
+
+// v = w M (a row vector times M, row-major): the effective weights of a pixel behind the plate.
+template <class T>
+PISCO_HD void effective_weights(const T w[4], const T* m, T v[4]) {
+  for (int b = 0; b < 4; ++b) v[b] = w[0] * m[b] + w[1] * m[4 + b] + w[2] * m[8 + b] + w[3] * m[12 + b];
+}
+
+}  // namespace pisco::detail
