@@ -40,7 +40,8 @@ void quat_to_pointing(const Quat& q, double& theta, double& phi, double& psi) no
 // sqrt(xi^2 + eta^2) from the boresight towards atan2(eta, xi), measured from the boresight's theta'
 // towards phi'; its theta' is the boresight's carried along that great circle, then turned by gamma.
 // The quaternion is the rotation R(n, r) R_z(gamma), n = (-sin a, cos a, 0), r = hypot(xi, eta),
-// a = atan2(eta, xi): the quaternion a TOAST focal plane carries in its `quat` column.
+// a = atan2(eta, xi). (TOAST's own xi, eta, gamma columns parameterize the offset differently; its
+// `quat` column is the offset itself: read_toast_focal_plane.)
 Quat offset_quat(double xi, double eta, double gamma) noexcept;
 // The inverse of offset_quat, for offsets r < pi.
 void offset_from_quat(const Quat& q, double& xi, double& eta, double& gamma) noexcept;
