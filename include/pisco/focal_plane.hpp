@@ -64,6 +64,9 @@ class FocalPlane {
 struct ToastFocalPlane {
   std::vector<Detector> detectors;  // in the table's row order
   std::vector<double> fwhm;         // per detector, radians (column fwhm); empty without the column
+  // Per detector, radians (column gamma): the polarization angle in the focal-plane frame, the
+  // HalfWavePlate::gamma of TOAST's plate model; empty without the column.
+  std::vector<double> gamma;
   double sample_rate = 0.0;         // Hz, the table's meta sample_rate; 0 when absent
 };
 // Throws pisco::Error naming the file, the row (from 0) and detector, and the column: for a file that

@@ -31,10 +31,15 @@ class BoresightFile {
   // sample for a non-finite quaternion or one whose norm is further than 1e-6 from 1.
   void read(std::size_t first, std::size_t count, std::vector<Quat>& out) const;
 
-  // Writes `quats` as a pointing file (under a temporary name, then renamed), with an optional
-  // `times` dataset (seconds) of the same length.
+  // Whether the file has a dataset `hwp_angle` (one half-wave plate angle per sample, radians, in the
+  // focal-plane frame, as TOAST's observations keep it), and samples [first, first + count) of it.
+  bool has_hwp_angle() const noexcept;
+  void read_hwp_angle(std::size_t first, std::size_t count, std::vector<double>& out) const;
+
+  // Writes `quats` as a pointing file (under a temporary name, then renamed), with optional `times`
+  // (seconds) and `hwp_angle` (radians) datasets of the same length.
   static void write(const std::filesystem::path& file, const std::vector<Quat>& quats,
-                    const std::vector<double>& times = {});
+                    const std::vector<double>& times = {}, const std::vector<double>& hwp_angle = {});
 
  private:
   struct Impl;

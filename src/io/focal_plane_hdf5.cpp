@@ -349,6 +349,15 @@ ToastFocalPlane read_toast_focal_plane(const fs::path& file, std::size_t beam) {
     out.fwhm = table.numbers("fwhm");
     for (double& v : out.fwhm) v *= scale;
   }
+  if (table.has("gamma")) {
+    const double scale = angle_unit(meta, "gamma", where);
+    out.gamma = table.numbers("gamma");
+    for (std::size_t i = 0; i < out.gamma.size(); ++i) {
+      if (!std::isfinite(out.gamma[i]))
+        throw Error(row_text(i) + ", column 'gamma': " + format_double(out.gamma[i]) + " (expected a finite angle)");
+      out.gamma[i] *= scale;
+    }
+  }
 
   std::map<std::string, std::size_t> seen;
   out.detectors.reserve(n);

@@ -10,6 +10,10 @@ struct BenchOptions {
   std::string backend = "auto";
   std::string device = "auto";
   unsigned threads = 0;
+  // A half-wave plate in front of both detectors: "none", "ideal" or "generic" (all 16 Mueller
+  // entries non-zero), at the aperture or, with hwp_placement = "detector", behind the optics.
+  std::string hwp = "none";
+  std::string hwp_placement = "aperture";
 };
 
 // The paper's Table 1 workload: a table of evaluations/s and the ratio to the paper's GTX 1080.
