@@ -66,6 +66,15 @@ void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, 
     vec3 xyz;
     float r2, cos2chi, sin2chi;
     pixel_geometry(f, a.xyz, xyz, r2, cos2chi, sin2chi);
+    // On the float64 path the beam coordinates come from the float64 pixel vectors, as the cuda
+    // kernel takes them (docs/vulkan.md, "Precision"): the float32 weights are interpolated there too.
+    double x64 = 0.0lf, y64 = 0.0lf;
+    if (FLOAT64) {
+      const dvec3 k = dvec3(a.xyz) + dvec3(uintBitsToFloat(texelFetch(sky_lo, int(p)).xyz));
+      x64 = dot(k, theta_p64);
+      y64 = dot(k, phi_p64);
+      xyz.xy = vec2(float(x64), float(y64));
+    }
     vec4 w = RADIAL ? interpolate_radial(g, r2) : interpolate_weights(g, xyz.x, xyz.y);
     if (PLATE) w = w * m;  // the effective weights w M(theta)
     precise const float y = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.xyz)) - acc.comp;
@@ -73,8 +82,6 @@ void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, 
     acc.comp = (t - acc.sum) - y;
     acc.sum = t;
     if (FLOAT64) {
-      const dvec3 k = dvec3(a.xyz) + dvec3(uintBitsToFloat(texelFetch(sky_lo, int(p)).xyz));
-      const double x64 = dot(k, theta_p64), y64 = dot(k, phi_p64);
       if (PLATE) {
         const dvec4 w64 = RADIAL ? plate_radial64(g, x64 * x64 + y64 * y64) : plate_weights64(g, x64, y64);
         acc.s0 += dot(w64, m0);

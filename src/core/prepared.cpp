@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <algorithm>
+#include <limits>
 #include <numbers>
 #include <thread>
 #include <string>
@@ -40,6 +41,15 @@ double float32_monopole(const Sky& sky) {
   }
   const double rms = std::sqrt(var / double(npix));
   return std::abs(mean) > 0.1 * rms ? mean : 0.0;
+}
+
+std::vector<float> float32_weights(const PreparedDetector& d) {
+  double largest = 0.0;
+  for (const double w : d.weights) largest = std::max(largest, std::abs(w));
+  const double cutoff = std::max(std::ldexp(largest, -64), double(std::numeric_limits<float>::min()));
+  std::vector<float> w32(d.weights.size());
+  for (std::size_t k = 0; k < w32.size(); ++k) w32[k] = std::abs(d.weights[k]) < cutoff ? 0.0f : float(d.weights[k]);
+  return w32;
 }
 
 struct PixelVectors::Impl {

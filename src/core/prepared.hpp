@@ -76,6 +76,14 @@ PreparedSky prepare_sky(const Sky& sky);
 // The float64 reference's pixel table: 8 doubles per pixel, the unit vector kx, ky, kz, 0, then
 // I, Q, U, V (one cache line per pixel).
 std::vector<double> reference_pixels(const Sky& sky, unsigned threads);
+// The detector's weights in float32 for the float32 backends (vulkan, cuda), 4 per node, with those
+// below 2^-64 of the largest (and any below float32's smallest normal number) set to zero.
+// A Gaussian's tail reaches float32's subnormal range within a Table 1 disc (below 1.2e-38 from
+// about 13 sigma), and CPUs take a slow microcode path for every operation on a subnormal number:
+// on lavapipe, the third of a 10 deg disc's pixels beyond 13 sigma made the whole disc take about
+// twice as long. What is dropped adds up to less than 1e-12 of the response. One rule for both
+// float32 backends (docs/vulkan.md, "Precision").
+std::vector<float> float32_weights(const PreparedDetector& detector);
 // The monopole the float32 backends take out of the sky (docs/vulkan.md, "Precision"): the mean I0 of
 // I when it matters for float32, that is when |I0| > 0.1 x the RMS of I - I0; 0 otherwise. They add
 // I0 sum_k w_I(k) back in float64.

@@ -39,9 +39,7 @@ std::vector<double> pixel_vectors(const Sky& sky) {
   return out;
 }
 
-std::vector<float> float_weights(const PreparedDetector& det) {
-  return std::vector<float>(det.weights.begin(), det.weights.end());
-}
+std::vector<float> float_weights(const PreparedDetector& det) { return float32_weights(det); }
 
 std::vector<double> exact_weights(const PreparedDetector& det) {
   const std::size_t nodes = det.weights.size() / 4;

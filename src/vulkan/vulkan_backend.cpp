@@ -32,21 +32,6 @@ constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 
 double mib(double bytes) { return bytes / double(1 << 20); }
 
-// The detector's weights in float32, 4 per node, with those below 2^-64 of the largest (and any below
-// float32's smallest normal number) set to zero.
-// A Gaussian's tail reaches float32's subnormal range within a Table 1 disc (below 1.2e-38 from
-// about 13 sigma), and CPUs take a slow microcode path for every operation on a subnormal number:
-// on lavapipe, the third of a 10 deg disc's pixels beyond 13 sigma made the whole disc take about
-// twice as long. What is dropped adds up to less than 1e-12 of the response.
-std::vector<float> float32_weights(const PreparedDetector& d) {
-  double largest = 0.0;
-  for (const double w : d.weights) largest = std::max(largest, std::abs(w));
-  const double cutoff = std::max(std::ldexp(largest, -64), double(std::numeric_limits<float>::min()));
-  std::vector<float> w32(d.weights.size());
-  for (std::size_t k = 0; k < w32.size(); ++k) w32[k] = std::abs(d.weights[k]) < cutoff ? 0.0f : float(d.weights[k]);
-  return w32;
-}
-
 // Weights stored per beam node: 2 when the detector's w_U and w_V vanish everywhere (any beam
 // without cross-polar response or Mueller leakage into U and V), so that a node and its neighbour fit
 // one 16-byte texel; 4 otherwise.
