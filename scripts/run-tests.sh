@@ -4,6 +4,26 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/setup.sh"
+
+# The Python package (docs/python.md): the python tests' virtual environment build/python-venv (TOAST,
+# litebird_sim, nanobind, pytest, ... from PyPI: created once, then reused without the network) and
+# the module pisco._pisco built in build/ for its Python. Where PyPI cannot be reached the package is
+# not built, and its tests (label python) skip, saying why.
+venv="$root/build/python-venv"
+venv_status=0
+/usr/bin/python3 "$root/tests/python/python_env.py" "$venv" || venv_status=$?
+if ((venv_status == 0)); then
+  python_flags=(-DPISCO_BUILD_PYTHON=ON "-DPython_EXECUTABLE=$venv/bin/python")
+else
+  python_flags=(-DPISCO_BUILD_PYTHON=OFF)
+fi
+if ! log="$(cmake -S "$root" -B "$root/build" "${python_flags[@]}" 2>&1)"; then
+  printf '%s\n' "$log" >&2
+  echo "run-tests: configuring $root/build with ${python_flags[*]} failed" >&2
+  exit 1
+fi
+cmake --build "$root/build" -j"$(nproc)"
+
 # libhealpix_cxx runs OpenMP threads (map2alm, alm2map); passive waiting keeps idle ones from spinning.
 export OMP_WAIT_POLICY=passive
 exec ctest --test-dir "$root/build" --output-on-failure -j2 "$@"

@@ -254,11 +254,26 @@ TEST_F(SkyFits, OneAndThreeColumnFilesLeaveMissingMapsZero) {
   EXPECT_EQ(b.units(), "uK");
 }
 
-TEST_F(SkyFits, UnseenPixelsAreKept) {
+// UNSEEN pixels: an error naming the column by default; kept with UnseenPolicy::flag, 0 with zero
+// (tests/test_unseen.cpp has the rest).
+TEST_F(SkyFits, UnseenPixelsAreAnErrorUnlessAPolicySaysOtherwise) {
   Sky sky(4);
   sky.I()[5] = -1.6375e30;
   sky.write_fits(dir_ / "unseen.fits");
-  EXPECT_EQ(Sky::read_fits(dir_ / "unseen.fits").I()[5], -1.6375e30);
+  const std::string msg = error_of([&] { Sky::read_fits(dir_ / "unseen.fits"); });
+  EXPECT_TRUE(contains(msg, "column 1 (I_STOKES) has 1 UNSEEN pixel") && contains(msg, "at pixel 5")) << msg;
+  EXPECT_EQ(Sky::read_fits(dir_ / "unseen.fits", pisco::UnseenPolicy::flag).I()[5], -1.6375e30);
+  EXPECT_EQ(Sky::read_fits(dir_ / "unseen.fits", pisco::UnseenPolicy::zero).I()[5], 0.0);
+}
+
+// A file cut short within its table is an error, even for readers that need only part of it.
+TEST_F(SkyFits, TruncatedFile) {
+  Sky(4).write_fits(dir_ / "whole.fits");
+  const auto size = fs::file_size(dir_ / "whole.fits");
+  fs::copy_file(dir_ / "whole.fits", dir_ / "cut.fits");
+  fs::resize_file(dir_ / "cut.fits", size - 2880);
+  const std::string msg = error_of([&] { Sky::read_fits(dir_ / "cut.fits"); });
+  EXPECT_TRUE(contains(msg, "cut.fits: is truncated")) << msg;
 }
 
 TEST_F(SkyFits, MissingFile) {

@@ -4,10 +4,15 @@ spectra with the input's and the r = 0.1 tensor BB reference curve.
 
     /usr/bin/python3 tools/pisco_plot.py OUTPUT_DIR [--dpi N] [--no-gnomview]
 
-Needs Debian's python3-healpy and python3-matplotlib (they live under /usr/bin/python3).
+Needs Debian's python3-healpy and python3-matplotlib (they live under /usr/bin/python3); exits with
+status 3 without them, 4 when a file cannot be written (a full disk), 128 + N when stopped by signal N.
+Each PNG is written under a temporary name and renamed when complete, so that no half-written plot is
+ever left (the temporary is removed on any failure or signal).
 """
 import argparse
+import errno
 import os
+import signal
 import sys
 
 UNSEEN = -1.6375e30
@@ -16,6 +21,34 @@ UNSEEN = -1.6375e30
 def fail(message, status):
     print(f"pisco_plot: {message}", file=sys.stderr)
     sys.exit(status)
+
+
+class Stopped(Exception):
+    """A SIGINT, SIGTERM or SIGHUP: unwind, removing the temporary file being written."""
+
+    def __init__(self, signum):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def on_signal(signum, _frame):
+    raise Stopped(signum)
+
+
+def save(fig, path, dpi):
+    """fig as the PNG `path`, whole or not at all (PISCO_TEST_FAULT=write-fail:NAME: a full disk)."""
+    temporary = f"{path}.tmp-{os.getpid()}"
+    try:
+        fig.savefig(temporary, dpi=dpi, bbox_inches="tight", format="png")
+        if os.environ.get("PISCO_TEST_FAULT") == "write-fail:" + os.path.basename(path):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), path)
+        os.replace(temporary, path)
+    except BaseException:
+        try:
+            os.remove(temporary)
+        except OSError:
+            pass
+        raise
 
 
 def load_spectra(path):
@@ -49,7 +82,7 @@ def plot_maps(out, dpi, gnomview):
     for i, (m, name) in enumerate(zip(maps, "IQU")):
         hp.mollview(m, fig=fig.number, sub=(1, 3, i + 1), title=f"{name}", unit=unit, badcolor="lightgray")
     written = [os.path.join(out, "maps_mollview.png")]
-    fig.savefig(written[-1], dpi=dpi, bbox_inches="tight")
+    save(fig, written[-1], dpi)
     plt.close(fig)
 
     hits_path = os.path.join(out, "hits.fits")
@@ -58,7 +91,7 @@ def plot_maps(out, dpi, gnomview):
         fig = plt.figure(figsize=(8, 5))
         hp.mollview(hits, fig=fig.number, title="hits", unit="samples", badcolor="lightgray")
         written.append(os.path.join(out, "hits_mollview.png"))
-        fig.savefig(written[-1], dpi=dpi, bbox_inches="tight")
+        save(fig, written[-1], dpi)
         plt.close(fig)
         if gnomview and hits.sum() > 0:
             # Centre the zoom on the hits-weighted mean direction of the observed region.
@@ -70,7 +103,7 @@ def plot_maps(out, dpi, gnomview):
                 hp.gnomview(m, fig=fig.number, sub=(1, 3, i + 1), rot=(lon[0], lat[0]), reso=2.0, xsize=600,
                             title=f"{name} (20 deg across)", badcolor="lightgray")
             written.append(os.path.join(out, "maps_gnomview.png"))
-            fig.savefig(written[-1], dpi=dpi, bbox_inches="tight")
+            save(fig, written[-1], dpi)
             plt.close(fig)
     return written
 
@@ -104,7 +137,7 @@ def plot_spectra(out, dpi, script_dir):
     axes[0, 0].set_ylabel(r"$D_\ell$")
     axes[1, 0].set_ylabel("out - in")
     written = os.path.join(out, "spectra.png")
-    fig.savefig(written, dpi=dpi, bbox_inches="tight")
+    save(fig, written, dpi)
     plt.close(fig)
     return [written]
 
@@ -115,6 +148,8 @@ def main():
     parser.add_argument("--dpi", type=int, default=100)
     parser.add_argument("--no-gnomview", action="store_true")
     args = parser.parse_args()
+    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(s, on_signal)
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -126,9 +161,15 @@ def main():
     script_dir = os.path.dirname(os.path.abspath(__file__))
     import warnings
     warnings.filterwarnings("ignore")
-    for f in plot_maps(args.output_dir, args.dpi, not args.no_gnomview) + plot_spectra(args.output_dir, args.dpi, script_dir):
-        print(f"plots: wrote {f}")
+    try:
+        for f in plot_maps(args.output_dir, args.dpi, not args.no_gnomview) + plot_spectra(args.output_dir, args.dpi, script_dir):
+            print(f"plots: wrote {f}")
+    except OSError as e:
+        fail(f"{e.filename or args.output_dir}: {e.strerror or e}", 4)
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except Stopped as stopped:
+        sys.exit(128 + stopped.signum)

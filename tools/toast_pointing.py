@@ -4,9 +4,10 @@
 This script builds a small TOAST focal plane, simulates one ground observation
 and one satellite observation with TOAST's own simulation operators, expands
 the detector pointing with ``toast.ops.PointingDetectorSimple`` and computes
-the polarization weights with ``toast.ops.StokesWeights`` (mode ``IQU``, no
-half-wave plate).  Everything is written to HDF5 so that another pointing code
-can be compared against TOAST sample by sample.
+the polarization weights with ``toast.ops.StokesWeights`` (mode ``IQU``; with
+``--hwp-rpm``, through TOAST's ideal rotating half-wave plate).  Everything is
+written to HDF5 so that another pointing code can be compared against TOAST
+sample by sample.
 
 It needs TOAST 3 (PyPI package ``toast``), ``h5py``, ``numpy`` and ``astropy``;
 no MPI is required (``toast.mpi.Comm()`` works without ``mpi4py``) and nothing
@@ -21,6 +22,11 @@ Outputs in ``OUTDIR``:
     per detector, ``quat`` is a ``float64[4]`` sub-array field in TOAST layout
     (x, y, z, w); dataset ``focalplane.__table_column_meta__`` holds astropy's
     YAML header with units and the ``sample_rate`` / ``field_of_view`` meta).
+    TOAST's hexagon puts every detector's ``gamma`` at a multiple of 45 deg;
+    ``--gamma-step S`` turns the detectors of pixel k (both of a pair) by k S
+    about their lines of sight (``gamma`` + k S, ``quat`` rebuilt from xi, eta
+    and the new gamma with TOAST's ``xieta_to_quat``), so that the plate's
+    4 gamma term is not a multiple of 180 deg.
 
 ``toast_ground.h5`` and ``toast_satellite.h5``
     ``times`` (N,) float64, UNIX seconds.
@@ -29,11 +35,16 @@ Outputs in ``OUTDIR``:
     by the file attribute ``boresight_key`` (``boresight_radec``: ICRS/equatorial).
     For the ground file also ``boresight_azel`` (N, 4), ``azimuth`` and
     ``elevation`` (N,) in radians.
+    ``hwp_angle`` (N,) float64 (with ``--hwp-rpm``): TOAST's per-sample
+    half-wave plate angle (``ob.shared["hwp_angle"]``, radians, focal-plane
+    frame), as SimGround / SimSatellite make it from ``hwp_rpm``; file
+    attribute ``hwp_rpm``.
     ``detectors/<name>/quats`` (N, 4): TOAST's detector quaternions,
     ``boresight (x) fp_quat`` as produced by PointingDetectorSimple.
     ``detectors/<name>/dir`` (N, 3): line of sight, ``qarray.rotate(quats, z)``.
     ``detectors/<name>/weights`` (N, 3): I, Q, U weights from StokesWeights
-    (COSMO convention, TOAST default).
+    (COSMO convention, TOAST default; with ``--hwp-rpm`` given ``hwp_angle``,
+    i.e. through an ideal half-wave plate).
     ``detectors/<name>/fp_quat`` (4,): the detector's focal-plane quaternion
     (also stored as an attribute of the group, together with ``gamma`` and
     ``pol_leakage``).
@@ -47,6 +58,16 @@ With ``q`` a detector quaternion, ``d = rotate(q, z)`` is the line of sight and
 right-handed about the outward line of sight) and StokesWeights (compiled
 kernel, no HWP, COSMO) returns ``(1, eta cos 2 alpha, eta sin 2 alpha)`` with
 ``eta = (1-eps)/(1+eps)``, ``eps`` = focal-plane column ``pol_leakage``.
+
+With an ideal half-wave plate at angle ``h`` (TOAST's ``hwp_angle``) and the
+detector's focal-plane column ``gamma``, TOAST's compiled kernel computes
+``ang = 2 (2 (gamma - h) - alpha)`` and the weights
+``(1, eta cos(ang), -eta sin(ang))`` (COSMO), which is
+``(1, eta cos 2(alpha + 2 theta), eta sin 2(alpha + 2 theta))`` with
+``theta = h - gamma``: PISCO-VK's ideal plate, ``M(theta) = R(-theta)
+diag(1, 1, -1, -1) R(theta)`` seen by a detector at ``chi = alpha``
+(docs/physics.md, "Half-wave plates").  The self-check evaluates this last
+form.
 
 Unless ``--no-check`` is given, the script verifies the exported arrays against
 an independent evaluation of these formulas and exits non-zero on mismatch.
@@ -145,6 +166,20 @@ def parse_args(argv=None):
         help="Satellite spin-axis opening angle from the precession axis [deg]",
     )
     p.add_argument(
+        "--hwp-rpm",
+        type=float,
+        default=None,
+        help="Simulate an ideal half-wave plate turning at this rate (rev/min) in both "
+        "observations, export TOAST's hwp_angle and weight through it",
+    )
+    p.add_argument(
+        "--gamma-step",
+        type=float,
+        default=0.0,
+        help="Turn the detectors of hexagon pixel k by k times this angle [deg] about "
+        "their lines of sight (gamma and quat)",
+    )
+    p.add_argument(
         "--no-check",
         action="store_true",
         help="Skip the consistency check of the exported arrays",
@@ -162,7 +197,8 @@ from astropy import units as u  # noqa: E402
 import toast  # noqa: E402
 import toast.ops  # noqa: E402
 from toast import qarray as qa  # noqa: E402
-from toast.instrument import GroundSite, SpaceSite, Telescope  # noqa: E402
+from toast.instrument import Focalplane, GroundSite, SpaceSite, Telescope  # noqa: E402
+from toast.instrument_coords import quat_to_xieta, xieta_to_quat  # noqa: E402
 from toast.instrument_sim import fake_hexagon_focalplane  # noqa: E402
 from toast.schedule import GroundScan, GroundSchedule  # noqa: E402
 from toast.schedule_sim_satellite import create_satellite_schedule  # noqa: E402
@@ -172,15 +208,42 @@ from datetime import datetime, timedelta, timezone  # noqa: E402
 BORESIGHT_KEY = "boresight_radec"
 QUATS_KEY = "quats"
 WEIGHTS_KEY = "weights"
+HWP_KEY = "hwp_angle"
 
 
 def make_focalplane(args):
-    return fake_hexagon_focalplane(
+    fp = fake_hexagon_focalplane(
         n_pix=args.n_pix,
         width=args.fp_width * u.degree,
         sample_rate=args.sample_rate * u.Hz,
         epsilon=args.pol_leakage,
     )
+    if args.gamma_step == 0.0:
+        return fp
+    # Turn pixel k's detectors by k * gamma_step about their lines of sight: gamma and the
+    # quaternion move together (TOAST's own xi, eta, gamma parameterization); TOAST derives
+    # pol_angle and pol_efficiency again from the new table.
+    table = fp.detector_data.copy()
+    for col in ("pol_angle", "pol_efficiency"):
+        if col in table.colnames:
+            table.remove_column(col)
+    pixels = list(dict.fromkeys(str(x) for x in table["pixel"]))
+    step = np.radians(args.gamma_step)
+    for row in table:
+        turn = pixels.index(str(row["pixel"])) * step
+        xi, eta, gamma = quat_to_xieta(np.array(row["quat"], dtype=np.float64))
+        row["quat"] = xieta_to_quat(xi, eta, gamma + turn)
+        row["gamma"] = (u.Quantity(row["gamma"]).to_value(u.rad) + turn) * u.rad
+    return Focalplane(
+        detector_data=table, sample_rate=fp.sample_rate, field_of_view=fp.field_of_view
+    )
+
+
+def hwp_options(args):
+    """SimGround / SimSatellite keywords for the plate (none without --hwp-rpm)."""
+    if args.hwp_rpm is None:
+        return {"hwp_angle": None}
+    return {"hwp_angle": HWP_KEY, "hwp_rpm": args.hwp_rpm}
 
 
 def simulate_ground(args, focalplane):
@@ -212,8 +275,8 @@ def simulate_ground(args, focalplane):
         schedule=schedule,
         boresight_radec=BORESIGHT_KEY,
         detset_key="pixel",
-        hwp_angle=None,
         use_ephem=True,
+        **hwp_options(args),
     )
     sim.apply(data)
     return data
@@ -236,17 +299,17 @@ def simulate_satellite(args, focalplane):
         telescope=tele,
         schedule=schedule,
         boresight=BORESIGHT_KEY,
-        hwp_angle=None,
         spin_angle=args.spin_angle * u.degree,
         prec_angle=args.prec_angle * u.degree,
         detset_key="pixel",
+        **hwp_options(args),
     )
     sim.apply(data)
     return data
 
 
-def expand_pointing(data):
-    """Run TOAST's detector pointing expansion and IQU Stokes weights."""
+def expand_pointing(data, hwp):
+    """Run TOAST's detector pointing expansion and IQU Stokes weights (through the plate if hwp)."""
     det_pointing = toast.ops.PointingDetectorSimple(
         name="det_pointing",
         boresight=BORESIGHT_KEY,
@@ -260,13 +323,17 @@ def expand_pointing(data):
         detector_pointing=det_pointing,
         mode="IQU",
         weights=WEIGHTS_KEY,
-        hwp_angle=None,
+        hwp_angle=HWP_KEY if hwp else None,
     )
     weights.apply(data)
 
 
-def reference_weights(quats, eps):
-    """Independent evaluation of the IQU weights for detector quaternions."""
+def reference_weights(quats, eps, hwp_angle=None, gamma=0.0):
+    """Independent evaluation of the IQU weights for detector quaternions.
+
+    With a plate: PISCO-VK's form, an ideal plate at theta = hwp_angle - gamma before a detector
+    at alpha measures Q cos 2(alpha + 2 theta) + U sin 2(alpha + 2 theta).
+    """
     x, y, z, w = quats.T
     # R e_x and R e_z for a unit quaternion (x, y, z, w).
     ox = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)], axis=1)
@@ -277,13 +344,15 @@ def reference_weights(quats, eps):
     ph_hat = np.stack([-np.sin(phi), np.cos(phi), np.zeros_like(phi)], axis=1)
     alpha = np.arctan2(np.sum(ox * ph_hat, axis=1), np.sum(ox * th_hat, axis=1))
     eta = (1.0 - eps) / (1.0 + eps)
+    if hwp_angle is not None:
+        alpha = alpha + 2.0 * (hwp_angle - gamma)
     wts = np.stack(
         [np.ones_like(alpha), eta * np.cos(2 * alpha), eta * np.sin(2 * alpha)], axis=1
     )
     return dz, wts
 
 
-def export(data, path, kind, check):
+def export(data, path, kind, check, hwp_rpm=None):
     """Write one observation's boresight and expanded pointing to HDF5."""
     if len(data.obs) != 1:
         raise RuntimeError(f"expected exactly one {kind} observation, got {len(data.obs)}")
@@ -295,6 +364,11 @@ def export(data, path, kind, check):
     n_samp = len(times)
     if bore.shape != (n_samp, 4):
         raise RuntimeError(f"unexpected boresight shape {bore.shape}")
+    hwp = None
+    if hwp_rpm is not None:
+        hwp = np.array(ob.shared[HWP_KEY].data, dtype=np.float64)
+        if hwp.shape != (n_samp,):
+            raise RuntimeError(f"unexpected hwp_angle shape {hwp.shape}")
     worst = 0.0
     with h5py.File(path, "w") as f:
         f.attrs["toast_version"] = toast.__version__
@@ -309,6 +383,9 @@ def export(data, path, kind, check):
         f.attrs["site"] = ob.telescope.site.name
         f.create_dataset("times", data=times)
         f.create_dataset("boresight", data=bore)
+        if hwp is not None:
+            f.attrs["hwp_rpm"] = float(hwp_rpm)
+            f.create_dataset("hwp_angle", data=hwp)
         if kind == "ground":
             f.create_dataset(
                 "boresight_azel", data=np.array(ob.shared["boresight_azel"].data)
@@ -325,9 +402,10 @@ def export(data, path, kind, check):
             wts = np.array(ob.detdata[WEIGHTS_KEY][det], dtype=np.float64)
             vdir = qa.rotate(quats, zaxis).reshape((-1, 3))
             eps = float(row["pol_leakage"]) if "pol_leakage" in row.colnames else 0.0
+            gamma = float(u.Quantity(row["gamma"]).to_value(u.rad))
             g = grp.create_group(det)
             g.attrs["fp_quat"] = fp_quat
-            g.attrs["gamma_rad"] = float(u.Quantity(row["gamma"]).to_value(u.rad))
+            g.attrs["gamma_rad"] = gamma
             g.attrs["pol_leakage"] = eps
             g.create_dataset("fp_quat", data=fp_quat)
             g.create_dataset("quats", data=quats)
@@ -338,7 +416,7 @@ def export(data, path, kind, check):
                 ref_q = qa.mult(bore, fp_quat).reshape((-1, 4))
                 worst = max(worst, float(np.max(np.abs(ref_q - quats))))
                 qn = quats / np.linalg.norm(quats, axis=1)[:, None]
-                ref_dir, ref_w = reference_weights(qn, eps)
+                ref_dir, ref_w = reference_weights(qn, eps, hwp, gamma)
                 worst = max(worst, float(np.max(np.abs(ref_dir - vdir))))
                 worst = max(worst, float(np.max(np.abs(ref_w - wts))))
     if check and not worst < 1e-9:
@@ -359,6 +437,7 @@ def main(argv=None):
 
     kinds = {"both": ["ground", "satellite"], "focalplane": []}.get(args.which, [args.which])
     summary = []
+    worst_all = 0.0
     for kind in kinds:
         # Each simulation gets its own (identical, deterministic) focal plane.
         # It is not read back from focalplane.h5: TOAST 3.0.x's
@@ -369,14 +448,17 @@ def main(argv=None):
             data = simulate_ground(args, fp)
         else:
             data = simulate_satellite(args, fp)
-        expand_pointing(data)
+        expand_pointing(data, args.hwp_rpm is not None)
         path = os.path.join(args.outdir, f"toast_{kind}.h5")
-        n_samp, n_det, worst = export(data, path, kind, not args.no_check)
+        n_samp, n_det, worst = export(data, path, kind, not args.no_check, args.hwp_rpm)
+        worst_all = max(worst_all, worst)
         summary.append(f"{kind}: {n_det} dets x {n_samp} samples")
         data.clear()
 
     dt = time.perf_counter() - t0
-    check = "" if args.no_check else " (self-check ok)"
+    check = "" if args.no_check else f" (self-check ok, {worst_all:.1e})"
+    if args.hwp_rpm is not None:
+        check += f", ideal half-wave plate at {args.hwp_rpm:g} rpm"
     if summary:
         print(
             f"toast {toast.__version__}: wrote {fp_path} and "

@@ -12,6 +12,14 @@ namespace pisco {
 
 enum class StokesIndex : int { I = 0, Q = 1, U = 2, V = 3 };
 
+// What the library does with the UNSEEN pixels (pisco::unseen, healpix_map.hpp: HEALPix's marker of a
+// pixel without data, as every masked map has them) of a sky it is given.
+enum class UnseenPolicy {
+  error,  // an error naming the map, the number of UNSEEN pixels and the first one (the default)
+  zero,   // taken as 0
+  flag,   // taken as 0, and the samples whose disc holds one are flagged (Engine::flag_samples)
+};
+
 class Sky {
  public:
   // A sky of zeros. Throws pisco::Error unless nside is a power of two in [1, 8192].
@@ -38,10 +46,21 @@ class Sky {
   // Throws pisco::Error naming `origin`, the Stokes map and the first pixel that is NaN or infinite.
   void check_finite(const std::string& origin) const;
 
+  // UNSEEN pixels (pisco::is_unseen): the RING indices of the pixels UNSEEN in any Stokes map,
+  // ascending; zero_unseen() sets those values to 0 and returns how many pixels it changed;
+  // check_unseen() throws pisco::Error "<origin>: the Stokes Q map has 12 UNSEEN pixels (...), the
+  // first at pixel 345 (RING); expected ..." for the first map that has any.
+  std::vector<std::size_t> unseen_pixels() const;
+  std::size_t zero_unseen();
+  void check_unseen(const std::string& origin) const;
+
   // Reads a HEALPix FITS map (1, 3 or 4 columns: I, or I Q U, or I Q U V; the first binary table).
   // NESTED maps are converted to RING; POLCCONV = 'IAU' maps have U negated (to COSMO).
-  // Throws pisco::Error naming the file on any problem (missing, not HEALPix, bad NSIDE, NaN).
-  static Sky read_fits(const std::filesystem::path& file);
+  // Throws pisco::Error naming the file on any problem (missing, not HEALPix, bad NSIDE, NaN). UNSEEN
+  // pixels (a masked map): with UnseenPolicy::error an error naming the file, the column, their
+  // number and the first; with zero they are set to 0; with flag they are kept as UNSEEN, for an
+  // Engine made with EngineOptions::unseen = UnseenPolicy::flag.
+  static Sky read_fits(const std::filesystem::path& file, UnseenPolicy unseen = UnseenPolicy::error);
 
   // Writes I, Q, U, V (TTYPE I_STOKES ... V_STOKES), RING, POLCCONV = 'COSMO', TUNIT = units.
   // The file is written to a temporary name and renamed, so it is never left half-written.

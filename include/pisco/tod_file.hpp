@@ -9,6 +9,8 @@
 //   /<detector>/theta,phi,psi   float64 pointing [rad], only when written with_pointing
 //   /<detector>/quat       float64 (samples, 4): the same pointing as the rotation of the detector's
 //                          antenna basis, x, y, z, w (quaternion.hpp), only when written with_pointing
+//   /<detector>/flags      uint8, one per sample, only when written with_flags: 1 where the sample's
+//                          disc holds an UNSEEN pixel of a masked sky (Engine::flag_samples), else 0
 //
 // A pointing input file (per-detector form) has the same layout without `signal`: groups named
 // after detectors, each holding float64 (or float32) 1-D datasets theta, phi, psi of equal length.
@@ -19,6 +21,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -41,10 +44,11 @@ enum class TodPrecision { float64, float32 };
 class TodWriter {
  public:
   // Creates the temporary file with one group per detector of `focal_plane` and its datasets of
-  // `samples_per_detector` samples. Detector names must be unique, non-empty, and contain no '/'.
+  // `samples_per_detector` samples (with `with_flags`, a uint8 dataset `flags` too). Detector names
+  // must be unique, non-empty, and contain no '/'.
   TodWriter(const std::filesystem::path& file, const FocalPlane& focal_plane,
             std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
-            const std::map<std::string, std::string>& attributes);
+            const std::map<std::string, std::string>& attributes, bool with_flags = false);
   ~TodWriter();
   TodWriter(TodWriter&&) noexcept;
   TodWriter& operator=(TodWriter&&) noexcept;
@@ -53,10 +57,12 @@ class TodWriter {
 
   // Writes signal[0..n) to samples [offset, offset + n) of detector `detector` (float32 files round
   // to nearest). With with_pointing, `pointing` is required and must have n samples; without it,
-  // `pointing` is ignored. Throws pisco::Error on a detector index beyond the focal plane, a range
-  // beyond samples_per_detector, a missing or mis-sized pointing chunk, or after commit().
+  // `pointing` is ignored. `flags` (n values, files written with_flags only) go to the `flags`
+  // dataset; samples written without flags read back as 0. Throws pisco::Error on a detector index
+  // beyond the focal plane, a range beyond samples_per_detector, a missing or mis-sized pointing
+  // chunk or flags, after commit(), or when the disk is full (the write that meets it names its samples).
   void write(std::size_t detector, std::size_t offset, std::span<const double> signal,
-             const PointingView* pointing = nullptr);
+             const PointingView* pointing = nullptr, std::span<const std::uint8_t> flags = {});
 
   // Checks that every sample of every detector was written (else pisco::Error naming the detector and
   // the first missing sample, and the temporary file is removed when the writer is destroyed), closes
@@ -90,6 +96,9 @@ std::vector<double> read_tod_signal(const std::filesystem::path& file, const std
 
 // The detector quaternions (`quat`, (samples, 4)) of a TOD file written with pointing.
 std::vector<Quat> read_tod_quats(const std::filesystem::path& file, const std::string& detector);
+
+// The `flags` of one detector (written with_flags); empty when the file has none (no sample flagged).
+std::vector<std::uint8_t> read_tod_flags(const std::filesystem::path& file, const std::string& detector);
 
 // The root attributes of a file: string attributes as they are, numeric scalar attributes formatted as
 // text; pisco_format included.

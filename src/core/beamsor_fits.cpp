@@ -189,6 +189,7 @@ BeamMaps load_maps(const fs::path& file, double rho_max, double reach) {
   const FitsFile f =
       FitsFile::open(file, "expected a HEALPix beamsor file (binary table with columns B_TT, ...)");
   detail::goto_first_binary_table(f, expected_file);
+  detail::require_complete_hdu(f);
   BeamTable t;
   read_geometry(f, t);
   find_columns(f, t);

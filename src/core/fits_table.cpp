@@ -4,11 +4,14 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
+#include <cstring>
 #include <new>
 #include <utility>
 
 #include <error_handling.h>
 
+#include "core/output_file.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
 
@@ -28,7 +31,12 @@ std::string cfitsio_text(int status) {
 }
 
 void check(int status, const fs::path& file, const std::string& doing) {
-  if (status != 0) fail(file, doing + " failed (CFITSIO: " + cfitsio_text(status) + ")");
+  if (status == 0) return;
+  // CFITSIO's text for a failed write or close does not say why: the system's reason does (a full disk).
+  const int error = errno;
+  std::string why = cfitsio_text(status);
+  if ((status == WRITE_ERROR || status == FILE_NOT_CLOSED) && error != 0) why += ": " + std::string(std::strerror(error));
+  fail(file, doing + " failed (CFITSIO: " + why + ")");
 }
 
 void rethrow_naming(const fs::path& file) {
@@ -89,6 +97,11 @@ FitsFile FitsFile::create(const fs::path& temporary, const fs::path& target) {
     fail(target, "cannot be created as " + temporary.filename().string() + " (CFITSIO: " +
                      cfitsio_text(status) + ")");
   }
+  if (write_fault_requested(target)) {
+    const int fd = descriptor_of(temporary);
+    if (fd < 0) fail(target, "PISCO_TEST_FAULT: the temporary file's descriptor was not found");
+    make_disk_full(fd, target);
+  }
   return f;
 }
 
@@ -112,6 +125,17 @@ void goto_first_binary_table(const FitsFile& f, const std::string& expected) {
     if (type == BINARY_TBL) return;
   }
   fail(f.path(), "has no binary-table extension; " + expected);
+}
+
+void require_complete_hdu(const FitsFile& f) {
+  long long head = 0, data = 0, end = 0;
+  int status = 0;
+  fits_get_hduaddrll(f.get(), &head, &data, &end, &status);
+  check(status, f.path(), "reading the table's extent");
+  std::error_code ec;
+  const auto size = fs::file_size(f.path(), ec);
+  if (!ec && static_cast<long long>(size) < end)
+    fail(f.path(), "is truncated: " + std::to_string(size) + " bytes, but its table ends at byte " + std::to_string(end));
 }
 
 std::optional<std::string> string_key(const FitsFile& f, const char* key) {
@@ -210,8 +234,8 @@ void write_columns(const FitsFile& f, int columns, long long total, long long re
 
 void write_atomically(const fs::path& file,
                       const std::function<void(const fs::path& temporary)>& write) {
-  fs::path temporary = file;
-  temporary += ".tmp-" + std::to_string(::getpid());
+  const TemporaryListing listed(temporary_name(file));
+  const fs::path& temporary = listed.path();
   std::error_code ec;
   fs::remove(temporary, ec);  // a leftover of a crashed process with the same pid
   try {

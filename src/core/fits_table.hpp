@@ -67,6 +67,10 @@ class FitsFile {
 // "has no binary-table extension; <expected>" when there is none.
 void goto_first_binary_table(const FitsFile& f, const std::string& expected);
 
+// Fails ("is truncated: ...") when the file ends before the data of the current HDU does: a reader
+// that takes only part of a table (a beamsor's cap) would not notice on its own.
+void require_complete_hdu(const FitsFile& f);
+
 // A string key of the current HDU; nullopt when it is absent.
 std::optional<std::string> string_key(const FitsFile& f, const char* key);
 

@@ -43,4 +43,40 @@ void Sky::check_finite(const std::string& origin) const {
   }
 }
 
+std::vector<std::size_t> Sky::unseen_pixels() const {
+  std::vector<std::size_t> out;
+  for (std::size_t p = 0; p < npix(); ++p)
+    if (is_unseen(maps_[0][p]) || is_unseen(maps_[1][p]) || is_unseen(maps_[2][p]) || is_unseen(maps_[3][p]))
+      out.push_back(p);
+  return out;
+}
+
+std::size_t Sky::zero_unseen() {
+  std::size_t changed = 0;
+  for (std::size_t p = 0; p < npix(); ++p) {
+    bool any = false;
+    for (auto& map : maps_)
+      if (is_unseen(map[p])) {
+        map[p] = 0.0;
+        any = true;
+      }
+    changed += any;
+  }
+  return changed;
+}
+
+void Sky::check_unseen(const std::string& origin) const {
+  for (int s = 0; s < 4; ++s) {
+    const auto& map = maps_[s];
+    std::size_t count = 0, first = 0;
+    for (std::size_t p = 0; p < map.size(); ++p)
+      if (is_unseen(map[p]) && count++ == 0) first = p;
+    if (count == 0) continue;
+    throw Error(origin + ": the Stokes " + stokes_names[s] + " map has " + std::to_string(count) +
+                " UNSEEN pixel" + (count == 1 ? "" : "s") + " (-1.6375e30, HEALPix's marker of a pixel without data), " +
+                "the first at pixel " + std::to_string(first) +
+                " (RING); expected a value at every pixel, or a policy for masked skies (zero or flag)");
+  }
+}
+
 }  // namespace pisco

@@ -117,12 +117,26 @@ void nested_to_ring(std::span<double> map, int nside) {
   for (int p = 0; p < base.Npix(); ++p) map[base.nest2ring(p)] = nested[p];
 }
 
-Sky read_sky(const fs::path& file) {
+// The error of a map column with UNSEEN pixels (UnseenPolicy::error).
+void reject_unseen(const FitsFile& f, const Column& c, std::span<const double> map) {
+  std::size_t count = 0, first = 0;
+  for (std::size_t p = 0; p < map.size(); ++p)
+    if (is_unseen(map[p]) && count++ == 0) first = p;
+  if (count == 0) return;
+  fail(f.path(), "column " + std::to_string(c.number) + " (" + name_or_number(f, c.number) + ") has " +
+                     std::to_string(count) + " UNSEEN pixel" + (count == 1 ? "" : "s") +
+                     " (-1.6375e30, HEALPix's marker of a pixel without data), the first at pixel " +
+                     std::to_string(first) + " (RING); expected a value at every pixel, or a policy for " +
+                     "masked skies (zero: taken as 0; flag: taken as 0 and the samples whose disc holds one flagged)");
+}
+
+Sky read_sky(const fs::path& file, UnseenPolicy unseen) {
   std::error_code ec;
   if (!fs::exists(file, ec)) fail(file, std::string("no such file; ") + expected_layout);
   if (fs::is_directory(file, ec)) fail(file, std::string("is a directory; ") + expected_layout);
   const FitsFile f = FitsFile::open(file, expected_layout);
   detail::goto_first_binary_table(f, expected_layout);
+  detail::require_complete_hdu(f);
   const int nside =
       detail::read_nside(f, std::string("has no NSIDE key in its binary table; ") + expected_layout);
   const bool nested = read_is_nested(f);
@@ -137,7 +151,9 @@ Sky read_sky(const fs::path& file) {
     detail::read_column(f, columns[k].number, columns[k].repeat, map,
                         std::to_string(columns[k].number));
     if (nested) nested_to_ring(map, nside);
+    if (unseen == UnseenPolicy::error) reject_unseen(f, columns[k], map);
   }
+  if (unseen == UnseenPolicy::zero) sky.zero_unseen();
   if (iau && columns.size() >= 3) {
     for (double& u : sky.U()) u = -u;
     std::clog << "pisco: " << file.string()
@@ -222,9 +238,9 @@ void write_healpix_map(const std::filesystem::path& file, int nside, const std::
   });
 }
 
-Sky Sky::read_fits(const std::filesystem::path& file) {
+Sky Sky::read_fits(const std::filesystem::path& file, UnseenPolicy unseen) {
   try {
-    return read_sky(file);
+    return read_sky(file, unseen);
   } catch (...) {
     rethrow_naming(file);
   }

@@ -1,8 +1,13 @@
 #include "io/hdf5.hpp"
 
+#include <sys/statvfs.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdio>
+#include <optional>
 
+#include "core/output_file.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail::hdf5 {
@@ -52,6 +57,18 @@ std::string hdf5_detail() {
   std::string desc;
   H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, walk_error, &desc);
   H5Eclear2(H5E_DEFAULT);
+  // The file driver's messages span lines and carry the time, descriptor and buffer of the failed
+  // call ("file write failed: time = ..., errno = 28, error message = 'No space left on device', ..."):
+  // keep what failed and the system's reason, on one line.
+  const std::string marker = "error message = '";
+  if (const auto m = desc.find(marker); m != std::string::npos) {
+    const auto end = desc.find('\'', m + marker.size());
+    const std::string reason = desc.substr(m + marker.size(), end == std::string::npos ? end : end - m - marker.size());
+    const auto colon = desc.find(':');
+    desc = (colon == std::string::npos || colon > m ? std::string() : desc.substr(0, colon) + ": ") + reason;
+  }
+  for (char& c : desc)
+    if (c == '\n' || c == '\r') c = ' ';
   return desc.empty() ? std::string() : " (HDF5: " + desc + ")";
 }
 
@@ -87,6 +104,59 @@ Handle file_access_plist(const std::string& where) {
   check(H5Pset_file_locking(fapl.get(), true, true), where, "cannot set file locking");
 #endif
   return fapl;
+}
+
+int file_descriptor(hid_t file) noexcept {
+  void* handle = nullptr;
+  if (H5Fget_vfd_handle(file, H5P_DEFAULT, &handle) < 0 || handle == nullptr) {
+    H5Eclear2(H5E_DEFAULT);
+    return -1;
+  }
+  return *static_cast<int*>(handle);
+}
+
+void abandon_file(hid_t file) noexcept {
+  const int fd = file_descriptor(file);
+  if (fd >= 0) detail::divert_descriptor(fd);
+}
+
+namespace {
+// Bytes the file system holding `file` can still give this process; nullopt when it does not say.
+std::optional<unsigned long long> free_bytes(const fs::path& file) {
+  struct statvfs fs_info {};
+  const fs::path dir = file.has_parent_path() ? file.parent_path() : fs::path(".");
+  if (::statvfs(dir.c_str(), &fs_info) != 0) return std::nullopt;
+  const unsigned long long blocks = ::geteuid() == 0 ? fs_info.f_bfree : fs_info.f_bavail;
+  return blocks * fs_info.f_frsize;
+}
+}  // namespace
+
+void check_room_for_metadata(hid_t id, const fs::path& file, const std::string& where) {
+  std::size_t max_size = 0, min_clean = 0, current = 0;
+  int entries = 0;
+  if (H5Fget_mdc_size(id, &max_size, &min_clean, &current, &entries) < 0) {
+    H5Eclear2(H5E_DEFAULT);
+    return;
+  }
+  const auto free = free_bytes(file);
+  if (free && *free < current + (std::size_t(16) << 10))
+    throw Error(where + ": no space left on the device for the file's last " + std::to_string(current) +
+                " bytes of metadata (" + std::to_string(*free) + " bytes free)");
+}
+
+void check_room_for_data(const fs::path& file, unsigned long long bytes, const std::string& where,
+                         const std::string& what) {
+  const auto free = free_bytes(file);
+  if (free && *free < bytes + (std::size_t(16) << 10))
+    throw Error(where + ": no space left on the device for " + what + " (" + std::to_string(bytes) +
+                " bytes, " + std::to_string(*free) + " free)");
+}
+
+void inject_write_fault(hid_t file, const fs::path& target) {
+  if (!detail::write_fault_requested(target)) return;
+  const int fd = file_descriptor(file);
+  if (fd < 0) throw Error(target.string() + ": PISCO_TEST_FAULT: HDF5 gives no file descriptor");
+  detail::make_disk_full(fd, target);
 }
 
 Handle open_read_only(const fs::path& file) {

@@ -96,6 +96,32 @@ bool valid_link_name(const std::string& name);
 // (without failing where it does not: NFS, some containers).
 Handle file_access_plist(const std::string& where);
 
+// The operating-system descriptor of an open file (the sec2 driver's); -1 when HDF5 gives none.
+int file_descriptor(hid_t file) noexcept;
+
+// Prepares a file that is being written and will not be completed (an error, a full disk) for its
+// handles to be closed: its descriptor is diverted to an anonymous file in memory, so that HDF5's
+// final flush, truncation and close succeed. (In HDF5 1.10 a close that fails leaves a freed file
+// under a live identifier, and the library's exit handler then crashes on it.) The caller closes its
+// handles, then removes the file by name.
+void abandon_file(hid_t file) noexcept;
+
+// Fails ("no space left on the device ...") unless the file system of `file` (open as `id`) has room
+// for the metadata HDF5 still holds in memory, so that the final flush does not meet a full disk: in
+// HDF5 1.10 a failed metadata flush leaves the cache unable to flush again, and the file can then be
+// neither completed nor closed.
+void check_room_for_metadata(hid_t id, const std::filesystem::path& file, const std::string& where);
+
+// Fails ("no space left on the device for <what> (N bytes, M free)") unless the file system of `file`
+// has room for `bytes` more (and a margin for metadata): checked before raw data is written, so that
+// a full disk is met here rather than inside HDF5, whose failed writes leak their buffers.
+void check_room_for_data(const std::filesystem::path& file, unsigned long long bytes, const std::string& where,
+                         const std::string& what);
+
+// Test hook (PISCO_TEST_FAULT=write-fail:NAME, core/output_file.hpp): when `target` is the file to
+// fail, the descriptor of `file`, just created, is made to refer to /dev/full.
+void inject_write_fault(hid_t file, const std::filesystem::path& target);
+
 // Opens an existing HDF5 file read-only. Errors name the file: "no such file (expected an HDF5 file)",
 // "is a directory (expected an HDF5 file)", "not an HDF5 file", or HDF5's reason for failing to open.
 Handle open_read_only(const std::filesystem::path& file);

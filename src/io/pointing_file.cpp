@@ -151,6 +151,8 @@ void BoresightFile::write(const fs::path& file, const std::vector<Quat>& quats, 
     f = checked(H5Fcreate(temporary.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.get()), H5Fclose, where,
                 "cannot create the file");
     inject_write_fault(f.get(), file);
+    check_room_for_data(temporary, 8ull * quats.size() * (4 + (times.empty() ? 0 : 1) + (hwp_angle.empty() ? 0 : 1)),
+                        where, std::to_string(quats.size()) + " samples");
     const hsize_t dims[2] = {quats.size(), 4};
     Handle space = checked(H5Screate_simple(2, dims, nullptr), H5Sclose, where, "cannot create a dataspace");
     Handle ds = checked(H5Dcreate2(f.get(), "boresight", H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT,
@@ -167,6 +169,14 @@ void BoresightFile::write(const fs::path& file, const std::vector<Quat>& quats, 
                           H5Dclose, where, "cannot create dataset '/times'");
       check(H5Dwrite(ts.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, times.data()), where,
             "cannot write '/times'");
+    }
+    if (!hwp_angle.empty()) {
+      Handle hspace = checked(H5Screate_simple(1, dims, nullptr), H5Sclose, where, "cannot create a dataspace");
+      Handle hs = checked(H5Dcreate2(f.get(), "hwp_angle", H5T_IEEE_F64LE, hspace.get(), H5P_DEFAULT, H5P_DEFAULT,
+                                     H5P_DEFAULT),
+                          H5Dclose, where, "cannot create dataset '/hwp_angle'");
+      check(H5Dwrite(hs.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, hwp_angle.data()), where,
+            "cannot write '/hwp_angle'");
     }
     // Everything reaches the disk before the file is closed (a full disk fails here, not in a close).
     check_room_for_metadata(f.get(), temporary, where);

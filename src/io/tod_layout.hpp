@@ -7,5 +7,8 @@ namespace pisco::detail::tod {
 inline constexpr const char* format = "pisco-tod-1";                    // root attribute pisco_format
 inline constexpr const char* pointing_names[3] = {"theta", "phi", "psi"};  // datasets of a detector group
 inline constexpr const char* quat_name = "quat";  // the detector's rotation (samples, 4), with the angles
+inline constexpr const char* flags_name = "flags";  // uint8 per sample, when the writer flags samples
+inline constexpr const char* flags_meaning =
+    "1: the sample's disc holds an UNSEEN pixel of the sky (taken as 0; the sample is left out of the maps); 0: not";
 
 }  // namespace pisco::detail::tod

@@ -124,6 +124,24 @@ std::vector<Quat> read_tod_quats(const fs::path& file, const std::string& detect
   return out;
 }
 
+std::vector<std::uint8_t> read_tod_flags(const fs::path& file, const std::string& detector) {
+  Session session;
+  const std::string where = file.string();
+  Handle h = open_read_only(file);
+  Handle group = open_detector_group(h.get(), where, detector);
+  const std::string path = "/" + detector + "/" + tod::flags_name;
+  if (!has_link(group.get(), tod::flags_name, where, "dataset " + in_quotes(path))) return {};
+  const std::string expected = "a one-dimensional integer dataset 'flags', one value per sample";
+  Dataset d = open_dataset(group.get(), tod::flags_name, path, where, expected);
+  if (d.type_class != H5T_INTEGER || d.shape.size() != 1)
+    throw Error(where + ": dataset " + in_quotes(path) + " is not one-dimensional integers (expected " + expected + ")");
+  std::vector<std::uint8_t> out(d.elements());
+  if (!out.empty())
+    check(H5Dread(d.handle.get(), H5T_NATIVE_UINT8, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()), where,
+          "cannot read dataset " + in_quotes(path));
+  return out;
+}
+
 std::map<std::string, std::string> read_tod_attributes(const fs::path& file) {
   Session session;
   const std::string where = file.string();

@@ -6,8 +6,11 @@
 #include <cstdint>
 #include <limits>
 #include <map>
+#include <optional>
 #include <set>
 #include <system_error>
+
+#include "core/output_file.hpp"
 
 #include "io/hdf5.hpp"
 #include "pisco/quaternion.hpp"
@@ -43,6 +46,13 @@ void add_interval(std::map<std::size_t, std::size_t>& intervals, std::size_t sta
   intervals.emplace(start, end);
 }
 
+// Whether any of the intervals overlaps [start, end).
+bool overlaps(const std::map<std::size_t, std::size_t>& intervals, std::size_t start, std::size_t end) {
+  auto it = intervals.upper_bound(start);
+  if (it != intervals.begin() && std::prev(it)->second > start) return true;
+  return it != intervals.end() && it->first < end;
+}
+
 }  // namespace
 
 // ================================================================ TodWriter
@@ -50,23 +60,30 @@ void add_interval(std::map<std::size_t, std::size_t>& intervals, std::size_t sta
 struct TodWriter::Impl {
   std::string where;      // the final file, for messages
   fs::path temporary;
+  std::optional<detail::TemporaryListing> listed;  // pisco::temporary_files() while it exists
   Handle file;
+  // Datasets are opened without a chunk cache: every write goes to the file at once, so that a full
+  // disk fails the write that meets it (naming its samples) and nothing is left to flush at close.
+  Handle dapl;
   std::vector<std::string> names;
   std::size_t samples = 0;
   TodPrecision precision = TodPrecision::float64;
   bool with_pointing = false;
+  bool with_flags = false;
   bool committed = false;
   bool closed = false;
   std::vector<std::map<std::size_t, std::size_t>> written;  // per detector
   // The datasets of the detector written last (signal, theta, phi, psi): only one detector's are kept
   // open, so HDF5's chunk caches stay bounded whatever the number of detectors.
   std::size_t open_detector = static_cast<std::size_t>(-1);
-  Handle datasets[5];  // signal, theta, phi, psi, quat
+  Handle datasets[6];  // signal, theta, phi, psi, quat, flags
   std::vector<float> buffer;
   std::vector<Quat> quats;
 
   ~Impl() {
     Session session;
+    // Abandoned (an error, a full disk, a signal): nothing may fail on the way out, whatever the disk.
+    if (!committed && file.valid()) abandon_file(file.get());
     for (Handle& d : datasets) d.reset();
     file.reset();
     if (!committed && !temporary.empty()) {
@@ -82,15 +99,18 @@ struct TodWriter::Impl {
     const std::string& name = names[detector];
     Handle group = checked(H5Gopen2(file.get(), name.c_str(), H5P_DEFAULT), H5Gclose, where,
                            "cannot open group " + in_quotes("/" + name) + " of the temporary file");
-    datasets[0] = checked(H5Dopen2(group.get(), "signal", H5P_DEFAULT), H5Dclose, where,
+    datasets[0] = checked(H5Dopen2(group.get(), "signal", dapl.get()), H5Dclose, where,
                           "cannot open dataset " + in_quotes("/" + name + "/signal"));
     if (with_pointing) {
       for (int k = 0; k < 3; ++k)
-        datasets[k + 1] = checked(H5Dopen2(group.get(), tod::pointing_names[k], H5P_DEFAULT), H5Dclose, where,
+        datasets[k + 1] = checked(H5Dopen2(group.get(), tod::pointing_names[k], dapl.get()), H5Dclose, where,
                                   "cannot open dataset " + in_quotes("/" + name + "/" + tod::pointing_names[k]));
-      datasets[4] = checked(H5Dopen2(group.get(), tod::quat_name, H5P_DEFAULT), H5Dclose, where,
+      datasets[4] = checked(H5Dopen2(group.get(), tod::quat_name, dapl.get()), H5Dclose, where,
                             "cannot open dataset " + in_quotes("/" + name + "/" + tod::quat_name));
     }
+    if (with_flags)
+      datasets[5] = checked(H5Dopen2(group.get(), tod::flags_name, dapl.get()), H5Dclose, where,
+                            "cannot open dataset " + in_quotes("/" + name + "/" + tod::flags_name));
     open_detector = detector;
   }
 
@@ -115,7 +135,7 @@ struct TodWriter::Impl {
 
 TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,
                      TodPrecision precision, bool with_pointing,
-                     const std::map<std::string, std::string>& attributes)
+                     const std::map<std::string, std::string>& attributes, bool with_flags)
     : file_(file),
       temporary_(fs::path(file.string() + ".tmp-" + std::to_string(::getpid()))),
       samples_(samples_per_detector) {
@@ -145,16 +165,21 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
   s.samples = samples_per_detector;
   s.precision = precision;
   s.with_pointing = with_pointing;
+  s.with_flags = with_flags;
   s.written.resize(focal_plane.size());
+  s.dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
+  check(H5Pset_chunk_cache(s.dapl.get(), 0, 0, 1.0), where, "cannot switch the chunk cache off");
 
   Handle fcpl = checked(H5Pcreate(H5P_FILE_CREATE), H5Pclose, where, "cannot create a file creation list");
   // Track link creation order so that readers list detectors in focal-plane order.
   check(H5Pset_link_creation_order(fcpl.get(), H5P_CRT_ORDER_TRACKED | H5P_CRT_ORDER_INDEXED), where,
         "cannot set the link creation order");
   Handle fapl = file_access_plist(where);
+  s.listed.emplace(temporary_);
   s.file = checked(H5Fcreate(temporary_.c_str(), H5F_ACC_TRUNC, fcpl.get(), fapl.get()), H5Fclose, where,
                    "cannot create the temporary file " + in_quotes(temporary_.string()));
   s.temporary = temporary_;  // from here on, the Impl removes the temporary file if anything fails
+  inject_write_fault(s.file.get(), file);
 
   for (const auto& [key, value] : attributes) {
     if (key == "pisco_format") continue;  // always written below
@@ -184,6 +209,12 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
     check(H5Pset_chunk(quat_dcpl.get(), 2, chunk), where, "cannot set the dataset chunk size");
   }
 
+  // Flags: unflagged (0) wherever nothing was written.
+  Handle flags_dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
+  if (samples_per_detector > 0) {
+    const hsize_t chunk[1] = {std::min<hsize_t>(dims[0], kChunkSamples)};
+    check(H5Pset_chunk(flags_dcpl.get(), 1, chunk), where, "cannot set the dataset chunk size");
+  }
   for (const Detector& d : focal_plane.detectors()) {
     const std::string group_path = in_quotes("/" + d.name);
     Handle group = checked(H5Gcreate2(s.file.get(), d.name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
@@ -194,25 +225,33 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
     const std::uint64_t beam = d.beam;
     write_scalar_attribute(group.get(), "beam", H5T_STD_U64LE, H5T_NATIVE_UINT64, &beam, where, d.name);
     Handle signal = checked(H5Dcreate2(group.get(), "signal", signal_type, space.get(), H5P_DEFAULT, dcpl.get(),
-                                       H5P_DEFAULT),
+                                       s.dapl.get()),
                             H5Dclose, where, "cannot create dataset " + in_quotes("/" + d.name + "/signal"));
     if (!signal.close()) fail(where, "cannot close dataset " + in_quotes("/" + d.name + "/signal"));
     if (with_pointing) {
       for (const char* name : tod::pointing_names) {
         const std::string path = in_quotes("/" + d.name + "/" + name);
         Handle ds = checked(H5Dcreate2(group.get(), name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, dcpl.get(),
-                                       H5P_DEFAULT),
+                                       s.dapl.get()),
                             H5Dclose, where, "cannot create dataset " + path);
         if (!ds.close()) fail(where, "cannot close dataset " + path);
       }
       const std::string path = in_quotes("/" + d.name + "/" + tod::quat_name);
       Handle ds = checked(H5Dcreate2(group.get(), tod::quat_name, H5T_IEEE_F64LE, quat_space.get(), H5P_DEFAULT,
-                                     quat_dcpl.get(), H5P_DEFAULT),
+                                     quat_dcpl.get(), s.dapl.get()),
                           H5Dclose, where, "cannot create dataset " + path);
       write_string_attribute(ds.get(), "layout",
                              "the detector's antenna basis as a rotation, x, y, z, w (scalar last): q z^ q* is the "
                              "line of sight, q x^ q* the axis zeta is measured from",
                              where);
+      if (!ds.close()) fail(where, "cannot close dataset " + path);
+    }
+    if (with_flags) {
+      const std::string path = in_quotes("/" + d.name + "/" + tod::flags_name);
+      Handle ds = checked(H5Dcreate2(group.get(), tod::flags_name, H5T_STD_U8LE, space.get(), H5P_DEFAULT,
+                                     flags_dcpl.get(), s.dapl.get()),
+                          H5Dclose, where, "cannot create dataset " + path);
+      write_string_attribute(ds.get(), "meaning", tod::flags_meaning, where);
       if (!ds.close()) fail(where, "cannot close dataset " + path);
     }
     if (!group.close()) fail(where, "cannot close group " + group_path);
@@ -224,7 +263,7 @@ TodWriter::TodWriter(TodWriter&&) noexcept = default;
 TodWriter& TodWriter::operator=(TodWriter&&) noexcept = default;
 
 void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const double> signal,
-                      const PointingView* pointing) {
+                      const PointingView* pointing, std::span<const std::uint8_t> flags) {
   Session session;
   const std::string where = file_.string();
   if (!impl_) throw Error(where + ": TodWriter::write() on a moved-from writer");
@@ -253,8 +292,23 @@ void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const 
                   std::to_string(pointing->psi.size()) + ") samples for " + std::to_string(count) +
                   " signal samples (expected equal lengths)");
   }
+  if (!flags.empty() && flags.size() != count)
+    throw Error(where + ": detector " + in_quotes(name) + ": " + std::to_string(flags.size()) + " flags for " +
+                std::to_string(count) + " signal samples (expected equal lengths, or no flags)");
+  if (!flags.empty() && !s.with_flags)
+    throw Error(where + ": detector " + in_quotes(name) + ": flags given, but the file is written without flags");
   if (count == 0) return;
 
+  // The chunks this write allocates, in every dataset it writes to: those it touches that no earlier
+  // write did.
+  std::size_t chunks = 0;
+  for (std::size_t c = offset / kChunkSamples; c <= (offset + count - 1) / kChunkSamples; ++c)
+    chunks += !overlaps(s.written[detector], c * kChunkSamples, (c + 1) * kChunkSamples);
+  const std::size_t per_sample = (s.precision == TodPrecision::float32 ? 4 : 8) + (s.with_pointing ? 7 * 8 : 0) +
+                                 (s.with_flags ? 1 : 0);
+  check_room_for_data(s.temporary, static_cast<unsigned long long>(chunks) * kChunkSamples * per_sample, where,
+                      "samples " + std::to_string(offset) + ".." + std::to_string(offset + count - 1) + " of detector " +
+                          in_quotes(name));
   s.open_datasets(detector);
   if (s.precision == TodPrecision::float32) {
     s.buffer.resize(count);
@@ -272,6 +326,8 @@ void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const 
       s.quats[i] = quat_from_pointing(pointing->theta[i], pointing->phi[i], pointing->psi[i]);
     s.write_slab(4, tod::quat_name, detector, offset, count, H5T_NATIVE_DOUBLE, s.quats.data(), 4);
   }
+  if (s.with_flags && !flags.empty())
+    s.write_slab(5, tod::flags_name, detector, offset, count, H5T_NATIVE_UINT8, flags.data());
   add_interval(s.written[detector], offset, offset + count);
 }
 
@@ -291,6 +347,11 @@ void TodWriter::commit() {
     throw Error(where + ": detector " + in_quotes(s.names[d]) + ": sample " + std::to_string(first_missing) +
                 " of " + std::to_string(s.samples) + " was never written (expected every sample before commit())");
   }
+  // Everything reaches the disk before any handle is closed: a full disk fails here, and the writer,
+  // still uncommitted, abandons the file (a close that failed would leave HDF5 broken).
+  check_room_for_metadata(s.file.get(), s.temporary, where);
+  check(H5Fflush(s.file.get(), H5F_SCOPE_GLOBAL), where,
+        "cannot flush the temporary file " + in_quotes(s.temporary.string()));
   bool ok = true;
   for (Handle& d : s.datasets) ok = d.close() && ok;
   s.open_detector = static_cast<std::size_t>(-1);
@@ -306,6 +367,7 @@ void TodWriter::commit() {
     throw Error(where + ": cannot rename the temporary file " + in_quotes(s.temporary.string()) + " to it: " +
                 ec.message());
   s.committed = true;
+  s.listed.reset();
 }
 
 }  // namespace pisco

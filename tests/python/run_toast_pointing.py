@@ -3,10 +3,11 @@
 
 Runs with the system Python (standard library only):
 
-1. a virtual environment at BUILD/python-venv with TOAST 3, h5py, numpy and
-   astropy from PyPI (binary wheels only), created on the first run and reused
-   afterwards; when packages are missing and PyPI cannot be reached within 5 s,
-   the test is skipped (exit status 77) with the reason;
+1. the python tests' virtual environment at BUILD/python-venv (python_env.py: TOAST 3,
+   h5py, numpy, astropy and the rest from PyPI, binary wheels only), created on
+   the first run and reused afterwards; when packages are missing and PyPI
+   cannot be reached within 5 s, the test is skipped (exit status 77) with the
+   reason;
 2. tools/toast_pointing.py in that environment: TOAST's focal plane
    (focalplane.h5), and one ground and one satellite observation with TOAST's
    boresight quaternions and its expanded detector pointing and Stokes weights;
@@ -27,12 +28,12 @@ import subprocess
 import sys
 import tempfile
 import time
-import urllib.error
-import urllib.request
 
-SKIP = 77
-PACKAGES = ["toast", "h5py", "numpy", "astropy"]
-REGISTRY = "https://pypi.org/simple/toast/"
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import python_env  # noqa: E402  (the environment shared by the python tests)
+
+# What this test needs, installed here when missing (scripts/run-tests.sh installs all of python_env.PACKAGES).
+PACKAGES = {"toast": "toast", "h5py": "h5py", "numpy": "numpy", "astropy": "astropy"}
 
 
 def log(message):
@@ -41,52 +42,21 @@ def log(message):
 
 def skip(reason):
     log(f"SKIPPED: {reason}")
-    sys.exit(SKIP)
+    sys.exit(python_env.SKIP)
 
 
 def venv_python(venv):
-    return os.path.join(venv, "bin", "python")
-
-
-def venv_complete(venv):
-    """Whether the environment exists and imports every package."""
-    python = venv_python(venv)
-    if not os.access(python, os.X_OK):
-        return False
-    probe = "import " + ", ".join(PACKAGES)
-    return subprocess.run([python, "-c", probe], capture_output=True).returncode == 0
-
-
-def registry_reachable():
-    """None when PyPI answers within 5 s, else the reason."""
-    request = urllib.request.Request(REGISTRY, method="HEAD")
-    try:
-        with urllib.request.urlopen(request, timeout=5):
-            return None
-    except (urllib.error.URLError, OSError, ValueError) as exc:
-        return f"{REGISTRY} unreachable ({getattr(exc, 'reason', exc)})"
+    return python_env.python_of(venv)
 
 
 def ensure_venv(venv):
-    if venv_complete(venv):
-        return
-    reason = registry_reachable()
-    if reason is not None:
-        skip(f"{reason}; the test needs {', '.join(PACKAGES)} from PyPI in {venv}")
-    t0 = time.perf_counter()
-    if not os.access(venv_python(venv), os.X_OK):
-        made = subprocess.run([sys.executable, "-m", "venv", venv], capture_output=True, text=True)
-        if made.returncode != 0:
-            skip(f"cannot create a virtual environment with {sys.executable} -m venv: {made.stderr.strip()[-500:]}")
-    env = dict(os.environ, PIP_DISABLE_PIP_VERSION_CHECK="1")
-    env.pop("PIP_DEFAULT_TIMEOUT", None)
-    pip = [venv_python(venv), "-m", "pip", "install", "--quiet", "--timeout", "5", "--retries", "0",
-           "--only-binary=:all:"] + PACKAGES
-    installed = subprocess.run(pip, capture_output=True, text=True, env=env)
-    if installed.returncode != 0 or not venv_complete(venv):
-        tail = (installed.stdout + installed.stderr).strip()[-800:]
-        skip(f"pip could not install {', '.join(PACKAGES)} into {venv}: {tail}")
-    log(f"installed {', '.join(PACKAGES)} into {venv} in {time.perf_counter() - t0:.1f} s")
+    try:
+        python_env.ensure_venv(venv, packages=PACKAGES, log=log)
+    except python_env.Unavailable as exc:
+        if exc.skip:
+            skip(str(exc))
+        log(f"FAILED: {exc}")
+        sys.exit(1)
 
 
 def simulation_toml(focalplane, boresight):

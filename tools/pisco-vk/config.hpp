@@ -24,6 +24,7 @@ struct SkyConfig {
   bool unpolarized = false;      // Q = U = 0 after synthesis or loading
   std::vector<double> point_source;  // theta, phi (rad), I, Q, U, V: one non-zero pixel (paper 6.1)
   std::string units;
+  pisco::UnseenPolicy unseen = pisco::UnseenPolicy::error;  // a map file's UNSEEN pixels
 };
 
 struct BeamConfig {
@@ -45,6 +46,22 @@ struct ScanConfig {
   std::filesystem::path file;
   pisco::CesScan ces;            // type = "ces"
   pisco::SatelliteScan satellite;  // type = "satellite"
+};
+
+// [hwp]: one half-wave plate model for the focal plane, with per-detector overrides.
+struct HwpConfig {
+  bool enabled = false;                  // an [hwp] table is present
+  pisco::HalfWavePlate plate;            // M0 and placement (gamma: per detector)
+  pisco::HwpAngleStream stream;          // continuous or stepped; sample_rate from the scan or the table
+  bool angles_from_file = false;         // the pointing file's per-sample `hwp_angle`
+  bool ideal_mapmaker = false;           // bin the maps with an ideal plate's model (mapmaker = "ideal")
+};
+
+// A detector's own plate settings from its focal-plane row (keys hwp, hwp_gamma_deg, hwp_mueller).
+struct DetectorHwp {
+  std::optional<bool> enabled;
+  std::optional<double> gamma;           // radians
+  std::optional<pisco::Mueller> mueller;
 };
 
 struct EngineConfig {
@@ -73,6 +90,8 @@ struct SimulationConfig {
   SkyConfig sky;
   std::vector<BeamConfig> beams;
   std::vector<pisco::Detector> detectors;
+  std::vector<DetectorHwp> detector_hwp;  // parallel to detectors (entries may be empty)
+  HwpConfig hwp;
   ScanConfig scan;
   EngineConfig engine;
   OutputConfig output;

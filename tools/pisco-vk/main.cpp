@@ -5,10 +5,12 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <hdf5.h>
 
 #include "bench.hpp"
 #include "config.hpp"
 #include "run.hpp"
+#include "signals.hpp"
 #include "validation/validation.hpp"
 
 namespace {
@@ -56,6 +58,12 @@ int devices() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // SIGINT, SIGTERM, SIGHUP: stop at once, no temporary file left, status 128 + signal (signals.hpp).
+  pisco_cli::handle_stop_signals();
+  // HDF5's exit-time clean-up is not needed (every file is closed or abandoned by then), and after a
+  // full disk HDF5 1.10's can crash or loop on its own state (docs/formats.md, "Errors and partial
+  // files"): the program ends without it. Before any other HDF5 call.
+  H5dont_atexit();
   CLI::App app{"PISCO-VK: pixel-space convolution of polarized skies with beamsors, for CMB simulations.",
                "pisco-vk"};
   app.set_version_flag("--version", std::string("pisco-vk ") + pisco::version);
@@ -81,6 +89,11 @@ int main(int argc, char** argv) {
   bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, vulkan, cuda (default: auto).");
   bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend (default: auto).");
   bench->add_option("--threads", bench_options.threads, "CPU backend threads (default: all).");
+  bench->add_option("--hwp", bench_options.hwp,
+                    "A half-wave plate before both detectors, turning at 2 Hz: none, ideal, generic (default: none).")
+      ->check(CLI::IsMember({"none", "ideal", "generic"}));
+  bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
+      ->check(CLI::IsMember({"aperture", "detector"}));
 
   auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E) and print a pass/fail table.");
   bool full = false;

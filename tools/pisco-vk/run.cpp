@@ -6,14 +6,17 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <ctime>
 #include <fstream>
+#include <functional>
 #include <numbers>
 #include <optional>
 #include <array>
 #include <sstream>
 
 #include "progress.hpp"
+#include "signals.hpp"
 
 namespace pisco_cli {
 namespace {
@@ -41,7 +44,9 @@ std::vector<double> read_bb_template(const fs::path& file, int lmax) {
 
 pisco::Sky make_sky(const SkyConfig& s, const fs::path& assets) {
   if (!s.file.empty()) {
-    pisco::Sky sky = pisco::Sky::read_fits(s.file);
+    // UNSEEN pixels: an error naming the file's column, or kept for the engine ([sky] unseen).
+    pisco::Sky sky = pisco::Sky::read_fits(
+        s.file, s.unseen == pisco::UnseenPolicy::error ? pisco::UnseenPolicy::error : pisco::UnseenPolicy::flag);
     if (s.unpolarized) {
       std::fill(sky.Q().begin(), sky.Q().end(), 0.0);
       std::fill(sky.U().begin(), sky.U().end(), 0.0);
@@ -84,6 +89,7 @@ pisco::Beamsor make_beam(const BeamConfig& b, const fs::path& config) {
 struct BoresightChunk {
   pisco::Pointing angles;
   std::vector<pisco::Quat> quats;
+  std::vector<double> hwp;  // the half-wave plate's angle per sample, with [hwp]
   bool quaternions = false;
   std::size_t first = 0;
   std::size_t size() const { return quaternions ? quats.size() : angles.size(); }
@@ -93,11 +99,14 @@ struct BoresightChunk {
 // scanning, a year of satellite scanning or a season's pointing file is never held in memory whole).
 class Boresight {
  public:
-  explicit Boresight(const ScanConfig& s) : scan_(s) {
+  Boresight(const ScanConfig& s, const HwpConfig& hwp) : scan_(s), hwp_(hwp) {
     if (s.type == "pixel_centres") all_ = pisco::pixel_centre_scan(s.nside, s.psi);
     else if (s.type == "random_offsets") all_ = pisco::random_offset_scan(s.nside, s.psi, s.f, s.seed, s.symmetric);
     else if (s.type == "raster") all_ = pisco::raster_scan(s.theta, s.phi, s.radius, s.nside, s.psi);
     else if (s.type == "file") file_.emplace(s.file);
+    if (hwp_.angles_from_file && !(file_ && file_->has_hwp_angle()))
+      throw pisco::Error(s.file.string() + ": [hwp] gives no rotation or steps, and the pointing file has no "
+                                           "'hwp_angle' dataset (expected one of them)");
   }
   bool quaternions() const { return scan_.type == "satellite" || file_.has_value(); }
   std::size_t size() const {
@@ -118,10 +127,14 @@ class Boresight {
       out.angles.phi.assign(v.phi.begin(), v.phi.end());
       out.angles.psi.assign(v.psi.begin(), v.psi.end());
     }
+    out.hwp.clear();
+    if (hwp_.angles_from_file) file_->read_hwp_angle(first, count, out.hwp);
+    else if (hwp_.enabled) hwp_.stream.generate(first, count, out.hwp);
   }
 
  private:
   ScanConfig scan_;
+  HwpConfig hwp_;
   pisco::Pointing all_;
   std::optional<pisco::BoresightFile> file_;
 };
@@ -141,22 +154,40 @@ std::optional<double> window_fwhm(const BeamConfig& b) {
   return std::nullopt;
 }
 
+// Written whole or not at all (pisco::write_file_atomically): a full disk is an error naming the file.
 void write_spectra(const fs::path& file, const pisco::Spectra& s, int lmax, const std::string& header) {
-  const fs::path tmp = file.string() + ".tmp";
-  {
-    std::ofstream out(tmp);
-    if (!out) throw pisco::Error(file.string() + ": cannot write");
-    out << "# " << header << "\n# l  D_l = l(l+1)C_l/2pi:  TT EE BB TE EB TB\n";
-    char buf[256];
-    for (int l = 2; l <= lmax; ++l) {
-      const double f = l * (l + 1.0) / (2 * std::numbers::pi);
-      std::snprintf(buf, sizeof buf, "%d %.10e %.10e %.10e %.10e %.10e %.10e\n", l, f * s.TT[l], f * s.EE[l],
-                    f * s.BB[l], f * s.TE[l], f * s.EB[l], f * s.TB[l]);
-      out << buf;
-    }
-    if (!out.flush()) throw pisco::Error(file.string() + ": write failed");
+  std::string text = "# " + header + "\n# l  D_l = l(l+1)C_l/2pi:  TT EE BB TE EB TB\n";
+  char buf[256];
+  for (int l = 2; l <= lmax; ++l) {
+    const double f = l * (l + 1.0) / (2 * std::numbers::pi);
+    std::snprintf(buf, sizeof buf, "%d %.10e %.10e %.10e %.10e %.10e %.10e\n", l, f * s.TT[l], f * s.EE[l],
+                  f * s.BB[l], f * s.TE[l], f * s.EB[l], f * s.TB[l]);
+    text += buf;
   }
-  fs::rename(tmp, file);
+  pisco::write_file_atomically(file, text);
+}
+
+// The plotting tool (tools/pisco_plot.py), started with an argument vector, never through a shell:
+// the output directory reaches it as one argument whatever its characters. Returns false when it
+// cannot plot here (no Python, or no healpy or matplotlib: the tool exits with status 3), saying why;
+// throws pisco::Error when it fails otherwise (a full disk: status 4; a crash).
+bool run_plots(const fs::path& python, const fs::path& script, const fs::path& dir, bool quiet,
+               const std::function<void(const std::string&)>& say) {
+  const std::vector<std::string> args{python.string(), script.string(), dir.string()};
+  const ChildStatus st = run_child(args, quiet);
+  if (st.spawn_error != 0) {
+    say("plots: skipped (" + python.string() + " could not be started: " + std::strerror(st.spawn_error) + ")\n");
+    return false;
+  }
+  if (st.exited && st.code == 0) return true;
+  if (st.exited && st.code == 3) {
+    say("plots: skipped (" + script.filename().string() + " cannot plot here; see above)\n");
+    return false;
+  }
+  throw pisco::Error("plots: " + script.string() + " " +
+                     (st.exited ? "failed with exit status " + std::to_string(st.code)
+                                : "was killed by signal " + std::to_string(st.signal)) +
+                     " writing into " + dir.string() + " (see its message above)");
 }
 
 }  // namespace
@@ -179,8 +210,23 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
   }
   pisco::FocalPlane fp(c.detectors);
-  pisco::Engine engine(sky, beams, fp, c.engine.options);
+  pisco::EngineOptions engine_options = c.engine.options;
+  engine_options.unseen = c.sky.unseen;
+  pisco::Engine engine(sky, beams, fp, engine_options);
   say("backend: %s (%s)\n", engine.backend_name().c_str(), engine.device_name().c_str());
+  // [sky] unseen = "flag": samples whose disc holds an UNSEEN pixel are flagged in the TOD file and
+  // left out of the maps.
+  const bool flagging = c.sky.unseen == pisco::UnseenPolicy::flag && engine.unseen_pixels() > 0;
+  if (engine.unseen_pixels() > 0)
+    say("sky: %zu UNSEEN pixels taken as 0%s\n", engine.unseen_pixels(),
+        flagging ? "; samples whose disc holds one are flagged and left out of the maps" : " ([sky] unseen = \"zero\")");
+  std::vector<std::uint8_t> flags;
+  std::uint64_t flagged = 0;
+  auto flag_samples = [&](std::size_t detector, const auto& boresight_view) {
+    flags.resize(boresight_view.size());
+    flagged += engine.flag_samples(detector, boresight_view, flags);
+    return std::span<const std::uint8_t>(flags);
+  };
 
   // Pointing files hold either boresight quaternions (the engine applies each detector's offset) or
   // each detector's own angles (per-detector groups, read whole).
@@ -200,7 +246,7 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
                            " samples, the others " + std::to_string(samples_per_detector));
     }
   } else {
-    boresight.emplace(c.scan);
+    boresight.emplace(c.scan, c.hwp);
     samples_per_detector = boresight->size();
   }
   const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
@@ -208,7 +254,11 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
                          : c.scan.type == "file" ? sky.nside() : c.scan.nside;
   say("scan: %s, %zu detectors x %zu samples\n", c.scan.type.c_str(), fp.size(), samples_per_detector);
 
-  fs::create_directories(c.output.dir);
+  if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
+    throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
+                       std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
+  if (std::error_code ec; !fs::create_directories(c.output.dir, ec) && ec)
+    throw pisco::Error(c.output.dir.string() + ": cannot create the output directory (" + ec.message() + ")");
   std::optional<pisco::BinnedMapmaker> mapper;
   if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
   std::optional<pisco::TodWriter> tod_file;
@@ -225,7 +275,8 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
                                                         {"device", engine.device_name()},
                                                         {"pisco_version", pisco::version},
                                                         {"created", utc_now()},
-                                                        {"config", c.text}});
+                                                        {"config", c.text}},
+                     flagging);
   }
 
   Progress progress(total, quiet);
@@ -245,7 +296,18 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   for (auto& t : tod) t.resize(chunk);
   std::array<BoresightChunk, 2> bore;
   std::array<pisco::Pointing, 2> file_pointing;  // per-detector files: the detector's pointing, whole
+  std::array<std::vector<double>, 2> file_hwp;   // per-detector files: a job's plate angles, by TOD buffer
   std::optional<Job> pending;
+  // The half-wave plate's angles of a job (empty for detectors without a plate), and the detectors as
+  // the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in place of the real one).
+  auto hwp_of = [&](const Job& j) -> std::span<const double> {
+    if (!fp[j.detector].hwp) return {};
+    return per_detector_file ? std::span<const double>(file_hwp[j.slot]) : std::span<const double>(bore[j.bslot].hwp);
+  };
+  std::vector<pisco::Detector> modelled = fp.detectors();
+  if (c.hwp.ideal_mapmaker)
+    for (auto& d : modelled)
+      if (d.hwp) d.hwp->mueller = pisco::ideal_hwp_mueller();
   pisco::Pointing own;
   auto finish = [&](const Job& j) {
     engine.wait(j.ticket);
@@ -261,15 +323,23 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
         pisco::detector_pointing(b.angles.view(), det.offset, own);
     }
     const pisco::PointingView detector_view = own.view();
-    if (mapper) mapper->add(det, detector_view, t);
-    if (tod_file) tod_file->write(j.detector, j.first, t, c.output.tod_pointing ? &detector_view : nullptr);
+    std::span<const std::uint8_t> fl;  // [sky] unseen = "flag": the samples whose disc holds an UNSEEN pixel
+    if (flagging) {
+      const BoresightChunk& b = bore[j.bslot];
+      fl = per_detector_file ? flag_samples(j.detector, file_pointing[j.detector % 2].view().subspan(j.first, j.count))
+           : b.quaternions   ? flag_samples(j.detector, pisco::QuatPointingView{b.quats})
+                             : flag_samples(j.detector, b.angles.view());
+    }
+    if (mapper) mapper->add(modelled[j.detector], detector_view, t, hwp_of(j), fl);
+    if (tod_file) tod_file->write(j.detector, j.first, t, c.output.tod_pointing ? &detector_view : nullptr, fl);
     progress.advance(j.count);
   };
   int next_slot = 0;
   auto submit = [&](Job j, auto submit_view) {
     j.slot = next_slot;
     next_slot ^= 1;
-    j.ticket = submit_view(std::span<double>(tod[j.slot].data(), j.count));
+    if (per_detector_file && c.hwp.enabled) c.hwp.stream.generate(j.first, j.count, file_hwp[j.slot]);
+    j.ticket = submit_view(std::span<double>(tod[j.slot].data(), j.count), hwp_of(j));
     if (pending) finish(*pending);
     pending = j;
   };
@@ -279,7 +349,9 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
       ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
       for (std::size_t off = 0; off < ptg.size(); off += chunk) {
         const std::size_t n = std::min(chunk, ptg.size() - off);
-        submit(Job{d, off, n}, [&](std::span<double> t) { return engine.submit(d, ptg.view().subspan(off, n), t); });
+        submit(Job{d, off, n}, [&](std::span<double> t, std::span<const double> h) {
+          return engine.submit(d, ptg.view().subspan(off, n), t, false, h);
+        });
       }
     }
   } else {
@@ -290,8 +362,9 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
       BoresightChunk& b = bore[bslot];  // the other is still the pending job's
       boresight->fill(off, n, b);
       for (std::size_t d = 0; d < fp.size(); ++d) {
-        submit(Job{d, off, n, bslot}, [&](std::span<double> t) {
-          return b.quaternions ? engine.submit(d, pisco::QuatPointingView{b.quats}, t) : engine.submit(d, b.angles.view(), t);
+        submit(Job{d, off, n, bslot}, [&](std::span<double> t, std::span<const double> h) {
+          return b.quaternions ? engine.submit(d, pisco::QuatPointingView{b.quats}, t, false, h)
+                               : engine.submit(d, b.angles.view(), t, false, h);
         });
       }
       bslot ^= 1;
@@ -305,6 +378,12 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     tod_file->commit();
     written.push_back(tod_path);
   }
+  if (flagging)
+    say("flags: %llu of %llu samples flagged (their disc holds an UNSEEN pixel)%s\n",
+        static_cast<unsigned long long>(flagged), static_cast<unsigned long long>(total),
+        tod_file ? "; the TOD file's 'flags' datasets" : "");
+  // A run whose maps solve no pixel has no maps to speak of: no spectra or plots, and exit status 4.
+  std::string nothing_solved;
 
   if (mapper) {
     const pisco::BinnedMaps maps = mapper->solve();
@@ -318,8 +397,35 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     const auto solved = std::count_if(maps.I.begin(), maps.I.end(), [](double v) { return v != pisco::unseen; });
     say("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside, solved, maps.I.size(),
         c.output.rcond_min);
+    if (c.hwp.enabled && solved > 0) {
+      // The plate's figure: the polarization of the maps against their temperature (on an unpolarized
+      // sky, the plate's leakage of temperature into polarization as the map-maker's model leaves it).
+      double ii = 0, qq = 0, uu = 0, mean_i = 0;
+      for (std::size_t p = 0; p < maps.I.size(); ++p)
+        if (maps.I[p] != pisco::unseen) mean_i += maps.I[p];
+      mean_i /= double(solved);
+      for (std::size_t p = 0; p < maps.I.size(); ++p)
+        if (maps.I[p] != pisco::unseen) {
+          ii += (maps.I[p] - mean_i) * (maps.I[p] - mean_i);
+          qq += maps.Q[p] * maps.Q[p];
+          uu += maps.U[p] * maps.U[p];
+        }
+      const double ri = std::sqrt(ii / double(solved)), rq = std::sqrt(qq / double(solved)), ru = std::sqrt(uu / double(solved));
+      say("hwp: maps' rms Q %.3g, U %.3g, I (mean removed) %.3g %s: leakage figure rms P / rms I = %.3g%s\n", rq, ru, ri,
+          sky.units().c_str(), std::hypot(rq, ru) / ri,
+          c.hwp.ideal_mapmaker ? " (maps binned with an ideal plate's model)" : "");
+    }
+    if (solved == 0) {
+      const auto hit = std::count_if(maps.hits.begin(), maps.hits.end(), [](std::uint32_t h) { return h > 0; });
+      nothing_solved = "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) +
+                       " NSIDE " + std::to_string(maps_nside) + " pixels are hit" +
+                       (flagging ? " by unflagged samples" : "") + ", none with rcond >= " +
+                       [](double v) { char b[32]; std::snprintf(b, sizeof b, "%g", v); return std::string(b); }(c.output.rcond_min) +
+                       " (each pixel needs three or more polarization angles); maps.fits is all UNSEEN, and no "
+                       "spectra or plots were made";
+    }
 
-    if (c.output.spectra) {
+    if (c.output.spectra && nothing_solved.empty()) {
       const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
       const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
       const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
@@ -345,15 +451,13 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     }
   }
 
-  if (c.output.plots && ro.plots && c.output.maps) {
+  if (c.output.plots && ro.plots && c.output.maps && nothing_solved.empty()) {
     const fs::path plot_script = ro.data_dir / "tools" / "pisco_plot.py";
     if (!fs::exists(plot_script)) {
       say("plots: skipped (tools/pisco_plot.py not found)\n");
     } else {
-      const std::string python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-      const std::string cmd = python + " \"" + plot_script.string() + "\" \"" + c.output.dir.string() + "\"" +
-                              (quiet ? " >/dev/null" : "");
-      if (std::system(cmd.c_str()) != 0) say("plots: skipped (%s could not run; see above)\n", python.c_str());
+      const fs::path python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+      run_plots(python, plot_script, c.output.dir, quiet, [&](const std::string& m) { say("%s", m.c_str()); });
     }
   }
 
@@ -365,6 +469,11 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     std::printf("         device %s (%s); convolution %s, wall time %s\n", engine.backend_name().c_str(),
                 engine.device_name().c_str(), human_seconds(conv).c_str(), human_seconds(wall).c_str());
     for (const auto& f : written) std::printf("         wrote %s\n", f.string().c_str());
+  }
+  if (!nothing_solved.empty()) {
+    std::fflush(stdout);
+    std::fprintf(stderr, "pisco-vk: warning: %s\n", nothing_solved.c_str());
+    return exit_nothing_solved;
   }
   return 0;
 }

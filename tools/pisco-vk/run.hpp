@@ -12,6 +12,10 @@ struct RunOptions {
   std::filesystem::path data_dir;     // holds assets/ and tools/pisco_plot.py
 };
 
+// The exit status of a run whose maps solve no pixel (docs/config.md): its files are written, the maps
+// all UNSEEN, with a warning on stderr.
+inline constexpr int exit_nothing_solved = 4;
+
 // Runs a whole simulation: sky -> TOD -> maps -> spectra (-> plots). Returns the exit status.
 int run_simulation(const SimulationConfig& config, const RunOptions& options);
 

@@ -1,0 +1,367 @@
+// `pisco-vk run` under hostile but fair conditions (docs/formats.md, "Errors and partial files"): an
+// output directory full of shell syntax, a disk that fills at each writer, stop signals mid-run, masked
+// skies, runs that solve no pixel, and errors that must name their file and key.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <numeric>
+#include <string>
+
+#include "cli_runner.hpp"
+#include "pisco/pisco.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using pisco_test::CliResult;
+using pisco_test::files_under;
+using pisco_test::joined;
+using pisco_test::run_cli;
+using pisco_test::temporaries_under;
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+class Reliability : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("pisco-rel-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  fs::path write(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p) << text;
+    return p;
+  }
+  // A small simulation (2 detectors x 3 x 3072 samples); `scan` and `extra` ([output] keys) vary it.
+  std::string config(const std::string& sky = "[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                     const std::string& scan = "[scan]\ntype = \"pixel_centres\"\nnside = 16\n",
+                     const std::string& extra = "plots = false\nlmax = 32\n",
+                     const std::string& fp = "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n",
+                     const std::string& engine = "") {
+    return sky + "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n" + fp + scan +
+           "[engine]\nbackend = \"cpu\"\n" + engine + "[output]\n" + extra;
+  }
+  // A stand-in for tools/pisco_plot.py, under a data directory of its own (PISCO_DATA_DIR).
+  fs::path fake_plotter(const std::string& python) {
+    const fs::path data = dir_ / "data";
+    fs::create_directories(data / "tools");
+    std::ofstream(data / "tools" / "pisco_plot.py") << python;
+    return data;
+  }
+  fs::path dir_;
+};
+
+void expect_one_error(const CliResult& r, const std::string& needle) {
+  EXPECT_TRUE(r.exited && r.status == 2) << r.describe() << "\n" << r.output;
+  EXPECT_EQ(r.error_lines(), 1u) << r.output;
+  EXPECT_TRUE(contains(r.error_line(), needle)) << "expected '" << needle << "' in: " << r.error_line();
+}
+
+// The output directory reaches the plotting tool as one argument, never through a shell: command
+// substitutions, backticks, quotes, semicolons and spaces in it run nothing.
+TEST_F(Reliability, HostileOutputDirectoryReachesNoShell) {
+  const std::string hostile = "out $(touch PWNED1) `touch PWNED2` \"q\" 's' ; touch PWNED3 & x";
+  const fs::path out = dir_ / hostile;
+  const fs::path data = fake_plotter(
+      "import os, sys\n"
+      "open(os.path.join(sys.argv[1], 'plot-args.txt'), 'w').write('\\n'.join(sys.argv[1:]))\n");
+  const fs::path cfg = write("sim.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                "[scan]\ntype = \"pixel_centres\"\nnside = 16\n",
+                                                "plots = true\nspectra = false\n"));
+  const CliResult r = run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {{"PISCO_DATA_DIR", data.string()}}, 120, dir_);
+  ASSERT_TRUE(r.exited && r.status == 0) << r.describe() << "\n" << r.output;
+  std::ifstream args(out / "plot-args.txt");
+  std::string got;
+  std::getline(args, got);
+  EXPECT_EQ(got, out.string()) << "the plotting tool's one argument";
+  // The real plotting tool on the same directory: plots, or a skip message where healpy is missing.
+  const CliResult real = run_cli({"run", cfg.string(), "-o", out.string()}, {}, 120, dir_);
+  std::cout << real.output;
+  EXPECT_TRUE(real.exited && real.status == 0) << real.describe() << "\n" << real.output;
+  EXPECT_TRUE(contains(real.output, "plots: wrote") || contains(real.output, "plots: skipped")) << real.output;
+  if (contains(real.output, "plots: wrote")) EXPECT_TRUE(fs::exists(out / "maps_mollview.png"));
+  for (const auto& f : files_under(dir_))
+    EXPECT_FALSE(contains(fs::path(f).filename().string(), "PWNED")) << "a shell ran: " << f;
+  EXPECT_TRUE(temporaries_under(dir_).empty()) << joined(temporaries_under(dir_));
+}
+
+// A full disk at each writer (PISCO_TEST_FAULT=write-fail:NAME: the writer of NAME finds the disk
+// full): one error naming the file and the reason, status 2, no crash, no temporary file; the files
+// written before stay whole (they read back), none after is made.
+TEST_F(Reliability, FullDiskAtEachWriter) {
+  const fs::path cfg = write("sim.toml", config());
+  const std::vector<std::string> order{"tod.h5", "maps.fits", "hits.fits", "spectra.txt", "input_spectra.txt"};
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    const fs::path out = dir_ / ("out-" + order[k]);
+    const CliResult r = run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {{"PISCO_TEST_FAULT", "write-fail:" + order[k]}});
+    std::cout << order[k] << ": " << r.describe() << ": " << r.error_line() << "\n";
+    expect_one_error(r, (out / order[k]).string());
+    EXPECT_TRUE(contains(r.error_line(), "No space left on device")) << r.error_line();
+    EXPECT_TRUE(temporaries_under(out).empty()) << joined(temporaries_under(out));
+    for (std::size_t j = 0; j < order.size(); ++j)
+      EXPECT_EQ(fs::exists(out / order[j]), j < k) << order[k] << " failing, " << order[j];
+    if (k > 0) EXPECT_EQ(pisco::read_tod_signal(out / "tod.h5", "pb").size(), 9216u);
+    if (k > 1) EXPECT_EQ(pisco::Sky::read_fits(out / "maps.fits", pisco::UnseenPolicy::flag).nside(), 16);
+  }
+  // The plotting tool on a full disk: its error, then pisco-vk's, no half-written PNG.
+  const fs::path out = dir_ / "out-plots";
+  const fs::path cfg_plots = write("plots.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                        "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = true\n"));
+  const CliResult r = run_cli({"run", "-q", cfg_plots.string(), "-o", out.string()},
+                              {{"PISCO_TEST_FAULT", "write-fail:hits_mollview.png"}});
+  std::cout << "plots: " << r.describe() << ":\n" << r.output;
+  if (contains(r.output, "cannot plot")) {
+    std::cout << "(the real plotting tool cannot plot here: python3-healpy or matplotlib missing; its full disk is "
+                 "checked through a stand-in)\n";
+    const fs::path data = fake_plotter(
+        "import os, sys\n"
+        "sys.stderr.write('pisco_plot: ' + os.path.join(sys.argv[1], 'maps_mollview.png') + ': No space left on device\\n')\n"
+        "sys.exit(4)\n");
+    const CliResult f = run_cli({"run", "-q", cfg_plots.string(), "-o", (dir_ / "out-fake").string()},
+                                {{"PISCO_DATA_DIR", data.string()}});
+    expect_one_error(f, "failed with exit status 4");
+    return;
+  }
+  expect_one_error(r, "failed with exit status 4");
+  EXPECT_TRUE(contains(r.output, "hits_mollview.png: No space left on device")) << r.output;
+  EXPECT_TRUE(fs::exists(out / "maps_mollview.png"));
+  EXPECT_FALSE(fs::exists(out / "hits_mollview.png"));
+  EXPECT_TRUE(temporaries_under(out).empty()) << joined(temporaries_under(out));
+}
+
+// A real small file system (a tmpfs in a private mount namespace, where `unshare -rm` is allowed),
+// sized to fill during each writer in turn: every run ends with all its files, or one error about
+// the space, status 2 and no temporary file; never a crash (HDF5's exit handlers were one).
+TEST_F(Reliability, FullDiskOnASmallFileSystem) {
+  const CliResult probe = pisco_test::finish_cli(
+      pisco_test::start_process("unshare", {"-rm", "sh", "-c", "mkdir -p \"$0\" && mount -t tmpfs -o size=64k tmpfs \"$0\"",
+                                            (dir_ / "probe").string()}));
+  if (!(probe.exited && probe.status == 0))
+    GTEST_SKIP() << "no small file system can be mounted here without root (unshare -rm: " << probe.describe() << ": "
+                 << probe.output << "); the fault-injection test covers every writer";
+  const fs::path cfg = write("sim.toml", config());
+  const fs::path whole = dir_ / "whole";
+  ASSERT_EQ(run_cli({"run", "-q", cfg.string(), "-o", whole.string()}).status, 0);
+  std::vector<std::uintmax_t> sizes;
+  const std::vector<std::string> order{"tod.h5", "maps.fits", "hits.fits", "spectra.txt", "input_spectra.txt"};
+  for (const auto& f : order) sizes.push_back(fs::file_size(whole / f));
+  std::vector<std::uintmax_t> limits{4096, 16384};
+  std::uintmax_t before = 0;
+  for (std::uintmax_t s : sizes) {
+    for (double part : {0.3, 0.6, 0.9, 0.99}) limits.push_back(before + std::uintmax_t(part * double(s)));
+    before += s;
+  }
+  limits.push_back(before + (1 << 20));
+  int failures = 0;
+  for (std::uintmax_t limit : limits) {
+    const std::uintmax_t kib = (limit + 4095) / 4096 * 4;
+    const fs::path mnt = dir_ / "small";
+    const std::string script =
+        "mkdir -p \"$1\" && mount -t tmpfs -o size=$2k tmpfs \"$1\" || exit 99\n"
+        "\"$0\" run -q \"$3\" -o \"$1/out\"\nrc=$?\necho \"FILES: $(ls -A \"$1/out\" 2>/dev/null | tr '\\n' ' ')\"\nexit $rc\n";
+    const CliResult r = pisco_test::finish_cli(pisco_test::start_process(
+        "unshare", {"-rm", "sh", "-c", script, PISCO_VK_EXE, mnt.string(), std::to_string(kib), cfg.string()}));
+    const std::string files = r.output.substr(r.output.find("FILES:"));
+    std::cout << kib << " KiB: " << r.describe() << "; " << (r.error_lines() ? r.error_line() : "") << " " << files;
+    EXPECT_TRUE(r.exited && (r.status == 0 || r.status == 2)) << r.describe() << "\n" << r.output;
+    EXPECT_FALSE(contains(files, ".tmp")) << files;
+    if (r.status == 2) {
+      ++failures;
+      EXPECT_EQ(r.error_lines(), 1u) << r.output;
+      EXPECT_TRUE(contains(r.error_line(), "space")) << r.error_line();
+    } else {
+      for (const auto& f : order) EXPECT_TRUE(contains(files, f)) << files;
+    }
+  }
+  EXPECT_GE(failures, 10);
+}
+
+// SIGINT, SIGTERM and SIGHUP in the middle of a convolution end the run within a second or so, with
+// status 128 + signal and no file left (the TOD temporary included).
+TEST_F(Reliability, StopSignalsEndTheRunAndRemoveTemporaries) {
+  const fs::path cfg = write("long.toml", config("[sky]\nnside = 64\nlmax = 128\nseed = 3\n",
+                                                 "[scan]\ntype = \"pixel_centres\"\nnside = 128\n", "plots = false\n",
+                                                 "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n",
+                                                 "chunk_samples = 20000\n"));
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
+    const fs::path out = dir_ / ("out-" + std::to_string(sig));
+    auto p = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()});
+    bool sent = false;
+    std::chrono::steady_clock::time_point sent_at;
+    const CliResult r = pisco_test::finish_cli(p, 120, [&](const std::string&) {
+      if (sent || temporaries_under(out).empty()) return;
+      // The TOD file is being written (its temporary exists), mid-convolution.
+      ::kill(p.pid, sig);
+      sent = true;
+      sent_at = std::chrono::steady_clock::now();
+    });
+    const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - sent_at).count();
+    std::cout << strsignal(sig) << ": " << r.describe() << " " << took << " s after the signal; "
+              << r.output.substr(r.output.rfind("pisco-vk:")) ;
+    ASSERT_TRUE(sent) << "the run ended before its TOD temporary appeared:\n" << r.output;
+    EXPECT_TRUE(r.exited && r.status == 128 + sig) << r.describe();
+    EXPECT_LT(took, 3.0);
+    EXPECT_TRUE(files_under(out).empty()) << "left: " << joined(files_under(out));
+    EXPECT_TRUE(contains(r.output, "stopped by SIG")) << r.output;
+  }
+}
+
+// A stop signal while the plotting tool runs reaches it: it removes its temporary PNG, and pisco-vk
+// exits with 128 + signal; the files written before stay whole.
+TEST_F(Reliability, StopSignalReachesThePlottingTool) {
+  const fs::path data = fake_plotter(
+      "import os, signal, sys, time\n"
+      "tmp = os.path.join(sys.argv[1], 'maps_mollview.png.tmp-%d' % os.getpid())\n"
+      "def stop(signum, frame):\n"
+      "    os.remove(tmp)\n"
+      "    print('fake plotter: stopped by signal %d' % signum, flush=True)\n"
+      "    sys.exit(128 + signum)\n"
+      "signal.signal(signal.SIGTERM, stop)\n"
+      "open(tmp, 'w').write('half a plot')\n"
+      "print('fake plotter: plotting', flush=True)\n"
+      "time.sleep(60)\n");
+  const fs::path cfg = write("sim.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = true\n"));
+  const fs::path out = dir_ / "out";
+  auto p = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()}, {{"PISCO_DATA_DIR", data.string()}});
+  bool sent = false;
+  const CliResult r = pisco_test::finish_cli(p, 120, [&](const std::string& output) {
+    if (!sent && contains(output, "fake plotter: plotting")) {
+      ::kill(p.pid, SIGTERM);
+      sent = true;
+    }
+  });
+  ASSERT_TRUE(sent) << r.output;
+  EXPECT_TRUE(r.exited && r.status == 128 + SIGTERM) << r.describe() << "\n" << r.output;
+  EXPECT_TRUE(temporaries_under(out).empty()) << joined(temporaries_under(out)) << "\n" << r.output;
+  EXPECT_TRUE(contains(r.output, "fake plotter: stopped by signal 15")) << r.output;
+  EXPECT_EQ(pisco::read_tod_signal(out / "tod.h5", "pa").size(), 9216u);
+}
+
+// A run whose maps solve no pixel (one polarization angle per pixel) says so on stderr and exits with
+// status 4; its TOD and maps are written, no spectra.
+TEST_F(Reliability, NoPixelSolvedExitsWithStatus4) {
+  const fs::path cfg = write("one.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                "[scan]\ntype = \"pixel_centres\"\nnside = 16\npsi_deg = [0]\n"));
+  const fs::path out = dir_ / "out";
+  const CliResult r = run_cli({"run", "-q", cfg.string(), "-o", out.string()});
+  std::cout << r.output;
+  EXPECT_TRUE(r.exited && r.status == 4) << r.describe();
+  EXPECT_EQ(r.error_lines(), 0u);
+  EXPECT_TRUE(contains(r.output, "pisco-vk: warning: the maps solve no pixel: 3072 of 3072 NSIDE 16 pixels are hit"))
+      << r.output;
+  EXPECT_TRUE(fs::exists(out / "maps.fits"));
+  EXPECT_FALSE(fs::exists(out / "spectra.txt"));
+}
+
+// Masked skies through the command line: an error by default (file, column, count, first pixel);
+// [sky] unseen = "zero" runs; "flag" flags the samples whose disc holds an UNSEEN pixel in the TOD
+// file (as the library flags them) and leaves them out of the maps.
+TEST_F(Reliability, MaskedSkies) {
+  pisco::Sky sky(16, "K");
+  for (std::size_t p = 0; p < sky.npix(); ++p) sky.I()[p] = 1e-3 * std::sin(0.01 * double(p));
+  const std::size_t source = pisco::ang2pix(16, 1.0, 2.0);
+  std::vector<std::size_t> mask{source, source + 1, 1500};
+  for (std::size_t p : mask) sky.I()[p] = pisco::unseen;
+  sky.write_fits(dir_ / "masked.fits");
+  const std::string beam = "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n";
+  auto cfg = [&](const std::string& unseen) {
+    return write("m.toml", "[sky]\nfile = \"masked.fits\"\n" + unseen + beam +
+                               "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n"
+                               "[scan]\ntype = \"pixel_centres\"\nnside = 16\n[engine]\nbackend = \"cpu\"\n"
+                               "[output]\nplots = false\nlmax = 32\n");
+  };
+  const fs::path out = dir_ / "out";
+  const CliResult e = run_cli({"run", "-q", cfg("").string(), "-o", out.string()});
+  expect_one_error(e, (dir_ / "masked.fits").string() + ": column 1 (I_STOKES) has 3 UNSEEN pixels");
+  EXPECT_TRUE(contains(e.error_line(), "the first at pixel " + std::to_string(std::min(source, std::size_t(1500)))));
+  EXPECT_TRUE(files_under(out).empty());
+  expect_one_error(run_cli({"run", "-q", write("bad.toml", "[sky]\nnside = 16\nunseen = \"zero\"\n" + beam).string(),
+                            "-o", out.string()}),
+                   "[sky] unseen: only for a map file");
+
+  const CliResult z = run_cli({"run", cfg("unseen = \"zero\"\n").string(), "-o", out.string()});
+  EXPECT_TRUE(z.exited && z.status == 0) << z.output;
+  EXPECT_TRUE(contains(z.output, "sky: 3 UNSEEN pixels taken as 0")) << z.output;
+  EXPECT_TRUE(pisco::read_tod_flags(out / "tod.h5", "pa").empty());
+
+  const CliResult f = run_cli({"run", cfg("unseen = \"flag\"\n").string(), "-o", out.string()});
+  std::cout << f.output;
+  ASSERT_TRUE(f.exited && f.status == 0) << f.output;
+  // The library's flags for the same scan.
+  pisco::Sky kept = pisco::Sky::read_fits(dir_ / "masked.fits", pisco::UnseenPolicy::flag);
+  pisco::BeamOptions o;
+  o.rho_max = 8 * pisco::deg;
+  pisco::FocalPlane fp;
+  fp.add_pair("p", 0, 0, 0);
+  pisco::Engine engine(kept, {pisco::Beamsor::gaussian(4 * pisco::deg, o)}, fp, {.unseen = pisco::UnseenPolicy::flag});
+  const pisco::Pointing scan = pisco::pixel_centre_scan(16, {0.0, pisco::deg * 45, pisco::deg * 90});
+  std::vector<std::uint8_t> want(scan.size());
+  const std::size_t n = engine.flag_samples(0, scan.view(), want);
+  EXPECT_GT(n, 0u);
+  EXPECT_EQ(pisco::read_tod_flags(out / "tod.h5", "pa"), want);
+  EXPECT_TRUE(contains(f.output, "flags: " + std::to_string(2 * n) + " of " + std::to_string(2 * scan.size()) +
+                                     " samples flagged"))
+      << f.output;
+  const pisco::Sky hits = pisco::Sky::read_fits(out / "hits.fits");
+  const double binned = std::accumulate(hits.I().begin(), hits.I().end(), 0.0);
+  EXPECT_EQ(binned, double(2 * (scan.size() - n))) << "flagged samples are left out of the maps";
+}
+
+// Errors that name their file and key.
+TEST_F(Reliability, ErrorsNameFileAndKey) {
+  const fs::path out = dir_ / "out";
+  auto run = [&](const std::string& name, const std::string& text, const std::string& needle) {
+    const CliResult r = run_cli({"run", "-q", write(name, text).string(), "-o", out.string()});
+    std::cout << r.error_line() << "\n";
+    expect_one_error(r, needle);
+    EXPECT_TRUE(files_under(out).empty()) << joined(files_under(out));
+  };
+  const std::string sky = "[sky]\nnside = 32\nlmax = 64\nseed = 3\n";
+  run("psi.toml", config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\npsi_deg = [0, nan, 90]\n"),
+      "psi.toml: [scan] psi_deg[1]: expected a finite number");
+  run("ps.toml", config("[sky]\nnside = 32\npoint_source = [190, 0, 1, 0, 0, 0]\n"),
+      "ps.toml: [sky] point_source: theta_deg = 190 is outside [0, 180]");
+  run("threads.toml", config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = false\n",
+                             "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n", "threads = 1000000\n"),
+      "threads.toml: [engine] threads: expected 0 (all hardware threads) or a number of threads up to");
+  run("nside.toml", config("[sky]\nnside = 4294967312\n"), "nside.toml: [sky] nside: expected a power of two");
+  run("eps.toml",
+      config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = false\n",
+             "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"main\"\nepsilon = -0.1\n"),
+      "eps.toml: [focal_plane.detectors[0]] epsilon: expected a cross-polar leakage in [0, 1]");
+  run("dup.toml",
+      config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = false\n",
+             "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n"
+             "[[focal_plane.detectors]]\nname = \"pb\"\nbeam = \"main\"\n"),
+      "dup.toml: [focal_plane.pairs[0]] detector 'pb' is also defined by [focal_plane.detectors[0]]");
+  write("fp.csv", "name,zeta_deg,epsilon,beam\nd1,0,0,main\nd2,90,0,main\n# comment\nd1,45,0,main\n");
+  run("csv.toml", config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = false\n",
+                         "[focal_plane]\nfile = \"fp.csv\"\n"),
+      (dir_ / "fp.csv").string() + ":5: detector 'd1' is also on line 2");
+  write("eps.csv", "name,zeta_deg,epsilon,beam\nd1,0,2,main\n");
+  run("csv2.toml", config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = false\n",
+                          "[focal_plane]\nfile = \"eps.csv\"\n"),
+      (dir_ / "eps.csv").string() + ":2: column 'epsilon': expected a cross-polar leakage in [0, 1], got '2'");
+  fs::create_directories(dir_ / "fpdir");
+  run("fpdir.toml", config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = false\n",
+                           "[focal_plane]\nfile = \"fpdir\"\n"),
+      (dir_ / "fpdir").string() + ": is a directory");
+  run("lmax.toml", config(sky, "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = false\nlmax = 4097\n"),
+      "[output] lmax");
+  fs::create_directories(dir_ / "conf.d");
+  expect_one_error(run_cli({"run", (dir_ / "conf.d").string(), "-o", out.string()}),
+                   (dir_ / "conf.d").string() + ": is a directory (expected a TOML file)");
+  std::ofstream(dir_ / "afile") << "x";
+  expect_one_error(run_cli({"run", "-q", write("ok.toml", config()).string(), "-o", (dir_ / "afile").string()}),
+                   (dir_ / "afile").string() + ": cannot create the output directory");
+}
+
+}  // namespace

@@ -1,0 +1,547 @@
+// The robustness suite (ctest label robustness; docs/validation.md, "Robustness"): malformed simulation
+// files, FITS, HDF5 and CSV inputs, generated systematically and each run through `pisco-vk run`. Every
+// one must end with exactly one `pisco-vk: error:` line naming the key or file at fault, exit status 2,
+// and an empty output directory; corrupted files that still read must never crash the program.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cli_runner.hpp"
+#include "pisco/pisco.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using pisco_test::CliResult;
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+// ---- simulation files
+
+const std::string base_config =
+    "[sky]\nnside = 8\nlmax = 16\nseed = 3\n"
+    "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 10.0\nrho_max_deg = 20.0\n"
+    "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n"
+    "[scan]\ntype = \"pixel_centres\"\nnside = 4\n"
+    "[engine]\nbackend = \"cpu\"\nthreads = 1\n"
+    "[output]\nplots = false\n";
+
+// `text` with the table `header` ("[sky]", "[[focal_plane.pairs]]") replaced by `body`.
+std::string with_table(const std::string& text, const std::string& header, const std::string& body) {
+  const auto at = text.find(header + "\n");
+  if (at == std::string::npos) return text + header + "\n" + body;
+  const auto start = at + header.size() + 1;
+  auto end = start;
+  while (end < text.size() && text[end] != '[') end = text.find('\n', end) + 1;
+  return text.substr(0, start) + body + text.substr(end);
+}
+
+// `text` without the table `header` and its keys.
+std::string without_table(const std::string& text, const std::string& header) {
+  const auto at = text.find(header + "\n");
+  if (at == std::string::npos) return text;
+  auto end = at + header.size() + 1;
+  while (end < text.size() && text[end] != '[') end = text.find('\n', end) + 1;
+  return text.substr(0, at) + text.substr(end);
+}
+
+// `text` with `key = value` in table `header` (replacing the key's line if there is one).
+std::string with_key(const std::string& text, const std::string& header, const std::string& key,
+                     const std::string& value) {
+  const auto at = text.find(header + "\n");
+  if (at == std::string::npos) return text + header + "\n" + key + " = " + value + "\n";
+  const auto start = at + header.size() + 1;
+  auto end = start;
+  std::string body;
+  while (end < text.size() && text[end] != '[') {
+    const auto next = text.find('\n', end) + 1;
+    const std::string line = text.substr(end, next - end);
+    if (line.rfind(key + " =", 0) != 0) body += line;
+    end = next;
+  }
+  return text.substr(0, start) + key + " = " + value + "\n" + body + text.substr(end);
+}
+
+// The variants of the base file in which each key is read.
+std::string variant(const std::string& name) {
+  std::string c = base_config;
+  if (name == "base") return c;
+  if (name == "r") return with_key(c, "[sky]", "r", "0.1");
+  if (name == "point") return with_table(c, "[sky]", "nside = 8\npoint_source = [45, 30, 1, 0.1, 0, 0]\nunits = \"K\"\n");
+  if (name == "file_sky") return with_table(c, "[sky]", "file = \"sky.fits\"\n");
+  if (name == "elliptical")
+    return with_table(c, "[beams.main]", "type = \"elliptical\"\nfwhm_x_deg = 10\nfwhm_y_deg = 12\nangle_deg = 10\nrho_max_deg = 20\n");
+  if (name == "file_beam") return with_table(c, "[beams.main]", "type = \"file\"\nfile = \"beam.fits\"\nrho_max_deg = 20\n");
+  if (name == "detectors")
+    return with_table(without_table(c, "[[focal_plane.pairs]]"), "[focal_plane]",
+                      "[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"main\"\n");
+  if (name == "pair_ab")
+    return with_table(c, "[[focal_plane.pairs]]", "name = \"p\"\nbeam_a = \"main\"\nbeam_b = \"main\"\n");
+  if (name == "fp_file") return with_table(without_table(c, "[[focal_plane.pairs]]"), "[focal_plane]", "file = \"fp.csv\"\n");
+  if (name == "random_offsets") return with_table(c, "[scan]", "type = \"random_offsets\"\nnside = 4\n");
+  if (name == "raster") return with_table(c, "[scan]", "type = \"raster\"\nnside = 8\ntheta_deg = 60\nradius_deg = 20\n");
+  if (name == "ces")
+    return with_table(c, "[scan]", "type = \"ces\"\nsample_rate_hz = 2\nduration_hours = 0.02\naz_throw_deg = 40\nnside = 8\n");
+  if (name == "satellite")
+    return with_table(c, "[scan]", "type = \"satellite\"\nsample_rate_hz = 2\nduration_hours = 0.05\nnside = 8\n");
+  if (name == "scan_file") return with_table(c, "[scan]", "type = \"file\"\nfile = \"bore.h5\"\n");
+  ADD_FAILURE() << "no variant " << name;
+  return c;
+}
+
+enum class Kind { integer, number, string, boolean, numbers, choice, path };
+
+struct Key {
+  std::string variant, table, key;
+  Kind kind;
+  std::vector<std::string> out_of_range;  // values of the right type outside the key's range
+  bool empty_valid = false;               // "" is a valid value
+};
+
+std::vector<std::string> wrong_values(const Key& k) {
+  switch (k.kind) {
+    case Kind::integer: return {"\"8\"", "8.5", "true", "[8]", "{ a = 1 }", "nan", "inf", "\"\""};
+    case Kind::number: return {"\"1\"", "true", "[1]", "{ a = 1 }", "nan", "inf", "-inf", "\"\""};
+    case Kind::boolean: return {"\"true\"", "1", "[true]", "nan", "\"\""};
+    case Kind::numbers: return {"1", "\"x\"", "[]", "[\"a\"]", "[nan]", "[inf]", "[[1]]", "\"\"", "[true]"};
+    case Kind::string:
+    case Kind::choice:
+    case Kind::path: {
+      std::vector<std::string> v{"1", "true", "[\"a\"]", "{ a = 1 }", "nan"};
+      if (!k.empty_valid) v.push_back("\"\"");
+      if (k.kind == Kind::choice) v.push_back("\"nonsense\"");
+      if (k.kind == Kind::path) {
+        v.push_back("\"missing.file\"");
+        v.push_back("\"subdir\"");  // a directory
+      }
+      return v;
+    }
+  }
+  return {};
+}
+
+std::vector<Key> keys() {
+  using K = Kind;
+  const std::string sky = "[sky]", beam = "[beams.main]", pair = "[[focal_plane.pairs]]",
+                    det = "[[focal_plane.detectors]]", fp = "[focal_plane]", scan = "[scan]", engine = "[engine]",
+                    out = "[output]";
+  return {
+      {"base", sky, "nside", K::integer, {"0", "3", "-8", "16384", "4294967304"}},
+      {"base", sky, "lmax", K::integer, {"-1", "33", "2147483648"}},
+      {"base", sky, "seed", K::integer, {"-1"}},
+      {"base", sky, "r", K::number, {"-0.5"}},
+      {"base", sky, "cl_file", K::path, {}},
+      {"r", sky, "bb_template", K::path, {}},
+      {"base", sky, "unpolarized", K::boolean, {}},
+      {"base", sky, "unseen", K::choice, {"\"zero\""}},
+      {"point", sky, "point_source", K::numbers,
+       {"[1, 2, 3]", "[200, 0, 1, 0, 0, 0]", "[-1, 0, 1, 0, 0, 0]", "[1, 2, 3, 4, 5, 6, 7]"}},
+      {"point", sky, "units", K::string, {"\"" + std::string(69, 'K') + "\""}, true},
+      {"file_sky", sky, "file", K::path, {}},
+      {"file_sky", sky, "unseen", K::choice, {}},
+      {"base", sky, "nonsense_key", K::integer, {"1"}},
+      {"base", beam, "type", K::choice, {}},
+      {"base", beam, "fwhm_deg", K::number, {"0", "-1", "40", "1e300"}},
+      {"base", beam, "rho_max_deg", K::number, {"0", "-1", "90", "1000"}},
+      {"base", beam, "grid_step_arcmin", K::number, {"-1", "1e-9"}},
+      {"base", beam, "cross_polar", K::number, {}},
+      {"base", beam, "cross_polar_pattern", K::choice, {}},
+      {"base", beam, "mueller", K::numbers, {"[1, 0, 0]", "[0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]"}},
+      {"elliptical", beam, "fwhm_x_deg", K::number, {"0", "-1"}},
+      {"elliptical", beam, "fwhm_y_deg", K::number, {"0", "-1"}},
+      {"elliptical", beam, "angle_deg", K::number, {}},
+      {"file_beam", beam, "file", K::path, {}},
+      {"base", pair, "name", K::string, {}},
+      {"base", pair, "zeta_deg", K::number, {}},
+      {"base", pair, "epsilon", K::number, {"-0.1", "1.1"}},
+      {"base", pair, "beam", K::string, {"\"side\""}},
+      {"pair_ab", pair, "beam_a", K::string, {"\"side\""}},
+      {"pair_ab", pair, "beam_b", K::string, {"\"side\""}},
+      {"base", pair, "gain_a", K::number, {"0", "-1"}},
+      {"base", pair, "gain_b", K::number, {"0", "-1"}},
+      {"base", pair, "xi_deg", K::number, {"200"}},
+      {"base", pair, "eta_deg", K::number, {"-190"}},
+      {"base", pair, "xi_b_deg", K::number, {"200"}},
+      {"base", pair, "eta_b_deg", K::number, {"185"}},
+      {"base", pair, "gamma_deg", K::number, {}},
+      {"detectors", det, "name", K::string, {}},
+      {"detectors", det, "zeta_deg", K::number, {}},
+      {"detectors", det, "epsilon", K::number, {"-1e-9", "2"}},
+      {"detectors", det, "gain", K::number, {"0", "-2"}},
+      {"detectors", det, "beam", K::string, {"\"side\""}},
+      {"detectors", det, "xi_deg", K::number, {"180"}},
+      {"detectors", det, "eta_deg", K::number, {"500"}},
+      {"detectors", det, "gamma_deg", K::number, {}},
+      {"fp_file", fp, "file", K::path, {}},
+      {"fp_file", fp, "beam", K::string, {"\"main\""}},
+      {"base", scan, "type", K::choice, {}},
+      {"base", scan, "nside", K::integer, {"0", "3", "16384", "-4"}},
+      {"base", scan, "psi_deg", K::numbers, {}},
+      {"random_offsets", scan, "f", K::number, {"-0.1", "1.5"}},
+      {"random_offsets", scan, "symmetric", K::boolean, {}},
+      {"random_offsets", scan, "seed", K::integer, {"-1"}},
+      {"raster", scan, "theta_deg", K::number, {"-1", "181"}},
+      {"raster", scan, "phi_deg", K::number, {}},
+      {"raster", scan, "radius_deg", K::number, {"0", "-1", "180"}},
+      {"ces", scan, "latitude_deg", K::number, {"-91", "91"}},
+      {"ces", scan, "longitude_deg", K::number, {}},
+      {"ces", scan, "elevation_deg", K::number, {"0", "90", "-10"}},
+      {"ces", scan, "az_centre_deg", K::number, {}},
+      {"ces", scan, "az_throw_deg", K::number, {"-1"}},
+      {"ces", scan, "az_speed_deg_s", K::number, {"0", "-1"}},
+      {"ces", scan, "sample_rate_hz", K::number, {"0", "-1"}},
+      {"ces", scan, "start", K::string, {"\"yesterday\"", "\"2019-13-01T00:00:00Z\"", "\"2019-06-01T25:00:00Z\""}},
+      {"ces", scan, "duration_hours", K::number, {"0", "-1", "1e12", "1e-9"}},
+      {"ces", scan, "boresight_deg", K::numbers, {}},
+      {"ces", scan, "boresight_period_hours", K::number, {"0", "-1"}},
+      {"ces", scan, "nside", K::integer, {"0", "6"}},
+      {"satellite", scan, "spin_sun_angle_deg", K::number, {"-1", "181"}},
+      {"satellite", scan, "spin_boresight_angle_deg", K::number, {"0", "180", "-5"}},
+      {"satellite", scan, "precession_period_min", K::number, {"0", "-1"}},
+      {"satellite", scan, "spin_period_min", K::number, {"0", "-1"}},
+      {"satellite", scan, "sample_rate_hz", K::number, {"0", "-1"}},
+      {"satellite", scan, "start_time_s", K::number, {}},
+      {"satellite", scan, "precession_phase_deg", K::number, {}},
+      {"satellite", scan, "spin_phase_deg", K::number, {}},
+      {"satellite", scan, "frame", K::choice, {}},
+      {"satellite", scan, "duration_hours", K::number, {"0", "1e12"}},
+      {"scan_file", scan, "file", K::path, {}},
+      {"base", engine, "backend", K::choice, {}},
+      {"base", engine, "device", K::string, {}, true},
+      {"base", engine, "normalization", K::choice, {}},
+      {"base", engine, "threads", K::integer, {"-1", "1000000", "4294967297"}},
+      {"base", engine, "chunk_samples", K::integer, {"0", "-1", "10000000000"}},
+      {"base", out, "dir", K::string, {}},
+      {"base", out, "tod", K::boolean, {}},
+      {"base", out, "tod_precision", K::choice, {}},
+      {"base", out, "tod_pointing", K::boolean, {}},
+      {"base", out, "maps", K::boolean, {}},
+      {"base", out, "maps_nside", K::integer, {"-1", "3", "16384"}},
+      {"base", out, "rcond_min", K::number, {"-0.1", "1.5"}},
+      {"base", out, "spectra", K::boolean, {}},
+      {"base", out, "lmax", K::integer, {"-1", "17", "1000000"}},
+      {"base", out, "deconvolve_beam", K::boolean, {}},
+      {"base", out, "deconvolve_pixel_window", K::boolean, {}},
+      {"base", out, "plots", K::boolean, {}},
+  };
+}
+
+// ---- the fixture: a scratch directory with valid inputs beside the simulation files
+
+class Robustness : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = fs::temp_directory_path() / ("pisco-robust-" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_ / "subdir");
+    // A valid sky, beam, focal plane and pointing file, which the variants name.
+    pisco::Sky sky(8, "K");
+    for (std::size_t p = 0; p < sky.npix(); ++p) sky.I()[p] = 1e-3 * std::cos(0.1 * double(p));
+    sky.write_fits(dir_ / "sky.fits");
+    pisco::BeamOptions o;
+    o.rho_max = 20 * pisco::deg;
+    pisco::Beamsor::gaussian(10 * pisco::deg, o).write_healpix_fits(dir_ / "beam.fits", 64);
+    std::ofstream(dir_ / "fp.csv") << "name,zeta_deg,epsilon,gain,beam\nd1,0,0,1,main\nd2,90,0,1,main\n";
+    std::vector<pisco::Quat> q;
+    pisco::SatelliteScan sat;
+    sat.sample_rate = 1;
+    sat.samples = 400;
+    sat.generate(0, sat.samples, q);
+    pisco::BoresightFile::write(dir_ / "bore.h5", q);
+  }
+  static void TearDownTestSuite() { fs::remove_all(dir_); }
+
+  static fs::path write(const std::string& name, const std::string& text) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p, std::ios::binary) << text;
+    return p;
+  }
+  static std::string read(const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  }
+
+  // Runs `config` (written as case.toml) and checks the contract: one error line mentioning `needle`,
+  // status 2, nothing in the output directory. Returns whether it held.
+  static bool expect_clean_error(const std::string& what, const std::string& config, const std::string& needle) {
+    const fs::path cfg = write("case.toml", config);
+    const fs::path out = dir_ / "out";
+    fs::remove_all(out);
+    const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {}, 60);
+    const auto left = pisco_test::files_under(out);
+    const bool ok = r.exited && r.status == 2 && r.error_lines() == 1 && left.empty() &&
+                    (needle.empty() || contains(r.error_line(), needle));
+    ++cases_;
+    if (!ok) {
+      ADD_FAILURE() << what << ": " << r.describe() << ", " << r.error_lines() << " error lines, left ["
+                    << pisco_test::joined(left) << "], expected the error to mention '" << needle << "'\n"
+                    << r.output << "\n--- case.toml:\n"
+                    << config;
+    }
+    return ok;
+  }
+
+  // A corrupted input that may still read: no crash and no hang, at most one error line, and on an
+  // error nothing in the output directory.
+  static void expect_no_crash(const std::string& what, const std::string& config) {
+    const fs::path cfg = write("case.toml", config);
+    const fs::path out = dir_ / "out";
+    fs::remove_all(out);
+    const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {}, 60);
+    ++cases_;
+    // Status 4: the corrupted pointing solves no map pixel, which the run reports as such.
+    const bool ok = r.exited && (r.status == 0 || r.status == 4 ||
+                                 (r.status == 2 && r.error_lines() == 1 && pisco_test::files_under(out).empty()));
+    if (!ok) ADD_FAILURE() << what << ": " << r.describe() << "\n" << r.output;
+  }
+
+  static fs::path dir_;
+  static int cases_;
+};
+
+fs::path Robustness::dir_;
+int Robustness::cases_ = 0;
+
+// Every variant runs as it is: the failures below are the bad value's alone.
+TEST_F(Robustness, VariantsRun) {
+  for (const std::string v : {"base", "r", "point", "file_sky", "elliptical", "file_beam", "detectors", "pair_ab",
+                              "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file"}) {
+    const fs::path cfg = write("variant.toml", variant(v));
+    const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "variant-out").string()}, {}, 60);
+    EXPECT_TRUE(r.exited && r.status == 0) << v << ": " << r.describe() << "\n" << r.output << "\n" << variant(v);
+  }
+}
+
+// Every key: each wrong type, NaN and infinity, the empty value, and values outside its range.
+TEST_F(Robustness, EveryKeyMalformed) {
+  int n = 0;
+  for (const Key& k : keys()) {
+    std::vector<std::string> values = wrong_values(k);
+    values.insert(values.end(), k.out_of_range.begin(), k.out_of_range.end());
+    for (const std::string& v : values) {
+      const std::string config = with_key(variant(k.variant), k.table, k.key, v);
+      expect_clean_error(k.table + " " + k.key + " = " + v + " (" + k.variant + ")", config, k.key);
+      ++n;
+    }
+  }
+  std::cout << n << " malformed keys, each one clear error naming its key\n";
+}
+
+// Whole files and tables: missing, empty, duplicated, unknown, not TOML.
+TEST_F(Robustness, MalformedFiles) {
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {"", "missing [sky]"},
+      {"\n\n# nothing\n", "missing [sky]"},
+      {std::string("\x89HDF\r\n\x1a\n\0\0\xff", 12), "not valid TOML"},
+      {"[sky\nnside = 8\n", "not valid TOML"},
+      {base_config + "[sky]\nnside = 8\n", "not valid TOML"},
+      {"sky = 1\n" + base_config.substr(base_config.find("[beams")), "[top level] sky: expected a table"},
+      {without_table(base_config, "[scan]"), "missing [scan]"},
+      {base_config.substr(0, base_config.find("[beams")) + base_config.substr(base_config.find("[focal_plane]")),
+       "missing [beams.NAME]"},
+      {base_config + "[extra]\n", "unknown key 'extra'"},
+      {base_config + "[beams.side]\nfwhm_deg = 'x'\n", "[beams.side] fwhm_deg"},
+      {with_table(base_config, "[focal_plane]", "beam = \"main\"\n"), "[focal_plane]"},
+      {without_table(base_config, "[[focal_plane.pairs]]"), "[focal_plane] detectors"},
+      {with_table(base_config, "[[focal_plane.pairs]]", "beam = \"main\"\n"), "name"},
+      {base_config + "[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n", "detector 'pa' is also defined"},
+      {"\xff\xfe[sky]\n", "not valid TOML"},
+  };
+  for (const auto& [text, needle] : cases) expect_clean_error("file " + text.substr(0, 40), text, needle);
+}
+
+// Focal-plane tables: CSV and TOML files with every kind of bad row.
+TEST_F(Robustness, MalformedFocalPlaneTables) {
+  const std::string cfg = variant("fp_file");
+  const std::vector<std::pair<std::string, std::string>> csv{
+      {"", "no detectors"},
+      {"name,zeta_deg,beam\n", "no detectors"},
+      {"zeta_deg,beam\n0,main\n", "'name' column"},
+      {"name,zeta,beam\nd,0,main\n", "unknown column 'zeta'"},
+      {"name,zeta_deg,beam\nd,0\n", "expected 3 fields"},
+      {"name,zeta_deg,beam\nd,abc,main\n", "column 'zeta_deg'"},
+      {"name,zeta_deg,beam\nd,nan,main\n", "column 'zeta_deg'"},
+      {"name,zeta_deg,beam\nd,inf,main\n", "column 'zeta_deg'"},
+      {"name,zeta_deg,beam\nd,1e999,main\n", "column 'zeta_deg'"},
+      {"name,epsilon,beam\nd,1.5,main\n", "column 'epsilon'"},
+      {"name,epsilon,beam\nd,-0.5,main\n", "column 'epsilon'"},
+      {"name,gain,beam\nd,0,main\n", "column 'gain'"},
+      {"name,gain,beam\nd,-1,main\n", "column 'gain'"},
+      {"name,xi_deg,beam\nd,200,main\n", "'xi_deg'"},
+      {"name,beam\nd,side\n", "no beam named 'side'"},
+      {"name,beam\n,main\n", "empty detector name"},
+      {"name,beam\nd,main\nd,main\n", "detector 'd' is also on line 2"},
+      {std::string("\0\1\2\3\xff,\n", 7), "fp.csv:1"},
+  };
+  for (const auto& [text, needle] : csv) {
+    write("fp.csv", text);
+    expect_clean_error("fp.csv: " + text.substr(0, 30), cfg, needle);
+  }
+  write("fp.csv", "name,zeta_deg,epsilon,gain,beam\nd1,0,0,1,main\nd2,90,0,1,main\n");
+  const std::string toml_cfg = with_table(without_table(base_config, "[[focal_plane.pairs]]"), "[focal_plane]",
+                                          "file = \"fp.toml\"\n");
+  const std::vector<std::pair<std::string, std::string>> toml{
+      {"", "no [[detectors]] or [[pairs]]"},
+      {"[[pairs]]\nname = \"p\"\nbeam = \"main\"\n[[detectors]]\nname = \"pa\"\nbeam = \"main\"\n", "detector 'pa'"},
+      {"[[detectors]]\nname = \"d\"\nbeam = \"main\"\nepsilon = 3\n", "epsilon"},
+      {"[[detectors]]\nname = \"d\"\nbeam = \"main\"\ngain = nan\n", "gain"},
+      {"[[detectors]]\nname = \"d\"\nbeam = \"side\"\n", "no beam named \"side\""},
+      {"[detectors]\nname = \"d\"\n", "detectors"},
+  };
+  for (const auto& [text, needle] : toml) {
+    write("fp.toml", text);
+    expect_clean_error("fp.toml: " + text.substr(0, 30), toml_cfg, needle);
+  }
+}
+
+// FITS inputs (sky maps and beamsor files): truncated, with broken headers, NaN and UNSEEN pixels,
+// not FITS at all; and, through a fixed set of random byte changes, corruptions that may still read.
+TEST_F(Robustness, CorruptedFitsFiles) {
+  const std::string sky = read(dir_ / "sky.fits"), beam = read(dir_ / "beam.fits");
+  ASSERT_GT(sky.size(), 2880u * 3);
+  auto header_with = [&](const std::string& key, const std::string& card) {
+    std::string s = sky;
+    for (std::size_t at = 2880; at + 80 <= s.size(); at += 80)
+      if (s.compare(at, key.size(), key) == 0 && (s[at + key.size()] == ' ' || s[at + key.size()] == '=')) {
+        std::string c = card;
+        c.resize(80, ' ');
+        s.replace(at, 80, c);
+        break;
+      }
+    return s;
+  };
+  const std::string sky_cfg = variant("file_sky"), beam_cfg = variant("file_beam");
+  const std::vector<std::pair<std::string, std::string>> skies{
+      {"", "sky.fits"},
+      {"not a FITS file at all\n", "sky.fits"},
+      {sky.substr(0, 100), "sky.fits"},
+      {sky.substr(0, 2880), "sky.fits"},
+      {sky.substr(0, 2880 + 800), "sky.fits"},
+      {sky.substr(0, 2 * 2880 + 1000), "sky.fits"},
+      {header_with("NSIDE", "NSIDE   =                   12"), "NSIDE = 12"},
+      {header_with("NSIDE", "NSIDE   =                    0"), "NSIDE = 0"},
+      {header_with("NSIDE", "NSIDE   = 'eight'"), "NSIDE"},
+      {header_with("NSIDE", "NSIDX   =                    8"), "NSIDE"},
+      {header_with("ORDERING", "ORDERING= 'SPIRAL  '"), "ORDERING"},
+      {header_with("POLCCONV", "POLCCONV= 'SIDEWAYS'"), "POLCCONV"},
+      {header_with("INDXSCHM", "INDXSCHM= 'EXPLICIT'"), "cut-sky"},
+      {header_with("TFORM1", "TFORM1  = '1024A   '"), "sky.fits"},
+  };
+  for (const auto& [text, needle] : skies) {
+    write("sky.fits", text);
+    expect_clean_error("sky.fits of " + std::to_string(text.size()) + " bytes", sky_cfg, needle);
+  }
+  // NaN and UNSEEN pixels in an otherwise valid map.
+  pisco::Sky bad(8, "K");
+  bad.Q()[17] = std::nan("");
+  bad.write_fits(dir_ / "sky.fits");
+  expect_clean_error("a NaN pixel", sky_cfg, "pixel 17");
+  bad.Q()[17] = pisco::unseen;
+  bad.write_fits(dir_ / "sky.fits");
+  expect_clean_error("an UNSEEN pixel", sky_cfg, "column 2 (Q_STOKES) has 1 UNSEEN pixel");
+  const std::vector<std::size_t> beam_cuts{0, 100, 2880, 2880 + 400, beam.size() / 2};
+  for (std::size_t cut : beam_cuts) {
+    write("beam.fits", beam.substr(0, cut));
+    expect_clean_error("beam.fits cut at " + std::to_string(cut), beam_cfg, "beam.fits");
+  }
+  // Random byte changes in the headers and the data: read or refused, never a crash.
+  std::mt19937_64 rng(2024);
+  for (int k = 0; k < 12; ++k) {
+    std::string s = sky;
+    for (int j = 0; j < 4; ++j) s[std::uniform_int_distribution<std::size_t>(0, s.size() - 1)(rng)] = char(rng());
+    write("sky.fits", s);
+    expect_no_crash("sky.fits with random bytes, draw " + std::to_string(k), sky_cfg);
+    std::string b = beam;
+    for (int j = 0; j < 4; ++j) b[std::uniform_int_distribution<std::size_t>(0, b.size() - 1)(rng)] = char(rng());
+    write("beam.fits", b);
+    expect_no_crash("beam.fits with random bytes, draw " + std::to_string(k), beam_cfg);
+  }
+  write("sky.fits", sky);
+  write("beam.fits", beam);
+}
+
+// HDF5 inputs (pointing files and TOAST focal planes): truncated, without their datasets, with bad
+// samples, and with random byte changes.
+TEST_F(Robustness, CorruptedHdf5Files) {
+  const std::string bore = read(dir_ / "bore.h5");
+  const std::string cfg = variant("scan_file");
+  for (std::size_t cut : {std::size_t(0), std::size_t(7), std::size_t(100), std::size_t(1000), bore.size() / 2,
+                          bore.size() - 100}) {
+    write("bore.h5", bore.substr(0, cut));
+    expect_clean_error("bore.h5 cut at " + std::to_string(cut), cfg, "bore.h5");
+  }
+  std::string sig = bore;
+  sig[1] = 'X';
+  write("bore.h5", sig);
+  expect_clean_error("bore.h5 without its signature", cfg, "bore.h5");
+  std::vector<pisco::Quat> q(50, pisco::Quat{0, 0, 0, 1});
+  q[33] = {0, 0, 0, 2};
+  pisco::BoresightFile::write(dir_ / "bore.h5", q);
+  expect_clean_error("a non-unit quaternion", cfg, "sample 33");
+  q[33] = {0, 0, std::nan(""), 1};
+  pisco::BoresightFile::write(dir_ / "bore.h5", q);
+  expect_clean_error("a NaN quaternion", cfg, "sample 33");
+  // A TOD file as a pointing file, without pointing datasets.
+  pisco::FocalPlane fp;
+  fp.add_pair("p", 0, 0, 0);
+  {
+    pisco::TodWriter w(dir_ / "bore.h5", fp, 4, pisco::TodPrecision::float64, false, {});
+    const std::vector<double> s(4, 0.0);
+    w.write(0, 0, s);
+    w.write(1, 0, s);
+    w.commit();
+  }
+  expect_clean_error("a TOD file without pointing", cfg, "bore.h5");
+  // TOAST focal planes: the bundled table truncated, and with random bytes.
+  const std::string toast = read(fs::path(PISCO_TEST_ASSETS_DIR) / "focalplanes" / "toast_hex7.h5");
+  const std::string toast_cfg = with_table(without_table(base_config, "[[focal_plane.pairs]]"), "[focal_plane]",
+                                           "file = \"fp.h5\"\n");
+  write("fp.h5", toast);
+  const CliResult whole = pisco_test::run_cli({"run", "-q", write("case.toml", toast_cfg).string(), "-o", (dir_ / "out").string()});
+  EXPECT_EQ(whole.status, 0) << whole.output;
+  for (std::size_t cut : {std::size_t(10), std::size_t(600), toast.size() / 3, toast.size() - 10}) {
+    write("fp.h5", toast.substr(0, cut));
+    expect_clean_error("fp.h5 cut at " + std::to_string(cut), toast_cfg, "fp.h5");
+  }
+  std::mt19937_64 rng(7);
+  pisco::SatelliteScan sat;
+  sat.sample_rate = 1;
+  sat.samples = 200;
+  std::vector<pisco::Quat> scan;
+  sat.generate(0, sat.samples, scan);
+  pisco::BoresightFile::write(dir_ / "bore.h5", scan);
+  const std::string good_bore = read(dir_ / "bore.h5");
+  for (int k = 0; k < 8; ++k) {
+    std::string b = good_bore;
+    for (int j = 0; j < 3; ++j) b[std::uniform_int_distribution<std::size_t>(0, b.size() - 1)(rng)] = char(rng());
+    write("bore.h5", b);
+    expect_no_crash("bore.h5 with random bytes, draw " + std::to_string(k), cfg);
+  }
+  write("bore.h5", bore);
+  write("fp.h5", toast);
+}
+
+// Other input files: C_l tables and tensor templates.
+TEST_F(Robustness, MalformedTables) {
+  for (const auto& [text, needle] : std::vector<std::pair<std::string, std::string>>{
+           {"", "cl.txt"}, {"2 abc 3 4 5\n", "cl.txt:1"}, {std::string("\0\0\0", 3), "cl.txt"}}) {
+    write("cl.txt", text);
+    expect_clean_error("cl.txt: " + text.substr(0, 20), with_key(base_config, "[sky]", "cl_file", "\"cl.txt\""), needle);
+  }
+  for (const auto& [text, needle] : std::vector<std::pair<std::string, std::string>>{
+           {"2 nan\n", "bb.txt:1"}, {"x y\n", "bb.txt:1"}, {"-3 1\n", "bb.txt:1"}}) {
+    write("bb.txt", text);
+    expect_clean_error("bb.txt: " + text, with_key(variant("r"), "[sky]", "bb_template", "\"bb.txt\""), needle);
+  }
+  std::cout << cases_ << " robustness cases so far\n";
+}
+
+}  // namespace

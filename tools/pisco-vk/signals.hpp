@@ -1,0 +1,30 @@
+// How `pisco-vk` stops and starts other programs: SIGINT, SIGTERM and SIGHUP end it at once with
+// no temporary file left behind, and child programs (the plotting tool) are started with an argument
+// vector, never through a shell.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace pisco_cli {
+
+// SIGINT, SIGTERM and SIGHUP are blocked in every thread and taken by one watcher thread, which
+// forwards the signal to a running child and gives it 3 s to end, removes the temporary files of the
+// writers in progress (pisco::remove_temporary_files), says so on stderr and ends the process with
+// status 128 + the signal, within milliseconds whatever the other threads are doing (a convolution,
+// a write). Call at the start of main, before any thread is started: threads inherit the mask.
+void handle_stop_signals();
+
+struct ChildStatus {
+  int spawn_error = 0;  // errno of a program that could not be started (ENOENT: not installed)
+  bool exited = false;  // exited normally, with `code`; else killed by `signal`
+  int code = 0;
+  int signal = 0;
+};
+
+// Runs args[0] (found on PATH when it has no '/') with the arguments args[1...], through posix_spawn:
+// no shell, each argument passed as it is. Its stdout goes to /dev/null when `quiet`; it starts with
+// no signal blocked and the default actions. Waits for it; a stop signal meanwhile is forwarded to it.
+ChildStatus run_child(const std::vector<std::string>& args, bool quiet);
+
+}  // namespace pisco_cli
