@@ -1,0 +1,324 @@
+"""PISCO-VK's C++ library: pixel-space beam convolution (see the package pisco)."""
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy
+from numpy.typing import ArrayLike, NDArray
+
+Float64Array = NDArray[numpy.float64]
+
+__version__: str
+deg: float
+unseen: float
+
+class Error(RuntimeError):
+    """An error of the C++ library (pisco::Error), carrying its message."""
+
+class BackendInfo:
+    """A backend compiled into the library and whether it runs here."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def available(self) -> bool: ...
+    @property
+    def detail(self) -> str:
+        """The device found, or why the backend is unavailable."""
+
+def devices() -> list[BackendInfo]:
+    """The backends compiled in ('cpu', 'vulkan', 'cuda'), with availability and device or reason."""
+
+def offset_quat(xi: float, eta: float, gamma: float) -> Float64Array:
+    """The offset quaternion (x, y, z, w) of focal-plane coordinates (xi, eta, gamma), radians."""
+
+def quat_from_pointing(theta: float, phi: float, psi: float) -> Float64Array:
+    """The rotation R_z(phi) R_y(theta) R_z(psi) (TOAST's ISO angles) as (x, y, z, w)."""
+
+def quat_to_pointing(q: ArrayLike) -> tuple[float, float, float]:
+    """The angles (theta, phi, psi) of a rotation (x, y, z, w)."""
+
+def valid_nside(nside: int) -> bool:
+    """Whether nside is a power of two in [1, 8192]."""
+
+def ang2pix(nside: int, theta: float, phi: float) -> int:
+    """The RING pixel containing (theta, phi)."""
+
+class Sky:
+    """A polarized sky: HEALPix I, Q, U, V maps (RING ordering, COSMO polarization convention).
+
+    Sky(nside, units='K_CMB') is a sky of zeros; Sky.from_maps and Sky.read_fits fill one.
+    The maps I, Q, U, V are writable numpy views of the sky's own storage (no copy).
+    """
+
+    def __init__(self, nside: int, units: str = "K_CMB") -> None: ...
+    @staticmethod
+    def from_maps(maps: Float64Array | Sequence[Float64Array], units: str = "K_CMB") -> Sky:
+        """A sky from k = 1, 3 or 4 RING maps (I; I, Q, U; I, Q, U, V), copied into the sky."""
+    @staticmethod
+    def read_fits(path: str | os.PathLike[str]) -> Sky:
+        """Reads a HEALPix FITS map (1, 3 or 4 columns); NESTED becomes RING, IAU becomes COSMO."""
+    def write_fits(self, path: str | os.PathLike[str]) -> None:
+        """Writes I, Q, U, V as a HEALPix FITS file (RING, COSMO), atomically."""
+    @property
+    def nside(self) -> int: ...
+    @property
+    def npix(self) -> int: ...
+    @property
+    def pixel_area(self) -> float:
+        """4 pi / npix, steradians."""
+    @property
+    def units(self) -> str: ...
+    @units.setter
+    def units(self, value: str, /) -> None: ...
+    @property
+    def I(self) -> Float64Array: ...
+    @property
+    def Q(self) -> Float64Array: ...
+    @property
+    def U(self) -> Float64Array: ...
+    @property
+    def V(self) -> Float64Array: ...
+
+class Beamsor:
+    """A field of 4x4 Mueller matrices over the beam's directions, sampled out to rho_max (radians)."""
+
+    @staticmethod
+    def gaussian(
+        fwhm: float,
+        rho_max: float = ...,
+        grid_step: float = 0.0,
+        cross_polar: float = 0.0,
+        cross_polar_pattern: str = "uniform",
+        mueller: ArrayLike | None = None,
+    ) -> Beamsor:
+        """A circular Gaussian beam of full width at half maximum `fwhm`, summed out to rho_max (5 deg)."""
+    @staticmethod
+    def elliptical_gaussian(
+        fwhm_x: float,
+        fwhm_y: float,
+        angle: float = 0.0,
+        rho_max: float = ...,
+        grid_step: float = 0.0,
+        cross_polar: float = 0.0,
+        cross_polar_pattern: str = "uniform",
+        mueller: ArrayLike | None = None,
+    ) -> Beamsor:
+        """fwhm_x along the direction `angle` (from theta' towards phi'), fwhm_y across it."""
+    @staticmethod
+    def from_field(
+        field: Callable[[float, float], ArrayLike],
+        rho_max: float,
+        grid_step: float,
+        description: str = "python field",
+        feature_scale: float = 0.0,
+        radial: bool = False,
+    ) -> Beamsor:
+        """Any beam: field(rho, sigma) returns the (unnormalized) 4x4 Mueller matrix."""
+    @staticmethod
+    def read_fits(path: str | os.PathLike[str], rho_max: float, grid_step: float = 0.0) -> Beamsor:
+        """Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...)."""
+    def write_fits(self, path: str | os.PathLike[str], nside: int) -> None: ...
+    @property
+    def rho_max(self) -> float: ...
+    @property
+    def is_radial(self) -> bool: ...
+    @property
+    def grid_size(self) -> int: ...
+    @property
+    def grid_step(self) -> float: ...
+    @property
+    def omega_tilde(self) -> float:
+        """The integral of B_TT over the cap, steradians."""
+    @property
+    def description(self) -> str: ...
+    def element(self, row: int, col: int) -> Float64Array | None:
+        """The grid values of Mueller element (row, col), a read-only view; None for a zero element."""
+    def at(self, x: float, y: float) -> Float64Array:
+        """The interpolated 4x4 Mueller matrix at orthographic (x, y)."""
+
+class HalfWavePlate:
+    """A half-wave plate (or any rotating Mueller element) in front of a detector.
+
+    mueller: M0, the 4x4 Mueller matrix with the fast axis along the detector's polarization axis
+    (None: the ideal plate diag(1, 1, -1, -1)); placement: 'aperture' or 'detector'; gamma: the
+    detector's polarization angle in the focal-plane frame (radians, TOAST's ``gamma``). At plate
+    angle h the plate is R(-theta) M0 R(theta), theta = h - gamma.
+    """
+
+    def __init__(self, mueller: ArrayLike | None = None, placement: str = "aperture", gamma: float = 0.0) -> None: ...
+    @property
+    def mueller(self) -> Float64Array:
+        """M0 (a read-only copy; assign a new (4, 4) array to change it)."""
+    @mueller.setter
+    def mueller(self, value: ArrayLike, /) -> None: ...
+    @property
+    def placement(self) -> str:
+        """'aperture' (skyward of the optics) or 'detector' (between the optics and the detector)."""
+    @placement.setter
+    def placement(self, value: str, /) -> None: ...
+    @property
+    def gamma(self) -> float:
+        """The detector's polarization angle in the focal-plane frame, radians."""
+    @gamma.setter
+    def gamma(self, value: float, /) -> None: ...
+    @property
+    def is_ideal(self) -> bool:
+        """Whether M0 is exactly diag(1, 1, -1, -1)."""
+    def mueller_at(self, hwp_angle: float) -> Float64Array:
+        """The plate's Mueller matrix in the detector's frame at plate angle hwp_angle."""
+    def __eq__(self, other: object) -> bool: ...
+    def __copy__(self) -> HalfWavePlate: ...
+    def __deepcopy__(self, memo: object) -> HalfWavePlate: ...
+
+def ideal_hwp_mueller() -> Float64Array:
+    """diag(1, 1, -1, -1), a read-only (4, 4) array."""
+
+def rotated_mueller(m0: ArrayLike, angle: float) -> Float64Array:
+    """R(-angle) m0 R(angle): a Mueller element turned by `angle` (radians) from the detector's axis."""
+
+class Detector:
+    """A detector: name, zeta, epsilon, gain, beam index, offset quaternion (x, y, z, w) and plate."""
+
+    name: str
+    zeta: float
+    epsilon: float
+    gain: float
+    beam: int
+    def __init__(
+        self,
+        name: str,
+        zeta: float = 0.0,
+        epsilon: float = 0.0,
+        gain: float = 1.0,
+        beam: int = 0,
+        offset: ArrayLike | None = None,
+        hwp: HalfWavePlate | None = None,
+    ) -> None: ...
+    @property
+    def offset(self) -> Float64Array:
+        """The rotation from the boresight's antenna basis to the detector's, (x, y, z, w)."""
+    @offset.setter
+    def offset(self, value: ArrayLike, /) -> None: ...
+    @property
+    def hwp(self) -> HalfWavePlate | None:
+        """The detector's half-wave plate (a copy), or None."""
+    @hwp.setter
+    def hwp(self, value: HalfWavePlate | None, /) -> None: ...
+    def set_offset(self, xi: float, eta: float, gamma: float) -> None: ...
+    def offset_xi_eta_gamma(self) -> tuple[float, float, float]: ...
+
+class FocalPlane:
+    """The detectors of an engine, in order."""
+
+    def __init__(self) -> None: ...
+    def add(
+        self,
+        detector: Detector | str,
+        zeta: float = 0.0,
+        epsilon: float = 0.0,
+        gain: float = 1.0,
+        beam: int = 0,
+        offset: ArrayLike | None = None,
+        hwp: HalfWavePlate | None = None,
+    ) -> int: ...
+    def add_pair(
+        self,
+        name: str,
+        zeta: float = 0.0,
+        beam_a: int = 0,
+        beam_b: int = 0,
+        epsilon: float = 0.0,
+        gain_a: float = 1.0,
+        gain_b: float = 1.0,
+        hwp: HalfWavePlate | None = None,
+    ) -> int:
+        """A PSB pair; hwp: a plate in front of both, its gamma a's (b's is gamma - 90 deg)."""
+    def __len__(self) -> int: ...
+    def __getitem__(self, key: int | str, /) -> Detector: ...
+    @property
+    def detectors(self) -> list[Detector]: ...
+    @property
+    def names(self) -> list[str]: ...
+    @staticmethod
+    def read_toast(path: str | os.PathLike[str], beam: int = 0, hwp: HalfWavePlate | None = None) -> FocalPlane:
+        """A TOAST 3 focal-plane file; hwp: a plate for every detector, gamma from the file's column."""
+    @staticmethod
+    def from_columns(
+        columns: Mapping[str, Any] | Any,
+        beam: int | Mapping[str, int] | Sequence[int] | None = None,
+        hwp: HalfWavePlate | None = None,
+    ) -> FocalPlane:
+        """From a dict of columns or an astropy table (pisco.focal_plane_from_columns)."""
+    @staticmethod
+    def from_toast(
+        focalplane: Any,
+        beam: int | Mapping[str, int] | Sequence[int] | None = None,
+        detectors: Sequence[str] | None = None,
+        hwp: HalfWavePlate | None = None,
+    ) -> FocalPlane:
+        """From a TOAST 3 Focalplane, its table or its HDF5 file (pisco.focal_plane_from_toast)."""
+
+def read_toast_focal_plane(path: str | os.PathLike[str], beam: int = 0) -> tuple[FocalPlane, Float64Array, float]:
+    """(FocalPlane, fwhm per detector in radians, sample rate in Hz) of a TOAST 3 focal-plane file."""
+
+class Engine:
+    """The convolution engine: set up once for a sky, beams and focal plane; then pointing -> TOD."""
+
+    def __init__(
+        self,
+        sky: Sky,
+        beams: Beamsor | Sequence[Beamsor],
+        focal_plane: FocalPlane,
+        backend: str = "auto",
+        device: str = "auto",
+        chunk_samples: int = 0,
+        normalization: str = "integral",
+        threads: int = 0,
+    ) -> None: ...
+    def convolve(
+        self,
+        detector: int | str,
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        out: Float64Array | None = None,
+        accumulate: bool = False,
+        hwp_angle: Float64Array | None = None,
+    ) -> Float64Array:
+        """The TOD of one detector for a chunk of boresight pointing (angles or quaternions).
+
+        hwp_angle: the plate's angle per sample (1-D float64, radians, focal-plane frame), required
+        for a detector with a plate and refused for one without.
+        """
+    def submit(
+        self,
+        detector: int | str,
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        out: Float64Array | None = None,
+        accumulate: bool = False,
+        hwp_angle: Float64Array | None = None,
+    ) -> int:
+        """convolve(), asynchronously; `out` (required) is written by the time wait(ticket) returns."""
+    def wait(self, ticket: int | None = None) -> None: ...
+    def close(self) -> None: ...
+    @property
+    def closed(self) -> bool: ...
+    @property
+    def backend(self) -> str: ...
+    @property
+    def device(self) -> str: ...
+    @property
+    def mean_disc_pixels(self) -> float: ...
+    @property
+    def focal_plane(self) -> FocalPlane: ...
+    def __len__(self) -> int: ...
+    def __enter__(self) -> Engine: ...
+    def __exit__(self, exc_type: object = None, exc_value: object = None, traceback: object = None) -> None: ...

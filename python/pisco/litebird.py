@@ -1,0 +1,253 @@
+"""PISCO-VK inside litebird_sim (docs/python.md, "litebird_sim").
+
+:func:`add_convolved_sky_to_observations` has the shape of litebird_sim's own function of that name
+(``litebird_sim.beam_convolution``): observations, a sky and beams (one for all, or a dict by detector
+or channel name), optional pointings and HWP, the TOD component to add into. Where litebird_sim takes
+the sky and beams as spherical harmonics for its 4 pi convolution (ducc0), this one takes HEALPix maps
+(``pisco.Sky`` or litebird_sim's ``HealpixMap``) and ``pisco.Beamsor`` beams and convolves in pixel
+space.
+
+Conventions, those of litebird_sim: the detector pointing ``(theta, phi, psi)`` comes from
+``Observation.get_pointings`` (ecliptic, rotated to galactic when the sky is galactic, as litebird_sim
+does); ``psi`` is the orientation of the beam's frame and the detector's polarization angle
+``pol_angle_rad`` is measured in it, so that the TOD is ``I + eta (Q cos 2a + U sin 2a)`` with
+``a = psi + pol_angle_rad`` and ``eta = pol_efficiency``, litebird_sim's ``scan_map`` equation. A
+``Beamsor`` is oriented in that frame, as litebird_sim's beam a_lm are.
+
+Half-wave plates, as litebird_sim's MuellerConvolver takes them: the plate's angle per sample (from
+the HWP object, ``IdealHWP(ang_speed_radpsec, start_angle_rad)``, or the observation's own) is
+measured from the beam frame's x axis, each detector's plate is its ``mueller_hwp`` (a 4x4 Mueller
+matrix) or the ideal one; an ideal plate gives ``a = psi + 2 hwp_angle - pol_angle_rad``, litebird_sim's
+``scan_map`` angle with a plate.
+"""
+
+import logging
+
+import numpy as np
+
+from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, Sky
+
+__all__ = ["add_convolved_sky_to_observations"]
+
+_IDEAL = np.diag([1.0, 1.0, -1.0, -1.0])
+
+
+def _as_sky(sky):
+    """(pisco.Sky, coordinates or None) of a pisco.Sky or a litebird_sim HealpixMap."""
+    if isinstance(sky, Sky):
+        return sky, None
+    values = getattr(sky, "values", None)
+    if values is None:
+        raise TypeError(f"sky: expected a pisco.Sky or a litebird_sim HealpixMap, got {type(sky).__name__}")
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 2:
+        raise ValueError("sky: a HealpixMap of one frequency is expected (values of shape (nstokes, npix))")
+    if getattr(sky, "nest", False):
+        from ducc0.healpix import Healpix_Base
+
+        nside = int(np.sqrt(values.shape[1] / 12))
+        ring = Healpix_Base(nside, "RING").pix2nest(np.arange(values.shape[1]))
+        values = values[:, ring]
+    units = getattr(sky, "units", None)
+    units = "K_CMB" if units is None else str(getattr(units, "name", units))
+    return Sky.from_maps(np.ascontiguousarray(values), units=units), getattr(sky, "coordinates", None)
+
+
+def _per_detector(value, obs, what):
+    """The entry of `value` (an object, or a dict by detector or channel name) for each detector."""
+    names = list(obs.name)
+    if not isinstance(value, dict):
+        return [value] * len(names)
+    if all(n in value for n in names):
+        return [value[n] for n in names]
+    channels = list(getattr(obs, "channel", [None] * len(names)))
+    if all(c in value for c in channels):
+        return [value[c] for c in channels]
+    raise ValueError(f"{what} dictionary keys do not match detector/channel names.")
+
+
+def _default_beam(obs, i, beam_rho_max):
+    fwhm = np.radians(float(obs.fwhm_arcmin[i]) / 60.0)
+    if not fwhm > 0:
+        raise ValueError(f"detector {obs.name[i]}: no beam given and fwhm_arcmin is {obs.fwhm_arcmin[i]}")
+    ellipticity = float(getattr(obs, "ellipticity", [1.0] * (i + 1))[i])
+    rho_max = min(beam_rho_max * fwhm * np.sqrt(max(ellipticity, 1.0)), np.radians(89.0))
+    if ellipticity == 1.0:
+        return Beamsor.gaussian(fwhm, rho_max=rho_max)
+    # litebird_sim: fwhm = sqrt(fwhm_max fwhm_min), ellipticity = fwhm_max / fwhm_min, the major axis at
+    # psi_rad from the beam frame's x axis.
+    psi_ell = float(obs.psi_rad[i])
+    return Beamsor.elliptical_gaussian(fwhm * np.sqrt(ellipticity), fwhm / np.sqrt(ellipticity), psi_ell,
+                                       rho_max=rho_max)
+
+
+def _hwp_angle(obs, hwp, pointings_dtype):
+    """The plate's angle per sample (float64, radians) as litebird_sim's own convolution takes it, or
+    None without a plate: from `hwp` (its get_hwp_angle at the observation's start time and sampling
+    rate), else from the observation's plate (its precomputed hwp_angle, or get_hwp_angle())."""
+    if hwp is None:
+        if not getattr(obs, "has_hwp", False):
+            return None
+        angle = getattr(obs, "hwp_angle", None)
+        if angle is None:
+            angle = obs.get_hwp_angle(pointings_dtype=pointings_dtype)
+        return None if angle is None else np.ascontiguousarray(angle, dtype=np.float64)
+    start = obs.start_time - obs.start_time_global
+    start_s = start.to("s").value if hasattr(start, "to") else float(start)
+    angle = np.empty(obs.n_samples, dtype=np.float64)
+    hwp.get_hwp_angle(angle, start_s, 1.0 / obs.sampling_rate_hz)
+    return angle
+
+
+def _plate_mueller(obs, i, hwp):
+    """Detector i's plate Mueller matrix M0: its ``mueller_hwp`` (a 4x4 matrix, as litebird_sim's
+    MuellerConvolver takes it), else the ideal plate's for an ideal (or unspecified) HWP."""
+    import litebird_sim as lbs
+
+    name = obs.name[i]
+    jones = getattr(obs, "jones_hwp", None)
+    if jones is not None and jones[i] is not None:
+        raise NotImplementedError(f"pisco.litebird: detector {name} has a Jones matrix (jones_hwp); give its plate "
+                                  "as a 4x4 Mueller matrix (mueller_hwp)")
+    mueller = getattr(obs, "mueller_hwp", None)
+    m = None if mueller is None else mueller[i]
+    if m is not None:
+        if isinstance(m, dict) or np.shape(m) != (4, 4):
+            raise NotImplementedError(f"pisco.litebird: detector {name}'s mueller_hwp is not one 4x4 matrix (a "
+                                      "harmonic expansion of the plate is not supported)")
+        m = np.asarray(m, dtype=np.float64)
+        if not np.all(np.isfinite(m)):
+            raise ValueError(f"detector {name}: mueller_hwp is not finite")
+        return m
+    plate = hwp if hwp is not None else getattr(obs, "hwp", None)
+    if plate is None or isinstance(plate, lbs.IdealHWP):
+        return _IDEAL
+    raise ValueError(f"detector {name}: the HWP ({plate}) is not ideal, but the detector has no mueller_hwp")
+
+
+def add_convolved_sky_to_observations(
+    observations,
+    sky,
+    beams=None,
+    pointings=None,
+    hwp=None,
+    component="tod",
+    pointings_dtype=np.float64,
+    coordinates=None,
+    backend="auto",
+    device="auto",
+    beam_rho_max=2.5,
+    hwp_placement="aperture",
+):
+    """Adds the beam-convolved sky to the TOD of litebird_sim observations, in pixel space.
+
+    Parameters
+    ----------
+    observations : Observation or list of Observation
+    sky : pisco.Sky, litebird_sim.HealpixMap, or a dict of them by detector or channel name
+        HEALPix maps (I, Q, U[, V], COSMO convention); a HealpixMap's ``coordinates`` say its frame.
+    beams : pisco.Beamsor, a dict of them by detector or channel name, or None
+        None: a Gaussian of each detector's ``fwhm_arcmin`` (elliptical with ``ellipticity`` and
+        ``psi_rad``), summed out to ``beam_rho_max`` FWHM.
+    pointings : array (n_det, n_samples, 3), a list of them (one per observation), or None
+        None: the observations' own (``pointing_matrix``, or ``get_pointings``).
+    hwp : litebird_sim.HWP or None
+        The half-wave plate, as litebird_sim's own function takes it: its angle per sample comes from
+        ``hwp.get_hwp_angle`` (litebird_sim's ``IdealHWP``: ``start_angle_rad`` plus
+        ``ang_speed_radpsec`` times the time since the start of the simulation); None: the
+        observations' own plate, if they have one. Each detector's plate is its ``mueller_hwp`` (a
+        4x4 Mueller matrix), else ideal; its angle is measured from the axis psi orients, and the
+        detector's polarization axis lies at ``pol_angle_rad`` from it (the plate's gamma), as in
+        litebird_sim's MuellerConvolver and ``scan_map``.
+    component : str
+        The TOD attribute to add into (litebird_sim's ``tod`` by default).
+    pointings_dtype : dtype
+        The dtype of pointings computed on the fly.
+    coordinates : litebird_sim.CoordinateSystem or None
+        The frame of a pisco.Sky; None: the HealpixMap's, else galactic, as litebird_sim assumes.
+    backend, device : str
+        PISCO-VK's backend ('auto', 'cpu', 'vulkan', 'cuda') and device.
+    beam_rho_max : float
+        Default beams are summed out to this many FWHM.
+    hwp_placement : str
+        Where the plate sits: 'aperture' (skyward of the optics, the default) or 'detector' (between
+        the optics and the detector; four times the cost).
+    """
+    import litebird_sim as lbs
+    from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g
+
+    obs_list = [observations] if isinstance(observations, lbs.Observation) else list(observations)
+    if pointings is None:
+        ptg_list = [None] * len(obs_list)
+    elif isinstance(observations, lbs.Observation):
+        ptg_list = [pointings]
+    else:
+        if not isinstance(pointings, list) or len(pointings) != len(obs_list):
+            raise ValueError("pointings: give one pointing array per observation, as a list")
+        ptg_list = pointings
+
+    converted = {}  # id of the caller's sky -> (pisco.Sky, coordinates)
+
+    def convert(s):
+        if id(s) not in converted:
+            converted[id(s)] = _as_sky(s)
+        return converted[id(s)]
+
+    if hwp_placement not in ("aperture", "detector"):
+        raise ValueError(f"hwp_placement: expected 'aperture' or 'detector', got {hwp_placement!r}")
+    for obs, ptg in zip(obs_list, ptg_list):
+        hwp_angle = _hwp_angle(obs, hwp, pointings_dtype)
+        if hwp_angle is not None and not np.all(np.isfinite(hwp_angle)):
+            raise ValueError("pisco.litebird: the plate's angles (hwp_angle) are not finite")
+        tod = getattr(obs, component)
+        n_det = tod.shape[0]
+        skies = _per_detector(sky, obs, "Sky")
+        det_beams = _per_detector(beams, obs, "Beam") if beams is not None else [None] * n_det
+        # One engine per distinct sky, with the detectors that see it.
+        groups = {}
+        for i in range(n_det):
+            groups.setdefault(id(skies[i]), []).append(i)
+        for members in groups.values():
+            pisco_sky, sky_coordinates = convert(skies[members[0]])
+            frame = coordinates if coordinates is not None else sky_coordinates
+            if frame is None:
+                logging.warning("pisco.litebird: the sky's coordinates are unknown: assuming CoordinateSystem.Galactic")
+                frame = CoordinateSystem.Galactic
+            beam_list, fp = [], FocalPlane()
+            for i in members:
+                b = det_beams[i] if det_beams[i] is not None else _default_beam(obs, i, beam_rho_max)
+                if not isinstance(b, Beamsor):
+                    raise TypeError(f"beams: expected pisco.Beamsor for detector {obs.name[i]}, got {type(b).__name__}")
+                found = next((k for k, x in enumerate(beam_list) if x is b), None)
+                if found is None:
+                    beam_list.append(b)
+                    found = len(beam_list) - 1
+                eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
+                epsilon = (1.0 - eta) / (1.0 + eta)
+                zeta = float(obs.pol_angle_rad[i])
+                plate = None
+                if hwp_angle is not None:
+                    # The plate's angle is measured from the beam frame's x axis (psi), the detector's
+                    # polarization axis lies at pol_angle_rad from it: theta = hwp_angle - pol_angle_rad.
+                    plate = HalfWavePlate(_plate_mueller(obs, i, hwp), placement=hwp_placement, gamma=zeta)
+                fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=2.0 / (1.0 + epsilon), beam=found,
+                       hwp=plate)
+            with Engine(pisco_sky, beam_list, fp, backend=backend, device=device) as engine:
+                buffer = None
+                for k, i in enumerate(members):
+                    if ptg is not None:
+                        p = np.asarray(ptg[i])
+                    elif getattr(obs, "pointing_matrix", None) is not None:
+                        p = np.asarray(obs.pointing_matrix[i])
+                    else:
+                        p, _ = obs.get_pointings(i, pointings_dtype=pointings_dtype, compute_hwp_angle=False)
+                    if frame == CoordinateSystem.Galactic:
+                        p = rotate_coordinates_e2g(p)
+                    theta, phi, psi = (np.ascontiguousarray(p[:, c], dtype=np.float64) for c in range(3))
+                    row = tod[i]
+                    if row.dtype == np.float64 and row.flags.c_contiguous and row.flags.writeable:
+                        engine.convolve(k, theta, phi, psi, out=row, accumulate=True, hwp_angle=hwp_angle)
+                    else:
+                        buffer = engine.convolve(k, theta, phi, psi, out=buffer if buffer is not None and
+                                                 len(buffer) == len(theta) else None, hwp_angle=hwp_angle)
+                        row += buffer.astype(row.dtype, copy=False)

@@ -1,0 +1,281 @@
+"""PISCO-VK inside TOAST 3: the operator :class:`PixelConvolve` (docs/python.md, "TOAST").
+
+``PixelConvolve`` reads each observation's boresight quaternions (``boresight_radec`` by default)
+and its focal plane, and writes or adds the beam-convolved sky into ``det_data``, as TOAST's own
+``SimTotalconvolve`` and ``ScanHealpixMap`` do. The focal plane maps to PISCO-VK's detectors as
+docs/formats.md ("TOAST focal planes") says, so that the TOD is in TOAST's calibration:
+``I + eta (Q cos 2a + U sin 2a)``, ``eta = (1 - pol_leakage) / (1 + pol_leakage)``, ``a`` the
+polarization angle of TOAST's detector quaternion, for a beam normalized to unit integral.
+
+Beams: one ``pisco.Beamsor`` for every detector (``beam``), one per detector name (``beams``), or,
+by default, a circular Gaussian of each detector's focal-plane ``fwhm`` summed out to
+``beam_rho_max`` FWHM. One engine is set up per focal plane and reused by every observation that
+shares it, until ``finalize()``.
+
+Half-wave plates: an observation holding the shared ``hwp_angle`` (the plate's angle per sample in
+the focal-plane frame, as ``SimSatellite`` and ``SimGround`` make it) puts a plate in front of every
+detector: ideal, or the Mueller matrix ``hwp_mueller``, with each detector's ``gamma`` from the focal
+plane (TOAST's own plate angle origin, the one its ``StokesWeights`` use), so that an ideal plate gives
+TOAST's ``I + eta (Q cos 2b + U sin 2b)``, ``b = a + 2 (hwp_angle - gamma)``.
+"""
+
+import numpy as np
+import traitlets
+from astropy import units as u
+
+from toast.observation import default_values as defaults
+from toast.ops.operator import Operator
+from toast.timing import function_timer
+from toast.traits import Bool, Dict, Float, Instance, Int, List, Unicode, Unit, trait_docs
+from toast.utils import Logger
+
+from ._focal_plane import focal_plane_from_toast
+from ._pisco import Beamsor, Engine, HalfWavePlate, Sky
+
+__all__ = ["PixelConvolve"]
+
+
+class _MuellerList(List):
+    """A List trait that also takes a numpy array or a tuple (a 4x4 matrix or 16 numbers)."""
+
+    _cast_types = (tuple, np.ndarray)
+
+    def validate(self, obj, value):
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        return super().validate(obj, value)
+
+
+def _mueller_matrix(value):
+    """A (4, 4) float64 array from 16 numbers (row by row) or 4 rows of 4; ValueError otherwise."""
+    try:
+        m = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"hwp_mueller: expected 16 numbers or a 4x4 matrix, got {value!r}") from None
+    if m.size != 16 or m.shape not in ((16,), (4, 4)):
+        raise ValueError(f"hwp_mueller: expected 16 numbers (row by row) or a 4x4 matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("hwp_mueller: the Mueller matrix must be finite")
+    return m.reshape(4, 4)
+
+
+def _astropy_unit(units):
+    """The astropy unit of a sky's units string ('K_CMB', 'uK_CMB', 'K', ...), or None."""
+    name = units.strip()
+    for suffix in ("_CMB", "_RJ", "CMB", "RJ"):
+        if name.endswith(suffix):
+            name = name[: -len(suffix)]
+            break
+    try:
+        return u.Unit(name)
+    except ValueError:
+        return None
+
+
+@trait_docs
+class PixelConvolve(Operator):
+    """Beam-convolved detector timestreams from PISCO-VK's pixel-space convolution."""
+
+    API = Int(0, help="Internal interface version for this operator")
+
+    sky = Instance(klass=Sky, allow_none=True, help="The sky, a pisco.Sky (or give sky_file)")
+
+    sky_file = Unicode(
+        None, allow_none=True, help="HEALPix FITS map (I; I, Q, U; or I, Q, U, V) read when sky is None"
+    )
+
+    beam = Instance(klass=Beamsor, allow_none=True, help="One pisco.Beamsor for every detector")
+
+    beams = Dict({}, help="pisco.Beamsor by detector name (when beam is None)")
+
+    beam_rho_max = Float(
+        2.5, help="Without beam or beams: Gaussian beams of the focal plane's fwhm, summed out to this many FWHM"
+    )
+
+    boresight = Unicode(defaults.boresight_radec, help="Observation shared key for boresight quaternions")
+
+    hwp_angle = Unicode(
+        defaults.hwp_angle,
+        allow_none=True,
+        help="Observation shared key for the HWP angle: an observation holding it gets a plate in front of "
+        "every detector, with the focal plane's gamma; None ignores it (no plate)",
+    )
+
+    hwp_mueller = _MuellerList(
+        None,
+        allow_none=True,
+        help="The plate's Mueller matrix at angle 0 (16 numbers row by row, or 4 rows; fast axis along the "
+        "detector's polarization axis); None or empty is the ideal plate diag(1, 1, -1, -1)",
+    )
+
+    hwp_placement = Unicode(
+        "aperture", help="Where the plate sits: 'aperture' (skyward of the optics) or 'detector' (before the "
+        "detector, after the optics: four times the cost)"
+    )
+
+    det_data = Unicode(defaults.det_data, help="Observation detdata key for the convolved timestreams")
+
+    det_data_units = Unit(defaults.det_data_units, help="Output units if creating detector data")
+
+    det_mask = Int(defaults.det_mask_invalid, help="Bit mask value for per-detector flagging")
+
+    view = Unicode(None, allow_none=True, help="Use this view of the data in all observations")
+
+    zero = Bool(False, help="If True, overwrite det_data instead of adding into it")
+
+    backend = Unicode("auto", help="PISCO-VK backend: 'auto', 'cpu', 'vulkan' or 'cuda'")
+
+    device = Unicode("auto", help="Device index or part of its name ('auto': the best)")
+
+    @traitlets.validate("beam_rho_max")
+    def _check_beam_rho_max(self, proposal):
+        if not proposal["value"] > 0:
+            raise traitlets.TraitError("beam_rho_max must be positive")
+        return proposal["value"]
+
+    @traitlets.validate("hwp_mueller")
+    def _check_hwp_mueller(self, proposal):
+        if proposal["value"] is None or len(proposal["value"]) == 0:
+            return proposal["value"]
+        try:
+            return _mueller_matrix(proposal["value"]).tolist()
+        except ValueError as exc:
+            raise traitlets.TraitError(str(exc)) from None
+
+    @traitlets.validate("hwp_placement")
+    def _check_hwp_placement(self, proposal):
+        if proposal["value"] not in ("aperture", "detector"):
+            raise traitlets.TraitError(f"hwp_placement must be 'aperture' or 'detector', not {proposal['value']!r}")
+        return proposal["value"]
+
+    @traitlets.validate("beams")
+    def _check_beams(self, proposal):
+        for name, beam in proposal["value"].items():
+            if not isinstance(beam, Beamsor):
+                raise traitlets.TraitError(f"beams['{name}'] is not a pisco.Beamsor")
+        return proposal["value"]
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._engines = {}
+        self._sky = None
+
+    def _get_sky(self):
+        if self.sky is not None:
+            return self.sky
+        if self.sky_file is None:
+            raise RuntimeError("PixelConvolve: give sky (a pisco.Sky) or sky_file")
+        if self._sky is None or self._sky[0] != self.sky_file:
+            self._sky = (self.sky_file, Sky.read_fits(self.sky_file))
+        return self._sky[1]
+
+    def _beams_for(self, focalplane, names):
+        """The engine's beam list and each detector's index into it."""
+        if self.beam is not None:
+            return [self.beam], [0] * len(names)
+        if len(self.beams) > 0:
+            missing = [n for n in names if n not in self.beams]
+            if missing:
+                raise RuntimeError(f"PixelConvolve: beams has no beam for detectors {missing}")
+            unique, index = [], []
+            for n in names:
+                b = self.beams[n]
+                found = next((i for i, x in enumerate(unique) if x is b), None)
+                if found is None:
+                    unique.append(b)
+                    found = len(unique) - 1
+                index.append(found)
+            return unique, index
+        table = focalplane.detector_data
+        if "fwhm" not in table.colnames:
+            raise RuntimeError("PixelConvolve: no beam, no beams, and the focal plane has no fwhm column")
+        fwhm = {str(n): float(u.Quantity(f).to_value(u.rad)) for n, f in zip(table["name"], table["fwhm"])}
+        widths = sorted({fwhm[n] for n in names})
+        beams = [Beamsor.gaussian(w, rho_max=min(self.beam_rho_max * w, np.radians(89.0))) for w in widths]
+        return beams, [widths.index(fwhm[n]) for n in names]
+
+    def _plate(self):
+        """The plate model (its gamma set per detector from the focal plane)."""
+        mueller = _mueller_matrix(self.hwp_mueller) if self.hwp_mueller else None
+        return HalfWavePlate(mueller, placement=self.hwp_placement)
+
+    def _engine_for(self, focalplane, plates):
+        """(engine, {name: detector index}) for a TOAST focal plane, with or without plates, set up on
+        first use."""
+        key = (id(focalplane), plates)
+        if key not in self._engines:
+            names = [str(n) for n in focalplane.detector_data["name"]]
+            beams, index = self._beams_for(focalplane, names)
+            fp = focal_plane_from_toast(focalplane, beam=index, hwp=self._plate() if plates else None)
+            engine = Engine(self._get_sky(), beams, fp, backend=self.backend, device=self.device)
+            # The focal plane is held too, so that its id cannot be reused by another while cached.
+            self._engines[key] = (engine, {n: i for i, n in enumerate(names)}, focalplane)
+            log = Logger.get()
+            log.debug(f"PixelConvolve: {len(names)} detectors on {engine.backend} ({engine.device})"
+                      + (", with half-wave plates" if plates else ""))
+        engine, index, _ = self._engines[key]
+        return engine, index
+
+    @function_timer
+    def _exec(self, data, detectors=None, **kwargs):
+        sky = self._get_sky()
+        scale_unit = _astropy_unit(sky.units)
+        for ob in data.obs:
+            dets = ob.select_local_detectors(detectors, flagmask=self.det_mask)
+            if len(dets) == 0:
+                continue
+            plates = self.hwp_angle is not None and self.hwp_angle in ob.shared
+            if self.boresight not in ob.shared:
+                raise RuntimeError(f"PixelConvolve: observation {ob.name} has no shared '{self.boresight}'")
+            ob.detdata.ensure(self.det_data, detectors=dets, create_units=self.det_data_units)
+            out_units = ob.detdata[self.det_data].units
+            scale = 1.0
+            if scale_unit is not None and out_units is not None:
+                try:
+                    scale = float((1.0 * scale_unit).to_value(out_units))
+                except u.UnitConversionError:
+                    scale = 1.0
+            engine, index = self._engine_for(ob.telescope.focalplane, plates)
+            views = ob.view[self.view]
+            for vw in range(len(views)):
+                quats = views.shared[self.boresight][vw]
+                quats = np.ascontiguousarray(quats, dtype=np.float64)
+                if len(quats) == 0:
+                    continue
+                angles = None
+                if plates:
+                    angles = np.ascontiguousarray(views.shared[self.hwp_angle][vw], dtype=np.float64)
+                    if not np.all(np.isfinite(angles)):
+                        bad = int(np.argmin(np.isfinite(angles)))
+                        raise ValueError(f"PixelConvolve: observation {ob.name}: '{self.hwp_angle}' is not finite "
+                                         f"(view sample {bad}: {angles[bad]})")
+                for det in dets:
+                    out = views.detdata[self.det_data][vw][det]
+                    direct = (
+                        scale == 1.0 and out.dtype == np.float64 and out.flags.c_contiguous and out.flags.writeable
+                    )
+                    if direct:
+                        engine.convolve(index[det], boresight_quats=quats, out=out, accumulate=not self.zero,
+                                        hwp_angle=angles)
+                    else:
+                        tod = engine.convolve(index[det], boresight_quats=quats, hwp_angle=angles)
+                        if self.zero:
+                            out[:] = scale * tod
+                        else:
+                            out[:] += scale * tod
+
+    def _finalize(self, data, **kwargs):
+        for engine, _, _ in self._engines.values():
+            engine.close()
+        self._engines = {}
+
+    def _requires(self):
+        req = {"shared": [self.boresight], "detdata": [], "intervals": []}
+        if not self.zero:
+            req["detdata"].append(self.det_data)
+        if self.view is not None:
+            req["intervals"].append(self.view)
+        return req
+
+    def _provides(self):
+        return {"detdata": [self.det_data]}

@@ -1,0 +1,364 @@
+// pisco.Engine: the C++ engine behind a lock, with the GIL released while it runs (docs/python.md).
+//
+// One Python Engine may be used from several threads: its calls are serialized by its own mutex,
+// taken after the GIL is released, so that other engines (and any other Python code) run meanwhile.
+// close() waits for the calls in progress and frees the device's memory; later calls raise.
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <numbers>
+#include <optional>
+#include <span>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include "arrays.hpp"
+#include "pisco/engine.hpp"
+#include "pisco/error.hpp"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace pisco::python {
+namespace {
+
+Normalization normalization_from(const std::string& name) {
+  if (name == "integral") return Normalization::integral;
+  if (name == "per_sample") return Normalization::per_sample;
+  throw nb::value_error(("normalization: expected 'integral' or 'per_sample', got '" + name + "'").c_str());
+}
+
+// The pointing of one call, checked and viewed (no copy): angles or boresight quaternions.
+struct PointingArgs {
+  std::optional<ConstVector> theta, phi, psi;
+  std::optional<ConstMatrix> quats;
+  std::size_t size = 0;
+
+  PointingView angles() const {
+    return {{theta->data(), size}, {phi->data(), size}, {psi->data(), size}};
+  }
+  QuatPointingView quaternions() const {
+    return {{reinterpret_cast<const Quat*>(quats->data()), size}};
+  }
+};
+
+PointingArgs pointing_args(nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats) {
+  const bool angles = !theta.is_none() || !phi.is_none() || !psi.is_none();
+  if (angles == !quats.is_none())
+    throw nb::type_error("convolve: give either theta, phi and psi (the boresight's angles) or boresight_quats "
+                         "(one quaternion x, y, z, w per sample), not both and not neither");
+  PointingArgs p;
+  if (angles) {
+    if (theta.is_none() || phi.is_none() || psi.is_none())
+      throw nb::type_error("convolve: theta, phi and psi must all be given");
+    p.theta = const_vector(theta, "theta");
+    p.phi = const_vector(phi, "phi");
+    p.psi = const_vector(psi, "psi");
+    p.size = p.theta->shape(0);
+    if (p.phi->shape(0) != p.size || p.psi->shape(0) != p.size)
+      throw nb::value_error(("convolve: theta, phi and psi have different lengths (" + std::to_string(p.size) + ", " +
+                             std::to_string(p.phi->shape(0)) + ", " + std::to_string(p.psi->shape(0)) + ")").c_str());
+  } else {
+    p.quats = const_matrix(quats, "boresight_quats", 4);
+    p.size = p.quats->shape(0);
+  }
+  return p;
+}
+
+// The plate's angles of one call (a view, no copy), or none: a 1-D float64 array of the pointing's
+// length. Whether the detector needs them is the engine's to say (pisco.Error).
+std::optional<ConstVector> hwp_args(nb::handle hwp_angle, std::size_t n) {
+  if (hwp_angle.is_none()) return std::nullopt;
+  ConstVector v = const_vector(hwp_angle, "hwp_angle");
+  if (v.shape(0) != n)
+    throw nb::value_error(("hwp_angle: " + std::to_string(v.shape(0)) + " samples, but the pointing has " +
+                           std::to_string(n)).c_str());
+  return v;
+}
+
+std::span<const double> span_of(const std::optional<ConstVector>& v) {
+  if (!v) return {};
+  return {v->data(), v->shape(0)};
+}
+
+// Runs without the GIL: the first non-finite plate angle, named, or an empty string.
+std::string check_hwp_values(const std::optional<ConstVector>& v) {
+  if (!v) return {};
+  const std::size_t n = v->shape(0);
+  const std::size_t bad = first_non_finite(v->data(), n);
+  if (bad < n)
+    return "hwp_angle[" + std::to_string(bad) + "] is " + format_double(v->data()[bad]) +
+           ": the plate's angles must be finite";
+  return {};
+}
+
+// Non-finite values, theta outside [0, pi] and quaternions far from unit norm, named by argument and
+// sample (the engine would report them too, as pisco.Error and without the argument's name).
+// Runs without the GIL; returns the message of the first problem, or an empty string.
+std::string check_values(const PointingArgs& p) {
+  if (p.theta) {
+    const char* names[3] = {"theta", "phi", "psi"};
+    const double* data[3] = {p.theta->data(), p.phi->data(), p.psi->data()};
+    for (int k = 0; k < 3; ++k) {
+      const std::size_t bad = first_non_finite(data[k], p.size);
+      if (bad < p.size)
+        return std::string(names[k]) + "[" + std::to_string(bad) + "] is " + format_double(data[k][bad]) +
+               ": the pointing must be finite";
+    }
+    for (std::size_t i = 0; i < p.size; ++i)
+      if (data[0][i] < 0.0 || data[0][i] > std::numbers::pi)
+        return "theta[" + std::to_string(i) + "] = " + format_double(data[0][i]) + " is outside [0, pi]";
+    return {};
+  }
+  const double* q = p.quats->data();
+  const std::size_t bad = first_non_finite(q, 4 * p.size);
+  if (bad < 4 * p.size)
+    return "boresight_quats[" + std::to_string(bad / 4) + "] has a non-finite component (" +
+           format_double(q[bad]) + ")";
+  for (std::size_t i = 0; i < p.size; ++i) {
+    const double n = std::sqrt(q[4 * i] * q[4 * i] + q[4 * i + 1] * q[4 * i + 1] + q[4 * i + 2] * q[4 * i + 2] +
+                               q[4 * i + 3] * q[4 * i + 3]);
+    if (std::abs(n - 1.0) > 1e-6)
+      return "boresight_quats[" + std::to_string(i) + "] has norm " + format_double(n) +
+             "; rotations must be unit quaternions (to 1e-6)";
+  }
+  return {};
+}
+
+class PyEngine {
+ public:
+  PyEngine(const Sky& sky, nb::handle beams, const FocalPlane& focal_plane, const std::string& backend,
+           const std::string& device, std::size_t chunk_samples, const std::string& normalization,
+           unsigned threads) {
+    std::vector<Beamsor> beam_list;
+    if (nb::isinstance<Beamsor>(beams)) {
+      beam_list.push_back(nb::cast<Beamsor>(beams));
+    } else {
+      for (nb::handle b : beams) {
+        if (!nb::isinstance<Beamsor>(b))
+          throw nb::type_error(("beams: expected a pisco.Beamsor or a sequence of them, found " + describe(b)).c_str());
+        beam_list.push_back(nb::cast<Beamsor>(b));
+      }
+    }
+    EngineOptions options;
+    options.backend = backend;
+    options.device = device;
+    options.chunk_samples = chunk_samples;
+    options.normalization = normalization_from(normalization);
+    options.threads = threads;
+    for (const auto& d : focal_plane.detectors()) names_.push_back(d.name);
+    nb::gil_scoped_release release;
+    engine_ = std::make_unique<Engine>(sky, beam_list, focal_plane, options);
+  }
+
+  ~PyEngine() {
+    if (!engine_ || in_flight_.empty()) return;
+    try {
+      engine_->wait();  // submissions still writing into arrays this object keeps alive
+    } catch (...) {
+    }
+  }
+  PyEngine(const PyEngine&) = delete;
+  PyEngine& operator=(const PyEngine&) = delete;
+
+  nb::object convolve(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
+                      nb::handle out, bool accumulate, nb::handle hwp_angle) {
+    const std::size_t d = detector_index(detector);
+    const PointingArgs p = pointing_args(theta, phi, psi, quats);
+    const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    nb::object result = output(out, p.size, accumulate);
+    Vector tod = vector(result, "out");
+    std::string problem;
+    {
+      nb::gil_scoped_release release;
+      problem = check_values(p);
+      if (problem.empty()) problem = check_hwp_values(h);
+      if (problem.empty()) {
+        std::lock_guard lock(mutex_);
+        Engine& e = open();
+        if (p.theta)
+          e.convolve(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h));
+        else
+          e.convolve(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+      }
+    }
+    if (!problem.empty()) throw nb::value_error(problem.c_str());
+    return result;
+  }
+
+  std::uint64_t submit(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
+                       nb::handle out, bool accumulate, nb::handle hwp_angle) {
+    const std::size_t d = detector_index(detector);
+    const PointingArgs p = pointing_args(theta, phi, psi, quats);
+    const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    if (out.is_none()) throw nb::type_error("submit: out is required (the array the TOD is written to by wait())");
+    check_output_size(out, p.size);
+    Vector tod = vector(out, "out");
+    std::string problem;
+    std::uint64_t ticket = 0;
+    {
+      nb::gil_scoped_release release;
+      problem = check_values(p);
+      if (problem.empty()) problem = check_hwp_values(h);
+      if (problem.empty()) {
+        std::lock_guard lock(mutex_);
+        Engine& e = open();
+        // The plate's angles, like the pointing, are read before submit() returns.
+        ticket = p.theta ? e.submit(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h))
+                         : e.submit(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+      }
+    }
+    if (!problem.empty()) throw nb::value_error(problem.c_str());
+    in_flight_[ticket] = nb::borrow(out);  // kept alive until wait() has written it
+    return ticket;
+  }
+
+  void wait(std::optional<std::uint64_t> ticket) {
+    {
+      nb::gil_scoped_release release;
+      std::lock_guard lock(mutex_);
+      Engine& e = open();
+      if (ticket)
+        e.wait(*ticket);
+      else
+        e.wait();
+    }
+    if (ticket)
+      in_flight_.erase(in_flight_.begin(), in_flight_.upper_bound(*ticket));
+    else
+      in_flight_.clear();
+  }
+
+  void close() {
+    {
+      nb::gil_scoped_release release;
+      std::lock_guard lock(mutex_);
+      engine_.reset();
+    }
+    in_flight_.clear();
+  }
+
+  bool closed() const { return !engine_; }
+  std::string backend_name() { return locked([](Engine& e) { return e.backend_name(); }); }
+  std::string device_name() { return locked([](Engine& e) { return e.device_name(); }); }
+  double mean_disc_pixels() { return locked([](Engine& e) { return e.mean_disc_pixels(); }); }
+  FocalPlane focal_plane() { return locked([](Engine& e) { return e.focal_plane(); }); }
+  std::size_t size() const { return names_.size(); }
+
+ private:
+  Engine& open() {
+    if (!engine_) throw nb::value_error("Engine: used after close()");
+    return *engine_;
+  }
+
+  template <class F>
+  std::invoke_result_t<F, Engine&> locked(F f) {
+    nb::gil_scoped_release release;
+    std::lock_guard lock(mutex_);
+    return f(open());
+  }
+
+  std::size_t detector_index(nb::handle detector) const {
+    if (nb::isinstance<nb::str>(detector)) {
+      const auto name = nb::cast<std::string>(detector);
+      for (std::size_t i = 0; i < names_.size(); ++i)
+        if (names_[i] == name) return i;
+      throw nb::key_error(("detector: the focal plane has no detector named '" + name + "'").c_str());
+    }
+    long long i = 0;
+    if (!nb::try_cast(detector, i, false))
+      throw nb::type_error(("detector: expected an index or a name, got " + describe(detector)).c_str());
+    if (i < 0 || i >= static_cast<long long>(names_.size()))
+      throw nb::index_error(("detector: index " + std::to_string(i) + " but the focal plane has " +
+                             std::to_string(names_.size()) + " detectors").c_str());
+    return static_cast<std::size_t>(i);
+  }
+
+  static void check_output_size(nb::handle out, std::size_t n) {
+    check_array(out, "out", 1, 0, true);
+    const auto len = nb::cast<std::size_t>(nb::cast<nb::tuple>(out.attr("shape"))[0]);
+    if (len != n)
+      throw nb::value_error(("out: " + std::to_string(len) + " samples, but the pointing has " + std::to_string(n))
+                                .c_str());
+  }
+
+  // `out`, checked, or a new array of n samples (accumulating needs the caller's array).
+  static nb::object output(nb::handle out, std::size_t n, bool accumulate) {
+    if (out.is_none()) {
+      if (accumulate) throw nb::type_error("convolve: accumulate=True adds into `out`, which must then be given");
+      return nb::module_::import_("numpy").attr("empty")(n, "float64");
+    }
+    check_output_size(out, n);
+    return nb::borrow(out);
+  }
+
+  // The outputs of submissions not yet waited for, kept alive until then. Declared before engine_,
+  // so destroyed after it: the engine completes its work before the arrays can go.
+  std::map<std::uint64_t, nb::object> in_flight_;
+  std::mutex mutex_;
+  std::vector<std::string> names_;
+  std::unique_ptr<Engine> engine_;
+};
+
+}  // namespace
+
+void bind_engine(nb::module_& m) {
+  nb::class_<PyEngine>(m, "Engine",
+                       "The convolution engine: the sky, beams and focal plane are set up once for a backend,\n"
+                       "then chunks of pointing become TOD.\n\n"
+                       "Engine(sky, beams, focal_plane, backend='auto', device='auto', chunk_samples=0,\n"
+                       "       normalization='integral', threads=0)\n\n"
+                       "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'vulkan',\n"
+                       "'cuda' or 'auto' (the best present: pisco.devices()). device: an index or part of a name.\n"
+                       "Usable as a context manager; close() frees the device's memory.")
+      .def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, std::size_t,
+                    const std::string&, unsigned>(),
+           "sky"_a, "beams"_a, "focal_plane"_a, "backend"_a = "auto", "device"_a = "auto", "chunk_samples"_a = 0,
+           "normalization"_a = "integral", "threads"_a = 0)
+      .def("convolve", &PyEngine::convolve, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
+           "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
+           "accumulate"_a = false, "hwp_angle"_a = nb::none(),
+           "The TOD of one detector (an index or its name) for a chunk of boresight pointing.\n\n"
+           "Pointing: theta, phi, psi (1-D float64 arrays, radians), or boresight_quats ((n, 4) float64,\n"
+           "x, y, z, w, TOAST's and litebird_sim's layout); the engine applies the detector's offset.\n"
+           "out: a writable 1-D float64 array of n samples, written (or added to, with accumulate=True);\n"
+           "None allocates one. Returns out. Arrays are used in place, never copied: a wrong dtype raises\n"
+           "TypeError, a wrong shape, a strided or read-only array or a non-finite value ValueError.\n"
+           "hwp_angle: the half-wave plate's angle per sample (1-D float64, radians, in the focal-plane\n"
+           "frame: TOAST's hwp_angle), required for a detector with a plate (Detector.hwp) and refused for\n"
+           "one without (pisco.Error). The GIL is released while the engine runs.")
+      .def("submit", &PyEngine::submit, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
+           "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
+           "accumulate"_a = false, "hwp_angle"_a = nb::none(),
+           "Like convolve(), asynchronously: the pointing (and hwp_angle) are read before submit() returns\n"
+           "a ticket; out (required) is written by the time wait(ticket) returns.")
+      .def("wait", &PyEngine::wait, "ticket"_a = nb::none(),
+           "Waits for submission `ticket` and every earlier one (all, without a ticket).")
+      .def("close", &PyEngine::close, "Frees the engine (its device memory); later calls raise ValueError.")
+      .def_prop_ro("closed", &PyEngine::closed)
+      .def_prop_ro("backend", &PyEngine::backend_name, "The backend in use ('cpu', 'vulkan', 'cuda').")
+      .def_prop_ro("device", &PyEngine::device_name, "The device in use.")
+      .def_prop_ro("mean_disc_pixels", &PyEngine::mean_disc_pixels,
+                   "Mean number of sky pixels summed per sample so far.")
+      .def_prop_ro("focal_plane", &PyEngine::focal_plane, "The engine's focal plane (a copy).")
+      .def("__len__", &PyEngine::size)
+      .def("__enter__", [](nb::handle self) { return nb::borrow(self); })
+      .def("__exit__", [](PyEngine& e, nb::handle, nb::handle, nb::handle) { e.close(); }, "exc_type"_a = nb::none(),
+           "exc_value"_a = nb::none(), "traceback"_a = nb::none())
+      .def("__repr__", [](PyEngine& e) {
+        if (e.closed()) return std::string("pisco.Engine(closed)");
+        return "pisco.Engine(backend='" + e.backend_name() + "', device='" + e.device_name() + "', " +
+               std::to_string(e.size()) + " detectors)";
+      });
+}
+
+}  // namespace pisco::python

@@ -1,0 +1,582 @@
+// The extension module pisco._pisco (docs/python.md): skies, beamsors, focal planes and helpers.
+// The engine is bound in engine.cpp. The package python/pisco/ re-exports these names and adds the
+// framework adapters (pisco.toast, pisco.litebird).
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <numbers>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/filesystem.h>
+#include <nanobind/stl/function.h>
+#include <nanobind/stl/optional.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include "arrays.hpp"
+#include "pisco/pisco.hpp"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace pisco::python {
+void bind_engine(nb::module_& m);
+
+namespace {
+
+using NumpyVector = nb::ndarray<nb::numpy, double, nb::ndim<1>>;
+using NumpyConstVector = nb::ndarray<nb::numpy, const double, nb::ndim<1>>;
+
+// A numpy array of 4 doubles (x, y, z, w), a copy.
+nb::ndarray<nb::numpy, double, nb::shape<4>> quat_array(const Quat& q) {
+  auto* data = new double[4]{q.x, q.y, q.z, q.w};
+  nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+  return nb::ndarray<nb::numpy, double, nb::shape<4>>(data, {4}, owner);
+}
+
+Quat quat_from(nb::handle obj, const char* name) {
+  std::vector<double> v;
+  if (!nb::try_cast(obj, v) || v.size() != 4)
+    throw nb::value_error((std::string(name) + ": expected four numbers (x, y, z, w), got " + describe(obj)).c_str());
+  for (double c : v)
+    if (!std::isfinite(c)) throw nb::value_error((std::string(name) + ": the quaternion is not finite").c_str());
+  return normalized(Quat{v[0], v[1], v[2], v[3]});
+}
+
+void check_nside_value(long long nside, const char* name) {
+  if (!valid_nside(nside))
+    throw nb::value_error((std::string(name) + ": NSIDE = " + std::to_string(nside) +
+                           " is not a power of two in [1, " + std::to_string(max_nside) + "]").c_str());
+}
+
+Mueller mueller_from(nb::handle obj) {
+  Mueller m{};
+  std::vector<std::vector<double>> rows;
+  if (!nb::try_cast(obj, rows) || rows.size() != 4)
+    throw nb::value_error(("mueller: expected a 4x4 matrix, got " + describe(obj)).c_str());
+  for (int i = 0; i < 4; ++i) {
+    if (rows[i].size() != 4) throw nb::value_error("mueller: expected a 4x4 matrix");
+    for (int j = 0; j < 4; ++j) m[i][j] = rows[i][j];
+  }
+  return m;
+}
+
+BeamOptions beam_options(double rho_max, double grid_step, double cross_polar, const std::string& pattern,
+                         nb::handle mueller) {
+  BeamOptions o;
+  o.rho_max = rho_max;
+  o.grid_step = grid_step;
+  o.cross_polar = cross_polar;
+  if (pattern == "uniform")
+    o.cross_polar_pattern = CrossPolarPattern::uniform;
+  else if (pattern == "quadrupole")
+    o.cross_polar_pattern = CrossPolarPattern::quadrupole;
+  else
+    throw nb::value_error(("cross_polar_pattern: expected 'uniform' or 'quadrupole', got '" + pattern + "'").c_str());
+  if (!mueller.is_none()) o.mueller = mueller_from(mueller);
+  return o;
+}
+
+nb::ndarray<nb::numpy, double, nb::shape<4, 4>> mueller_array(const Mueller& m) {
+  auto* data = new double[16];
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) data[i * 4 + j] = m[i][j];
+  nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+  return nb::ndarray<nb::numpy, double, nb::shape<4, 4>>(data, {4, 4}, owner);
+}
+
+// A (4, 4) Mueller matrix argument: any real array-like of that shape (a list of rows, an int or float
+// numpy array), converted once; TypeError for what is not numbers, ValueError naming `name` for a
+// wrong shape or a non-finite entry.
+Mueller mueller_arg(nb::handle obj, const std::string& name) {
+  nb::module_ numpy = nb::module_::import_("numpy");
+  if (nb::hasattr(obj, "dtype") && to_string(obj.attr("dtype").attr("kind")) == "c")
+    throw nb::type_error((name + ": expected a real (4, 4) Mueller matrix, got a " + describe(obj)).c_str());
+  nb::object array;
+  try {
+    array = numpy.attr("asarray")(obj, "float64");
+  } catch (nb::python_error&) {
+    throw nb::type_error((name + ": expected a (4, 4) Mueller matrix of numbers, got " + describe(obj)).c_str());
+  }
+  const nb::tuple shape = nb::cast<nb::tuple>(array.attr("shape"));
+  if (shape.size() != 2 || nb::cast<std::size_t>(shape[0]) != 4 || nb::cast<std::size_t>(shape[1]) != 4)
+    throw nb::value_error((name + ": expected a (4, 4) Mueller matrix (rows: the Stokes parameters I, Q, U, V "
+                           "leaving the element, columns: those arriving), got shape " + to_string(shape))
+                              .c_str());
+  array = numpy.attr("ascontiguousarray")(array);
+  const auto view = nb::cast<nb::ndarray<const double, nb::shape<4, 4>, nb::c_contig, nb::device::cpu>>(array);
+  Mueller m{};
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) {
+      const double v = view.data()[4 * i + j];
+      if (!std::isfinite(v))
+        throw nb::value_error((name + "[" + std::to_string(i) + "][" + std::to_string(j) + "] is " +
+                               format_double(v) + ": Mueller matrices must be finite").c_str());
+      m[i][j] = v;
+    }
+  return m;
+}
+
+HwpPlacement placement_from(const std::string& name) {
+  if (name == "aperture") return HwpPlacement::aperture;
+  if (name == "detector") return HwpPlacement::detector;
+  throw nb::value_error(("placement: expected 'aperture' or 'detector', got '" + name + "'").c_str());
+}
+
+const char* placement_name(HwpPlacement p) { return p == HwpPlacement::detector ? "detector" : "aperture"; }
+
+double finite_arg(double value, const char* name) {
+  if (!std::isfinite(value))
+    throw nb::value_error((std::string(name) + " is " + format_double(value) + ": expected a finite angle (radians)")
+                              .c_str());
+  return value;
+}
+
+// A (4, 4) read-only numpy array holding a copy of m.
+nb::object mueller_readonly(const Mueller& m) {
+  auto* data = new double[16];
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) data[i * 4 + j] = m[i][j];
+  nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+  return nb::cast(nb::ndarray<nb::numpy, const double, nb::shape<4, 4>>(data, {4, 4}, owner));
+}
+
+// None or a HalfWavePlate, for Detector.hwp and the `hwp` arguments.
+std::optional<HalfWavePlate> plate_arg(nb::handle obj) {
+  if (obj.is_none()) return std::nullopt;
+  if (!nb::isinstance<HalfWavePlate>(obj))
+    throw nb::type_error(("hwp: expected a pisco.HalfWavePlate or None, got " + describe(obj)).c_str());
+  return nb::cast<HalfWavePlate>(obj);
+}
+
+std::string plate_repr(const HalfWavePlate& p) {
+  const bool ideal = p.mueller == ideal_hwp_mueller();
+  return std::string("pisco.HalfWavePlate(") + (ideal ? "ideal" : "mueller=[...]") + ", placement='" +
+         placement_name(p.placement) + "', gamma=" + to_string(nb::repr(nb::float_(p.gamma))) + ")";
+}
+
+// A writable view of one Stokes map, keeping the Python Sky alive. Returned as a plain object: the
+// view already has its owner, which a property's default reference_internal policy would set again.
+nb::object stokes_view(nb::handle self, StokesIndex k) {
+  auto map = nb::cast<Sky&>(self).stokes(k);
+  return nb::cast(NumpyVector(map.data(), {map.size()}, self));
+}
+
+void bind_sky(nb::module_& m) {
+  nb::class_<Sky>(m, "Sky",
+                  "A polarized sky: HEALPix I, Q, U, V maps (RING ordering, COSMO polarization convention).\n\n"
+                  "Sky(nside, units='K_CMB') is a sky of zeros; Sky.from_maps and Sky.read_fits fill one.\n"
+                  "The maps I, Q, U, V are writable numpy views of the sky's own storage (no copy).")
+      .def("__init__",
+           [](Sky* self, long long nside, std::string units) {
+             check_nside_value(nside, "nside");
+             new (self) Sky(static_cast<int>(nside), std::move(units));
+           },
+           "nside"_a, "units"_a = "K_CMB")
+      .def_static(
+          "from_maps",
+          [](nb::handle maps, std::string units) {
+            // One 1-D float64 array per Stokes map (a (k, npix) array iterates as its rows), k = 1, 3 or 4.
+            std::vector<nb::object> rows;
+            if (nb::hasattr(maps, "ndim") && nb::cast<int>(maps.attr("ndim")) == 1) {
+              rows.push_back(nb::borrow(maps));
+            } else {
+              for (nb::handle row : maps) rows.push_back(nb::borrow(row));
+            }
+            if (rows.size() != 1 && rows.size() != 3 && rows.size() != 4)
+              throw nb::value_error(("maps: expected 1 (I), 3 (I, Q, U) or 4 (I, Q, U, V) maps, got " +
+                                     std::to_string(rows.size())).c_str());
+            std::vector<ConstVector> views;
+            for (std::size_t k = 0; k < rows.size(); ++k) {
+              const std::string name = "maps[" + std::to_string(k) + "]";
+              views.push_back(const_vector(rows[k], name.c_str()));
+            }
+            const std::size_t npix = views[0].shape(0);
+            long long nside = 1;
+            while (12ll * nside * nside < static_cast<long long>(npix)) nside *= 2;
+            if (12ll * nside * nside != static_cast<long long>(npix))
+              throw nb::value_error(("maps: " + std::to_string(npix) +
+                                     " pixels is not 12 NSIDE^2 for a power of two NSIDE").c_str());
+            check_nside_value(nside, "maps");
+            Sky sky(static_cast<int>(nside), std::move(units));
+            for (std::size_t k = 0; k < views.size(); ++k) {
+              if (views[k].shape(0) != npix)
+                throw nb::value_error(("maps[" + std::to_string(k) + "]: " + std::to_string(views[k].shape(0)) +
+                                       " pixels, but maps[0] has " + std::to_string(npix)).c_str());
+              const double* src = views[k].data();
+              const std::size_t bad = first_non_finite(src, npix);
+              if (bad < npix)
+                throw nb::value_error(("maps[" + std::to_string(k) + "][" + std::to_string(bad) + "] is " +
+                                       format_double(src[bad]) + ": sky maps must be finite").c_str());
+              auto dst = sky.stokes(static_cast<StokesIndex>(k));
+              std::copy(src, src + npix, dst.begin());
+            }
+            return sky;
+          },
+          "maps"_a, "units"_a = "K_CMB",
+          "A sky from HEALPix RING maps: a (k, npix) float64 array or a sequence of k 1-D float64 arrays,\n"
+          "k = 1 (I), 3 (I, Q, U) or 4 (I, Q, U, V), COSMO convention. The values are copied into the sky.")
+      .def_static("read_fits", [](const std::filesystem::path& path) { return Sky::read_fits(path); }, "path"_a,
+                  "Reads a HEALPix FITS map (1, 3 or 4 columns); NESTED is converted to RING, IAU to COSMO.")
+      .def("write_fits", &Sky::write_fits, "path"_a,
+           "Writes I, Q, U, V as a HEALPix FITS file (RING, COSMO), atomically.")
+      .def_prop_ro("nside", &Sky::nside)
+      .def_prop_ro("npix", &Sky::npix)
+      .def_prop_ro("pixel_area", &Sky::pixel_area, "4 pi / npix, steradians.")
+      .def_prop_rw("units", &Sky::units, &Sky::set_units)
+      .def_prop_ro("I", [](nb::handle self) { return stokes_view(self, StokesIndex::I); })
+      .def_prop_ro("Q", [](nb::handle self) { return stokes_view(self, StokesIndex::Q); })
+      .def_prop_ro("U", [](nb::handle self) { return stokes_view(self, StokesIndex::U); })
+      .def_prop_ro("V", [](nb::handle self) { return stokes_view(self, StokesIndex::V); })
+      .def("__repr__", [](const Sky& s) {
+        return "pisco.Sky(nside=" + std::to_string(s.nside()) + ", units='" + s.units() + "')";
+      });
+}
+
+void bind_beamsor(nb::module_& m) {
+  nb::class_<Beamsor>(m, "Beamsor",
+                      "A beamsor: a field of 4x4 Mueller matrices over the beam's directions, sampled on a grid\n"
+                      "out to rho_max (radians). Built by Beamsor.gaussian, .elliptical_gaussian, .from_field or\n"
+                      ".read_fits.")
+      .def_static(
+          "gaussian",
+          [](double fwhm, double rho_max, double grid_step, double cross_polar, const std::string& pattern,
+             nb::handle mueller) {
+            return Beamsor::gaussian(fwhm, beam_options(rho_max, grid_step, cross_polar, pattern, mueller));
+          },
+          "fwhm"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "cross_polar"_a = 0.0,
+          "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(),
+          "A circular Gaussian beam of full width at half maximum `fwhm` (radians), summed out to rho_max.\n"
+          "grid_step 0 = fwhm / 20. cross_polar: the cross-polar field ratio kappa ('uniform' or\n"
+          "'quadrupole' pattern); mueller: a constant 4x4 Mueller matrix applied after the beam.")
+      .def_static(
+          "elliptical_gaussian",
+          [](double fwhm_x, double fwhm_y, double angle, double rho_max, double grid_step, double cross_polar,
+             const std::string& pattern, nb::handle mueller) {
+            return Beamsor::elliptical_gaussian(fwhm_x, fwhm_y, angle,
+                                                beam_options(rho_max, grid_step, cross_polar, pattern, mueller));
+          },
+          "fwhm_x"_a, "fwhm_y"_a, "angle"_a = 0.0, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0,
+          "cross_polar"_a = 0.0, "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(),
+          "An elliptical Gaussian: fwhm_x along the direction `angle` (from theta' towards phi', radians),\n"
+          "fwhm_y across it.")
+      .def_static(
+          "from_field",
+          [](nb::callable field, double rho_max, double grid_step, std::string description, double feature_scale,
+             bool radial) {
+            const Beamsor::Field f = [&field](double rho, double sigma) {
+              nb::object value = field(rho, sigma);
+              return mueller_from(value);
+            };
+            return Beamsor::from_field(f, rho_max, grid_step, std::move(description), feature_scale, radial);
+          },
+          "field"_a, "rho_max"_a, "grid_step"_a, "description"_a = "python field", "feature_scale"_a = 0.0,
+          "radial"_a = false,
+          "Any beam: field(rho, sigma) returns the (unnormalized) 4x4 Mueller matrix at the antenna-basis\n"
+          "direction (rho, sigma), sampled every grid_step out to rho_max. radial: the field does not depend\n"
+          "on sigma (stored as a radial profile).")
+      .def_static("read_fits", &Beamsor::read_healpix_fits, "path"_a, "rho_max"_a, "grid_step"_a = 0.0,
+                  "Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...).")
+      .def("write_fits", &Beamsor::write_healpix_fits, "path"_a, "nside"_a,
+           "Writes this beamsor as a HEALPix beamsor file at `nside`.")
+      .def_prop_ro("rho_max", &Beamsor::rho_max)
+      .def_prop_ro("is_radial", &Beamsor::is_radial)
+      .def_prop_ro("grid_size", &Beamsor::grid_size)
+      .def_prop_ro("grid_step", &Beamsor::grid_step)
+      .def_prop_ro("omega_tilde", &Beamsor::omega_tilde, "The integral of B_TT over the cap, steradians.")
+      .def_prop_ro("description", &Beamsor::description)
+      .def(
+          "element",
+          [](nb::handle self, int row, int col) -> nb::object {
+            if (row < 0 || row > 3 || col < 0 || col > 3) throw nb::index_error("element: row and col are in 0..3");
+            const auto values = nb::cast<const Beamsor&>(self).element(row, col);
+            if (values.empty()) return nb::none();
+            return nb::cast(NumpyConstVector(values.data(), {values.size()}, self));
+          },
+          "row"_a, "col"_a,
+          "The grid values of Mueller element (row, col) as a read-only view (None for a zero element).")
+      .def("at", [](const Beamsor& b, double x, double y) { return mueller_array(b.at(x, y)); }, "x"_a, "y"_a,
+           "The interpolated Mueller matrix at orthographic (x, y) = sin(rho) (cos sigma, sin sigma).")
+      .def("__repr__", [](const Beamsor& b) { return "pisco.Beamsor('" + b.description() + "')"; });
+}
+
+void bind_hwp(nb::module_& m) {
+  nb::class_<HalfWavePlate>(
+      m, "HalfWavePlate",
+      "A half-wave plate (or any rotating Mueller element) in front of a detector (docs/physics.md,\n"
+      "\"Half-wave plates\").\n\n"
+      "HalfWavePlate(mueller=None, placement='aperture', gamma=0.0)\n\n"
+      "mueller: M0, the plate's 4x4 Mueller matrix with its fast axis along the detector's polarization\n"
+      "axis (rows: I, Q, U, V leaving the plate; columns: those arriving); None is the ideal plate\n"
+      "diag(1, 1, -1, -1). placement: 'aperture' (skyward of the optics, the default) or 'detector'\n"
+      "(between the optics and the detector: four times the cost). gamma: the detector's polarization\n"
+      "angle in the focal-plane frame (radians, TOAST's focal-plane `gamma`). At the plate's angle h\n"
+      "(Engine.convolve's hwp_angle, in the focal-plane frame) the plate is M(theta) = R(-theta) M0\n"
+      "R(theta), theta = h - gamma (mueller_at).")
+      .def("__init__",
+           [](HalfWavePlate* self, nb::handle mueller, const std::string& placement, double gamma) {
+             HalfWavePlate p;
+             if (!mueller.is_none()) p.mueller = mueller_arg(mueller, "mueller");
+             p.placement = placement_from(placement);
+             p.gamma = finite_arg(gamma, "gamma");
+             new (self) HalfWavePlate(p);
+           },
+           "mueller"_a = nb::none(), "placement"_a = "aperture", "gamma"_a = 0.0)
+      .def_prop_rw(
+          "mueller", [](const HalfWavePlate& p) { return mueller_readonly(p.mueller); },
+          [](HalfWavePlate& p, nb::handle v) { p.mueller = mueller_arg(v, "mueller"); },
+          "M0, the plate's Mueller matrix at theta = 0 (a read-only copy; assign a new (4, 4) array to change it).")
+      .def_prop_rw(
+          "placement", [](const HalfWavePlate& p) { return std::string(placement_name(p.placement)); },
+          [](HalfWavePlate& p, const std::string& v) { p.placement = placement_from(v); },
+          "'aperture' (skyward of the optics) or 'detector' (between the optics and the detector).")
+      .def_prop_rw(
+          "gamma", [](const HalfWavePlate& p) { return p.gamma; },
+          [](HalfWavePlate& p, double v) { p.gamma = finite_arg(v, "gamma"); },
+          "The detector's polarization angle in the focal-plane frame, radians.")
+      .def_prop_ro("is_ideal", [](const HalfWavePlate& p) { return p.mueller == ideal_hwp_mueller(); },
+                   "Whether M0 is exactly diag(1, 1, -1, -1).")
+      .def(
+          "mueller_at",
+          [](const HalfWavePlate& p, double hwp_angle) { return mueller_readonly(rotated_mueller(p.mueller, hwp_angle - p.gamma)); },
+          "hwp_angle"_a,
+          "The plate's Mueller matrix in the detector's frame at plate angle hwp_angle (focal-plane frame):\n"
+          "R(-theta) M0 R(theta), theta = hwp_angle - gamma.")
+      .def("__eq__",
+           [](const HalfWavePlate& a, nb::handle b) {
+             if (!nb::isinstance<HalfWavePlate>(b)) return false;
+             const auto& p = nb::cast<const HalfWavePlate&>(b);
+             return a.mueller == p.mueller && a.placement == p.placement && a.gamma == p.gamma;
+           })
+      .def("__copy__", [](const HalfWavePlate& p) { return p; })
+      .def("__deepcopy__", [](const HalfWavePlate& p, nb::handle) { return p; }, "memo"_a)
+      .def("__repr__", &plate_repr);
+  m.def("ideal_hwp_mueller", []() { return mueller_readonly(ideal_hwp_mueller()); },
+        "The ideal half-wave plate's Mueller matrix, diag(1, 1, -1, -1) (a read-only (4, 4) array).");
+  m.def(
+      "rotated_mueller",
+      [](nb::handle m0, double angle) {
+        return mueller_readonly(rotated_mueller(mueller_arg(m0, "m0"), finite_arg(angle, "angle")));
+      },
+      "m0"_a, "angle"_a,
+      "R(-angle) m0 R(angle): a Mueller element turned by `angle` (radians) from the detector's axis,\n"
+      "R(a) having rows (1,0,0,0), (0,cos2a,sin2a,0), (0,-sin2a,cos2a,0), (0,0,0,1).");
+}
+
+void bind_focal_plane(nb::module_& m) {
+  nb::class_<Detector>(m, "Detector",
+                       "A detector: name, polarization angle zeta (radians, from theta' towards phi'), cross-polar\n"
+                       "leakage epsilon (efficiency 1 - epsilon), gain, the index of its beam, its offset from the\n"
+                       "boresight as a quaternion (x, y, z, w), and its half-wave plate (a pisco.HalfWavePlate, or\n"
+                       "None: then the engine's convolve() needs the plate's angles, hwp_angle).")
+      .def("__init__",
+           [](Detector* self, std::string name, double zeta, double epsilon, double gain, std::size_t beam,
+              nb::handle offset, nb::handle hwp) {
+             Detector d{};
+             d.name = std::move(name);
+             d.zeta = zeta;
+             d.epsilon = epsilon;
+             d.gain = gain;
+             d.beam = beam;
+             if (!offset.is_none()) d.offset = quat_from(offset, "offset");
+             d.hwp = plate_arg(hwp);
+             new (self) Detector(std::move(d));
+           },
+           "name"_a, "zeta"_a = 0.0, "epsilon"_a = 0.0, "gain"_a = 1.0, "beam"_a = 0, "offset"_a = nb::none(),
+           "hwp"_a = nb::none())
+      .def_rw("name", &Detector::name)
+      .def_rw("zeta", &Detector::zeta)
+      .def_rw("epsilon", &Detector::epsilon)
+      .def_rw("gain", &Detector::gain)
+      .def_rw("beam", &Detector::beam)
+      .def_prop_rw(
+          "offset", [](const Detector& d) { return nb::cast(quat_array(d.offset)); },
+          [](Detector& d, nb::handle q) { d.offset = quat_from(q, "offset"); },
+          "The offset quaternion (x, y, z, w): the rotation from the boresight's antenna basis to the detector's.")
+      .def_prop_rw(
+          "hwp", [](const Detector& d) { return d.hwp ? nb::cast(*d.hwp) : nb::none(); },
+          [](Detector& d, nb::handle v) { d.hwp = plate_arg(v); },
+          nb::for_setter(nb::arg("value").none()), "The detector's half-wave plate (a copy of it), or None.")
+      .def("set_offset", &Detector::set_offset, "xi"_a, "eta"_a, "gamma"_a,
+           "Sets the offset from focal-plane coordinates (xi, eta, gamma), radians (pisco.offset_quat).")
+      .def("offset_xi_eta_gamma",
+           [](const Detector& d) {
+             double xi, eta, gamma;
+             d.offset_xi_eta_gamma(xi, eta, gamma);
+             return std::make_tuple(xi, eta, gamma);
+           })
+      .def("__repr__", [](const Detector& d) {
+        return "pisco.Detector('" + d.name + "', zeta=" + format_double(d.zeta) + ", epsilon=" +
+               format_double(d.epsilon) + ", gain=" + format_double(d.gain) + ", beam=" + std::to_string(d.beam) +
+               (d.hwp ? ", hwp=" + plate_repr(*d.hwp) : std::string()) + ")";
+      });
+
+  nb::class_<FocalPlane>(m, "FocalPlane",
+                         "The detectors of an engine, in order. FocalPlane() is empty; add() and add_pair() fill\n"
+                         "it; FocalPlane.from_columns and FocalPlane.from_toast build one from tables.")
+      .def(nb::init<>())
+      .def(
+          "add",
+          [](FocalPlane& fp, nb::handle detector_or_name, double zeta, double epsilon, double gain, std::size_t beam,
+             nb::handle offset, nb::handle hwp) {
+            if (nb::isinstance<Detector>(detector_or_name)) {
+              Detector d = nb::cast<Detector>(detector_or_name);
+              if (!hwp.is_none()) d.hwp = plate_arg(hwp);
+              return fp.add(std::move(d));
+            }
+            if (!nb::isinstance<nb::str>(detector_or_name))
+              throw nb::type_error(("detector: expected a pisco.Detector or a name, got " +
+                                    describe(detector_or_name)).c_str());
+            Detector d;
+            d.name = nb::cast<std::string>(detector_or_name);
+            d.zeta = zeta;
+            d.epsilon = epsilon;
+            d.gain = gain;
+            d.beam = beam;
+            if (!offset.is_none()) d.offset = quat_from(offset, "offset");
+            d.hwp = plate_arg(hwp);
+            return fp.add(std::move(d));
+          },
+          "detector"_a, "zeta"_a = 0.0, "epsilon"_a = 0.0, "gain"_a = 1.0, "beam"_a = 0, "offset"_a = nb::none(),
+          "hwp"_a = nb::none(),
+          "Adds a Detector, or one built from a name and these fields; returns its index. hwp: a\n"
+          "pisco.HalfWavePlate for the detector (given with a Detector, it replaces the Detector's).")
+      .def(
+          "add_pair",
+          [](FocalPlane& fp, const std::string& name, double zeta, std::size_t beam_a, std::size_t beam_b,
+             double epsilon, double gain_a, double gain_b, nb::handle hwp) {
+            const std::optional<HalfWavePlate> plate = plate_arg(hwp);
+            if (!plate) return fp.add_pair(name, zeta, beam_a, beam_b, epsilon, gain_a, gain_b);
+            FocalPlane pair;
+            pair.add_pair(name, zeta, beam_a, beam_b, epsilon, gain_a, gain_b);
+            std::vector<Detector> ds = pair.detectors();
+            ds[0].hwp = plate;
+            ds[1].hwp = plate;
+            ds[1].hwp->gamma = plate->gamma - std::numbers::pi / 2;  // b's axis is 90 deg from a's
+            const std::size_t first = fp.add(std::move(ds[0]));
+            fp.add(std::move(ds[1]));
+            return first;
+          },
+          "name"_a, "zeta"_a = 0.0, "beam_a"_a = 0, "beam_b"_a = 0, "epsilon"_a = 0.0, "gain_a"_a = 1.0,
+          "gain_b"_a = 1.0, "hwp"_a = nb::none(),
+          "Adds a PSB pair: name+'a' at zeta and name+'b' at zeta - 90 deg; returns the first's index.\n"
+          "hwp: a pisco.HalfWavePlate in front of both, its gamma a's (b's is gamma - 90 deg).")
+      .def("__len__", &FocalPlane::size)
+      .def("__getitem__",
+           [](const FocalPlane& fp, nb::handle key) -> Detector {
+             if (nb::isinstance<nb::str>(key)) {
+               const auto name = nb::cast<std::string>(key);
+               for (const auto& d : fp.detectors())
+                 if (d.name == name) return d;
+               throw nb::key_error(("no detector named '" + name + "'").c_str());
+             }
+             long long i = 0;
+             if (!nb::try_cast(key, i, false))
+               throw nb::type_error(("expected a detector index or name, got " + describe(key)).c_str());
+             if (i < 0) i += static_cast<long long>(fp.size());
+             if (i < 0 || i >= static_cast<long long>(fp.size()))
+               throw nb::index_error(("detector index out of range (the focal plane has " +
+                                      std::to_string(fp.size()) + " detectors)").c_str());
+             return fp[static_cast<std::size_t>(i)];
+           })
+      .def_prop_ro("detectors", &FocalPlane::detectors, "The detectors (copies), in order.")
+      .def_prop_ro("names",
+                   [](const FocalPlane& fp) {
+                     std::vector<std::string> names;
+                     for (const auto& d : fp.detectors()) names.push_back(d.name);
+                     return names;
+                   })
+      .def_static(
+          "read_toast",
+          [](const std::filesystem::path& path, std::size_t beam, nb::handle hwp) {
+            const std::optional<HalfWavePlate> plate = plate_arg(hwp);
+            ToastFocalPlane t = read_toast_focal_plane(path, beam);
+            if (plate) {
+              for (std::size_t i = 0; i < t.detectors.size(); ++i) {
+                Detector& d = t.detectors[i];
+                d.hwp = plate;
+                if (i < t.gamma.size()) {
+                  d.hwp->gamma = t.gamma[i];
+                } else {  // no gamma column: the detector's polarization angle in the focal plane
+                  double xi = 0, eta = 0, gamma = 0;
+                  d.offset_xi_eta_gamma(xi, eta, gamma);
+                  d.hwp->gamma = gamma + d.zeta;
+                }
+              }
+            }
+            return FocalPlane(std::move(t.detectors));
+          },
+          "path"_a, "beam"_a = 0, "hwp"_a = nb::none(),
+          "Reads a TOAST 3 focal-plane file (HDF5, Focalplane.save_hdf5): docs/formats.md maps its columns.\n"
+          "hwp: a pisco.HalfWavePlate for every detector, each with its own gamma, the table's `gamma`\n"
+          "column (without one, the detector's polarization angle in the focal plane: its offset's gamma\n"
+          "plus zeta, as pisco-vk run does).")
+      .def("__repr__", [](const FocalPlane& fp) { return "pisco.FocalPlane(" + std::to_string(fp.size()) + " detectors)"; });
+
+  m.def(
+      "read_toast_focal_plane",
+      [](const std::filesystem::path& path, std::size_t beam) {
+        ToastFocalPlane t = read_toast_focal_plane(path, beam);
+        auto* fwhm = new std::vector<double>(std::move(t.fwhm));
+        nb::capsule owner(fwhm, [](void* p) noexcept { delete static_cast<std::vector<double>*>(p); });
+        return std::make_tuple(FocalPlane(std::move(t.detectors)),
+                               NumpyVector(fwhm->data(), {fwhm->size()}, owner), t.sample_rate);
+      },
+      "path"_a, "beam"_a = 0,
+      "Reads a TOAST 3 focal-plane file: (FocalPlane, fwhm per detector in radians (empty without the\n"
+      "column), sample rate in Hz (0 when absent)).");
+}
+
+void bind_helpers(nb::module_& m) {
+  nb::class_<BackendInfo>(m, "BackendInfo", "A backend compiled into the library and whether it runs here.")
+      .def_ro("name", &BackendInfo::name)
+      .def_ro("available", &BackendInfo::available)
+      .def_ro("detail", &BackendInfo::detail, "The device found, or why the backend is unavailable.")
+      .def("__repr__", [](const BackendInfo& b) {
+        return "pisco.BackendInfo('" + b.name + "', available=" + (b.available ? "True" : "False") + ", '" +
+               b.detail + "')";
+      });
+  m.def("devices", &Engine::backends,
+        "The backends compiled in ('cpu', 'vulkan', 'cuda'), each with whether it is available on this\n"
+        "machine and its device or the reason it is not.");
+  m.def("offset_quat", [](double xi, double eta, double gamma) { return quat_array(offset_quat(xi, eta, gamma)); },
+        "xi"_a, "eta"_a, "gamma"_a, "The offset quaternion of focal-plane coordinates (xi, eta, gamma), radians.");
+  m.def(
+      "quat_from_pointing",
+      [](double theta, double phi, double psi) { return quat_array(quat_from_pointing(theta, phi, psi)); },
+      "theta"_a, "phi"_a, "psi"_a, "The rotation R_z(phi) R_y(theta) R_z(psi) (TOAST's ISO angles) as (x, y, z, w).");
+  m.def(
+      "quat_to_pointing",
+      [](nb::handle q) {
+        double theta, phi, psi;
+        quat_to_pointing(quat_from(q, "q"), theta, phi, psi);
+        return std::make_tuple(theta, phi, psi);
+      },
+      "q"_a, "The angles (theta, phi, psi) of a rotation (x, y, z, w).");
+  m.def("valid_nside", [](long long nside) { return valid_nside(nside); }, "nside"_a,
+        "Whether nside is a power of two in [1, 8192].");
+  m.def("ang2pix", &ang2pix, "nside"_a, "theta"_a, "phi"_a, "The RING pixel containing (theta, phi).");
+  m.attr("deg") = deg;
+  m.attr("unseen") = unseen;
+  m.attr("__version__") = version;
+}
+
+}  // namespace
+}  // namespace pisco::python
+
+NB_MODULE(_pisco, m) {
+  m.doc() = "PISCO-VK's C++ library: pixel-space beam convolution (see the package pisco).";
+  nb::exception<pisco::Error>(m, "Error", PyExc_RuntimeError);
+  pisco::python::bind_helpers(m);
+  pisco::python::bind_sky(m);
+  pisco::python::bind_beamsor(m);
+  pisco::python::bind_hwp(m);
+  pisco::python::bind_focal_plane(m);
+  pisco::python::bind_engine(m);
+}

@@ -1,0 +1,546 @@
+"""The package's API: skies, beams, focal planes, the engine, arrays and errors, threads, stubs."""
+
+import ast
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import pisco
+from pisco import deg
+
+
+def small_setup(nside=32, fwhm=2 * deg, seed=1):
+    rng = np.random.default_rng(seed)
+    maps = rng.normal(size=(3, 12 * nside * nside))
+    sky = pisco.Sky.from_maps(maps, units="uK_CMB")
+    beam = pisco.Beamsor.gaussian(fwhm, rho_max=2.5 * fwhm)
+    fp = pisco.FocalPlane()
+    fp.add_pair("p", zeta=0.3)
+    fp.add("off", zeta=0.1, epsilon=0.05, gain=1.2, offset=pisco.offset_quat(1 * deg, -0.5 * deg, 0.2))
+    return sky, beam, fp
+
+
+def pointing(n, seed=2):
+    rng = np.random.default_rng(seed)
+    theta = np.arccos(rng.uniform(-1, 1, n))
+    phi = rng.uniform(0, 2 * np.pi, n)
+    psi = rng.uniform(-np.pi, np.pi, n)
+    return theta, phi, psi
+
+
+# --- the sky -------------------------------------------------------------------------------------
+
+
+def test_sky_views_are_the_sky_storage():
+    sky = pisco.Sky(4, units="K")
+    assert (sky.nside, sky.npix, sky.units) == (4, 192, "K")
+    view = sky.Q
+    view[5] = 2.5
+    assert sky.Q[5] == 2.5 and view.flags.writeable and view.dtype == np.float64
+    del sky  # the view keeps the sky alive
+    assert view[5] == 2.5
+    assert np.isclose(pisco.Sky(8).pixel_area, 4 * np.pi / 768)
+
+
+def test_sky_from_maps_and_fits(tmp_out):
+    maps = np.arange(3 * 48, dtype=np.float64).reshape(3, 48)
+    sky = pisco.Sky.from_maps(maps)
+    assert sky.nside == 2 and np.array_equal(sky.U, maps[2]) and not np.any(sky.V)
+    sky4 = pisco.Sky.from_maps([maps[0], maps[1], maps[2], maps[0]])
+    assert np.array_equal(sky4.V, maps[0])
+    assert np.array_equal(pisco.Sky.from_maps(maps[0]).I, maps[0])
+    path = tmp_out / "sky.fits"
+    sky.write_fits(path)
+    back = pisco.Sky.read_fits(str(path))
+    assert np.array_equal(back.Q, sky.Q)
+
+
+@pytest.mark.parametrize("nside", [0, 3, 12, 16384])
+def test_sky_nside_must_be_a_power_of_two(nside):
+    with pytest.raises(ValueError, match="nside: NSIDE = .* power of two"):
+        pisco.Sky(nside)
+
+
+def test_sky_from_maps_errors():
+    with pytest.raises(ValueError, match="not 12 NSIDE"):
+        pisco.Sky.from_maps(np.zeros((3, 100)))
+    with pytest.raises(ValueError, match="12 NSIDE"):
+        pisco.Sky.from_maps(np.zeros((3, 12 * 12 * 12)))  # NSIDE 12
+    with pytest.raises(TypeError, match=r"maps\[0\]: expected float64 .* int64"):
+        pisco.Sky.from_maps(np.zeros((3, 48), dtype=np.int64))
+    with pytest.raises(ValueError, match=r"expected 1 \(I\), 3"):
+        pisco.Sky.from_maps(np.zeros((2, 48)))
+    bad = np.zeros((3, 48))
+    bad[1, 7] = np.nan
+    with pytest.raises(ValueError, match=r"maps\[1\]\[7\] is nan"):
+        pisco.Sky.from_maps(bad)
+    with pytest.raises(ValueError, match="not C-contiguous"):
+        pisco.Sky.from_maps(np.zeros((48, 3)).T)
+    with pytest.raises(pisco.Error, match="nothere.fits"):
+        pisco.Sky.read_fits("nothere.fits")
+
+
+# --- beams and focal planes ----------------------------------------------------------------------
+
+
+def test_beamsor_builders(tmp_out):
+    g = pisco.Beamsor.gaussian(1 * deg, rho_max=3 * deg)
+    assert g.is_radial and np.isclose(g.rho_max, 3 * deg)
+    # The integral of a Gaussian of FWHM f over the sphere: 2 pi s^2, s = f / sqrt(8 ln 2).
+    s = 1 * deg / np.sqrt(8 * np.log(2))
+    assert np.isclose(g.omega_tilde, 2 * np.pi * s**2, rtol=1e-3)
+    tt = g.element(0, 0)
+    assert tt is not None and not tt.flags.writeable and g.element(0, 3) is None
+    assert g.at(0.0, 0.0).shape == (4, 4) and g.at(0.0, 0.0)[0, 0] == pytest.approx(1.0)
+    e = pisco.Beamsor.elliptical_gaussian(1 * deg, 0.5 * deg, 0.3, rho_max=3 * deg, cross_polar=0.01)
+    assert not e.is_radial
+    f = pisco.Beamsor.from_field(lambda rho, sigma: np.diag([np.exp(-rho**2 / 2 / s**2)] * 2 + [0.0, 0.0]),
+                                 3 * deg, 0.05 * deg, "field")
+    assert f.omega_tilde == pytest.approx(g.omega_tilde, rel=2e-3)
+    path = tmp_out / "beam.fits"
+    g.write_fits(str(path), 256)
+    r = pisco.Beamsor.read_fits(str(path), 3 * deg)
+    assert r.omega_tilde == pytest.approx(g.omega_tilde, rel=3e-2)  # a pixel sum at NSIDE 256
+    with pytest.raises(ValueError, match="cross_polar_pattern"):
+        pisco.Beamsor.gaussian(1 * deg, cross_polar_pattern="octupole")
+    with pytest.raises(pisco.Error):
+        pisco.Beamsor.gaussian(1 * deg, rho_max=100 * deg)
+
+
+def test_focal_plane_builders():
+    fp = pisco.FocalPlane()
+    assert fp.add("a", zeta=0.1, epsilon=0.02, gain=1.1, beam=0) == 0
+    assert fp.add_pair("p", zeta=0.2) == 1
+    d = pisco.Detector("x", zeta=0.4)
+    d.set_offset(1 * deg, 2 * deg, 0.3)
+    fp.add(d)
+    assert fp.names == ["a", "pa", "pb", "x"] and len(fp) == 4
+    assert fp["pb"].zeta == pytest.approx(0.2 - np.pi / 2)
+    assert fp[-1].offset_xi_eta_gamma() == pytest.approx((1 * deg, 2 * deg, 0.3))
+    with pytest.raises(KeyError):
+        fp["nobody"]
+    with pytest.raises(TypeError, match="index or name"):
+        fp[1.5]
+    with pytest.raises(TypeError, match="a pisco.Detector or a name"):
+        fp.add(3)
+    with pytest.raises(IndexError):
+        fp[4]
+    cols = pisco.FocalPlane.from_columns(
+        {"name": ["a", "b"], "zeta": [0.0, 0.5], "epsilon": [0.0, 0.1], "xi": [0.0, 1 * deg], "eta": [0, 0],
+         "gamma": [0, 0], "beam": [0, 1]})
+    assert cols["b"].beam == 1 and cols["b"].offset_xi_eta_gamma()[0] == pytest.approx(1 * deg)
+    from astropy import units as u
+    from astropy.table import QTable
+
+    table = QTable({"name": ["a", "b"], "zeta": [0.0, 30.0] * u.deg, "quat": [[0, 0, 0, 1.0], [0, 0, 0.6, 0.8]]})
+    t = pisco.FocalPlane.from_columns(table)
+    assert t["b"].zeta == pytest.approx(np.radians(30)) and t["b"].offset == pytest.approx([0, 0, 0.6, 0.8])
+
+
+# --- the engine ----------------------------------------------------------------------------------
+
+
+def test_engine_convolves_angles_and_quaternions_alike():
+    sky, beam, fp = small_setup()
+    theta, phi, psi = pointing(500)
+    quats = np.array([pisco.quat_from_pointing(t, p, s) for t, p, s in zip(theta, phi, psi)])
+    with pisco.Engine(sky, beam, fp, backend="cpu") as engine:
+        assert engine.backend == "cpu" and len(engine) == 3 and engine.focal_plane.names == fp.names
+        for det in range(3):
+            a = engine.convolve(det, theta, phi, psi)
+            b = engine.convolve(fp.names[det], boresight_quats=quats)
+            assert a.dtype == np.float64 and a.shape == (500,)
+            assert np.max(np.abs(a - b)) <= 1e-12 * np.max(np.abs(a))
+        assert engine.mean_disc_pixels > 10
+    assert engine.closed
+
+
+def test_out_is_written_in_place_and_accumulates():
+    sky, beam, fp = small_setup()
+    theta, phi, psi = pointing(300)
+    engine = pisco.Engine(sky, [beam], fp, backend="cpu")
+    ref = engine.convolve(0, theta, phi, psi)
+    out = np.full(300, np.nan)
+    assert engine.convolve(0, theta, phi, psi, out=out) is out
+    assert np.array_equal(out, ref)
+    acc = np.ones(300)
+    engine.convolve(0, theta, phi, psi, out=acc, accumulate=True)
+    assert np.array_equal(acc, ref + 1.0)
+    # A row of a detector-data matrix, as TOAST and litebird_sim hold TOD.
+    tods = np.zeros((3, 300))
+    engine.convolve(2, theta, phi, psi, out=tods[2])
+    assert np.array_equal(tods[2], engine.convolve(2, theta, phi, psi)) and not np.any(tods[:2])
+
+
+def test_submit_and_wait_give_convolve():
+    sky, beam, fp = small_setup()
+    theta, phi, psi = pointing(1000)
+    engine = pisco.Engine(sky, beam, fp, backend="cpu")
+    ref = [engine.convolve(d, theta, phi, psi) for d in range(3)]
+    outs = [np.zeros(1000) for _ in range(3)]
+    tickets = [engine.submit(d, theta, phi, psi, out=outs[d]) for d in range(3)]
+    engine.wait(tickets[1])
+    assert np.array_equal(outs[0], ref[0]) and np.array_equal(outs[1], ref[1])
+    engine.wait()
+    assert np.array_equal(outs[2], ref[2])
+    with pytest.raises(TypeError, match="out is required"):
+        engine.submit(0, theta, phi, psi)
+    # An engine dropped with submissions in flight completes them first: the arrays stay valid.
+    late = np.zeros(1000)
+    engine.submit(0, theta, phi, psi, out=late)
+    del engine
+    assert np.array_equal(late, ref[0])
+
+
+def test_argument_errors_name_the_argument():
+    sky, beam, fp = small_setup()
+    theta, phi, psi = pointing(20)
+    engine = pisco.Engine(sky, beam, fp, backend="cpu")
+    cases = [
+        (TypeError, r"theta: expected float64 values, got a float32", dict(theta=theta.astype(np.float32))),
+        (TypeError, r"phi: expected a numpy array of float64, got list", dict(phi=list(phi))),
+        (ValueError, r"psi: expected shape \(n,\)", dict(psi=np.zeros((20, 1)))),
+        (ValueError, r"theta: the array is not C-contiguous", dict(theta=np.repeat(theta, 2)[::2])),
+        (ValueError, r"theta\[3\] is nan", dict(theta=np.where(np.arange(20) == 3, np.nan, theta))),
+        (ValueError, r"phi\[0\] is inf", dict(phi=np.where(np.arange(20) == 0, np.inf, phi))),
+        (ValueError, r"theta\[1\] = 4 is outside \[0, pi\]", dict(theta=np.where(np.arange(20) == 1, 4.0, theta))),
+        (ValueError, r"different lengths", dict(psi=psi[:10])),
+    ]
+    for error, message, change in cases:
+        args = dict(theta=theta, phi=phi, psi=psi)
+        args.update(change)
+        with pytest.raises(error, match=message):
+            engine.convolve(0, **args)
+    quats = np.tile([0.0, 0.0, 0.0, 1.0], (20, 1))
+    with pytest.raises(ValueError, match=r"boresight_quats: expected shape \(n, 4\)"):
+        engine.convolve(0, boresight_quats=quats[:, :3].copy())
+    with pytest.raises(ValueError, match=r"boresight_quats\[2\] has norm 2"):
+        engine.convolve(0, boresight_quats=np.where(np.arange(20)[:, None] == 2, 2 * quats, quats))
+    with pytest.raises(TypeError, match="either theta, phi and psi .* or boresight_quats"):
+        engine.convolve(0, theta, phi, psi, boresight_quats=quats)
+    with pytest.raises(TypeError, match="either"):
+        engine.convolve(0)
+    read_only = np.zeros(20)
+    read_only.flags.writeable = False
+    with pytest.raises(ValueError, match="out: the array is read-only"):
+        engine.convolve(0, theta, phi, psi, out=read_only)
+    with pytest.raises(ValueError, match="out: 19 samples, but the pointing has 20"):
+        engine.convolve(0, theta, phi, psi, out=np.zeros(19))
+    with pytest.raises(ValueError, match="out: the array is not C-contiguous"):
+        engine.convolve(0, theta, phi, psi, out=np.zeros((20, 2))[:, 0])
+    with pytest.raises(TypeError, match="out: expected float64"):
+        engine.convolve(0, theta, phi, psi, out=np.zeros(20, dtype=np.float32))
+    with pytest.raises(TypeError, match="accumulate=True adds into `out`"):
+        engine.convolve(0, theta, phi, psi, accumulate=True)
+    with pytest.raises(IndexError, match="index 3 but the focal plane has 3"):
+        engine.convolve(3, theta, phi, psi)
+    with pytest.raises(KeyError, match="no detector named 'q'"):
+        engine.convolve("q", theta, phi, psi)
+
+
+def test_engine_errors_and_close():
+    sky, beam, fp = small_setup()
+    with pytest.raises(pisco.Error, match="backend 'nope' is unknown"):
+        pisco.Engine(sky, beam, fp, backend="nope")
+    with pytest.raises(TypeError, match="beams: expected a pisco.Beamsor"):
+        pisco.Engine(sky, [beam, "beam"], fp, backend="cpu")
+    bad = pisco.FocalPlane()
+    bad.add("a", beam=3)
+    with pytest.raises(pisco.Error) as info:
+        pisco.Engine(sky, beam, bad, backend="cpu")
+    assert isinstance(info.value, RuntimeError) and "beam" in str(info.value)
+    engine = pisco.Engine(sky, beam, fp, backend="cpu")
+    engine.close()
+    engine.close()  # twice is fine
+    theta, phi, psi = pointing(5)
+    for call in (lambda: engine.convolve(0, theta, phi, psi), lambda: engine.wait(), lambda: engine.backend,
+                 lambda: engine.submit(0, theta, phi, psi, out=np.zeros(5))):
+        with pytest.raises(ValueError, match="used after close"):
+            call()
+    assert repr(engine) == "pisco.Engine(closed)"
+
+
+def test_gil_is_released_and_engines_run_in_threads():
+    """Two engines in two threads give the TOD of sequential runs, and Python runs meanwhile."""
+    sky, beam, fp = small_setup(nside=64, fwhm=3 * deg)
+    theta, phi, psi = pointing(6000)
+    engines = [pisco.Engine(sky, beam, fp, backend="cpu", threads=1) for _ in range(2)]
+    sequential = [engines[k].convolve(k, theta, phi, psi) for k in range(2)]
+    results = [np.zeros(6000), np.zeros(6000)]
+    start = threading.Barrier(3)
+
+    def run(k):
+        start.wait()
+        engines[k].convolve(k, theta, phi, psi, out=results[k])
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    start.wait()
+    ticks = 0
+    t0 = time.perf_counter()
+    while any(t.is_alive() for t in threads):
+        ticks += 1
+    elapsed = time.perf_counter() - t0
+    for t in threads:
+        t.join()
+    for k in range(2):
+        assert np.array_equal(results[k], sequential[k])
+    # With the GIL held by the engines this loop could not have run while they did.
+    assert elapsed > 0.05 and ticks > 1000, (elapsed, ticks)
+    # One engine shared by two threads: its calls are serialized, the TOD the same.
+    shared = [np.zeros(6000), np.zeros(6000)]
+    threads = [threading.Thread(target=lambda k=k: engines[0].convolve(k, theta, phi, psi, out=shared[k]))
+               for k in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert np.array_equal(shared[0], sequential[0]) and np.array_equal(shared[1], sequential[1])
+
+
+def test_vulkan_backend_agrees_with_the_reference():
+    available = {b.name: b.available for b in pisco.devices()}
+    assert "cpu" in available and available["cpu"]
+    if not available.get("vulkan"):
+        pytest.skip("no Vulkan device: " + next(b.detail for b in pisco.devices() if b.name == "vulkan"))
+    sky, beam, fp = small_setup()
+    theta, phi, psi = pointing(2000)
+    with pisco.Engine(sky, beam, fp, backend="cpu") as cpu, pisco.Engine(sky, beam, fp, backend="vulkan") as vk:
+        for det in range(3):
+            a = cpu.convolve(det, theta, phi, psi)
+            b = vk.convolve(det, theta, phi, psi)
+            assert np.sqrt(np.mean((a - b) ** 2) / np.mean(a**2)) < 1e-5
+
+
+# --- half-wave plates ----------------------------------------------------------------------------
+
+# The ideal plate plus leakage in all 16 entries (tools/hwp_compare.py's generic plate).
+GENERIC_PLATE = np.diag([1.0, 1.0, -1.0, -1.0]) + np.array([[0.0, 0.012, -0.008, 0.005],
+                                                           [0.021, -0.03, 0.017, -0.011],
+                                                           [-0.015, 0.009, 0.025, 0.04],
+                                                           [0.007, -0.02, 0.033, 0.02]])
+
+
+def test_half_wave_plate_objects():
+    ideal = pisco.HalfWavePlate()
+    assert ideal.is_ideal and ideal.placement == "aperture" and ideal.gamma == 0.0
+    assert np.array_equal(ideal.mueller, np.diag([1.0, 1.0, -1.0, -1.0]))
+    assert np.array_equal(pisco.ideal_hwp_mueller(), ideal.mueller) and not ideal.mueller.flags.writeable
+    plate = pisco.HalfWavePlate(GENERIC_PLATE, placement="detector", gamma=0.4)
+    assert not plate.is_ideal and np.array_equal(plate.mueller, GENERIC_PLATE) and plate.placement == "detector"
+    assert pisco.HalfWavePlate(np.diag([1, 1, -1, -1])).is_ideal  # an int array is taken too
+    # M(theta) = R(-theta) M0 R(theta), theta = h - gamma.
+    a = 0.9
+    c, s = np.cos(2 * a), np.sin(2 * a)
+    r = np.array([[1, 0, 0, 0], [0, c, s, 0], [0, -s, c, 0], [0, 0, 0, 1.0]])
+    expected = r.T @ GENERIC_PLATE @ r
+    assert np.allclose(pisco.rotated_mueller(GENERIC_PLATE, a), expected, rtol=0, atol=1e-15)
+    assert np.allclose(plate.mueller_at(a + 0.4), expected, rtol=0, atol=1e-15)
+    plate.gamma, plate.placement, plate.mueller = 0.1, "aperture", pisco.ideal_hwp_mueller()
+    assert plate == pisco.HalfWavePlate(gamma=0.1) and plate != ideal
+    d = pisco.Detector("d", zeta=0.2, hwp=plate)
+    assert d.hwp == plate and "HalfWavePlate" in repr(d)
+    d.hwp = None
+    assert d.hwp is None
+    fp = pisco.FocalPlane()
+    fp.add("x", hwp=plate)
+    fp.add(pisco.Detector("y"), hwp=pisco.HalfWavePlate(gamma=0.3))
+    fp.add_pair("p", zeta=0.5, hwp=pisco.HalfWavePlate(gamma=0.5))
+    fp.add_pair("q")
+    assert fp["x"].hwp == plate and fp["y"].hwp.gamma == 0.3
+    assert fp["pa"].hwp.gamma == 0.5 and fp["pb"].hwp.gamma == pytest.approx(0.5 - np.pi / 2)
+    assert fp["qa"].hwp is None and fp["qb"].hwp is None
+    # From tables: the hwp_gamma column, else the detector's polarization angle (offset gamma + zeta).
+    cols = pisco.FocalPlane.from_columns({"name": ["a", "b"], "zeta": [0.1, 0.2], "xi": [0, 0], "eta": [0, 0],
+                                          "gamma": [0.3, 0.0]}, hwp=pisco.HalfWavePlate(GENERIC_PLATE))
+    assert cols["a"].hwp.gamma == pytest.approx(0.4) and cols["b"].hwp.gamma == pytest.approx(0.2)
+    assert np.array_equal(cols["b"].hwp.mueller, GENERIC_PLATE)
+    cols = pisco.FocalPlane.from_columns({"name": ["a"], "hwp_gamma": [0.7]}, hwp=pisco.HalfWavePlate())
+    assert cols["a"].hwp.gamma == 0.7
+    assert pisco.FocalPlane.from_columns({"name": ["a"], "hwp_gamma": [0.7]})["a"].hwp is None
+
+
+def test_half_wave_plate_errors():
+    cases = [
+        (ValueError, r"mueller: expected a \(4, 4\) Mueller matrix .* got shape \(16,\)", dict(mueller=np.eye(4).ravel())),
+        (ValueError, r"mueller: expected a \(4, 4\).* got shape \(3, 3\)", dict(mueller=np.eye(3))),
+        (ValueError, r"mueller\[2\]\[1\] is nan", dict(mueller=np.where(np.arange(16).reshape(4, 4) == 9, np.nan,
+                                                                          np.eye(4)))),
+        (ValueError, r"mueller\[0\]\[0\] is inf", dict(mueller=np.diag([np.inf, 1, 1, 1]))),
+        (TypeError, r"mueller: expected a \(4, 4\) Mueller matrix of numbers, got str", dict(mueller="ideal")),
+        (TypeError, r"mueller: expected a real", dict(mueller=np.eye(4, dtype=complex))),
+        (ValueError, r"placement: expected 'aperture' or 'detector', got 'sky'", dict(placement="sky")),
+        (ValueError, r"gamma is nan", dict(gamma=np.nan)),
+    ]
+    for error, message, kwargs in cases:
+        with pytest.raises(error, match=message):
+            pisco.HalfWavePlate(**kwargs)
+    plate = pisco.HalfWavePlate()
+    with pytest.raises(ValueError, match=r"mueller\[3\]\[3\] is nan"):
+        plate.mueller = np.diag([1, 1, 1, np.nan])
+    with pytest.raises(ValueError, match="gamma is inf"):
+        plate.gamma = np.inf
+    with pytest.raises(ValueError, match=r"m0: expected a \(4, 4\)"):
+        pisco.rotated_mueller(np.zeros(4), 0.1)
+    with pytest.raises(TypeError, match=r"hwp: expected a pisco.HalfWavePlate or None, got float64 array of shape \(4, 4\)"):
+        pisco.Detector("d", hwp=np.eye(4))
+    with pytest.raises(TypeError, match="hwp: expected a pisco.HalfWavePlate"):
+        pisco.FocalPlane().add("d", hwp="ideal")
+    with pytest.raises(TypeError, match="hwp: expected a pisco.HalfWavePlate"):
+        pisco.FocalPlane.from_columns({"name": ["a"]}, hwp=np.eye(4))
+
+
+def plate_setup(mueller=None, placement="aperture", nside=32, fwhm=2 * deg):
+    """A sky, a round beam, and the same detectors with and without plates (gamma not zero): a
+    detector turned about its line of sight, one off the boresight, a PSB pair."""
+    rng = np.random.default_rng(4)
+    sky = pisco.Sky.from_maps(rng.normal(size=(4, 12 * nside * nside)))
+    beam = pisco.Beamsor.gaussian(fwhm, rho_max=2.5 * fwhm)
+    with_plate, without = pisco.FocalPlane(), pisco.FocalPlane()
+    for fp, plate in ((with_plate, True), (without, False)):
+        def hwp(gamma):
+            return pisco.HalfWavePlate(mueller, placement=placement, gamma=gamma) if plate else None
+
+        fp.add("turned", zeta=0.3, epsilon=0.05, gain=1.2, offset=pisco.offset_quat(0.0, 0.0, 0.2), hwp=hwp(0.7))
+        fp.add("off", zeta=-0.4, offset=pisco.offset_quat(1 * deg, -0.5 * deg, 0.1), hwp=hwp(-0.3))
+        fp.add_pair("p", zeta=0.1, epsilon=0.02, hwp=hwp(1.1))
+    return sky, beam, with_plate, without
+
+
+def test_ideal_plate_identity():
+    """With an ideal plate and a round beam, d(psi, h) is the plate-less d(psi + 2 (h - gamma)) for a
+    detector on the boresight (float64, cpu backend)."""
+    sky, beam, with_plate, without = plate_setup()
+    theta, phi, psi = pointing(2000, seed=5)
+    h = np.random.default_rng(6).uniform(-np.pi, 2 * np.pi, 2000)
+    quats = np.array([pisco.quat_from_pointing(t, p, s) for t, p, s in zip(theta, phi, psi)])
+    with pisco.Engine(sky, beam, with_plate, backend="cpu") as plated, \
+            pisco.Engine(sky, beam, without, backend="cpu") as plain:
+        for det in ("turned", "pa", "pb"):
+            gamma = with_plate[det].hwp.gamma
+            tod = plated.convolve(det, theta, phi, psi, hwp_angle=h)
+            expected = plain.convolve(det, theta, phi, psi + 2 * (h - gamma))
+            err = relative(tod, expected)
+            print(f"ideal-plate identity, detector {det} (gamma {gamma}): {err:.1e} of the TOD's RMS")
+            assert err <= 1e-12
+            # Quaternions, submit/wait and accumulate give the same TOD.
+            assert relative(plated.convolve(det, boresight_quats=quats, hwp_angle=h), tod) <= 1e-12
+            out = np.ones(2000)
+            plated.wait(plated.submit(det, theta, phi, psi, out=out, accumulate=True, hwp_angle=h))
+            assert np.array_equal(out, tod + 1.0)
+        # The plate does modulate: the angle's other sense gives another TOD.
+        assert relative(plated.convolve("turned", theta, phi, psi, hwp_angle=-h),
+                        plated.convolve("turned", theta, phi, psi, hwp_angle=h)) > 0.1
+
+
+def relative(test, reference):
+    return float(np.sqrt(np.mean((test - reference) ** 2) / np.mean(reference**2)))
+
+
+def test_hwp_angle_errors():
+    sky, beam, with_plate, without = plate_setup()
+    theta, phi, psi = pointing(20)
+    h = np.linspace(0, 1, 20)
+    engine = pisco.Engine(sky, beam, with_plate, backend="cpu")
+    cases = [
+        (TypeError, r"hwp_angle: expected float64 values, got a float32", h.astype(np.float32)),
+        (TypeError, r"hwp_angle: expected a numpy array of float64, got list", list(h)),
+        (ValueError, r"hwp_angle: expected shape \(n,\)", h.reshape(20, 1)),
+        (ValueError, r"hwp_angle: the array is not C-contiguous", np.repeat(h, 2)[::2]),
+        (ValueError, r"hwp_angle: 19 samples, but the pointing has 20", h[:19]),
+        (ValueError, r"hwp_angle\[4\] is nan: the plate's angles must be finite", np.where(np.arange(20) == 4, np.nan, h)),
+        (ValueError, r"hwp_angle\[0\] is -inf", np.where(np.arange(20) == 0, -np.inf, h)),
+    ]
+    for error, message, angles in cases:
+        with pytest.raises(error, match=message):
+            engine.convolve(0, theta, phi, psi, hwp_angle=angles)
+        with pytest.raises(error, match=message):
+            engine.submit(0, theta, phi, psi, out=np.zeros(20), hwp_angle=angles)
+    # The engine's own rules, with its message: a plate needs angles, no plate takes none.
+    with pytest.raises(pisco.Error, match="detector 'turned' has a half-wave plate: expected 20 plate angles"):
+        engine.convolve("turned", theta, phi, psi)
+    with pytest.raises(pisco.Error, match="has a half-wave plate"):
+        engine.submit("turned", theta, phi, psi, out=np.zeros(20))
+    plain = pisco.Engine(sky, beam, without, backend="cpu")
+    with pytest.raises(pisco.Error, match="detector 'turned' has no half-wave plate, but plate angles"):
+        plain.convolve("turned", theta, phi, psi, hwp_angle=h)
+    # Read-only angles are fine (they are only read), and nothing was written by the failures.
+    ro = h.copy()
+    ro.flags.writeable = False
+    out = np.full(20, 7.0)
+    with pytest.raises(pisco.Error):
+        plain.convolve(0, theta, phi, psi, out=out, hwp_angle=h)
+    assert np.all(out == 7.0)
+    assert np.array_equal(engine.convolve(0, theta, phi, psi, hwp_angle=ro),
+                          engine.convolve(0, theta, phi, psi, hwp_angle=h))
+
+
+@pytest.mark.parametrize("placement", ["aperture", "detector"])
+def test_vulkan_agrees_with_the_reference_through_a_generic_plate(placement):
+    available = {b.name: b.available for b in pisco.devices()}
+    if not available.get("vulkan"):
+        pytest.skip("no Vulkan device: " + next(b.detail for b in pisco.devices() if b.name == "vulkan"))
+    sky, beam, with_plate, _ = plate_setup(GENERIC_PLATE, placement)
+    sky.I[:] += 2.725  # a monopole: the plate's M_QI turns it into polarization
+    theta, phi, psi = pointing(3000, seed=8)
+    h = np.random.default_rng(9).uniform(0, 2 * np.pi, 3000)
+    with pisco.Engine(sky, beam, with_plate, backend="cpu") as cpu, \
+            pisco.Engine(sky, beam, with_plate, backend="vulkan") as vk:
+        worst = 0.0
+        for det in range(len(with_plate)):
+            a = cpu.convolve(det, theta, phi, psi, hwp_angle=h)
+            b = vk.convolve(det, theta, phi, psi, hwp_angle=h)
+            worst = max(worst, relative(b, a))
+        print(f"generic plate at the {placement}, vulkan ({vk.device}) vs cpu: worst relative RMS {worst:.1e}")
+        assert worst < 1e-5
+
+
+def test_the_optics_of_one_detector():
+    """The measurement equation end to end: a uniform polarized sky gives gain/2 [(1+e) I + (1-e) ...]."""
+    sky = pisco.Sky(64)
+    sky.I[:], sky.Q[:] = 2.0, 0.5
+    beam = pisco.Beamsor.gaussian(2 * deg, rho_max=5 * deg)
+    fp = pisco.FocalPlane()
+    fp.add("d", zeta=0.0, epsilon=0.1, gain=2 / 1.1)
+    # On the equator at psi = 0, theta' = theta^ (Q > 0 along theta^): chi = 0. (Q is uniform in the
+    # local meridian frames, which turn slightly across the disc: 1e-7.)
+    theta, phi, psi = np.full(1, np.pi / 2), np.zeros(1), np.zeros(1)
+    tod = pisco.Engine(sky, beam, fp, backend="cpu", normalization="per_sample").convolve(0, theta, phi, psi)
+    assert tod[0] == pytest.approx(2.0 + 0.9 / 1.1 * 0.5, rel=1e-7)
+
+
+# --- the package itself --------------------------------------------------------------------------
+
+
+def test_stubs_cover_the_module():
+    """python/pisco/_pisco.pyi declares every public name of the compiled module, and no other."""
+    stub = os.path.join(os.path.dirname(pisco.__file__), "_pisco.pyi")
+    tree = ast.parse(open(stub).read())
+    declared = set()
+    for node in tree.body:
+        if isinstance(node, (ast.ClassDef, ast.FunctionDef)):
+            declared.add(node.name)
+        elif isinstance(node, ast.AnnAssign):
+            declared.add(node.target.id)
+    declared.discard("Float64Array")
+    public = {n for n in dir(pisco._pisco) if not n.startswith("_")} | {"__version__"}
+    assert declared == public
+    for cls in ("Sky", "Beamsor", "Detector", "FocalPlane", "Engine", "HalfWavePlate"):
+        node = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == cls)
+        members = {n.name for n in node.body if isinstance(n, ast.FunctionDef)}
+        members |= {n.target.id for n in node.body if isinstance(n, ast.AnnAssign)}
+        actual = {n for n in dir(getattr(pisco, cls)) if not n.startswith("_")}
+        assert actual <= members, f"{cls}: not in the stub: {actual - members}"
+
+
+def test_docstrings_and_version():
+    assert pisco.__version__.count(".") == 2
+    for obj in (pisco.Sky, pisco.Beamsor.gaussian, pisco.Engine, pisco.Engine.convolve, pisco.FocalPlane.from_toast,
+                pisco.devices, pisco.HalfWavePlate, pisco.HalfWavePlate.mueller_at, pisco.rotated_mueller,
+                pisco.ideal_hwp_mueller):
+        assert obj.__doc__ and len(obj.__doc__) > 20
+    assert issubclass(pisco.Error, RuntimeError)
