@@ -379,7 +379,16 @@ void read_detectors(const toml::table& root, const std::string& where, const fs:
         hwp->push_back(dh);
         if (dh.gamma) hwp->back().gamma = *dh.gamma - std::numbers::pi / 2;  // b: its axis 90 deg from a's
       }
-      pisco::Detector a{*name + "a", zeta, eps, ga, ba}, b{*name + "b", zeta - std::numbers::pi / 2, eps, gb, bb};
+      pisco::Detector a, b;
+      a.name = *name + "a";
+      b.name = *name + "b";
+      a.zeta = zeta;
+      b.zeta = zeta - std::numbers::pi / 2;  // paper eq. copol_bolo
+      a.epsilon = b.epsilon = eps;
+      a.gain = ga;
+      b.gain = gb;
+      a.beam = ba;
+      b.beam = bb;
       a.set_offset(xi, eta, gamma);
       b.set_offset(xi_b, eta_b, gamma);
       out.push_back(a);
