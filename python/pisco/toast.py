@@ -102,10 +102,9 @@ class PixelConvolve(Operator):
     )
 
     hwp_mueller = _MuellerList(
-        None,
-        allow_none=True,
-        help="The plate's Mueller matrix at angle 0 (16 numbers row by row, or 4 rows; fast axis along the "
-        "detector's polarization axis); None or empty is the ideal plate diag(1, 1, -1, -1)",
+        [],
+        help="The plate's Mueller matrix at angle 0 (16 numbers row by row, or 4 rows of 4, kept as 16 numbers; "
+        "fast axis along the detector's polarization axis); empty: the ideal plate diag(1, 1, -1, -1)",
     )
 
     hwp_placement = Unicode(
@@ -135,10 +134,10 @@ class PixelConvolve(Operator):
 
     @traitlets.validate("hwp_mueller")
     def _check_hwp_mueller(self, proposal):
-        if proposal["value"] is None or len(proposal["value"]) == 0:
-            return proposal["value"]
+        if len(proposal["value"]) == 0:
+            return []
         try:
-            return _mueller_matrix(proposal["value"]).tolist()
+            return [float(x) for x in _mueller_matrix(proposal["value"]).ravel()]
         except ValueError as exc:
             raise traitlets.TraitError(str(exc)) from None
 
@@ -202,7 +201,10 @@ class PixelConvolve(Operator):
     def _engine_for(self, focalplane, plates):
         """(engine, {name: detector index}) for a TOAST focal plane, with or without plates, set up on
         first use."""
-        key = (id(focalplane), plates)
+        # With plates, the plate model is part of the key: traits changed between calls take effect.
+        model = (tuple(_mueller_matrix(self.hwp_mueller).ravel()) if self.hwp_mueller else None,
+                 self.hwp_placement) if plates else None
+        key = (id(focalplane), model)
         if key not in self._engines:
             names = [str(n) for n in focalplane.detector_data["name"]]
             beams, index = self._beams_for(focalplane, names)

@@ -344,7 +344,9 @@ void bind_hwp(nb::module_& m) {
                    "Whether M0 is exactly diag(1, 1, -1, -1).")
       .def(
           "mueller_at",
-          [](const HalfWavePlate& p, double hwp_angle) { return mueller_readonly(rotated_mueller(p.mueller, hwp_angle - p.gamma)); },
+          [](const HalfWavePlate& p, double hwp_angle) {
+            return mueller_readonly(rotated_mueller(p.mueller, hwp_angle - p.gamma));
+          },
           "hwp_angle"_a,
           "The plate's Mueller matrix in the detector's frame at plate angle hwp_angle (focal-plane frame):\n"
           "R(-theta) M0 R(theta), theta = hwp_angle - gamma.")
@@ -400,7 +402,7 @@ void bind_focal_plane(nb::module_& m) {
           [](Detector& d, nb::handle q) { d.offset = quat_from(q, "offset"); },
           "The offset quaternion (x, y, z, w): the rotation from the boresight's antenna basis to the detector's.")
       .def_prop_rw(
-          "hwp", [](const Detector& d) { return d.hwp ? nb::cast(*d.hwp) : nb::none(); },
+          "hwp", [](const Detector& d) { return d.hwp ? nb::cast(*d.hwp, nb::rv_policy::copy) : nb::none(); },
           [](Detector& d, nb::handle v) { d.hwp = plate_arg(v); },
           nb::for_setter(nb::arg("value").none()), "The detector's half-wave plate (a copy of it), or None.")
       .def("set_offset", &Detector::set_offset, "xi"_a, "eta"_a, "gamma"_a,

@@ -366,7 +366,8 @@ def test_half_wave_plate_objects():
 
 def test_half_wave_plate_errors():
     cases = [
-        (ValueError, r"mueller: expected a \(4, 4\) Mueller matrix .* got shape \(16,\)", dict(mueller=np.eye(4).ravel())),
+        (ValueError, r"mueller: expected a \(4, 4\) Mueller matrix .* got shape \(16,\)",
+         dict(mueller=np.eye(4).ravel())),
         (ValueError, r"mueller: expected a \(4, 4\).* got shape \(3, 3\)", dict(mueller=np.eye(3))),
         (ValueError, r"mueller\[2\]\[1\] is nan", dict(mueller=np.where(np.arange(16).reshape(4, 4) == 9, np.nan,
                                                                           np.eye(4)))),
@@ -386,7 +387,8 @@ def test_half_wave_plate_errors():
         plate.gamma = np.inf
     with pytest.raises(ValueError, match=r"m0: expected a \(4, 4\)"):
         pisco.rotated_mueller(np.zeros(4), 0.1)
-    with pytest.raises(TypeError, match=r"hwp: expected a pisco.HalfWavePlate or None, got float64 array of shape \(4, 4\)"):
+    with pytest.raises(TypeError,
+                       match=r"hwp: expected a pisco.HalfWavePlate or None, got float64 array of shape \(4, 4\)"):
         pisco.Detector("d", hwp=np.eye(4))
     with pytest.raises(TypeError, match="hwp: expected a pisco.HalfWavePlate"):
         pisco.FocalPlane().add("d", hwp="ideal")
@@ -452,7 +454,8 @@ def test_hwp_angle_errors():
         (ValueError, r"hwp_angle: expected shape \(n,\)", h.reshape(20, 1)),
         (ValueError, r"hwp_angle: the array is not C-contiguous", np.repeat(h, 2)[::2]),
         (ValueError, r"hwp_angle: 19 samples, but the pointing has 20", h[:19]),
-        (ValueError, r"hwp_angle\[4\] is nan: the plate's angles must be finite", np.where(np.arange(20) == 4, np.nan, h)),
+        (ValueError, r"hwp_angle\[4\] is nan: the plate's angles must be finite",
+         np.where(np.arange(20) == 4, np.nan, h)),
         (ValueError, r"hwp_angle\[0\] is -inf", np.where(np.arange(20) == 0, -np.inf, h)),
     ]
     for error, message, angles in cases:

@@ -1,5 +1,6 @@
 """pisco.litebird.add_convolved_sky_to_observations against litebird_sim's own 4 pi convolution (ducc0)
-on the same observation, band-limited sky and Gaussian beams, and the shape of its arguments."""
+on the same observation, band-limited sky and Gaussian beams, without and with a half-wave plate
+(litebird_sim's MuellerConvolver), and the shape of its arguments."""
 
 import logging
 
@@ -14,9 +15,16 @@ from conftest import relative_rms, smooth_sky_alm
 
 FWHM_ARCMIN = 60.0
 POL_ANGLES_DEG = (0.0, 90.0, 22.5)
+IDEAL = np.diag([1.0, 1.0, -1.0, -1.0])
+# The ideal plate plus leakage in all 16 entries (tools/hwp_compare.py's generic plate).
+GENERIC = IDEAL + np.array([[0.0, 0.012, -0.008, 0.005],
+                            [0.021, -0.03, 0.017, -0.011],
+                            [-0.015, 0.009, 0.025, 0.04],
+                            [0.007, -0.02, 0.033, 0.02]])
+HWP_SPEED = 2 * np.pi * 46 / 60  # LiteBIRD's LFT plate, 46 rpm, in rad/s
 
 
-def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=None):
+def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=None, mueller_hwp=None):
     sim = lbs.Simulation(start_time=0.0, duration_s=seconds, random_seed=1, base_path=str(tmp_path / "lbs"),
                          imo=lbs.Imo(flatfile_location=lbs.PTEP_IMO_LOCATION))
     sim.set_scanning_strategy(lbs.SpinningScanningStrategy(spin_sun_angle_rad=np.radians(45),
@@ -32,7 +40,8 @@ def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=
                                                                   np.radians(10.0 * k))))
         detectors.append(lbs.DetectorInfo(name=f"det{k}", channel="ch", sampling_rate_hz=10.0,
                                           fwhm_arcmin=FWHM_ARCMIN, pol_angle_rad=np.radians(angle), quat=quat,
-                                          ellipticity=ellipticity, psi_rad=np.radians(30.0)))
+                                          ellipticity=ellipticity, psi_rad=np.radians(30.0),
+                                          mueller_hwp=mueller_hwp))
     tods = [lbs.TodDescription(name=name, units=lbs.Units.K_CMB, dtype=dtype, description=name)
             for name in ("tod", "pisco")]
     (obs,) = sim.create_observations(detectors=detectors, tods=tods)
@@ -40,10 +49,10 @@ def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=
     return obs
 
 
-def compare(tmp_path, nside, ellipticity):
+def compare(tmp_path, nside, ellipticity, hwp=None, mueller_hwp=None):
     lmax = 2 * nside
     mmax = 2 if ellipticity == 1.0 else 24
-    obs = observation(tmp_path, ellipticity)
+    obs = observation(tmp_path, ellipticity, hwp=hwp, mueller_hwp=mueller_hwp)
     alm = smooth_sky_alm(lmax, seed=5, smoothing_fwhm=np.radians(0.5))
     sky_alm = lbs.SphericalHarmonics(values=alm, lmax=lmax, coordinates=lbs.CoordinateSystem.Galactic)
     blms = lbs.generate_gauss_beam_alms(obs, lmax=lmax, mmax=mmax)
@@ -112,7 +121,85 @@ def test_unknown_coordinates_are_galactic_with_a_warning(tmp_path, caplog):
     assert "assuming CoordinateSystem.Galactic" in caplog.text
 
 
-def test_plates_raise(tmp_path):
-    obs = observation(tmp_path, seconds=10.0, hwp=lbs.IdealHWP(ang_speed_radpsec=1.0))
-    with pytest.raises(NotImplementedError, match="half-wave plates"):
-        pisco.litebird.add_convolved_sky_to_observations(obs, pisco.Sky(32), component="pisco", backend="cpu")
+@pytest.mark.parametrize("plate", ["ideal", "generic"])
+def test_plates_match_litebird_sims_mueller_convolver(tmp_path, plate):
+    """litebird_sim's IdealHWP turning at 46 rpm from 0.3 rad, each detector's mueller_hwp the ideal
+    or the generic plate: litebird_sim's own function (MuellerConvolver, alpha = its HWP angle) and
+    pisco.litebird on the same observation, I, Q, U sky and beams."""
+    m0 = IDEAL if plate == "ideal" else GENERIC
+    obs = compare(tmp_path, nside=256, ellipticity=1.0, hwp=lbs.IdealHWP(ang_speed_radpsec=HWP_SPEED,
+                                                                         start_angle_rad=0.3), mueller_hwp=m0)
+    assert obs.has_hwp
+    rms = relative_rms(obs.pisco, obs.tod)
+    per_detector = [relative_rms(obs.pisco[i], obs.tod[i]) for i in range(len(POL_ANGLES_DEG))]
+    print(f"pisco.litebird vs litebird_sim MuellerConvolver, {plate} plate at 46 rpm: {obs.tod.shape[0]} detectors x "
+          f"{obs.tod.shape[1]} samples, sky NSIDE 256 (lmax 512), FWHM 1 deg, polarization angles {POL_ANGLES_DEG} "
+          f"deg: relative RMS {rms:.2e} (per detector {', '.join(f'{r:.2e}' for r in per_detector)})")
+    assert rms <= 1e-4 and max(per_detector) <= 2e-4
+    # The comparison tells the plate's conventions apart: the plate turning the other way (an explicit
+    # `hwp`, which replaces the observation's) misses by O(1).
+    sky = lbs.HealpixMap(values=hp.alm2map(smooth_sky_alm(512, seed=5, smoothing_fwhm=np.radians(0.5)), 256,
+                                           lmax=512, pol=True), nside=256, coordinates=lbs.CoordinateSystem.Galactic)
+    obs.pisco[:] = 0
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, component="pisco", backend="cpu",
+                                                     hwp=lbs.IdealHWP(ang_speed_radpsec=-HWP_SPEED,
+                                                                      start_angle_rad=-0.3))
+    wrong = relative_rms(obs.pisco, obs.tod)
+    print(f"  the plate turning the other way: relative RMS {wrong:.2f}")
+    assert wrong > 0.1
+
+
+def test_plate_arguments(tmp_path):
+    """The plate's angle from an explicit HWP or the observation's, the detectors' mueller_hwp, the
+    placement, and what is refused."""
+    obs = observation(tmp_path, seconds=20.0)
+    assert not obs.has_hwp
+    sky = pisco.Sky.from_maps(hp.alm2map(smooth_sky_alm(128, seed=2, smoothing_fwhm=np.radians(2.0)), 64,
+                                         lmax=128, pol=True))
+    beam = pisco.Beamsor.gaussian(np.radians(1.0), rho_max=np.radians(2.5))
+    galactic = lbs.CoordinateSystem.Galactic
+
+    def run(target, **kwargs):
+        target.pisco[:] = 0
+        pisco.litebird.add_convolved_sky_to_observations(target, sky, beam, component="pisco", backend="cpu",
+                                                         coordinates=galactic, **kwargs)
+        return target.pisco.copy()
+
+    plain = run(obs)
+    hwp = lbs.IdealHWP(ang_speed_radpsec=HWP_SPEED, start_angle_rad=0.3)
+    with_hwp = run(obs, hwp=hwp)
+    assert relative_rms(with_hwp, plain) > 0.1
+    # The same through PISCO-VK's engine: each detector's plate at gamma = pol_angle_rad, the angles
+    # litebird_sim's (start_angle_rad + ang_speed_radpsec t), the gain 2 of pol_efficiency 1.
+    h = 0.3 + HWP_SPEED * np.arange(obs.n_samples) / obs.sampling_rate_hz
+    pointings, _ = obs.get_pointings("all")
+    fp = pisco.FocalPlane()
+    for k, angle in enumerate(POL_ANGLES_DEG):
+        fp.add(f"det{k}", zeta=np.radians(angle), gain=2.0, hwp=pisco.HalfWavePlate(gamma=np.radians(angle)))
+    from litebird_sim.coordinates import rotate_coordinates_e2g
+
+    with pisco.Engine(sky, beam, fp, backend="cpu") as engine:
+        for k in range(len(POL_ANGLES_DEG)):
+            p = rotate_coordinates_e2g(pointings[k])
+            tod = engine.convolve(k, *(np.ascontiguousarray(p[:, c]) for c in range(3)), hwp_angle=h)
+            assert relative_rms(with_hwp[k], tod) < 1e-9
+    # The observation's own plate (set before the observations), and each detector's mueller_hwp.
+    own = observation(tmp_path, seconds=20.0, hwp=hwp)
+    assert np.allclose(run(own), with_hwp, rtol=0, atol=1e-10 * np.max(np.abs(with_hwp)))
+    leaky = observation(tmp_path, seconds=20.0, hwp=hwp, mueller_hwp=GENERIC)
+    generic = run(leaky)
+    assert relative_rms(generic, with_hwp) > 1e-3
+    assert relative_rms(run(leaky, hwp_placement="detector"), generic) < 1e-12  # a round beam commutes
+    with pytest.raises(ValueError, match="hwp_placement: expected 'aperture' or 'detector'"):
+        run(leaky, hwp_placement="sky")
+    # Refused: Mueller matrices that are not one finite 4x4 matrix per detector, Jones matrices.
+    leaky.mueller_hwp = np.array([np.diag([1.0, 1.0, -1.0, np.nan])] * 3)
+    with pytest.raises(ValueError, match="mueller_hwp is not finite"):
+        run(leaky)
+    leaky.mueller_hwp = np.array([{"0f": IDEAL}] * 3, dtype=object)
+    with pytest.raises(NotImplementedError, match="harmonic expansion"):
+        run(leaky)
+    leaky.mueller_hwp = np.array([None] * 3, dtype=object)
+    leaky.jones_hwp = np.array([np.eye(2)] * 3)
+    with pytest.raises(NotImplementedError, match="Jones matrix"):
+        run(leaky)

@@ -1,6 +1,8 @@
 """pisco.toast.PixelConvolve in TOAST 3 (installed from PyPI): against TOAST's own SimTotalconvolve
-(ducc0's total convolution) on the same observation, band-limited sky and Gaussian beam; in a TOAST
-pipeline with TOAST's binned map-maker; the focal-plane mapping, views, units and plates."""
+(ducc0's total convolution) on the same observation, band-limited sky and Gaussian beam; through a
+half-wave plate against TOAST's own plate model (its StokesWeights with hwp_angle, and its
+SimTotalconvolve's); in a TOAST pipeline with TOAST's binned map-maker; the focal-plane mapping,
+views, units and plate options."""
 
 import os
 from datetime import datetime, timedelta, timezone
@@ -34,15 +36,36 @@ def focalplane(epsilon=EPSILON, fwhm=FWHM, n_pix=7):
     return fp
 
 
-def satellite_data(fp, seconds=600.0):
+def turned_focalplane(fp, step):
+    """TOAST's focal plane with the detectors of pixel k (both of a pair) turned by k step about their
+    lines of sight (gamma and quat together, in TOAST's own xi, eta, gamma), so that a plate's 4 gamma
+    term is not a multiple of 180 deg (tools/toast_pointing.py --gamma-step)."""
+    from toast.instrument import Focalplane
+    from toast.instrument_coords import quat_to_xieta, xieta_to_quat
+
+    table = fp.detector_data.copy()
+    for col in ("pol_angle", "pol_efficiency"):
+        if col in table.colnames:
+            table.remove_column(col)
+    pixels = list(dict.fromkeys(str(x) for x in table["pixel"]))
+    for row in table:
+        turn = pixels.index(str(row["pixel"])) * step
+        xi, eta, gamma = quat_to_xieta(np.array(row["quat"], dtype=np.float64))
+        row["quat"] = xieta_to_quat(xi, eta, gamma + turn)
+        row["gamma"] = (u.Quantity(row["gamma"]).to_value(u.rad) + turn) * u.rad
+    return Focalplane(detector_data=table, sample_rate=fp.sample_rate, field_of_view=fp.field_of_view)
+
+
+def satellite_data(fp, seconds=600.0, hwp_rpm=None):
     tele = Telescope("satellite", focalplane=fp, site=SpaceSite("L2"))
     schedule = create_satellite_schedule(
         prefix="sat_", mission_start=datetime(2023, 2, 23, tzinfo=timezone.utc),
         observation_time=seconds * u.s, gap_time=0 * u.s, num_observations=1,
         prec_period=10 * u.min, spin_period=2 * u.min)
     data = toast.Data(toast.mpi.Comm())
-    toast.ops.SimSatellite(name="sim_satellite", telescope=tele, schedule=schedule, hwp_angle=None,
-                           spin_angle=30 * u.deg, prec_angle=65 * u.deg, detset_key="pixel").apply(data)
+    plate = dict(hwp_angle="hwp_angle", hwp_rpm=hwp_rpm) if hwp_rpm is not None else dict(hwp_angle=None)
+    toast.ops.SimSatellite(name="sim_satellite", telescope=tele, schedule=schedule, spin_angle=30 * u.deg,
+                           prec_angle=65 * u.deg, detset_key="pixel", **plate).apply(data)
     return data
 
 
@@ -95,7 +118,7 @@ class TotalconvolveForCurrentDucc0(toast.ops.SimTotalconvolve):
         return result
 
 
-def toast_totalconvolve(data, fp, alm, lmax, tmp_path, det_data):
+def toast_totalconvolve(data, fp, alm, lmax, tmp_path, det_data, hwp_angle=None):
     """TOAST's own beam convolution of the sky `alm` with the Gaussian beam, into `det_data`."""
     sky_file = str(tmp_path / "sky_alm.fits")
     hp.write_alm(sky_file, alm, lmax=lmax, overwrite=True)
@@ -115,7 +138,7 @@ def toast_totalconvolve(data, fp, alm, lmax, tmp_path, det_data):
     op = TotalconvolveForCurrentDucc0(
         comm=None, detector_pointing=toast.ops.PointingDetectorSimple(quats="tc_quats"), sky_file=sky_file,
         beam_file_dict=beam_files, sky_file_dict={}, dxx=False, det_data=det_data, fwhm=0 * u.rad, lmax=lmax,
-        beammmax=2, epsilon=1e-7)
+        beammmax=2, epsilon=1e-7, hwp_angle=hwp_angle)
     op.apply(data)
 
 
@@ -142,6 +165,83 @@ def test_pixel_convolve_matches_toast_total_convolution(tmp_path):
     pol = relative_rms(ours[0::2] - ours[1::2], reference[0::2] - reference[1::2])
     print(f"pair differences (polarization): relative RMS {pol:.2e}")
     assert pol <= 1e-3
+
+
+def toast_plate_reference(data, alm, lmax):
+    """TOAST's own ideal plate, without a convolution code of its own in the way: its StokesWeights
+    with hwp_angle (IQU, the focal plane's gamma) applied, sample by sample, to the sky smoothed by
+    the Gaussian beam (T window on I, polarized window on Q and U, healpy's) evaluated exactly at each
+    detector's line of sight by ducc0's synthesis_general. Returns (detectors, n) TOD."""
+    import ducc0
+    from toast import qarray as qa
+
+    detpointing = toast.ops.PointingDetectorSimple(quats="plate_quats")
+    toast.ops.StokesWeights(mode="IQU", detector_pointing=detpointing, weights="plate_weights",
+                            hwp_angle="hwp_angle").apply(data)
+    bl = hp.gauss_beam(FWHM, lmax=lmax, pol=True)
+    smoothed = np.array([hp.almxfl(alm[k], bl[:, k]) for k in range(3)])
+    ob = data.obs[0]
+    tod = []
+    for det in ob.local_detectors:
+        theta, phi, _ = qa.to_iso_angles(ob.detdata["plate_quats"][det])
+        loc = np.ascontiguousarray(np.stack([theta, np.mod(phi, 2 * np.pi)], axis=1))
+        i = ducc0.sht.synthesis_general(alm=smoothed[0:1], spin=0, lmax=lmax, loc=loc, epsilon=1e-12, nthreads=2)[0]
+        q, u_ = ducc0.sht.synthesis_general(alm=smoothed[1:3], spin=2, lmax=lmax, loc=loc, epsilon=1e-12, nthreads=2)
+        w = ob.detdata["plate_weights"][det]
+        tod.append(w[:, 0] * i + w[:, 1] * q + w[:, 2] * u_)
+    return np.array(tod)
+
+
+def test_pixel_convolve_through_a_plate_matches_toast(tmp_path):
+    """A satellite observation with TOAST's plate turning at 20 rpm (SimSatellite's hwp_angle) and
+    the hexagon's detectors turned so that gamma matters: PixelConvolve's ideal plates (gamma from the
+    focal plane) against TOAST's ideal plate; and TOAST's SimTotalconvolve with hwp_angle, whose own
+    plate convention is mapped onto PISCO-VK's."""
+    nside, lmax = 256, 512
+    fp = turned_focalplane(focalplane(), np.radians(10.0))
+    data = satellite_data(fp, hwp_rpm=20.0)
+    ob = data.obs[0]
+    dets = list(ob.local_detectors)
+    h = np.array(ob.shared["hwp_angle"].data, dtype=np.float64)
+    alm = smooth_sky_alm(lmax, seed=3, smoothing_fwhm=np.radians(0.5))
+    sky = pisco.Sky.from_maps(hp.alm2map(alm, nside, lmax=lmax, pol=True), units="K")
+    pisco.toast.PixelConvolve(sky=sky, det_data="pisco", backend="cpu").apply(data)
+    ours = np.array([ob.detdata["pisco"][d] for d in dets])
+    reference = toast_plate_reference(data, alm, lmax)
+    rms = relative_rms(ours, reference)
+    worst = max(relative_rms(ours[i], reference[i]) for i in range(len(dets)))
+    pol = relative_rms(ours[0::2] - ours[1::2], reference[0::2] - reference[1::2])
+    print(f"PixelConvolve with ideal plates vs TOAST's plate (StokesWeights with hwp_angle x the beam-smoothed "
+          f"sky): {len(dets)} detectors x {len(h)} samples, sky NSIDE {nside} (lmax {lmax}), FWHM 1 deg, "
+          f"pol_leakage {EPSILON}, 20 rpm: relative RMS {rms:.2e} (worst detector {worst:.2e}; pair differences "
+          f"{pol:.2e})")
+    assert rms <= 1e-4 and worst <= 2e-4 and pol <= 1e-3
+    # The comparison tells the plate's conventions apart: the angle in the other sense misses by O(1).
+    ob.shared.create_column("minus_hwp", (ob.n_local_samples,))
+    ob.shared["minus_hwp"].set(-h if ob.comm.group_rank == 0 else None, offset=(0,), fromrank=0)
+    pisco.toast.PixelConvolve(sky=sky, det_data="pisco_minus", hwp_angle="minus_hwp", backend="cpu").apply(data)
+    wrong = relative_rms(np.array([ob.detdata["pisco_minus"][d] for d in dets]), reference)
+    print(f"  the plate's angle in the other sense: relative RMS {wrong:.2f}")
+    assert wrong > 0.1
+
+    # TOAST 3.0.6's SimTotalconvolve with hwp_angle adds 2 hwp_angle to the detector's polarization
+    # angle psi_pol and weighs its polarized convolutions by cos and sin of 4 psi_pol: the polarization
+    # is turned by 4 h, gamma unused. That is PISCO-VK's ideal plate turned to 2 h with gamma = 0 (an
+    # ideal plate turns it by 2 (h - gamma)), not TOAST's own StokesWeights: compare in that convention.
+    toast_totalconvolve(data, fp, alm, lmax, tmp_path, "totalconvolve", hwp_angle="hwp_angle")
+    theirs = np.array([ob.detdata["totalconvolve"][d] for d in dets])
+    table = fp.detector_data.copy()
+    table["gamma"] = np.zeros(len(table)) * u.rad
+    plates = pisco.FocalPlane.from_toast(table, hwp=pisco.HalfWavePlate())
+    assert all(d.hwp.gamma == 0.0 for d in plates.detectors)
+    quats = np.ascontiguousarray(ob.shared["boresight_radec"].data, dtype=np.float64)
+    with pisco.Engine(sky, pisco.Beamsor.gaussian(FWHM, rho_max=2.5 * FWHM), plates, backend="cpu") as engine:
+        mapped = np.array([engine.convolve(d, boresight_quats=quats, hwp_angle=2 * h) for d in dets])
+    tc_rms = relative_rms(mapped, theirs)
+    tc_toast = relative_rms(theirs, reference)
+    print(f"TOAST SimTotalconvolve with hwp_angle vs PISCO-VK's ideal plate at 2 h, gamma 0: relative RMS "
+          f"{tc_rms:.2e}; SimTotalconvolve vs TOAST's own StokesWeights plate: {tc_toast:.2f}")
+    assert tc_rms <= 1e-4
 
 
 def binned_map(data, nside, det_data, tmp_path, name):
@@ -246,16 +346,55 @@ def test_views_units_zero_and_accumulate():
     assert "boresight_radec" in req["shared"] and "full" in prov["detdata"]
 
 
-def test_plates_and_missing_inputs_raise():
-    fp = focalplane(n_pix=1)
-    data = satellite_data(fp, seconds=10.0)
-    sky = pisco.Sky(16)
-    beam = pisco.Beamsor.gaussian(FWHM)
+def test_plate_options_and_missing_inputs():
+    fp = turned_focalplane(focalplane(n_pix=1), np.radians(10.0))
+    data = satellite_data(fp, seconds=30.0, hwp_rpm=30.0)
+    sky = pisco.Sky.from_maps(hp.alm2map(smooth_sky_alm(128, 1, np.radians(2)), 64, lmax=128, pol=True))
+    beam = pisco.Beamsor.gaussian(FWHM, rho_max=2.5 * FWHM)
     ob = data.obs[0]
-    ob.shared.create_column("hwp_angle", (ob.n_local_samples,))
-    with pytest.raises(NotImplementedError, match="half-wave plate angle 'hwp_angle'"):
-        pisco.toast.PixelConvolve(sky=sky, beam=beam, backend="cpu").apply(data)
-    pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_angle=None, backend="cpu").apply(data)
+    h = np.array(ob.shared["hwp_angle"].data)
+    gamma = {str(n): float(u.Quantity(g).to_value(u.rad)) for n, g in zip(fp.detector_data["name"],
+                                                                          fp.detector_data["gamma"])}
+
+    def run(key, **traits):
+        pisco.toast.PixelConvolve(sky=sky, beam=beam, det_data=key, backend="cpu", **traits).apply(data)
+        return {d: ob.detdata[key][d].copy() for d in ob.local_detectors}
+
+    ideal = run("ideal")
+    plain = run("plain", hwp_angle=None)  # no plate: hwp_angle=None ignores the observation's
+    as_list = run("as_list", hwp_mueller=[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1])
+    leaky = np.diag([1.0, 0.98, -0.97, -0.95]) + 0.01
+    aperture = run("aperture", hwp_mueller=leaky)
+    detector = run("detector", hwp_mueller=leaky, hwp_placement="detector")
+    # The plates' gamma and angles reach the engine: the engine's own ideal plate gives the same TOD.
+    table_fp = pisco.FocalPlane.from_toast(fp, hwp=pisco.HalfWavePlate())
+    quats = np.ascontiguousarray(ob.shared["boresight_radec"].data)
+    with pisco.Engine(sky, beam, table_fp, backend="cpu") as engine:
+        for det in ob.local_detectors:
+            assert table_fp[det].hwp.gamma == pytest.approx(gamma[det], abs=1e-15)
+            assert np.allclose(ideal[det], engine.convolve(det, boresight_quats=quats, hwp_angle=h), rtol=0,
+                               atol=1e-12 * np.max(np.abs(ideal[det])))
+            assert relative_rms(ideal[det], plain[det]) > 0.1  # the plate modulates
+            assert np.array_equal(as_list[det], ideal[det])
+            assert relative_rms(aperture[det], ideal[det]) > 1e-3
+            # A round co-polar beam commutes with the plate: both placements give the same TOD.
+            assert relative_rms(detector[det], aperture[det]) < 1e-12
+    # The plate's traits go through TOAST's config system (the matrix kept as its 16 numbers).
+    op = pisco.toast.PixelConvolve(name="pc", sky=sky, beam=beam, hwp_mueller=leaky, hwp_placement="detector")
+    assert op.hwp_mueller == [float(x) for x in leaky.ravel()]
+    assert op.get_config()["operators"]["pc"]["hwp_placement"]["value"] == "detector"
+    with pytest.raises(Exception, match="hwp_mueller: expected 16 numbers"):
+        pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_mueller=[1.0] * 15)
+    with pytest.raises(Exception, match="hwp_mueller: the Mueller matrix must be finite"):
+        pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_mueller=[[np.nan] * 4] * 4)
+    with pytest.raises(Exception, match="hwp_placement must be 'aperture' or 'detector'"):
+        pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_placement="sky")
+    ob.shared.create_column("bad_hwp", (ob.n_local_samples,))
+    bad = h.copy()
+    bad[5] = np.nan
+    ob.shared["bad_hwp"].set(bad if ob.comm.group_rank == 0 else None, offset=(0,), fromrank=0)
+    with pytest.raises(ValueError, match="'bad_hwp' is not finite"):
+        pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_angle="bad_hwp", backend="cpu").apply(data)
     with pytest.raises(RuntimeError, match="give sky"):
         pisco.toast.PixelConvolve(beam=beam, hwp_angle=None).apply(data)
     with pytest.raises(RuntimeError, match="no shared 'nothing'"):
