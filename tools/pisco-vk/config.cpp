@@ -581,14 +581,11 @@ bool is_hdf5_focal_plane(const fs::path& file) {
   return in.read(head, sizeof head) && std::string(head, sizeof head) == std::string("\x89HDF\r\n\x1a\n", 8);
 }
 
-// A TOAST focal plane (pisco::read_toast_focal_plane), every detector with beam `beam`.
-std::vector<pisco::Detector> load_toast_focal_plane(const fs::path& file, std::size_t beam) {
-  return pisco::read_toast_focal_plane(file, beam).detectors;
-}
 
 }  // namespace
 
-std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::vector<BeamConfig>& beams) {
+std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::vector<BeamConfig>& beams,
+                                              std::vector<DetectorHwp>* hwp) {
   std::vector<pisco::Detector> out;
   std::error_code ec;
   if (fs::is_directory(file, ec))
@@ -597,11 +594,16 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
     if (beams.size() != 1)
       throw pisco::Error(file.string() + ": a TOAST focal plane gives every detector one beam: name it with "
                                          "[focal_plane] beam (there are " + std::to_string(beams.size()) + " beams)");
-    return load_toast_focal_plane(file, 0);
+    const pisco::ToastFocalPlane toast = pisco::read_toast_focal_plane(file, 0);
+    if (hwp) {
+      hwp->assign(toast.detectors.size(), DetectorHwp{});
+      for (std::size_t i = 0; i < toast.gamma.size(); ++i) (*hwp)[i].gamma = toast.gamma[i];
+    }
+    return toast.detectors;
   }
   if (file.extension() == ".toml") {
     const toml::table root = parse(file, nullptr);
-    read_detectors(root, "focal plane", file, beams, out);
+    read_detectors(root, "focal plane", file, beams, out, hwp);
     if (out.empty()) throw pisco::Error(file.string() + ": no [[detectors]] or [[pairs]]");
     return out;
   }
@@ -630,9 +632,10 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
       header = f;
       for (const auto& h : header)
         if (h != "name" && h != "zeta_deg" && h != "epsilon" && h != "gain" && h != "beam" && h != "xi_deg" &&
-            h != "eta_deg" && h != "gamma_deg")
+            h != "eta_deg" && h != "gamma_deg" && h != "hwp" && h != "hwp_gamma_deg")
           throw pisco::Error(where + "unknown column '" + h +
-                             "'; expected name, zeta_deg, epsilon, gain, beam, xi_deg, eta_deg, gamma_deg");
+                             "'; expected name, zeta_deg, epsilon, gain, beam, xi_deg, eta_deg, gamma_deg, hwp, "
+                             "hwp_gamma_deg");
       if (std::find(header.begin(), header.end(), "name") == header.end())
         throw pisco::Error(where + "the header needs a 'name' column");
       continue;
@@ -641,6 +644,7 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
       throw pisco::Error(where + "expected " + std::to_string(header.size()) + " fields, got " + std::to_string(f.size()));
     pisco::Detector d;
     double xi = 0.0, eta = 0.0, gamma = 0.0;
+    DetectorHwp plate;  // the row's plate keys (hwp, hwp_gamma_deg)
     for (std::size_t i = 0; i < f.size(); ++i) {
       auto num = [&](const std::string& s) {
         try {
@@ -665,6 +669,11 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
       else if (header[i] == "xi_deg") xi = num(f[i]) * deg;
       else if (header[i] == "eta_deg") eta = num(f[i]) * deg;
       else if (header[i] == "gamma_deg") gamma = num(f[i]) * deg;
+      else if (header[i] == "hwp") {
+        if (f[i] == "1" || f[i] == "true") plate.enabled = true;
+        else if (f[i] == "0" || f[i] == "false") plate.enabled = false;
+        else throw pisco::Error(where + "column 'hwp': expected 1, 0, true or false, got '" + f[i] + "'");
+      } else if (header[i] == "hwp_gamma_deg") plate.gamma = num(f[i]) * deg;
       else {
         auto it = std::find_if(beams.begin(), beams.end(), [&](const BeamConfig& b) { return b.name == f[i]; });
         if (it == beams.end()) throw pisco::Error(where + "no beam named '" + f[i] + "' in [beams]");
@@ -679,6 +688,10 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
       throw pisco::Error(where + "detector '" + d.name + "' is also on line " + std::to_string(it->second) +
                          " (expected unique detector names)");
     out.push_back(d);
+    if (hwp) {
+      hwp->resize(out.size() - 1);
+      hwp->push_back(plate);
+    }
   }
   if (out.empty()) throw pisco::Error(file.string() + ": no detectors in the focal plane table");
   return out;
@@ -804,7 +817,7 @@ SimulationConfig load_config(const fs::path& file) {
     } else {
       if (fpt.has("beam"))
         fpt.fail("beam", "only for a TOAST focal plane (HDF5); a CSV or TOML table names each detector's beam itself");
-      c.detectors = load_focal_plane(fp_file, c.beams);
+      c.detectors = load_focal_plane(fp_file, c.beams, &c.detector_hwp);
     }
     fpt.finish();
   } else {

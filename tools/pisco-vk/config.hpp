@@ -101,9 +101,11 @@ struct SimulationConfig {
 // Throws pisco::Error naming the file and the key on anything unexpected, unknown keys included.
 SimulationConfig load_config(const std::filesystem::path& file);
 
-// Reads a focal plane table: CSV with a header (name, zeta_deg, epsilon, gain, beam) or TOML
+// Reads a focal plane table: CSV with a header (name, zeta_deg, epsilon, gain, beam, xi_deg, eta_deg,
+// gamma_deg, hwp, hwp_gamma_deg), a TOAST HDF5 table (one beam, its gamma column as the plates' gamma) or TOML
 // ([[detectors]] / [[pairs]] as in the simulation file). Beam names are resolved against `beams`.
 std::vector<pisco::Detector> load_focal_plane(const std::filesystem::path& file,
-                                              const std::vector<BeamConfig>& beams);
+                                              const std::vector<BeamConfig>& beams,
+                                              std::vector<DetectorHwp>* hwp = nullptr);
 
 }  // namespace pisco_cli
