@@ -80,6 +80,31 @@ TEST(Mapmaker, ThreeAnglesRoundTripExactly) {
   EXPECT_EQ(out.nside, nside);
 }
 
+TEST(Mapmaker, NormalEquationsOfPartsAddUpToTheWhole) {
+  std::cout << "checking: two map-makers, each given half of the TOD, added with add_normal_equations, solve "
+               "to the maps of one given all of it (the MPI run's reduction), and mismatched sizes are refused\n";
+  const int nside = 8;
+  const Maps truth = random_maps(nside, 4);
+  const pisco::Detector det{"d0", 10 * deg, 0.05, 1.3, 0};
+  const pisco::Pointing p = pisco::pixel_centre_scan(nside, {0.0, 45 * deg, 90 * deg, 135 * deg});
+  const std::vector<double> tod = make_tod(det, p, truth, nside);
+  const std::size_t half = p.size() / 2;
+  pisco::BinnedMapmaker whole(nside), first(nside), second(nside);
+  whole.add(det, p, tod);
+  first.add(det, p.view().subspan(0, half), std::span(tod).subspan(0, half));
+  second.add(det, p.view().subspan(half, p.size() - half), std::span(tod).subspan(half));
+  first.add_normal_equations(second);
+  EXPECT_EQ(first.normal_matrices().size(), 6 * whole.hits().size());
+  EXPECT_EQ(first.normal_vectors().size(), 3 * whole.hits().size());
+  const pisco::BinnedMaps a = whole.solve(), b = first.solve();
+  EXPECT_EQ(a.hits, b.hits);
+  EXPECT_LT(max_error(a.I, b.I), 1e-12);
+  EXPECT_LT(max_error(a.Q, b.Q), 1e-12);
+  EXPECT_LT(max_error(a.U, b.U), 1e-12);
+  pisco::BinnedMapmaker other(2 * nside);
+  expect_error([&] { first.add_normal_equations(other); }, "add_normal_equations");
+}
+
 TEST(Mapmaker, ConditionNumberOfAnIdealPixel) {
   // Angles 0, 45, 90 deg: 4 A^T A = [[3,0,1],[0,2,0],[1,0,1]], eigenvalues 2 and 2 +- sqrt 2.
   pisco::BinnedMapmaker mm(1);

@@ -182,6 +182,52 @@ TEST_F(TodFile, StreamingFloat64ReadsBackExactly) {
   EXPECT_EQ(pisco::pointing_detectors(file), (std::vector<std::string>{"z_det", "a_det"}));
 }
 
+TEST_F(TodFile, SharedFileCreatedByOneAndWrittenByItsOpenersReadsBackAsOne) {
+  std::cout << "checking: a shared file (create_shared, then open_shared by two writers, as the ranks of an MPI "
+               "run) written in halves reads back as the file of one writer; commit() renames it once, and a "
+               "shared writer destroyed without commit() removes the temporary file\n";
+  const std::size_t n = 40000;
+  const std::vector<std::vector<double>> signal = {random_signal(n, 1), random_signal(n, 2, -1e-3)};
+  const std::vector<Pointing> pointing = {random_pointing(n, 3), random_pointing(n, 4)};
+  const fs::path file = dir_ / "tod.h5";
+  const FocalPlane fp = two_detectors();
+  TodWriter::create_shared(file, fp, n, TodPrecision::float64, true, {{"units", "K_CMB"}}, false, ".tmp-shared");
+  EXPECT_TRUE(fs::exists(dir_ / "tod.h5.tmp-shared"));
+  int barriers = 0;
+  for (int leader : {0, 1}) {  // the second writer, then the leader (HDF5 opens a file once per process)
+    pisco::SharedTodOptions o;
+    o.temporary_suffix = ".tmp-shared";
+    o.leader = leader == 1;
+    o.barrier = [&] { ++barriers; };
+    TodWriter w = TodWriter::open_shared(file, fp, n, TodPrecision::float64, true, false, o);
+    const std::size_t first = leader == 1 ? 0 : n / 2, count = leader == 1 ? n / 2 : n - n / 2;
+    for (std::size_t d = 0; d < 2; ++d) {
+      const pisco::PointingView view = pointing[d].view().subspan(first, count);
+      w.write(d, first, std::span<const double>(signal[d].data() + first, count), &view);
+    }
+    w.commit();
+    EXPECT_EQ(fs::exists(file), leader == 1);
+  }
+  EXPECT_EQ(barriers, 2);
+  EXPECT_EQ(files(), std::vector<std::string>{"tod.h5"});
+  EXPECT_EQ(pisco::read_tod_signal(file, "z_det"), signal[0]);
+  EXPECT_EQ(pisco::read_tod_signal(file, "a_det"), signal[1]);
+  EXPECT_EQ(pisco::read_tod_attributes(file).at("units"), "K_CMB");
+  EXPECT_EQ(pisco::read_pointing_hdf5(file, "a_det").theta, pointing[1].theta);
+  fs::remove(file);
+
+  // Abandoned: no file left.
+  TodWriter::create_shared(file, fp, n, TodPrecision::float32, false, {}, true, ".tmp-shared");
+  {
+    pisco::SharedTodOptions o;
+    o.temporary_suffix = ".tmp-shared";
+    o.leader = true;
+    TodWriter w = TodWriter::open_shared(file, fp, n, TodPrecision::float32, false, true, o);
+    w.write(0, 0, std::span<const double>(signal[0].data(), 100));
+  }
+  EXPECT_TRUE(files().empty());
+}
+
 TEST_F(TodFile, StreamingFloat32ReadsBackWithinFloatRounding) {
   std::cout << "checking: a float32 TOD stores the nearest float of every sample (relative error <= 2^-24)\n";
   const std::size_t n = 3001;

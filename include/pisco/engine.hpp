@@ -37,6 +37,10 @@ struct BackendInfo {
   std::string name;
   bool available = false;
   std::string detail;  // device found, or why the backend is unavailable
+  // The indices (EngineOptions::device) of the devices "auto" chooses among: the usable ones of the
+  // kind it prefers (discrete GPUs before others), in index order; empty for cpu. Several processes on
+  // one node (pisco-vk under MPI) share them out: process k takes devices[k % devices.size()].
+  std::vector<std::size_t> devices;
 };
 
 namespace detail {

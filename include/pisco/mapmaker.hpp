@@ -37,6 +37,22 @@ class BinnedMapmaker {
 
   int nside() const noexcept { return nside_; }
 
+  // The normal equations accumulated so far, per pixel (RING order): the 6 entries of the upper
+  // triangle of A^T A (00 01 02 11 12 22), the 3 of A^T d and the hits. Map-makers that each binned
+  // part of the TOD (processes of an MPI run, docs/scaling.md) are combined by adding these: the sum
+  // solves to the maps of all the TOD binned by one map-maker, to rounding.
+  std::span<const double> normal_matrices() const noexcept { return ata_; }
+  std::span<const double> normal_vectors() const noexcept { return atd_; }
+  std::span<const std::uint32_t> hits() const noexcept { return hits_; }
+  // Adds another map-maker's normal equations (same NSIDE: 6, 3 and 1 values per pixel) to this one's,
+  // element by element. Throws pisco::Error on sizes that do not match.
+  void add_normal_equations(std::span<const double> matrices, std::span<const double> vectors,
+                            std::span<const std::uint32_t> hits);
+  // The same with another map-maker of the same NSIDE.
+  void add_normal_equations(const BinnedMapmaker& other) {
+    add_normal_equations(other.normal_matrices(), other.normal_vectors(), other.hits());
+  }
+
  private:
   int nside_;
   double rcond_min_;

@@ -23,6 +23,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <span>
@@ -35,6 +36,27 @@
 namespace pisco {
 
 enum class TodPrecision { float64, float32 };
+
+// One TOD file written by several processes together (pisco-vk under MPI, docs/scaling.md), in the
+// layout of a file written by one. The library knows nothing of MPI; the caller brings it here:
+//  1. one process (the leader) calls TodWriter::create_shared(): the temporary file (file + suffix) is
+//     created whole, the storage of every dataset allocated, and closed;
+//  2. every process opens it with TodWriter::open_shared(), whose file access list the caller
+//     configures (with parallel HDF5: H5Pset_fapl_mpio); opening, flushing and closing are then
+//     collective: every process makes the same calls in the same order;
+//  3. each process writes its own samples with write() (independent writes, any order);
+//  4. every process calls commit(): flush and close, then `barrier`, then the leader renames the
+//     temporary file to its final name. commit() cannot check that every sample was written (no
+//     process sees the others' writes): the processes' shares of the work must cover the file.
+// A shared writer destroyed without commit() closes the file (every process at the same point) and
+// removes the temporary file.
+struct SharedTodOptions {
+  std::string temporary_suffix;  // the same in every process, e.g. ".tmp-<the leader's process id>"
+  bool leader = false;           // the process that renames the file at commit()
+  // Called with the file access property list (an HDF5 hid_t) before the file is opened.
+  std::function<void(std::int64_t file_access_list)> configure_access;
+  std::function<void()> barrier;  // returns when every process has called it
+};
 
 // Writes a TOD file incrementally, chunk by chunk: only the chunk passed to write() is held in memory.
 // The file is written under a temporary name in the same directory (file + ".tmp-<pid>") and renamed to
@@ -50,6 +72,19 @@ class TodWriter {
             std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
             const std::map<std::string, std::string>& attributes, bool with_flags = false);
   ~TodWriter();
+
+  // Shared files (SharedTodOptions): the leader creates the temporary file `file` + temporary_suffix
+  // with the layout and attributes of the constructor's (samples never written are not filled), and
+  // closes it; then every process opens it with open_shared(), given the same focal plane, sizes and
+  // options. Errors as the constructor's; a failed create_shared() leaves no file.
+  static void create_shared(const std::filesystem::path& file, const FocalPlane& focal_plane,
+                            std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
+                            const std::map<std::string, std::string>& attributes, bool with_flags,
+                            const std::string& temporary_suffix);
+  static TodWriter open_shared(const std::filesystem::path& file, const FocalPlane& focal_plane,
+                               std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
+                               bool with_flags, const SharedTodOptions& options);
+
   TodWriter(TodWriter&&) noexcept;
   TodWriter& operator=(TodWriter&&) noexcept;
   TodWriter(const TodWriter&) = delete;
@@ -75,6 +110,10 @@ class TodWriter {
 
  private:
   struct Impl;
+  TodWriter() = default;
+  void create(const FocalPlane& focal_plane, std::size_t samples_per_detector, TodPrecision precision,
+              bool with_pointing, const std::map<std::string, std::string>& attributes, bool with_flags,
+              bool shared);
   std::filesystem::path file_, temporary_;
   std::size_t samples_ = 0;
   std::unique_ptr<Impl> impl_;

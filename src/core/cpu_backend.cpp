@@ -156,7 +156,8 @@ BackendEntry cpu_backend_entry() {
             return BackendInfo{"cpu", true,
                                "float64 reference on " +
                                    std::to_string(std::max(1u, std::thread::hardware_concurrency())) +
-                                   " hardware threads"};
+                                   " hardware threads",
+                               {}};
           },
           [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
             return std::make_unique<CpuBackend>(std::move(in), sky, o.threads);

@@ -161,6 +161,19 @@ void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
   }
 }
 
+void BinnedMapmaker::add_normal_equations(std::span<const double> matrices, std::span<const double> vectors,
+                                          std::span<const std::uint32_t> hits) {
+  if (matrices.size() != ata_.size() || vectors.size() != atd_.size() || hits.size() != hits_.size())
+    throw Error("BinnedMapmaker::add_normal_equations: " + std::to_string(matrices.size()) + ", " +
+                std::to_string(vectors.size()) + " and " + std::to_string(hits.size()) +
+                " values for the NSIDE " + std::to_string(nside_) + " map-maker (expected " +
+                std::to_string(ata_.size()) + ", " + std::to_string(atd_.size()) + " and " +
+                std::to_string(hits_.size()) + ")");
+  for (std::size_t i = 0; i < ata_.size(); ++i) ata_[i] += matrices[i];
+  for (std::size_t i = 0; i < atd_.size(); ++i) atd_[i] += vectors[i];
+  for (std::size_t i = 0; i < hits_.size(); ++i) hits_[i] += hits[i];
+}
+
 BinnedMaps BinnedMapmaker::solve() const {
   const std::size_t npix = hits_.size();
   BinnedMaps out;

@@ -107,6 +107,18 @@ Handle file_access_plist(const std::string& where) {
 }
 
 int file_descriptor(hid_t file) noexcept {
+  // Only the sec2 driver's handle is a descriptor (the MPI-IO driver's is an MPI_File).
+  const hid_t fapl = H5Fget_access_plist(file);
+  if (fapl < 0) {
+    H5Eclear2(H5E_DEFAULT);
+    return -1;
+  }
+  const hid_t driver = H5Pget_driver(fapl);
+  H5Pclose(fapl);
+  if (driver != H5FD_SEC2) {
+    H5Eclear2(H5E_DEFAULT);
+    return -1;
+  }
   void* handle = nullptr;
   if (H5Fget_vfd_handle(file, H5P_DEFAULT, &handle) < 0 || handle == nullptr) {
     H5Eclear2(H5E_DEFAULT);

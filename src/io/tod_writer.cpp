@@ -72,6 +72,7 @@ struct TodWriter::Impl {
   bool with_flags = false;
   bool committed = false;
   bool closed = false;
+  std::optional<SharedTodOptions> shared;  // a shared file (open_shared)
   std::vector<std::map<std::size_t, std::size_t>> written;  // per detector
   // The datasets of the detector written last (signal, theta, phi, psi): only one detector's are kept
   // open, so HDF5's chunk caches stay bounded whatever the number of detectors.
@@ -139,6 +140,13 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
     : file_(file),
       temporary_(fs::path(file.string() + ".tmp-" + std::to_string(::getpid()))),
       samples_(samples_per_detector) {
+  create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, false);
+}
+
+void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_detector, TodPrecision precision,
+                       bool with_pointing, const std::map<std::string, std::string>& attributes, bool with_flags,
+                       bool shared) {
+  const fs::path& file = file_;
   Session session;
   const std::string where = file.string();
   if (file.empty() || !file.has_filename()) throw Error(where + ": not a file name (expected a TOD file path)");
@@ -215,6 +223,14 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
     const hsize_t chunk[1] = {std::min<hsize_t>(dims[0], kChunkSamples)};
     check(H5Pset_chunk(flags_dcpl.get(), 1, chunk), where, "cannot set the dataset chunk size");
   }
+  // A shared file: all storage allocated now, so that the processes that open it write into it
+  // independently (with parallel HDF5, allocation is collective), and nothing filled (each process
+  // writes its own samples; filling would write the whole file once more).
+  if (shared)
+    for (const Handle* list : {&dcpl, &quat_dcpl, &flags_dcpl}) {
+      check(H5Pset_alloc_time(list->get(), H5D_ALLOC_TIME_EARLY), where, "cannot set the allocation time");
+      check(H5Pset_fill_time(list->get(), H5D_FILL_TIME_NEVER), where, "cannot set the fill time");
+    }
   for (const Detector& d : focal_plane.detectors()) {
     const std::string group_path = in_quotes("/" + d.name);
     Handle group = checked(H5Gcreate2(s.file.get(), d.name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
@@ -256,6 +272,56 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
     }
     if (!group.close()) fail(where, "cannot close group " + group_path);
   }
+}
+
+void TodWriter::create_shared(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,
+                              TodPrecision precision, bool with_pointing,
+                              const std::map<std::string, std::string>& attributes, bool with_flags,
+                              const std::string& temporary_suffix) {
+  TodWriter w;
+  w.file_ = file;
+  w.temporary_ = fs::path(file.string() + temporary_suffix);
+  w.samples_ = samples_per_detector;
+  w.create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, true);
+  Session session;
+  Impl& s = *w.impl_;
+  const std::string where = file.string();
+  check_room_for_metadata(s.file.get(), s.temporary, where);
+  check(H5Fflush(s.file.get(), H5F_SCOPE_GLOBAL), where,
+        "cannot flush the temporary file " + in_quotes(s.temporary.string()));
+  if (!s.file.close()) fail(where, "cannot close the temporary file " + in_quotes(s.temporary.string()));
+  s.closed = true;
+  s.committed = true;  // kept: the processes open it next (open_shared)
+}
+
+TodWriter TodWriter::open_shared(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,
+                                 TodPrecision precision, bool with_pointing, bool with_flags,
+                                 const SharedTodOptions& options) {
+  Session session;
+  const std::string where = file.string();
+  TodWriter w;
+  w.file_ = file;
+  w.temporary_ = fs::path(file.string() + options.temporary_suffix);
+  w.samples_ = samples_per_detector;
+  w.impl_ = std::make_unique<Impl>();
+  Impl& s = *w.impl_;
+  s.where = where;
+  for (const Detector& d : focal_plane.detectors()) s.names.push_back(d.name);
+  s.samples = samples_per_detector;
+  s.precision = precision;
+  s.with_pointing = with_pointing;
+  s.with_flags = with_flags;
+  s.written.resize(focal_plane.size());
+  s.shared = options;
+  s.dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
+  check(H5Pset_chunk_cache(s.dapl.get(), 0, 0, 1.0), where, "cannot switch the chunk cache off");
+  Handle fapl = file_access_plist(where);
+  if (options.configure_access) options.configure_access(static_cast<std::int64_t>(fapl.get()));
+  s.listed.emplace(w.temporary_);
+  s.file = checked(H5Fopen(w.temporary_.c_str(), H5F_ACC_RDWR, fapl.get()), H5Fclose, where,
+                   "cannot open the temporary file " + in_quotes(w.temporary_.string()));
+  s.temporary = w.temporary_;  // from here on, the Impl removes the temporary file if anything fails
+  return w;
 }
 
 TodWriter::~TodWriter() = default;
@@ -337,7 +403,7 @@ void TodWriter::commit() {
   if (!impl_) throw Error(where + ": TodWriter::commit() on a moved-from writer");
   Impl& s = *impl_;
   if (s.closed) throw Error(where + ": TodWriter::commit() called twice");
-  for (std::size_t d = 0; d < s.names.size(); ++d) {
+  for (std::size_t d = 0; d < s.names.size() && !s.shared; ++d) {
     const auto& intervals = s.written[d];
     if (s.samples == 0) break;
     if (intervals.size() == 1 && intervals.begin()->first == 0 && intervals.begin()->second == s.samples)
@@ -361,6 +427,14 @@ void TodWriter::commit() {
     fail(where, "cannot close the temporary file " + in_quotes(s.temporary.string()));
   }
   s.closed = true;
+  if (s.shared) {
+    if (s.shared->barrier) s.shared->barrier();
+    if (!s.shared->leader) {  // the leader renames the file
+      s.committed = true;
+      s.listed.reset();
+      return;
+    }
+  }
   std::error_code ec;
   fs::rename(s.temporary, file_, ec);
   if (ec)

@@ -561,12 +561,17 @@ BackendEntry vulkan_backend_entry() {
                 return BackendInfo{"vulkan", false,
                                    devices.empty() ? "no Vulkan device was found (for a CPU device, install "
                                                      "mesa-vulkan-drivers)"
-                                                   : "no usable Vulkan device: " + unusable.substr(0, unusable.size() - 2)};
-              const std::string pick = vk::choose_device(devices, "auto").describe();
+                                                   : "no usable Vulkan device: " + unusable.substr(0, unusable.size() - 2),
+                                   {}};
+              const vk::DeviceInfo chosen = vk::choose_device(devices, "auto");
+              const std::string pick = chosen.describe();
               std::string detail = usable + unusable;
-              return BackendInfo{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")"};
+              BackendInfo info{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")", {}};
+              for (const auto& d : devices)
+                if (d.unusable.empty() && d.type == chosen.type) info.devices.push_back(d.index);
+              return info;
             } catch (const Error& e) {
-              return BackendInfo{"vulkan", false, e.what()};
+              return BackendInfo{"vulkan", false, e.what(), {}};
             }
           },
           [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {

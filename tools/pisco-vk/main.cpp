@@ -8,6 +8,7 @@
 #include <hdf5.h>
 
 #include "bench.hpp"
+#include "cluster.hpp"
 #include "config.hpp"
 #include "run.hpp"
 #include "signals.hpp"
@@ -64,6 +65,8 @@ int main(int argc, char** argv) {
   // full disk HDF5 1.10's can crash or loop on its own state (docs/formats.md, "Errors and partial
   // files"): the program ends without it. Before any other HDF5 call.
   H5dont_atexit();
+  // The processes of the run: MPI's ranks in the MPI build (docs/scaling.md), else this one.
+  pisco_cli::Cluster cluster(argc, argv);
   CLI::App app{"PISCO-VK: pixel-space convolution of polarized skies with beamsors, for CMB simulations.",
                "pisco-vk"};
   app.set_version_flag("--version", std::string("pisco-vk ") + pisco::version);
@@ -113,7 +116,8 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("validate")) return validate(full, validate_backend);
     const fs::path data = data_dir();
     const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
-    pisco_cli::SimulationConfig config = pisco_cli::load_config(config_file);
+    pisco_cli::SimulationConfig config;
+    cluster.step([&] { config = pisco_cli::load_config(config_file); });
     if (!output_dir.empty()) config.output.dir = output_dir;
     if (!backend.empty()) config.engine.options.backend = backend;
     if (!device.empty()) config.engine.options.device = device;
@@ -122,10 +126,25 @@ int main(int argc, char** argv) {
     options.plots = !no_plots;
     options.data_dir = data;
     return pisco_cli::run_simulation(config, options);
+  } catch (const pisco_cli::AgreedError& e) {
+    // Every rank has it (a single process: always): said once.
+    if (cluster.leader()) std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
+    std::fflush(stderr);
+    cluster.finalize();
+    return 2;
   } catch (const pisco::Error& e) {
+    if (cluster.parallel()) {
+      // One rank's error outside the collective steps: the others cannot be told, and are ended.
+      std::fprintf(stderr, "pisco-vk: error: rank %d: %s\n", cluster.rank(), e.what());
+      cluster.abort(2);
+    }
     std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
     return 2;
   } catch (const std::exception& e) {
+    if (cluster.parallel()) {
+      std::fprintf(stderr, "pisco-vk: error: rank %d: %s\n", cluster.rank(), e.what());
+      cluster.abort(3);
+    }
     std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
     return 3;
   }

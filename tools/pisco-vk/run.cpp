@@ -13,8 +13,12 @@
 #include <numbers>
 #include <optional>
 #include <array>
+#include <cstdlib>
 #include <sstream>
+#include <thread>
+#include <unistd.h>
 
+#include "cluster.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
 
@@ -194,26 +198,64 @@ bool run_plots(const fs::path& python, const fs::path& script, const fs::path& d
 
 int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   const auto t0 = std::chrono::steady_clock::now();
-  const bool quiet = ro.quiet;
+  // Under MPI (cluster.hpp, docs/scaling.md): every rank runs this function; rank 0 alone speaks, and
+  // every step that can fail on one rank is a collective step (Cluster::step), so that an error on
+  // any rank ends every rank with that rank's message.
+  Cluster& cl = Cluster::get();
+  const bool quiet = ro.quiet || !cl.leader();
   auto say = [&](const char* fmt, auto... args) {
     if (!quiet) std::printf(fmt, args...);
     std::fflush(stdout);
   };
   say("pisco-vk %s: %s\n", pisco::version, c.source.empty() ? "built-in defaults" : c.source.string().c_str());
 
-  const pisco::Sky sky = make_sky(c.sky, ro.data_dir / "assets");
+  std::optional<pisco::Sky> sky_holder;
+  cl.step([&] { sky_holder.emplace(make_sky(c.sky, ro.data_dir / "assets")); });
+  const pisco::Sky& sky = *sky_holder;
   say("sky: NSIDE %d, %s%s\n", sky.nside(), c.sky.file.empty() ? "synthesized from " : "",
       c.sky.file.empty() ? c.sky.cl_file.string().c_str() : c.sky.file.string().c_str());
   std::vector<pisco::Beamsor> beams;
-  for (const auto& b : c.beams) {
-    beams.push_back(make_beam(b, c.source));
-    say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
-  }
+  cl.step([&] {
+    for (const auto& b : c.beams) {
+      beams.push_back(make_beam(b, c.source));
+      say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
+    }
+  });
   pisco::FocalPlane fp(c.detectors);
   pisco::EngineOptions engine_options = c.engine.options;
   engine_options.unseen = c.sky.unseen;
-  pisco::Engine engine(sky, beams, fp, engine_options);
-  say("backend: %s (%s)\n", engine.backend_name().c_str(), engine.device_name().c_str());
+  std::optional<pisco::Engine> engine_holder;
+  cl.step([&] {
+    // Several ranks on a node share it out: on cpu, the hardware threads; on a GPU backend, the
+    // devices "auto" chooses among, rank k on the node taking device k modulo their number. With
+    // backend "auto", the backend is known once an engine is made (and then made again if need be).
+    auto share_out = [&](const std::string& backend, pisco::EngineOptions& o) {
+      if (cl.node_size() <= 1) return;
+      if (backend == "cpu" && o.threads == 0) {
+        o.threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
+      } else if (backend != "cpu" && (o.device == "auto" || o.device.empty())) {
+        for (const auto& b : pisco::Engine::backends())
+          if (b.name == backend && !b.devices.empty())
+            o.device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
+      }
+    };
+    pisco::EngineOptions o = engine_options;
+    if (o.backend != "auto") share_out(o.backend, o);
+    engine_holder.emplace(sky, beams, fp, o);
+    if (engine_options.backend == "auto") {
+      o.backend = engine_holder->backend_name();
+      share_out(o.backend, o);
+      if (o.threads != engine_options.threads || o.device != engine_options.device) {
+        engine_holder.reset();
+        engine_holder.emplace(sky, beams, fp, o);
+      }
+    }
+  });
+  pisco::Engine& engine = *engine_holder;
+  say("backend: %s (%s)%s\n", engine.backend_name().c_str(), engine.device_name().c_str(),
+      cl.parallel() ? (", rank 0 of " + std::to_string(cl.size()) + " (" + std::to_string(cl.node_size()) +
+                       " on its node)").c_str()
+                    : "");
   // [sky] unseen = "flag": samples whose disc holds an UNSEEN pixel are flagged in the TOD file and
   // left out of the maps.
   const bool flagging = c.sky.unseen == pisco::UnseenPolicy::flag && engine.unseen_pixels() > 0;
@@ -233,54 +275,134 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   const bool per_detector_file = c.scan.type == "file" && !pisco::BoresightFile::holds_boresight(c.scan.file);
   std::optional<Boresight> boresight;
   std::size_t samples_per_detector = 0;
-  if (per_detector_file) {
-    for (const auto& d : fp.detectors()) {
-      if (d.has_offset())
-        throw pisco::Error(c.scan.file.string() + ": the file gives detector '" + d.name +
-                           "' its own pointing, but the focal plane also gives it an offset from the boresight " +
-                           "(expected a boresight pointing file, or detectors without offsets)");
-      const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
-      if (samples_per_detector == 0) samples_per_detector = n;
-      if (n != samples_per_detector)
-        throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
-                           " samples, the others " + std::to_string(samples_per_detector));
+  cl.step([&] {
+    if (per_detector_file) {
+      for (const auto& d : fp.detectors()) {
+        if (d.has_offset())
+          throw pisco::Error(c.scan.file.string() + ": the file gives detector '" + d.name +
+                             "' its own pointing, but the focal plane also gives it an offset from the boresight " +
+                             "(expected a boresight pointing file, or detectors without offsets)");
+        const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
+        if (samples_per_detector == 0) samples_per_detector = n;
+        if (n != samples_per_detector)
+          throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
+                             " samples, the others " + std::to_string(samples_per_detector));
+      }
+    } else {
+      boresight.emplace(c.scan, c.hwp);
+      samples_per_detector = boresight->size();
     }
-  } else {
-    boresight.emplace(c.scan, c.hwp);
-    samples_per_detector = boresight->size();
-  }
+  });
   const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
   const int maps_nside = c.output.maps_nside > 0 ? c.output.maps_nside
                          : c.scan.type == "file" ? sky.nside() : c.scan.nside;
   say("scan: %s, %zu detectors x %zu samples\n", c.scan.type.c_str(), fp.size(), samples_per_detector);
 
-  if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
-    throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
-                       std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
-  if (std::error_code ec; !fs::create_directories(c.output.dir, ec) && ec)
-    throw pisco::Error(c.output.dir.string() + ": cannot create the output directory (" + ec.message() + ")");
   std::optional<pisco::BinnedMapmaker> mapper;
-  if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
+  cl.step([&] {
+    if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
+      throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
+                         std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
+    if (std::error_code ec; !fs::create_directories(c.output.dir, ec) && ec)
+      throw pisco::Error(c.output.dir.string() + ": cannot create the output directory (" + ec.message() + ")");
+    if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
+  });
   std::optional<pisco::TodWriter> tod_file;
   const fs::path tod_path = c.output.dir / "tod.h5";
   if (c.output.tod) {
     std::string beam_desc;
     for (std::size_t i = 0; i < beams.size(); ++i)
       beam_desc += (i ? "; " : "") + c.beams[i].name + ": " + beams[i].description();
-    tod_file.emplace(tod_path, fp, samples_per_detector, c.output.tod_precision, c.output.tod_pointing,
-                     std::map<std::string, std::string>{{"units", sky.units()},
+    const std::map<std::string, std::string> attributes{{"units", sky.units()},
                                                         {"nside", std::to_string(sky.nside())},
                                                         {"beam", beam_desc},
                                                         {"backend", engine.backend_name()},
                                                         {"device", engine.device_name()},
                                                         {"pisco_version", pisco::version},
                                                         {"created", utc_now()},
-                                                        {"config", c.text}},
-                     flagging);
+                                                        {"config", c.text}};
+    if (!cl.parallel()) {
+      tod_file.emplace(tod_path, fp, samples_per_detector, c.output.tod_precision, c.output.tod_pointing, attributes,
+                       flagging);
+    } else {
+      // One file for all ranks (parallel HDF5): rank 0 creates it whole, then every rank opens it and
+      // writes its own samples; rank 0 renames it once every rank has closed it.
+      pisco::SharedTodOptions shared;
+      shared.temporary_suffix = ".tmp-" + cl.broadcast(std::to_string(::getpid()));
+      shared.leader = cl.leader();
+      shared.configure_access = cl.file_access();
+      shared.barrier = [&cl] { cl.barrier(); };
+      cl.step([&] {
+        if (cl.leader())
+          pisco::TodWriter::create_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
+                                          c.output.tod_pointing, attributes, flagging, shared.temporary_suffix);
+      });
+      cl.step([&] {
+        tod_file.emplace(pisco::TodWriter::open_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
+                                                       c.output.tod_pointing, flagging, shared));
+      });
+    }
   }
 
-  Progress progress(total, quiet);
   const std::size_t chunk = std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1));
+  // The jobs of the run (a detector's span of samples), in the order one process runs them: time
+  // spans outermost (each boresight chunk made once for all detectors), or, with per-detector pointing
+  // files, detectors outermost. Under MPI the spans are shortened until there are at least 4 jobs per
+  // rank, and each rank takes a contiguous run of jobs of about equal cost, a job costing its samples
+  // times its detector's disc pixels (from its beam's rho_max and the sky's NSIDE).
+  // The jobs are never listed (a season is 1e9 of them): job i of the run is job_at(i).
+  struct Span {
+    std::size_t detector = 0, first = 0, count = 0;
+  };
+  const std::size_t ndet = fp.size();
+  std::size_t span = chunk;
+  auto ceil_div = [](std::size_t a, std::size_t b) { return (a + b - 1) / b; };
+  if (cl.parallel() && samples_per_detector > 0) {
+    const std::size_t spans_needed = ceil_div(4 * std::size_t(cl.size()), std::max<std::size_t>(ndet, 1));
+    span = std::max<std::size_t>(1, std::min(chunk, ceil_div(samples_per_detector, spans_needed)));
+  }
+  const std::size_t spans = samples_per_detector == 0 ? 0 : ceil_div(samples_per_detector, span);
+  const std::size_t njobs = spans * ndet;
+  auto job_at = [&](std::size_t i) {
+    const std::size_t d = per_detector_file ? i / spans : i % ndet, s = per_detector_file ? i % spans : i / ndet;
+    return Span{d, s * span, std::min(span, samples_per_detector - s * span)};
+  };
+  std::size_t my_first = 0, my_end = 0, rounds = 0;  // this rank's jobs [my_first, my_end); the most any rank has
+  if (!cl.parallel()) {
+    my_end = rounds = njobs;
+  } else {
+    std::vector<double> disc(ndet);
+    const double npix = 12.0 * double(sky.nside()) * double(sky.nside());
+    for (std::size_t d = 0; d < ndet; ++d)
+      disc[d] = std::max(1.0, 0.5 * (1 - std::cos(beams[fp[d].beam].rho_max())) * npix);
+    double all = 0;
+    for (std::size_t i = 0; i < njobs; ++i) {
+      const Span j = job_at(i);
+      all += double(j.count) * disc[j.detector];
+    }
+    std::vector<std::size_t> per_rank(std::size_t(cl.size()), 0);
+    double before = 0;
+    my_first = njobs;
+    for (std::size_t i = 0; i < njobs; ++i) {
+      const Span j = job_at(i);
+      const double cost = double(j.count) * disc[j.detector];
+      const int owner = all > 0 ? std::min(cl.size() - 1, int((before + 0.5 * cost) / all * cl.size())) : 0;
+      before += cost;
+      ++per_rank[std::size_t(owner)];
+      if (owner == cl.rank()) {
+        my_first = std::min(my_first, i);
+        my_end = i + 1;
+      }
+    }
+    if (my_first > my_end) my_first = my_end;
+    rounds = *std::max_element(per_rank.begin(), per_rank.end());
+  }
+  // Checks for an error on another rank: after every check_every jobs, at most about 1000 in a run.
+  const std::size_t check_every = std::max<std::size_t>(1, ceil_div(rounds, 1000));
+  const std::size_t checks = ceil_div(rounds, check_every);
+  std::uint64_t my_samples = 0;
+  for (std::size_t i = my_first; i < my_end; ++i) my_samples += job_at(i).count;
+  Progress progress(my_samples, quiet);
   const auto tc = std::chrono::steady_clock::now();
   // The run as a stream of jobs (a detector's chunk), two in flight: while the engine convolves job
   // j, job j - 1 is binned and written and job j + 1's pointing is prepared, so that the device never
@@ -343,41 +465,72 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     if (pending) finish(*pending);
     pending = j;
   };
-  if (per_detector_file) {
-    for (std::size_t d = 0; d < fp.size(); ++d) {
-      pisco::Pointing& ptg = file_pointing[d % 2];
-      ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
-      for (std::size_t off = 0; off < ptg.size(); off += chunk) {
-        const std::size_t n = std::min(chunk, ptg.size() - off);
+  // Fault injection for the tests (docs/scaling.md): PISCO_TEST_RANK_FAIL=R makes rank R fail after
+  // its first job, as a rank whose device or disk fails mid-run would.
+  const char* fail_env = std::getenv("PISCO_TEST_RANK_FAIL");
+  const bool inject_failure = cl.parallel() && fail_env != nullptr && std::atoi(fail_env) == cl.rank();
+  auto run_jobs = [&] {
+    std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
+    int bslot = 1;
+    for (std::size_t i = my_first; i < my_end; ++i) {
+      const Span job = job_at(i);
+      const std::size_t d = job.detector, off = job.first, n = job.count;
+      if (per_detector_file) {
+        pisco::Pointing& ptg = file_pointing[d % 2];
+        if (d != read_detector) ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
+        read_detector = d;
         submit(Job{d, off, n}, [&](std::span<double> t, std::span<const double> h) {
           return engine.submit(d, ptg.view().subspan(off, n), t, false, h);
         });
-      }
-    }
-  } else {
-    // Time chunks outermost: each boresight chunk is made once for all detectors.
-    int bslot = 0;
-    for (std::size_t off = 0; off < samples_per_detector; off += chunk) {
-      const std::size_t n = std::min(chunk, samples_per_detector - off);
-      BoresightChunk& b = bore[bslot];  // the other is still the pending job's
-      boresight->fill(off, n, b);
-      for (std::size_t d = 0; d < fp.size(); ++d) {
+      } else {
+        if (off != filled_first) {  // a new time span: its boresight chunk, in the buffer not pending
+          bslot ^= 1;
+          boresight->fill(off, n, bore[bslot]);
+          filled_first = off;
+        }
+        BoresightChunk& b = bore[bslot];
         submit(Job{d, off, n, bslot}, [&](std::span<double> t, std::span<const double> h) {
           return b.quaternions ? engine.submit(d, pisco::QuatPointingView{b.quats}, t, false, h)
                                : engine.submit(d, b.angles.view(), t, false, h);
         });
       }
-      bslot ^= 1;
+      if (inject_failure && i > my_first)
+        throw pisco::Error("injected failure on rank " + std::to_string(cl.rank()) + " (PISCO_TEST_RANK_FAIL)");
+      if ((i - my_first + 1) % check_every == 0) {
+        cl.post_check(false);
+        if (cl.stop()) return;  // another rank failed
+      }
     }
+    if (pending) finish(*pending);
+  };
+  if (!cl.parallel()) {
+    run_jobs();
+  } else {
+    std::optional<std::string> failure;
+    try {
+      run_jobs();
+    } catch (const std::exception& e) {
+      failure = e.what();
+    }
+    engine.wait();  // after a failure or a stop, nothing in flight writes into the buffers any more
+    cl.finish_checks(checks, failure.has_value());
+    cl.agree(failure);
   }
-  if (pending) finish(*pending);
   progress.finish();
-  const double conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
+  const double my_conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
+  const double conv = cl.max(my_conv);  // the slowest rank's
+  // Pixels per disc over every rank's samples.
+  const double mean_disc =
+      cl.parallel() && total > 0 ? cl.sum_of(engine.mean_disc_pixels() * double(my_samples)) / double(total)
+                                 : engine.mean_disc_pixels();
   std::vector<fs::path> written;
   if (tod_file) {
-    tod_file->commit();
+    cl.step([&] { tod_file->commit(); });
     written.push_back(tod_path);
   }
+  flagged = cl.sum(flagged);
+  std::uint64_t reduced_bytes = 0;
+  if (mapper) cl.step([&] { reduced_bytes = cl.sum(cl.reduce(*mapper)); });
   if (flagging)
     say("flags: %llu of %llu samples flagged (their disc holds an UNSEEN pixel)%s\n",
         static_cast<unsigned long long>(flagged), static_cast<unsigned long long>(total),
@@ -385,89 +538,98 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   // A run whose maps solve no pixel has no maps to speak of: no spectra or plots, and exit status 4.
   std::string nothing_solved;
 
-  if (mapper) {
-    const pisco::BinnedMaps maps = mapper->solve();
-    const fs::path maps_path = c.output.dir / "maps.fits", hits_path = c.output.dir / "hits.fits";
-    pisco::write_healpix_map(maps_path, maps_nside, {{"I_STOKES", maps.I}, {"Q_STOKES", maps.Q}, {"U_STOKES", maps.U}},
-                             sky.units());
-    std::vector<double> hits(maps.hits.begin(), maps.hits.end());
-    pisco::write_healpix_map(hits_path, maps_nside, {{"HITS", hits}}, "samples");
-    written.push_back(maps_path);
-    written.push_back(hits_path);
-    const auto solved = std::count_if(maps.I.begin(), maps.I.end(), [](double v) { return v != pisco::unseen; });
-    say("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside, solved, maps.I.size(),
-        c.output.rcond_min);
-    if (c.hwp.enabled && solved > 0) {
-      // The plate's figure: the polarization of the maps against their temperature (on an unpolarized
-      // sky, the plate's leakage of temperature into polarization as the map-maker's model leaves it).
-      double ii = 0, qq = 0, uu = 0, mean_i = 0;
-      for (std::size_t p = 0; p < maps.I.size(); ++p)
-        if (maps.I[p] != pisco::unseen) mean_i += maps.I[p];
-      mean_i /= double(solved);
-      for (std::size_t p = 0; p < maps.I.size(); ++p)
-        if (maps.I[p] != pisco::unseen) {
-          ii += (maps.I[p] - mean_i) * (maps.I[p] - mean_i);
-          qq += maps.Q[p] * maps.Q[p];
-          uu += maps.U[p] * maps.U[p];
+  // Maps, spectra and plots: rank 0's, from the normal equations of every rank.
+  cl.step([&] {
+    if (mapper && cl.leader()) {
+      const pisco::BinnedMaps maps = mapper->solve();
+      const fs::path maps_path = c.output.dir / "maps.fits", hits_path = c.output.dir / "hits.fits";
+      pisco::write_healpix_map(maps_path, maps_nside, {{"I_STOKES", maps.I}, {"Q_STOKES", maps.Q}, {"U_STOKES", maps.U}},
+                               sky.units());
+      std::vector<double> hits(maps.hits.begin(), maps.hits.end());
+      pisco::write_healpix_map(hits_path, maps_nside, {{"HITS", hits}}, "samples");
+      written.push_back(maps_path);
+      written.push_back(hits_path);
+      const auto solved = std::count_if(maps.I.begin(), maps.I.end(), [](double v) { return v != pisco::unseen; });
+      say("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside, solved, maps.I.size(),
+          c.output.rcond_min);
+      if (c.hwp.enabled && solved > 0) {
+        // The plate's figure: the polarization of the maps against their temperature (on an unpolarized
+        // sky, the plate's leakage of temperature into polarization as the map-maker's model leaves it).
+        double ii = 0, qq = 0, uu = 0, mean_i = 0;
+        for (std::size_t p = 0; p < maps.I.size(); ++p)
+          if (maps.I[p] != pisco::unseen) mean_i += maps.I[p];
+        mean_i /= double(solved);
+        for (std::size_t p = 0; p < maps.I.size(); ++p)
+          if (maps.I[p] != pisco::unseen) {
+            ii += (maps.I[p] - mean_i) * (maps.I[p] - mean_i);
+            qq += maps.Q[p] * maps.Q[p];
+            uu += maps.U[p] * maps.U[p];
+          }
+        const double ri = std::sqrt(ii / double(solved)), rq = std::sqrt(qq / double(solved)), ru = std::sqrt(uu / double(solved));
+        say("hwp: maps' rms Q %.3g, U %.3g, I (mean removed) %.3g %s: leakage figure rms P / rms I = %.3g%s\n", rq, ru, ri,
+            sky.units().c_str(), std::hypot(rq, ru) / ri,
+            c.hwp.ideal_mapmaker ? " (maps binned with an ideal plate's model)" : "");
+      }
+      if (solved == 0) {
+        const auto hit = std::count_if(maps.hits.begin(), maps.hits.end(), [](std::uint32_t h) { return h > 0; });
+        nothing_solved = "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) +
+                         " NSIDE " + std::to_string(maps_nside) + " pixels are hit" +
+                         (flagging ? " by unflagged samples" : "") + ", none with rcond >= " +
+                         [](double v) { char b[32]; std::snprintf(b, sizeof b, "%g", v); return std::string(b); }(c.output.rcond_min) +
+                         " (each pixel needs three or more polarization angles); maps.fits is all UNSEEN, and no "
+                         "spectra or plots were made";
+      }
+
+      if (c.output.spectra && nothing_solved.empty()) {
+        const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
+        const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
+        const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
+        std::vector<double> bt, bp, pt, pp;
+        std::string note = "binned maps";
+        const auto fw = window_fwhm(c.beams[c.detectors.front().beam]);
+        if (c.output.deconvolve_beam && fw) {
+          bt = pisco::gaussian_beam_window(*fw, lmax, false);
+          bp = pisco::gaussian_beam_window(*fw, lmax, true);
+          note += ", divided by the Gaussian beam window of FWHM " + std::to_string(*fw * 180 / std::numbers::pi) + " deg";
         }
-      const double ri = std::sqrt(ii / double(solved)), rq = std::sqrt(qq / double(solved)), ru = std::sqrt(uu / double(solved));
-      say("hwp: maps' rms Q %.3g, U %.3g, I (mean removed) %.3g %s: leakage figure rms P / rms I = %.3g%s\n", rq, ru, ri,
-          sky.units().c_str(), std::hypot(rq, ru) / ri,
-          c.hwp.ideal_mapmaker ? " (maps binned with an ideal plate's model)" : "");
-    }
-    if (solved == 0) {
-      const auto hit = std::count_if(maps.hits.begin(), maps.hits.end(), [](std::uint32_t h) { return h > 0; });
-      nothing_solved = "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) +
-                       " NSIDE " + std::to_string(maps_nside) + " pixels are hit" +
-                       (flagging ? " by unflagged samples" : "") + ", none with rcond >= " +
-                       [](double v) { char b[32]; std::snprintf(b, sizeof b, "%g", v); return std::string(b); }(c.output.rcond_min) +
-                       " (each pixel needs three or more polarization angles); maps.fits is all UNSEEN, and no "
-                       "spectra or plots were made";
+        if (c.output.deconvolve_pixel_window) {
+          pt = pisco::pixel_window(maps_nside, lmax, false);
+          pp = pisco::pixel_window(maps_nside, lmax, true);
+          note += ", divided by the NSIDE " + std::to_string(maps_nside) + " pixel window";
+        }
+        const fs::path spectra_path = c.output.dir / "spectra.txt", input_path = c.output.dir / "input_spectra.txt";
+        write_spectra(spectra_path, pisco::deconvolve_windows(out, bt, bp, pt, pp), lmax, note);
+        write_spectra(input_path, pisco::anafast(sky.I(), sky.Q(), sky.U(), sky.nside(), lmax_sky), lmax_sky,
+                      "input sky");
+        written.push_back(spectra_path);
+        written.push_back(input_path);
+      }
     }
 
-    if (c.output.spectra && nothing_solved.empty()) {
-      const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
-      const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
-      const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
-      std::vector<double> bt, bp, pt, pp;
-      std::string note = "binned maps";
-      const auto fw = window_fwhm(c.beams[c.detectors.front().beam]);
-      if (c.output.deconvolve_beam && fw) {
-        bt = pisco::gaussian_beam_window(*fw, lmax, false);
-        bp = pisco::gaussian_beam_window(*fw, lmax, true);
-        note += ", divided by the Gaussian beam window of FWHM " + std::to_string(*fw * 180 / std::numbers::pi) + " deg";
+    if (c.output.plots && ro.plots && c.output.maps && nothing_solved.empty() && cl.leader()) {
+      const fs::path plot_script = ro.data_dir / "tools" / "pisco_plot.py";
+      if (!fs::exists(plot_script)) {
+        say("plots: skipped (tools/pisco_plot.py not found)\n");
+      } else {
+        const fs::path python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+        run_plots(python, plot_script, c.output.dir, quiet, [&](const std::string& m) { say("%s", m.c_str()); });
       }
-      if (c.output.deconvolve_pixel_window) {
-        pt = pisco::pixel_window(maps_nside, lmax, false);
-        pp = pisco::pixel_window(maps_nside, lmax, true);
-        note += ", divided by the NSIDE " + std::to_string(maps_nside) + " pixel window";
-      }
-      const fs::path spectra_path = c.output.dir / "spectra.txt", input_path = c.output.dir / "input_spectra.txt";
-      write_spectra(spectra_path, pisco::deconvolve_windows(out, bt, bp, pt, pp), lmax, note);
-      write_spectra(input_path, pisco::anafast(sky.I(), sky.Q(), sky.U(), sky.nside(), lmax_sky), lmax_sky,
-                    "input sky");
-      written.push_back(spectra_path);
-      written.push_back(input_path);
     }
-  }
-
-  if (c.output.plots && ro.plots && c.output.maps && nothing_solved.empty()) {
-    const fs::path plot_script = ro.data_dir / "tools" / "pisco_plot.py";
-    if (!fs::exists(plot_script)) {
-      say("plots: skipped (tools/pisco_plot.py not found)\n");
-    } else {
-      const fs::path python = fs::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-      run_plots(python, plot_script, c.output.dir, quiet, [&](const std::string& m) { say("%s", m.c_str()); });
-    }
-  }
+  });
+  nothing_solved = cl.broadcast(nothing_solved);
 
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!quiet) {
     std::printf("summary: %llu samples, %.1f pixels per disc, %.3g pixel evaluations/s, %.3g samples/s\n",
-                static_cast<unsigned long long>(total), engine.mean_disc_pixels(),
-                double(total) * engine.mean_disc_pixels() / conv, double(total) / conv);
+                static_cast<unsigned long long>(total), mean_disc, double(total) * mean_disc / conv,
+                double(total) / conv);
     std::printf("         device %s (%s); convolution %s, wall time %s\n", engine.backend_name().c_str(),
                 engine.device_name().c_str(), human_seconds(conv).c_str(), human_seconds(wall).c_str());
+    if (cl.parallel())
+      std::printf("         %d ranks: %.3g samples/s per rank (the slowest's time); map reduction %.3g MB, "
+                  "TOD %.3g MB written by all\n",
+                  cl.size(), double(total) / conv / cl.size(), double(reduced_bytes) / 1e6,
+                  tod_file ? double(fs::file_size(tod_path)) / 1e6 : 0.0);
     for (const auto& f : written) std::printf("         wrote %s\n", f.string().c_str());
   }
   if (!nothing_solved.empty()) {
