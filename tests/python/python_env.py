@@ -34,6 +34,7 @@ PACKAGES = {
     "pytest": "pytest",
     "nanobind": "nanobind",
     "scikit-build-core": "scikit_build_core",
+    "mpi4py": "mpi4py",
 }
 REGISTRY = "https://pypi.org/simple/pip/"
 
