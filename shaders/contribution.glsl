@@ -93,28 +93,50 @@ dvec2 weight64(uint k) {
   return dvec2(packDouble2x32(t.xy), packDouble2x32(t.zw));
 }
 
-dvec2 interpolate_weights64(Grid grid, double x, double y) {
+// The float64 interpolation at (x, y): its nodes (absolute node indices) and coefficients, linear in
+// r = sqrt(x^2 + y^2) for a radial profile (2 nodes), bilinear on the grid otherwise (4 nodes); no
+// node outside the grid or beyond the profile. One stencil for every float64 table a node has.
+struct Stencil64 {
+  uint k[4];
+  double c[4];
+  int m;  // nodes used
+};
+
+Stencil64 stencil64(Grid grid, double x, double y) {
+  Stencil64 s;
+  s.m = 0;
   const uint offset = grid.offset64, n = uint(grid.n);
+  if (RADIAL) {
+    const double u = sqrt(max(x * x + y * y, 0.0lf)) * grid.inv_step64;
+    if (!(u <= double(n - 1u))) return s;
+    const uint i = min(uint(u), n - 2u);
+    const double f = u - double(i);
+    s.k[0] = offset + i;
+    s.k[1] = offset + i + 1u;
+    s.c[0] = 1.0 - f;
+    s.c[1] = f;
+    s.m = 2;
+    return s;
+  }
   const double u = (x + grid.a64) * grid.inv_step64;
   const double v = (y + grid.a64) * grid.inv_step64;
   const double last = double(n - 1u);
-  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return dvec2(0.0);
+  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return s;
   const uint i = min(uint(u), n - 2u);
   const uint j = min(uint(v), n - 2u);
   const double fu = u - double(i);
   const double fv = v - double(j);
   const uint g00 = offset + j * n + i;
-  return ((1.0 - fu) * (1.0 - fv)) * weight64(g00) + (fu * (1.0 - fv)) * weight64(g00 + 1u) +
-         ((1.0 - fu) * fv) * weight64(g00 + n) + (fu * fv) * weight64(g00 + n + 1u);
-}
-
-dvec2 interpolate_radial64(Grid grid, double r2) {
-  const uint offset = grid.offset64, n = uint(grid.n);
-  const double u = sqrt(max(r2, 0.0lf)) * grid.inv_step64;
-  if (!(u <= double(n - 1u))) return dvec2(0.0);
-  const uint i = min(uint(u), n - 2u);
-  const double f = u - double(i);
-  return (1.0 - f) * weight64(offset + i) + f * weight64(offset + i + 1u);
+  s.k[0] = g00;
+  s.k[1] = g00 + 1u;
+  s.k[2] = g00 + n;
+  s.k[3] = g00 + n + 1u;
+  s.c[0] = (1.0 - fu) * (1.0 - fv);
+  s.c[1] = fu * (1.0 - fv);
+  s.c[2] = (1.0 - fu) * fv;
+  s.c[3] = fu * fv;
+  s.m = 4;
+  return s;
 }
 
 // Half-wave plates at the aperture (docs/physics.md, "Half-wave plates"): the float64 weights of a
@@ -126,53 +148,6 @@ dvec4 plate_weight64(uint k) {
 }
 
 double plate_norm_at(uint k) { return packDouble2x32(texelFetch(weights64, int(3u * k)).zw); }
-
-dvec4 plate_weights64(Grid grid, double x, double y) {
-  const uint offset = grid.offset64, n = uint(grid.n);
-  const double u = (x + grid.a64) * grid.inv_step64;
-  const double v = (y + grid.a64) * grid.inv_step64;
-  const double last = double(n - 1u);
-  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return dvec4(0.0);
-  const uint i = min(uint(u), n - 2u);
-  const uint j = min(uint(v), n - 2u);
-  const double fu = u - double(i);
-  const double fv = v - double(j);
-  const uint g00 = offset + j * n + i;
-  return ((1.0 - fu) * (1.0 - fv)) * plate_weight64(g00) + (fu * (1.0 - fv)) * plate_weight64(g00 + 1u) +
-         ((1.0 - fu) * fv) * plate_weight64(g00 + n) + (fu * fv) * plate_weight64(g00 + n + 1u);
-}
-
-dvec4 plate_radial64(Grid grid, double r2) {
-  const uint offset = grid.offset64, n = uint(grid.n);
-  const double u = sqrt(max(r2, 0.0lf)) * grid.inv_step64;
-  if (!(u <= double(n - 1u))) return dvec4(0.0);
-  const uint i = min(uint(u), n - 2u);
-  const double f = u - double(i);
-  return (1.0 - f) * plate_weight64(offset + i) + f * plate_weight64(offset + i + 1u);
-}
-
-// The per-sample normalization weight of a plate detector at (x, y).
-double plate_norm64(Grid grid, bool radial, double x, double y) {
-  const uint offset = grid.offset64, n = uint(grid.n);
-  if (radial) {
-    const double u = sqrt(max(x * x + y * y, 0.0lf)) * grid.inv_step64;
-    if (!(u <= double(n - 1u))) return 0.0lf;
-    const uint i = min(uint(u), n - 2u);
-    const double f = u - double(i);
-    return (1.0 - f) * plate_norm_at(offset + i) + f * plate_norm_at(offset + i + 1u);
-  }
-  const double u = (x + grid.a64) * grid.inv_step64;
-  const double v = (y + grid.a64) * grid.inv_step64;
-  const double last = double(n - 1u);
-  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return 0.0lf;
-  const uint i = min(uint(u), n - 2u);
-  const uint j = min(uint(v), n - 2u);
-  const double fu = u - double(i);
-  const double fv = v - double(j);
-  const uint g00 = offset + j * n + i;
-  return ((1.0 - fu) * (1.0 - fv)) * plate_norm_at(g00) + (fu * (1.0 - fv)) * plate_norm_at(g00 + 1u) +
-         ((1.0 - fu) * fv) * plate_norm_at(g00 + n) + (fu * fv) * plate_norm_at(g00 + n + 1u);
-}
 
 // M(theta) = R(-theta) M0 R(theta) with c = cos 2 theta, s = sin 2 theta, as columns: mt[j][i] = M_ij.
 // R(theta) rows (1,0,0,0), (0,c,s,0), (0,-s,c,0), (0,0,0,1).

@@ -82,12 +82,19 @@ void accumulate(SampleFrame f, Grid g, dvec3 theta_p64, dvec3 phi_p64, uint b0, 
     acc.comp = (t - acc.sum) - y;
     acc.sum = t;
     if (FLOAT64) {
+      const Stencil64 st = stencil64(g, x64, y64);
       if (PLATE) {
-        const dvec4 w64 = RADIAL ? plate_radial64(g, x64 * x64 + y64 * y64) : plate_weights64(g, x64, y64);
+        dvec4 w64 = dvec4(0.0lf);
+        double n64 = 0.0lf;
+        for (int q = 0; q < st.m; ++q) {
+          w64 += st.c[q] * plate_weight64(st.k[q]);
+          n64 += st.c[q] * plate_norm_at(st.k[q]);
+        }
         acc.s0 += dot(w64, m0);
-        acc.n0 += plate_norm64(g, RADIAL, x64, y64);
+        acc.n0 += n64;
       } else {
-        const dvec2 w64 = RADIAL ? interpolate_radial64(g, x64 * x64 + y64 * y64) : interpolate_weights64(g, x64, y64);
+        dvec2 w64 = dvec2(0.0lf);
+        for (int q = 0; q < st.m; ++q) w64 += st.c[q] * weight64(st.k[q]);
         acc.s0 += w64.x;
         acc.n0 += w64.y;
       }
