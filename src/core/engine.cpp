@@ -120,7 +120,6 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   }
   detail::PointingInput input = input_of(boresight);
   std::uint64_t ticket = 0;
-  std::size_t failing = detector;
   try {
     if (det.plate == detail::PreparedDetector::Plate::detector) {
       // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
@@ -140,8 +139,7 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
       backend_->submit(detector, input, tod, accumulate, ticket);
     }
   } catch (const detail::SubmissionError& e) {
-    failing = e.detector < focal_plane_.size() ? e.detector : detector;
-    throw Error("convolving detector '" + focal_plane_[failing].name + "': " + e.what());
+    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what());
   } catch (const Error& e) {
     throw Error("convolving detector '" + name + "': " + e.what());
   }
@@ -183,12 +181,7 @@ void Engine::wait(std::uint64_t ticket) {
     pixels_ += backend_->wait(ticket);
   } catch (const detail::SubmissionError& e) {
     pending_.clear();
-    // Row detectors of a plate belong to their focal-plane detector.
-    std::size_t d = e.detector;
-    for (std::size_t i = 0; d >= focal_plane_.size() && i < focal_plane_.size(); ++i)
-      for (std::size_t r : inputs_->detectors[i].rows)
-        if (inputs_->detectors[i].plate == detail::PreparedDetector::Plate::detector && r == e.detector) d = i;
-    throw Error("convolving detector '" + focal_plane_[d < focal_plane_.size() ? d : 0].name + "': " + e.what());
+    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what());
   }
   finish_pending(ticket);
 }

@@ -188,6 +188,7 @@ EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
       throw Error("detector '" + d.name + "': beam index " + std::to_string(d.beam) +
                   " but only " + std::to_string(beams.size()) + " beamsors were given");
     in.detectors.push_back(prepare_detector(d, beams[d.beam], in.sky.pixel_area, normalization));
+    in.detectors.back().owner = in.detectors.size() - 1;
   }
   // The row detectors of plates between the optics and the detector, after the focal plane's.
   for (std::size_t i = 0; i < focal_plane.size(); ++i) {
@@ -196,6 +197,7 @@ EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
     for (int r = 0; r < 4; ++r) {
       in.detectors[i].rows[r] = in.detectors.size();
       in.detectors.push_back(prepare_row_detector(d, beams[d.beam], in.sky.pixel_area, normalization, r));
+      in.detectors.back().owner = i;
     }
   }
   return in;

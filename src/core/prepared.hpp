@@ -64,6 +64,7 @@ struct PreparedDetector {
   double plate_gamma = 0.0;
   double d0[2] = {0.0, 0.0};        // D(0) = (s/2 (1+eps), s/2 (1-eps), 0, 0)
   std::size_t rows[4] = {0, 0, 0, 0};  // detector placement: the row detectors' indices
+  std::size_t owner = 0;  // the focal-plane detector this one is (or is a row detector of), for messages
 };
 
 struct EngineInputs {
