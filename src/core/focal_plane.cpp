@@ -12,8 +12,18 @@ std::size_t FocalPlane::add(Detector detector) {
 std::size_t FocalPlane::add_pair(const std::string& name, double zeta, std::size_t beam_a,
                                  std::size_t beam_b, double epsilon, double gain_a, double gain_b) {
   // Paper eq. copol_bolo: detector b's co-polarization is detector a's rotated by -90 deg.
-  const std::size_t first = add({name + "a", zeta, epsilon, gain_a, beam_a});
-  add({name + "b", zeta - std::numbers::pi / 2, epsilon, gain_b, beam_b});
+  Detector a, b;
+  a.name = name + "a";
+  b.name = name + "b";
+  a.zeta = zeta;
+  b.zeta = zeta - std::numbers::pi / 2;
+  a.epsilon = b.epsilon = epsilon;
+  a.gain = gain_a;
+  b.gain = gain_b;
+  a.beam = beam_a;
+  b.beam = beam_b;
+  const std::size_t first = add(a);
+  add(b);
   return first;
 }
 
