@@ -226,7 +226,10 @@ TEST_F(Reliability, StopSignalReachesThePlottingTool) {
       "signal.signal(signal.SIGTERM, stop)\n"
       "open(tmp, 'w').write('half a plot')\n"
       "print('fake plotter: plotting', flush=True)\n"
-      "time.sleep(60)\n");
+      // Short sleeps: a signal that lands between the print and a long sleep's system call would
+      // otherwise wait for that sleep to end before Python runs its handler.
+      "for _ in range(600):\n"
+      "    time.sleep(0.1)\n");
   const fs::path cfg = write("sim.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
                                                 "[scan]\ntype = \"pixel_centres\"\nnside = 16\n", "plots = true\n"));
   const fs::path out = dir_ / "out";
