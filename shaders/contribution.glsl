@@ -1,8 +1,16 @@
 // The per-pixel contribution of the measurement equation in float32: src/core/contribution.hpp line
-// for line (see the derivation there and in docs/physics.md); the backend parity tests
-// (tests/test_backend_parity.cpp) hold the two to the same numbers.
+// for line (see the derivation there and in docs/physics.md), and the beam interpolation. The float64
+// tables of the monopole path are read here too, in float64 or, on devices without it, in float-float
+// (PISCO_FF). Written in the common subset of GLSL and C++ (common.glsl): tests/test_kernel_host.cpp
+// runs this file as C++ against the reference, and the backend parity tests hold the kernel to it.
+// Reads the tables `weight_pairs` and `weights64` and the specialization constants RADIAL and COLUMNS.
 #ifndef PISCO_CONTRIBUTION_GLSL
 #define PISCO_CONTRIBUTION_GLSL
+
+#include "common.glsl"
+#if PISCO_FF
+#include "ff.glsl"
+#endif
 
 struct SampleFrame {
   vec3 theta_p, phi_p, p;  // theta', phi', p'
@@ -11,18 +19,19 @@ struct SampleFrame {
 
 // Antenna coordinates (x, y, z) of k, r2 = x^2 + y^2 (independent of psi) and (cos 2chi, sin 2chi),
 // all from d = k - p' (see contribution.hpp for why).
-void pixel_geometry(SampleFrame f, vec3 k, out vec3 xyz, out float r2, out float cos2chi, out float sin2chi) {
+PISCO_FN void pixel_geometry(SampleFrame f, vec3 k, PISCO_OUT(vec3) xyz, PISCO_OUT(float) r2, PISCO_OUT(float) cos2chi,
+                             PISCO_OUT(float) sin2chi) {
   const vec3 d = k - f.p;
   const float dz = dot(d, f.p);  // z - 1
-  xyz = vec3(dot(d, f.theta_p), dot(d, f.phi_p), 1.0 + dz);
+  xyz = vec3(dot(d, f.theta_p), dot(d, f.phi_p), 1.0f + dz);
   r2 = dot(d, d) - dz * dz;
   const float t = dot(d, f.e_c);
-  const float zp = 2.0 + dz;
+  const float zp = 2.0f + dz;
   const float c = (k.z * t - f.e_c.z) * zp - t * (d.z + k.z * dz);
   const float s = (k.x * f.e_c.y - k.y * f.e_c.x) * zp - t * (d.x * f.p.y - d.y * f.p.x);
-  const float inv = 1.0 / (c * c + s * s);
+  const float inv = 1.0f / (c * c + s * s);
   cos2chi = (c * c - s * s) * inv;
-  sin2chi = 2.0 * c * s * inv;
+  sin2chi = 2.0f * c * s * inv;
 }
 
 // The beam grid of one detector, read from the push constants once per sample (lavapipe reads a
@@ -33,16 +42,16 @@ struct Grid {
   float a;         // half-width: nodes at x_i = -a + i * step
   float inv_step;  // 1 / step
   uint offset64;   // first node in the float64 weights
-  double a64, inv_step64;
+  PISCO_F64 a64, inv_step64;
 };
 
 // Node k's weights and its neighbour's along x (or r), stored side by side: one texel with the
 // two columns (w_I, w_Q) of each, or two texels with all four.
-void weight_pair(Grid g, int k, out vec4 w, out vec4 next) {
+PISCO_FN void weight_pair(Grid g, int k, PISCO_OUT(vec4) w, PISCO_OUT(vec4) next) {
   if (COLUMNS == 2) {
     const vec4 t = uintBitsToFloat(texelFetch(weight_pairs, g.offset + k));
-    w = vec4(t.xy, 0.0, 0.0);
-    next = vec4(t.zw, 0.0, 0.0);
+    w = vec4(t.x, t.y, 0.0f, 0.0f);
+    next = vec4(t.z, t.w, 0.0f, 0.0f);
   } else {
     w = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k));
     next = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k + 1));
@@ -52,11 +61,11 @@ void weight_pair(Grid g, int k, out vec4 w, out vec4 next) {
 // Bilinear interpolation on the n x n grid at x_i = -a + i * step (x fastest); zero outside.
 // Without branches: the nodes are clamped into the grid and the result selected, which keeps
 // lavapipe's vector code free of masked writes.
-vec4 interpolate_weights(Grid g, float x, float y) {
+PISCO_FN vec4 interpolate_weights(Grid g, float x, float y) {
   const float u = (x + g.a) * g.inv_step;
   const float v = (y + g.a) * g.inv_step;
   const float last = float(g.n - 1);
-  const bool inside = u >= 0.0 && v >= 0.0 && u <= last && v <= last;
+  const bool inside = u >= 0.0f && v >= 0.0f && u <= last && v <= last;
   const int i = clamp(int(u), 0, g.n - 2);
   const int j = clamp(int(v), 0, g.n - 2);
   const float fu = u - float(i);
@@ -65,32 +74,26 @@ vec4 interpolate_weights(Grid g, float x, float y) {
   vec4 w00, w10, w01, w11;
   weight_pair(g, k00, w00, w10);
   weight_pair(g, k00 + g.n, w01, w11);
-  const vec4 w = ((1.0 - fu) * (1.0 - fv)) * w00 + (fu * (1.0 - fv)) * w10 + ((1.0 - fu) * fv) * w01 + (fu * fv) * w11;
-  return inside ? w : vec4(0.0);
+  const vec4 w = ((1.0f - fu) * (1.0f - fv)) * w00 + (fu * (1.0f - fv)) * w10 + ((1.0f - fu) * fv) * w01 + (fu * fv) * w11;
+  return inside ? w : vec4(0.0f);
 }
 
 // Linear interpolation in r = sqrt(r2) of a radial profile at r = i * step; zero beyond.
 // Signed indices: CPUs (lavapipe) convert float to int in one instruction, to uint in several.
-vec4 interpolate_radial(Grid g, float r2) {
-  const float u = sqrt(max(r2, 0.0)) * g.inv_step;
+PISCO_FN vec4 interpolate_radial(Grid g, float r2) {
+  const float u = sqrt(max(r2, 0.0f)) * g.inv_step;
   const int i = clamp(int(u), 0, g.n - 2);
   const float f = u - float(i);
   vec4 w0, w1;
   weight_pair(g, i, w0, w1);
-  const vec4 w = (1.0 - f) * w0 + f * w1;
-  return u <= float(g.n - 1) ? w : vec4(0.0);
+  const vec4 w = (1.0f - f) * w0 + f * w1;
+  return u <= float(g.n - 1) ? w : vec4(0.0f);
 }
 
 // w . Lambda(-chi) S (docs/physics.md, "The measurement equation").
-float stokes_response(vec4 w, float cos2chi, float sin2chi, vec4 S) {
+PISCO_FN float stokes_response(vec4 w, float cos2chi, float sin2chi, vec4 S) {
   return w.x * S.x + w.y * (S.y * cos2chi + S.z * sin2chi) + w.z * (S.z * cos2chi - S.y * sin2chi) +
          w.w * S.w;
-}
-
-// The float64 path: (w_I, Omega_pix B_TT / Omega~) interpolated in double from double coordinates.
-dvec2 weight64(uint k) {
-  const uvec4 t = texelFetch(weights64, int(k));
-  return dvec2(packDouble2x32(t.xy), packDouble2x32(t.zw));
 }
 
 // The float64 interpolation at (x, y): its nodes (absolute node indices) and coefficients, linear in
@@ -98,11 +101,19 @@ dvec2 weight64(uint k) {
 // node outside the grid or beyond the profile. One stencil for every float64 table a node has.
 struct Stencil64 {
   uint k[4];
-  double c[4];
+  PISCO_F64 c[4];
   int m;  // nodes used
 };
 
-Stencil64 stencil64(Grid grid, double x, double y) {
+#if !PISCO_FF
+
+// A float64 table entry: one texel holds two float64 numbers, low word first.
+PISCO_FN dvec2 texel_doubles(uvec4 t) { return dvec2(packDouble2x32(uvec2(t.x, t.y)), packDouble2x32(uvec2(t.z, t.w))); }
+
+// (w_I, Omega_pix B_TT / Omega~) of node k.
+PISCO_FN dvec2 weight64(uint k) { return texel_doubles(texelFetch(weights64, int(k))); }
+
+PISCO_FN Stencil64 stencil64(Grid grid, double x, double y) {
   Stencil64 s;
   s.m = 0;
   const uint offset = grid.offset64, n = uint(grid.n);
@@ -113,7 +124,7 @@ Stencil64 stencil64(Grid grid, double x, double y) {
     const double f = u - double(i);
     s.k[0] = offset + i;
     s.k[1] = offset + i + 1u;
-    s.c[0] = 1.0 - f;
+    s.c[0] = 1.0lf - f;
     s.c[1] = f;
     s.m = 2;
     return s;
@@ -121,7 +132,7 @@ Stencil64 stencil64(Grid grid, double x, double y) {
   const double u = (x + grid.a64) * grid.inv_step64;
   const double v = (y + grid.a64) * grid.inv_step64;
   const double last = double(n - 1u);
-  if (!(u >= 0.0 && v >= 0.0 && u <= last && v <= last)) return s;
+  if (!(u >= 0.0lf && v >= 0.0lf && u <= last && v <= last)) return s;
   const uint i = min(uint(u), n - 2u);
   const uint j = min(uint(v), n - 2u);
   const double fu = u - double(i);
@@ -131,9 +142,9 @@ Stencil64 stencil64(Grid grid, double x, double y) {
   s.k[1] = g00 + 1u;
   s.k[2] = g00 + n;
   s.k[3] = g00 + n + 1u;
-  s.c[0] = (1.0 - fu) * (1.0 - fv);
-  s.c[1] = fu * (1.0 - fv);
-  s.c[2] = (1.0 - fu) * fv;
+  s.c[0] = (1.0lf - fu) * (1.0lf - fv);
+  s.c[1] = fu * (1.0lf - fv);
+  s.c[2] = (1.0lf - fu) * fv;
   s.c[3] = fu * fv;
   s.m = 4;
   return s;
@@ -141,31 +152,91 @@ Stencil64 stencil64(Grid grid, double x, double y) {
 
 // Half-wave plates at the aperture (docs/physics.md, "Half-wave plates"): the float64 weights of a
 // plate detector are 3 texels a node, (w_I, wn), (w_Q, w_U), (w_V, 0); M0 is 8 texels, row by row.
-dvec4 plate_weight64(uint k) {
+PISCO_FN dvec4 plate_weight64(uint k) {
+  const dvec2 a = texel_doubles(texelFetch(weights64, int(3u * k)));
+  const dvec2 b = texel_doubles(texelFetch(weights64, int(3u * k + 1u)));
+  const dvec2 c = texel_doubles(texelFetch(weights64, int(3u * k + 2u)));
+  return dvec4(a.x, b.x, b.y, c.x);
+}
+
+PISCO_FN double plate_norm_at(uint k) { return texel_doubles(texelFetch(weights64, int(3u * k))).y; }
+
+// Row r of the plate's M0.
+PISCO_FN dvec4 plate_row(uint offset, int r) {
+  const dvec2 a = texel_doubles(texelFetch(weights64, int(offset) + 2 * r));
+  const dvec2 b = texel_doubles(texelFetch(weights64, int(offset) + 2 * r + 1));
+  return dvec4(a.x, a.y, b.x, b.y);
+}
+
+#else  // PISCO_FF: every float64 number of the tables is a float-float pair, hi then lo
+
+PISCO_FN vec2 texel_ff(uvec4 t, int half_) {
+  return half_ == 0 ? vec2(uintBitsToFloat(t.x), uintBitsToFloat(t.y)) : vec2(uintBitsToFloat(t.z), uintBitsToFloat(t.w));
+}
+
+PISCO_FN Stencil64 stencil64(Grid grid, vec2 x, vec2 y) {
+  Stencil64 s;
+  s.m = 0;
+  const uint offset = grid.offset64, n = uint(grid.n);
+  const vec2 one = vec2(1.0f, 0.0f);
+  if (RADIAL) {
+    const vec2 u = ff_mul(ff_sqrt(ff_add(ff_mul(x, x), ff_mul(y, y))), grid.inv_step64);
+    if (!ff_le(u, vec2(float(n - 1u), 0.0f))) return s;
+    const uint i = min(uint(ff_floor(u)), n - 2u);
+    const vec2 f = ff_sub(u, vec2(float(i), 0.0f));
+    s.k[0] = offset + i;
+    s.k[1] = offset + i + 1u;
+    s.c[0] = ff_sub(one, f);
+    s.c[1] = f;
+    s.m = 2;
+    return s;
+  }
+  const vec2 u = ff_mul(ff_add(x, grid.a64), grid.inv_step64);
+  const vec2 v = ff_mul(ff_add(y, grid.a64), grid.inv_step64);
+  const vec2 last = vec2(float(n - 1u), 0.0f);
+  const vec2 zero = vec2(0.0f, 0.0f);
+  if (!(ff_le(zero, u) && ff_le(zero, v) && ff_le(u, last) && ff_le(v, last))) return s;
+  const uint i = min(uint(ff_floor(u)), n - 2u);
+  const uint j = min(uint(ff_floor(v)), n - 2u);
+  const vec2 fu = ff_sub(u, vec2(float(i), 0.0f));
+  const vec2 fv = ff_sub(v, vec2(float(j), 0.0f));
+  const uint g00 = offset + j * n + i;
+  s.k[0] = g00;
+  s.k[1] = g00 + 1u;
+  s.k[2] = g00 + n;
+  s.k[3] = g00 + n + 1u;
+  s.c[0] = ff_mul(ff_sub(one, fu), ff_sub(one, fv));
+  s.c[1] = ff_mul(fu, ff_sub(one, fv));
+  s.c[2] = ff_mul(ff_sub(one, fu), fv);
+  s.c[3] = ff_mul(fu, fv);
+  s.m = 4;
+  return s;
+}
+
+// (w_I, Omega_pix B_TT / Omega~) of node k.
+PISCO_FN void weight64(uint k, PISCO_OUT(vec2) w, PISCO_OUT(vec2) wn) {
+  const uvec4 t = texelFetch(weights64, int(k));
+  w = texel_ff(t, 0);
+  wn = texel_ff(t, 1);
+}
+
+// Plate detectors: 3 texels a node, (w_I, wn), (w_Q, w_U), (w_V, 0); M0 8 texels, row by row.
+PISCO_FN void plate_weight64(uint k, PISCO_OUT(vec2) wi, PISCO_OUT(vec2) wq, PISCO_OUT(vec2) wu, PISCO_OUT(vec2) wv,
+                             PISCO_OUT(vec2) wn) {
   const uvec4 a = texelFetch(weights64, int(3u * k)), b = texelFetch(weights64, int(3u * k + 1u)),
               c = texelFetch(weights64, int(3u * k + 2u));
-  return dvec4(packDouble2x32(a.xy), packDouble2x32(b.xy), packDouble2x32(b.zw), packDouble2x32(c.xy));
+  wi = texel_ff(a, 0);
+  wn = texel_ff(a, 1);
+  wq = texel_ff(b, 0);
+  wu = texel_ff(b, 1);
+  wv = texel_ff(c, 0);
 }
 
-double plate_norm_at(uint k) { return packDouble2x32(texelFetch(weights64, int(3u * k)).zw); }
-
-// M(theta) = R(-theta) M0 R(theta) with c = cos 2 theta, s = sin 2 theta, as columns: mt[j][i] = M_ij.
-// R(theta) rows (1,0,0,0), (0,c,s,0), (0,-s,c,0), (0,0,0,1).
-void plate_mueller(uint offset, double c, double s, out dmat4 mt) {
-  dmat4 m0;  // m0[j][i] = (M0)_ij
-  for (int r = 0; r < 4; ++r) {
-    const uvec4 t0 = texelFetch(weights64, int(offset) + 2 * r), t1 = texelFetch(weights64, int(offset) + 2 * r + 1);
-    m0[0][r] = packDouble2x32(t0.xy);
-    m0[1][r] = packDouble2x32(t0.zw);
-    m0[2][r] = packDouble2x32(t1.xy);
-    m0[3][r] = packDouble2x32(t1.zw);
-  }
-  dmat4 rot = dmat4(1.0lf);  // rot[j][i] = R(theta)_ij
-  rot[1][1] = c;
-  rot[2][1] = s;
-  rot[1][2] = -s;
-  rot[2][2] = c;
-  mt = transpose(rot) * m0 * rot;
+// M0_{r c} of the plate whose M0 starts at texel `offset`.
+PISCO_FN vec2 plate_entry(uint offset, int r, int c) {
+  return texel_ff(texelFetch(weights64, int(offset) + 2 * r + c / 2), c % 2);
 }
+
+#endif
 
 #endif

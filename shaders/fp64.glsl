@@ -10,13 +10,7 @@
 #ifndef PISCO_FP64_GLSL
 #define PISCO_FP64_GLSL
 
-#ifdef __cplusplus
-#define PISCO_FN inline
-#define PISCO_OUT(T) T&
-#else
-#define PISCO_FN
-#define PISCO_OUT(T) out T
-#endif
+#include "common.glsl"
 
 // sin(r) and cos(r) for |r| <= pi/4 (fdlibm __kernel_sin, __kernel_cos).
 PISCO_FN double pisco_kernel_sin(double r) {

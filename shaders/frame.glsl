@@ -1,10 +1,14 @@
 // One sample's antenna basis in float64, from boresight angles or a boresight quaternion, with the
 // detector's offset applied: src/core/frame.hpp line for line (docs/physics.md, "Pointing as a
-// rotation"). Written in the common subset of GLSL and C++ (vectors built by constructor, no swizzle,
-// every double literal suffixed) so that tests/test_frame.cpp runs this very file as C++ against
-// frame.hpp.
+// rotation"). Without float64 (PISCO_FF), the same from a boresight quaternion in float-float (the
+// host turns angles into quaternions for that path). Written in the common subset of GLSL and C++
+// (common.glsl) so that tests/test_frame.cpp and tests/test_kernel_host.cpp run this very file as C++.
 #ifndef PISCO_FRAME_GLSL
 #define PISCO_FRAME_GLSL
+
+#include "common.glsl"
+
+#if !PISCO_FF
 
 #include "fp64.glsl"
 
@@ -71,5 +75,50 @@ PISCO_FN void pisco_sample_frame(bool quaternion, bool offset, dvec4 b, dvec4 of
     pisco_direction_angles(p, theta, phi);
   }
 }
+
+#else  // PISCO_FF
+
+#include "ff.glsl"
+
+struct ffquat {
+  vec2 x, y, z, w;  // scalar last
+};
+
+// q a b: the rotation b, then a.
+PISCO_FN ffquat ff_quat_mul(ffquat a, ffquat b) {
+  ffquat r;
+  r.x = ff_add(ff_add(ff_mul(a.w, b.x), ff_mul(b.w, a.x)), ff_sub(ff_mul(a.y, b.z), ff_mul(a.z, b.y)));
+  r.y = ff_add(ff_add(ff_mul(a.w, b.y), ff_mul(b.w, a.y)), ff_sub(ff_mul(a.z, b.x), ff_mul(a.x, b.z)));
+  r.z = ff_add(ff_add(ff_mul(a.w, b.z), ff_mul(b.w, a.z)), ff_sub(ff_mul(a.x, b.y), ff_mul(a.y, b.x)));
+  r.w = ff_sub(ff_mul(a.w, b.w), ff_add(ff_add(ff_mul(a.x, b.x), ff_mul(a.y, b.y)), ff_mul(a.z, b.z)));
+  return r;
+}
+
+// The columns of q's rotation matrix, exact for any norm of q (s = 2 / |q|^2).
+PISCO_FN void ff_rotation(ffquat q, PISCO_OUT(ff3) ex, PISCO_OUT(ff3) ey, PISCO_OUT(ff3) ez) {
+  const vec2 one = vec2(1.0f, 0.0f);
+  const vec2 xx = ff_mul(q.x, q.x), yy = ff_mul(q.y, q.y), zz = ff_mul(q.z, q.z), ww = ff_mul(q.w, q.w);
+  const vec2 s = ff_div(vec2(2.0f, 0.0f), ff_add(ff_add(xx, yy), ff_add(zz, ww)));
+  const vec2 xy = ff_mul(q.x, q.y), xz = ff_mul(q.x, q.z), yz = ff_mul(q.y, q.z);
+  const vec2 wx = ff_mul(q.w, q.x), wy = ff_mul(q.w, q.y), wz = ff_mul(q.w, q.z);
+  ex.x = ff_sub(one, ff_mul(s, ff_add(yy, zz)));
+  ex.y = ff_mul(s, ff_add(xy, wz));
+  ex.z = ff_mul(s, ff_sub(xz, wy));
+  ey.x = ff_mul(s, ff_sub(xy, wz));
+  ey.y = ff_sub(one, ff_mul(s, ff_add(xx, zz)));
+  ey.z = ff_mul(s, ff_add(yz, wx));
+  ez.x = ff_mul(s, ff_add(xz, wy));
+  ez.y = ff_mul(s, ff_sub(yz, wx));
+  ez.z = ff_sub(one, ff_mul(s, ff_add(xx, yy)));
+}
+
+// The detector basis (theta', phi', p') of a sample whose boresight is the quaternion b: the columns
+// of b * offset_quat, or of b when the detector is on the boresight.
+PISCO_FN void ff_sample_frame(bool offset, ffquat b, ffquat offset_quat, PISCO_OUT(ff3) theta_p, PISCO_OUT(ff3) phi_p,
+                              PISCO_OUT(ff3) p) {
+  ff_rotation(offset ? ff_quat_mul(b, offset_quat) : b, theta_p, phi_p, p);
+}
+
+#endif
 
 #endif

@@ -16,10 +16,12 @@
 #define PISCO_BINDING_WEIGHTS 3    // texels: each node's COLUMNS weights, then its neighbour's; every detector's grid
 #define PISCO_BINDING_WEIGHTS64 4  // texels, 1 per node: float64 (w_I, Omega_pix B_TT / Omega~), low word first;
                                    // with PLATE 3 per node: (w_I, wn), (w_Q, w_U), (w_V, 0); and the plates' M0
-#define PISCO_BINDING_POINTING 5   // storage: 4 doubles per sample: (theta, phi, psi, 0) or a quaternion (x, y, z, w)
+#define PISCO_BINDING_POINTING 5   // storage: 4 doubles per sample: (theta, phi, psi, 0) or a quaternion (x, y, z, w);
+                                   // without float64, always the quaternion
 #define PISCO_BINDING_TOD 6        // storage: 1 double per sample of the chunk
 #define PISCO_BINDING_COUNT 7      // storage: 1 uint per sample: pixels in its disc
-#define PISCO_BINDING_PLATE 8      // storage: 1 double per sample: the plate's angle from the detector's axis
+#define PISCO_BINDING_PLATE 8      // storage: 1 double per sample: the plate's angle from the detector's axis;
+                                   // without float64, 2: cos 2 angle, sin 2 angle
 #define PISCO_BINDINGS 9
 
 #define PISCO_FLAG_PER_SAMPLE 2u  // divide each sample by its own sum of Omega_pix B_TT / Omega~
@@ -41,15 +43,19 @@ constexpr bool is_texel_binding(uint b) {
   return b <= PISCO_BINDING_WEIGHTS64;
 }
 struct PushConstants {
+#ifndef PISCO_F64
+#define PISCO_F64 double  // the kernels' host tests define it as their float-float type
+#endif
 #else
 layout(push_constant) uniform PushConstants {
 #endif
-  double rho_max;
-  double cos_rho_max;
-  double monopole;        // I0, subtracted from the float32 sky and added back in float64
-  double grid_a;          // half-width of the beam grid (= sin rho_max)
-  double grid_inv_step;   // 1 / node spacing
-  double offset_quat[4];  // the detector's offset from the boresight (x, y, z, w)
+  // PISCO_F64: a float64 number, or on devices without float64 a float-float pair (hi, lo) in its 8 bytes.
+  PISCO_F64 rho_max;
+  PISCO_F64 cos_rho_max;
+  PISCO_F64 monopole;        // I0, subtracted from the float32 sky and added back in float64
+  PISCO_F64 grid_a;          // half-width of the beam grid (= sin rho_max)
+  PISCO_F64 grid_inv_step;   // 1 / node spacing
+  PISCO_F64 offset_quat[4];  // the detector's offset from the boresight (x, y, z, w)
   float grid_a32;
   float grid_inv_step32;
   float cos_zeta;

@@ -19,7 +19,7 @@ using pisco_test::expect_error;
 const std::vector<DeviceCandidate> devices{
     {"llvmpipe (LLVM 15.0.6, 256 bits)", "llvmpipe [cpu]", 1, ""},
     {"NVIDIA H100 80GB HBM3", "NVIDIA H100 [discrete]", 4, ""},
-    {"Intel(R) UHD Graphics", "", 3, "lacks shaderFloat64"},
+    {"Intel(R) UHD Graphics", "", 3, "has no compute queue"},
     {"llvmpipe (LLVM 16)", "", 1, ""},
 };
 
@@ -41,9 +41,9 @@ TEST(DeviceChoice, ErrorsNameTheBackendTheRequestAndTheDevices) {
   expect_error([] { choose_device("vk", "Vulkan", devices, "4"); }, "Vulkan devices: 0: llvmpipe [cpu]; 1: NVIDIA H100");
   expect_error([] { choose_device("vk", "Vulkan", devices, "99999999999999999999999"); }, "out of range");
   expect_error([] { choose_device("vk", "Vulkan", devices, "nosuch"); }, "no device named 'nosuch'");
-  expect_error([] { choose_device("vk", "Vulkan", devices, "nosuch"); }, "2: Intel(R) UHD Graphics (lacks shaderFloat64)");
-  expect_error([] { choose_device("vk", "Vulkan", devices, "2"); }, "device '2' (Intel(R) UHD Graphics) lacks shaderFloat64");
-  expect_error([] { choose_device("vk", "Vulkan", devices, "intel"); }, "lacks shaderFloat64");
+  expect_error([] { choose_device("vk", "Vulkan", devices, "nosuch"); }, "2: Intel(R) UHD Graphics (has no compute queue)");
+  expect_error([] { choose_device("vk", "Vulkan", devices, "2"); }, "device '2' (Intel(R) UHD Graphics) has no compute queue");
+  expect_error([] { choose_device("vk", "Vulkan", devices, "intel"); }, "has no compute queue");
   expect_error([] { choose_device("vk", "Vulkan", {devices[2]}, "auto"); }, "vk: no usable device");
   expect_error([] { choose_device("cuda", "CUDA", {}, "auto"); }, "cuda: device 'auto' requested, but no CUDA devices");
 }

@@ -27,6 +27,10 @@ struct EngineOptions {
   std::size_t chunk_samples = 0;  // vulkan/cuda: samples per device chunk; 0 = fitted to the device's limits
   Normalization normalization = Normalization::integral;
   unsigned threads = 0;         // cpu backend: worker threads, 0 = all hardware threads; at most max_threads()
+  // vulkan: the arithmetic of the kernel's float64 work (frame, disc selection, monopole and
+  // normalization): "float64" (devices with shaderFloat64), "float-float" (pairs of float32, any
+  // device), or "auto": float64 where the device has it, float-float elsewhere.
+  std::string arithmetic = "auto";
   // UNSEEN pixels of the sky (a masked map, Sky::read_fits with UnseenPolicy::flag): an error by
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
   // hold one.

@@ -199,7 +199,7 @@ std::string DeviceInfo::type_name() const {
 
 std::string DeviceInfo::describe() const {
   return name + " [" + type_name() + ", Vulkan " + std::to_string(VK_API_VERSION_MAJOR(api_version)) + "." +
-         std::to_string(VK_API_VERSION_MINOR(api_version)) + "]";
+         std::to_string(VK_API_VERSION_MINOR(api_version)) + ", " + (float64 ? "float64" : "float-float") + "]";
 }
 
 std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
@@ -219,6 +219,7 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
     VkPhysicalDeviceFeatures features{};
     vkGetPhysicalDeviceFeatures(phys[i], &features);
     d.name = props.properties.deviceName;
+    d.float64 = features.shaderFloat64 == VK_TRUE;
     d.type = props.properties.deviceType;
     d.api_version = props.properties.apiVersion;
     d.subgroup_size = sub.subgroupSize;
@@ -241,8 +242,6 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
                    std::to_string(VK_API_VERSION_MINOR(d.api_version)) + " (1.2 required)";
     else if (!compute)
       d.unusable = "has no compute queue";
-    else if (!features.shaderFloat64)
-      d.unusable = "lacks shaderFloat64 (the exact disc selection and the monopole run in float64)";
     out.push_back(std::move(d));
   }
   return out;
@@ -275,7 +274,7 @@ Device::Device(std::shared_ptr<Instance> instance, DeviceInfo info) : instance_(
   qi.queueCount = 1;
   qi.pQueuePriorities = &priority;
   VkPhysicalDeviceFeatures features{};
-  features.shaderFloat64 = VK_TRUE;
+  features.shaderFloat64 = info_.float64 ? VK_TRUE : VK_FALSE;
   VkDeviceCreateInfo ci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
   ci.queueCreateInfoCount = 1;
   ci.pQueueCreateInfos = &qi;

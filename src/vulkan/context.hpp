@@ -53,9 +53,12 @@ struct DeviceInfo {
   VkDeviceSize max_storage_buffer_range = 0;
   std::uint32_t max_texel_buffer_elements = 0;
   std::uint32_t max_groups_x = 0, max_groups_y = 0;
+  // shaderFloat64: the kernel's float64 work runs in float64; without it, in float-float
+  // (docs/vulkan.md, "Devices without float64").
+  bool float64 = false;
   std::string unusable;  // why the kernels cannot run on it ("" when they can)
   std::string type_name() const;
-  std::string describe() const;  // "llvmpipe (...) [cpu, Vulkan 1.3]"
+  std::string describe() const;  // "llvmpipe (...) [cpu, Vulkan 1.3, float64]"
 };
 
 std::vector<DeviceInfo> enumerate_devices(const Instance& instance);

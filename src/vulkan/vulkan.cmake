@@ -18,15 +18,22 @@ set(pisco_shader_dir ${PROJECT_SOURCE_DIR}/shaders)
 set(pisco_spv_dir ${CMAKE_CURRENT_BINARY_DIR}/spv)
 file(MAKE_DIRECTORY ${pisco_spv_dir})
 set(pisco_spv_headers)
-foreach(kernel convolve)
-  set(out ${pisco_spv_dir}/${kernel}.spv.h)
+# The kernel is built twice: with float64, and with its float64 work in float-float (PISCO_FF=1) for
+# devices without shaderFloat64 (docs/vulkan.md, "Devices without float64").
+foreach(variant convolve convolve_ff)
+  set(out ${pisco_spv_dir}/${variant}.spv.h)
+  if(variant STREQUAL "convolve_ff")
+    set(defines -DPISCO_FF=1)
+  else()
+    set(defines -DPISCO_FF=0)
+  endif()
   add_custom_command(
     OUTPUT ${out}
-    COMMAND ${PISCO_GLSLANG} --target-env vulkan1.2 -Os --quiet
-            --vn pisco_spv_${kernel} --depfile ${out}.d -o ${out} ${pisco_shader_dir}/${kernel}.comp
-    DEPENDS ${pisco_shader_dir}/${kernel}.comp
+    COMMAND ${PISCO_GLSLANG} --target-env vulkan1.2 -Os --quiet ${defines}
+            --vn pisco_spv_${variant} --depfile ${out}.d -o ${out} ${pisco_shader_dir}/convolve.comp
+    DEPENDS ${pisco_shader_dir}/convolve.comp
     DEPFILE ${out}.d
-    COMMENT "SPIR-V: shaders/${kernel}.comp"
+    COMMENT "SPIR-V: shaders/convolve.comp (${variant})"
     VERBATIM)
   list(APPEND pisco_spv_headers ${out})
 endforeach()
@@ -41,6 +48,7 @@ target_sources(pisco PRIVATE
   vulkan/context.cpp
   vulkan/buffer.cpp
   vulkan/pipeline.cpp
+  vulkan/tables.cpp
   vulkan/vulkan_backend.cpp
   $<TARGET_OBJECTS:pisco_volk>)
 add_dependencies(pisco pisco_shaders)
@@ -50,5 +58,5 @@ target_compile_definitions(pisco PRIVATE PISCO_HAVE_VULKAN VK_NO_PROTOTYPES)
 target_link_libraries(pisco PRIVATE ${CMAKE_DL_LIBS})
 set(PISCO_HAVE_VULKAN ON)
 # Vulkan structures are written {sType} with the rest zeroed, the API's own idiom.
-set_source_files_properties(vulkan/context.cpp vulkan/buffer.cpp vulkan/pipeline.cpp vulkan/vulkan_backend.cpp
+set_source_files_properties(vulkan/context.cpp vulkan/buffer.cpp vulkan/pipeline.cpp vulkan/tables.cpp vulkan/vulkan_backend.cpp
   PROPERTIES COMPILE_OPTIONS -Wno-missing-field-initializers)

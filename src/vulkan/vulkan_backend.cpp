@@ -13,13 +13,16 @@
 #include <numbers>
 
 #include "convolve.spv.h"
+#include "convolve_ff.spv.h"
 #include "core/backend.hpp"
 #include "core/streaming.hpp"
+#include "pisco/quaternion.hpp"
 #include "interface.h"
 #include "vulkan/buffer.hpp"
 #include "vulkan/check.hpp"
 #include "vulkan/context.hpp"
 #include "vulkan/pipeline.hpp"
+#include "vulkan/tables.hpp"
 
 namespace pisco::detail {
 namespace {
@@ -32,20 +35,17 @@ constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 
 double mib(double bytes) { return bytes / double(1 << 20); }
 
-// Weights stored per beam node: 2 when the detector's w_U and w_V vanish everywhere (any beam
-// without cross-polar response or Mueller leakage into U and V), so that a node and its neighbour fit
-// one 16-byte texel; 4 otherwise.
-std::uint32_t weight_columns(const PreparedDetector& d) {
-  for (std::size_t k = 0; k < d.weights.size(); k += 4)
-    if (d.weights[k + 2] != 0.0 || d.weights[k + 3] != 0.0) return 4;
-  return 2;
-}
-
-// x - double(float(x)): what float(x) lacks of x. Kept out of line: GCC 12's vectorizer at -O3 folds
-// x - double(float(x)) to zero when this runs inside the pixel loop below.
-[[gnu::noinline]] float float_residual(double x) {
-  const float hi = float(x);
-  return float(x - double(hi));
+// The kernel's float64 work in float-float: on devices without shaderFloat64, or when asked for.
+bool use_float_float(const vk::DeviceInfo& info, const std::string& arithmetic) {
+  if (arithmetic == "auto") return !info.float64;
+  if (arithmetic == "float-float") return true;
+  if (arithmetic == "float64") {
+    if (!info.float64)
+      throw Error("vulkan: arithmetic \"float64\" was asked for, but " + info.name +
+                  " lacks shaderFloat64; use \"float-float\" or \"auto\"");
+    return false;
+  }
+  throw Error("vulkan: unknown arithmetic \"" + arithmetic + "\" (expected \"auto\", \"float64\" or \"float-float\")");
 }
 
 class VulkanBackend final : public Backend {
@@ -55,7 +55,8 @@ class VulkanBackend final : public Backend {
 
   std::string name() const override { return "vulkan"; }
   std::string device() const override {
-    return device_->info().describe() + ", chunks of " + std::to_string(chunk_) + " samples" +
+    const std::string forced = mode_.ff && device_->info().float64 ? ", float-float kernel (asked for)" : "";
+    return device_->info().describe() + forced + ", chunks of " + std::to_string(chunk_) + " samples" +
            (device_->instance().validation() ? ", with the Khronos validation layer" : "");
   }
   void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
@@ -96,12 +97,8 @@ class VulkanBackend final : public Backend {
   std::unique_ptr<vk::ComputePipeline> pipeline_;
   VkCommandPool pool_ = VK_NULL_HANDLE;
   Buffer sky_, sky_lo_, rings_, weights_, weights64_;
-  std::vector<std::uint32_t> grid_offset_;    // per detector, in texels of weights_
-  std::vector<std::uint32_t> grid_offset64_;  // per detector, in nodes of weights64_ (plate detectors: 3 texels a node)
-  std::vector<std::uint32_t> plate_offset64_;  // per detector, the texel of its plate's M0 in weights64_
-  std::vector<std::uint32_t> columns_;        // per detector: weight columns stored (2 or 4)
-  double monopole_ = 0.0;
-  bool float64_ = false;
+  vk::Grids grids_;      // the beam grids' offsets and layouts (their tables are on the device)
+  vk::KernelMode mode_;  // the float64 path, and float-float or float64 numbers
   std::size_t chunk_ = 0;
   std::array<Slot, 2> slots_;
   SlotRing<Slot> ring_{slots_};
@@ -132,18 +129,18 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
   pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
   pi.queueFamilyIndex = info.queue_family;
   PISCO_VK(fn.vkCreateCommandPool(device_->handle(), &pi, nullptr, &pool_));
-  pipeline_ = std::make_unique<vk::ComputePipeline>(
-      *device_, std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t)),
-      std::uint32_t(slots_.size()));
+  const bool ff = use_float_float(info, options.arithmetic);
+  const std::span<const std::uint32_t> spirv =
+      ff ? std::span<const std::uint32_t>(pisco_spv_convolve_ff, sizeof(pisco_spv_convolve_ff) / sizeof(std::uint32_t))
+         : std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t));
+  pipeline_ = std::make_unique<vk::ComputePipeline>(*device_, spirv, std::uint32_t(slots_.size()));
 
   // The sky in float32 without its monopole I0, which float32 cannot carry next to micro-kelvin
   // anisotropies (docs/vulkan.md, "Precision"): I0 sum_k w_I(k) is added back by the kernel's float64
   // path. Packed from the maps straight into the staging buffer, a piece at a time.
   const PreparedSky& sky = in_->sky;
   const std::size_t npix = sky.npix;
-  monopole_ = float32_monopole(sky_maps);
-  const bool per_sample = in_->normalization == Normalization::per_sample;
-  float64_ = monopole_ != 0.0 || per_sample;
+  mode_ = vk::kernel_mode(*in_, sky_maps, ff);
 
   // Texel indices are signed 32-bit integers in the kernel.
   double max_texels = std::min(double(info.max_texel_buffer_elements), double(std::numeric_limits<std::int32_t>::max()));
@@ -155,94 +152,41 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
   const PixelVectors vectors(sky.nside);
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
   std::vector<double> xyz;
-  const double monopole = monopole_;
   sky_ = upload_records(
       npix, 8 * sizeof(float),
       [&](std::size_t first, std::size_t n, void* dst) {
         xyz.resize(3 * n);
         vectors.get(first, n, xyz.data(), threads);
-        auto* out = static_cast<float*>(dst);
-        for (std::size_t j = 0; j < n; ++j) {
-          const std::size_t p = first + j;
-          float* rec = out + 8 * j;
-          rec[0] = float(xyz[3 * j]);
-          rec[1] = float(xyz[3 * j + 1]);
-          rec[2] = float(xyz[3 * j + 2]);
-          rec[3] = float(sky_maps.I()[p] - monopole);
-          rec[4] = float(sky_maps.Q()[p]);
-          rec[5] = float(sky_maps.U()[p]);
-          rec[6] = float(sky_maps.V()[p]);
-          rec[7] = 0.0f;
-        }
+        vk::pack_sky(sky_maps, mode_.monopole, first, n, xyz.data(), static_cast<float*>(dst));
       },
       "the sky");
   sky_lo_ = upload_records(
-      float64_ ? npix : 1, 4 * sizeof(float),
+      mode_.vectors64() ? npix : 1, 4 * sizeof(float),
       [&](std::size_t first, std::size_t n, void* dst) {
         auto* out = static_cast<float*>(dst);
-        if (!float64_) {
+        if (!mode_.vectors64()) {
           std::fill(out, out + 4 * n, 0.0f);
           return;
         }
         xyz.resize(3 * n);
         vectors.get(first, n, xyz.data(), threads);
-        for (std::size_t j = 0; j < n; ++j) {
-          for (int c = 0; c < 3; ++c) out[4 * j + c] = float_residual(xyz[3 * j + c]);
-          out[4 * j + 3] = 0.0f;
-        }
+        vk::pack_sky_lo(n, xyz.data(), out);
       },
       "the sky's float64 pixel vectors");
-  std::vector<std::uint32_t> rings;  // shaders/interface.h
-  for (const RingEntry& r : sky.rings) {
-    std::uint64_t z = 0;
-    static_assert(sizeof(z) == sizeof(r.z));
-    std::memcpy(&z, &r.z, sizeof(z));
-    rings.insert(rings.end(), {std::uint32_t(z), std::uint32_t(z >> 32), r.first, r.count | (r.shifted ? 1u << 31 : 0u)});
-  }
+  const std::vector<std::uint32_t> rings = vk::pack_rings(sky, mode_.ff);
   rings_ = upload(rings.data(), rings.size() * sizeof(std::uint32_t), "the ring table");
 
-  std::vector<float> w32;
-  std::vector<double> w64;
-  for (const PreparedDetector& d : in_->detectors) {
-    // Each node with its neighbour along x (or r), (w[k], w[k + 1]) in 2 x columns floats, so that
-    // the pair is one texel (2 columns) or two neighbouring ones (4 columns).
-    grid_offset_.push_back(std::uint32_t(w32.size() / 4));
-    const bool plate = d.plate == PreparedDetector::Plate::aperture;
-    // A plate detector's float64 nodes are 3 texels each (shaders/contribution.glsl), from a texel
-    // index divisible by 3.
-    if (plate && float64_)
-      while ((w64.size() / 2) % 3 != 0) w64.insert(w64.end(), {0.0, 0.0});
-    grid_offset64_.push_back(std::uint32_t(w64.size() / 2 / (plate ? 3 : 1)));
-    const std::size_t columns = weight_columns(d);
-    columns_.push_back(std::uint32_t(columns));
-    const std::vector<float> dw = float32_weights(d);
-    const std::size_t nodes = dw.size() / 4;
-    for (std::size_t k = 0; k < nodes; ++k)
-      for (std::size_t m = 0; m < 2; ++m)
-        for (std::size_t c = 0; c < columns; ++c) {
-          const std::size_t src = 4 * (k + m) + c;
-          w32.push_back(src < dw.size() ? dw[src] : 0.0f);
-        }
-    if (float64_)
-      for (std::size_t k = 0; k < nodes; ++k) {
-        w64.push_back(d.weights[4 * k]);
-        w64.push_back(per_sample ? d.norm_weights[4 * k] : 0.0);
-        if (plate) w64.insert(w64.end(), {d.weights[4 * k + 1], d.weights[4 * k + 2], d.weights[4 * k + 3], 0.0});
-      }
-    // The plate's M0, row by row: 8 texels.
-    plate_offset64_.push_back(std::uint32_t(w64.size() / 2));
-    if (plate)
-      for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) w64.push_back(d.plate_mueller[i][j]);
-  }
-  if (w64.empty()) w64.assign(2, 0.0);
+  grids_ = vk::pack_grids(*in_, mode_);
   // The float32 grids take at least one texel a node, the float64 ones exactly one.
-  if (double(w32.size() / 4) > max_texels)
-    throw Error("vulkan: the beam grids need " + std::to_string(w32.size() / 4) + " texels, but " + info.name +
+  if (double(grids_.w32.size() / 4) > max_texels)
+    throw Error("vulkan: the beam grids need " + std::to_string(grids_.w32.size() / 4) + " texels, but " + info.name +
                 " binds at most " + std::to_string(std::uint64_t(max_texels)) +
                 " (maxTexelBufferElements); use a coarser grid_step");
-  weights_ = upload(w32.data(), w32.size() * sizeof(float), "the beam grids");
-  weights64_ = upload(w64.data(), w64.size() * sizeof(double), "the float64 beam grids");
+  weights_ = upload(grids_.w32.data(), grids_.w32.size() * sizeof(float), "the beam grids");
+  weights64_ = upload(grids_.w64.data(), grids_.w64.size() * sizeof(double), "the float64 beam grids");
+  // Only the offsets and layouts stay on the host.
+  grids_.w32 = {};
+  grids_.w64 = {};
 
   // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
   const std::size_t by_range = info.max_storage_buffer_range / (4 * sizeof(double));
@@ -327,7 +271,8 @@ void VulkanBackend::make_slots(std::size_t chunk) {
           s.pointing = Buffer(*device_, n * 4 * sizeof(double), storage, MemoryUse::upload);
           s.tod = Buffer(*device_, n * sizeof(double), storage, MemoryUse::readback);
           s.counts = Buffer(*device_, n * sizeof(std::uint32_t), storage, MemoryUse::readback);
-          s.plate = Buffer(*device_, n * sizeof(double), storage, MemoryUse::upload);
+          // float64: the plate's angle; float-float: cos 2 angle and sin 2 angle.
+          s.plate = Buffer(*device_, n * (mode_.ff ? 2 : 1) * sizeof(double), storage, MemoryUse::upload);
         }
       },
       [&] {
@@ -393,60 +338,25 @@ vk::ComputePipeline::Specialization VulkanBackend::specialization(std::size_t de
                 " can sum in one workgroup; use a smaller rho_max, a GPU or the cpu backend");
   vk::ComputePipeline::Specialization spec{};
   spec[PISCO_SPEC_RADIAL] = det.radial ? 1u : 0u;
-  spec[PISCO_SPEC_FLOAT64] = float64_ ? 1u : 0u;
+  spec[PISCO_SPEC_FLOAT64] = mode_.float64 ? 1u : 0u;
   spec[PISCO_SPEC_PARTS] = parts;
-  spec[PISCO_SPEC_COLUMNS] = columns_.at(detector);
+  spec[PISCO_SPEC_COLUMNS] = grids_.columns.at(detector);
   spec[PISCO_SPEC_PLATE] = det.plate == PreparedDetector::Plate::aperture ? 1u : 0u;
   return spec;
 }
 
 vk::PushConstants VulkanBackend::push_constants(std::size_t detector, bool quaternions) const {
-  const PreparedDetector& det = in_->detectors.at(detector);
-  vk::PushConstants push{};
-  push.rho_max = det.rho_max;
-  push.cos_rho_max = det.cos_rho_max;
-  push.monopole = monopole_;
-  push.grid_a = det.grid_a;
-  push.grid_inv_step = det.grid_inv_step;
-  push.offset_quat[0] = det.offset.quat.x;
-  push.offset_quat[1] = det.offset.quat.y;
-  push.offset_quat[2] = det.offset.quat.z;
-  push.offset_quat[3] = det.offset.quat.w;
-  push.grid_a32 = float(det.grid_a);
-  push.grid_inv_step32 = float(det.grid_inv_step);
-  push.cos_zeta = float(det.cos_zeta);
-  push.sin_zeta = float(det.sin_zeta);
-  push.grid_n = std::uint32_t(det.grid_n);
-  push.grid_offset = grid_offset_.at(detector);
-  push.grid_offset64 = grid_offset64_.at(detector);
-  push.plate_offset64 = plate_offset64_.at(detector);
-  push.nside = std::uint32_t(in_->sky.nside);
-  push.flags = (in_->normalization == Normalization::per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) |
-               (quaternions ? PISCO_FLAG_QUATERNION : 0u) | (det.offset.active ? PISCO_FLAG_OFFSET : 0u);
-  return push;
+  return vk::push_constants(*in_, grids_, mode_, detector, quaternions);
 }
 
 // Fills the slot's pointing (4 doubles a sample, shaders/interface.h) and queues its kernel.
 void VulkanBackend::dispatch(Slot& slot, const vk::ComputePipeline::Specialization& spec,
                              const vk::PushConstants& push_in, const PointingInput& pointing) {
   const auto& fn = device_->fn();
-  constexpr double twopi = 2 * std::numbers::pi;
   const std::size_t n = pointing.size();
-  auto* p = static_cast<double*>(slot.pointing.mapped());
-  if (pointing.quaternions) {
-    std::memcpy(p, pointing.quats.quats.data(), n * sizeof(Quat));
-  } else {
-    for (std::size_t i = 0; i < n; ++i) {
-      double phi = pointing.angles.phi[i];
-      if (!(phi >= 0.0 && phi < twopi)) phi = wrap_phi(phi);  // as the reference does
-      p[4 * i] = pointing.angles.theta[i];
-      p[4 * i + 1] = phi;
-      p[4 * i + 2] = pointing.angles.psi[i];
-      p[4 * i + 3] = 0.0;
-    }
-  }
+  vk::pack_pointing(pointing, mode_.ff, static_cast<double*>(slot.pointing.mapped()));
   if (!pointing.plate_angle.empty())
-    std::memcpy(slot.plate.mapped(), pointing.plate_angle.data(), n * sizeof(double));
+    vk::pack_plate(pointing.plate_angle, mode_.ff, static_cast<double*>(slot.plate.mapped()));
   vk::PushConstants push = push_in;
   push.sample_count = std::uint32_t(n);
   const std::size_t per_group = PISCO_WG_SIZE / spec[PISCO_SPEC_PARTS];
@@ -480,7 +390,10 @@ std::uint64_t VulkanBackend::collect(Slot& slot) {
     vk::fail(VK_ERROR_DEVICE_LOST, "vkWaitForFences (PISCO_VK_TEST_FAULT)");
   slot.tod.invalidate();
   slot.counts.invalidate();
-  deliver(slot.job, static_cast<const double*>(slot.tod.mapped()));
+  auto* tod = static_cast<double*>(slot.tod.mapped());
+  if (mode_.ff)
+    for (std::size_t i = 0; i < slot.job.tod.size(); ++i) tod[i] = vk::from_ff_bits(tod[i]);
+  deliver(slot.job, tod);
   const auto* counts = static_cast<const std::uint32_t*>(slot.counts.mapped());
   std::uint64_t pixels = 0;
   for (std::size_t i = 0; i < slot.job.tod.size(); ++i) pixels += counts[i];

@@ -81,7 +81,9 @@ int run_bench(const BenchOptions& options) {
     o.rho_max = rho * deg;
     o.grid_step = beam_step;
     std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(1.5 * deg, o)};
-    pisco::Engine engine(sky, beams, fp, {.backend = options.backend, .device = options.device, .threads = threads});
+    pisco::Engine engine(sky, beams, fp,
+                         {.backend = options.backend, .device = options.device, .threads = threads,
+                          .arithmetic = options.arithmetic});
     const double setup = seconds_since(t0);
     std::vector<double> tod(scan.size());
     const auto t1 = std::chrono::steady_clock::now();

@@ -10,6 +10,7 @@ struct BenchOptions {
   std::string backend = "auto";
   std::string device = "auto";
   unsigned threads = 0;
+  std::string arithmetic = "auto";  // vulkan: auto, float64 or float-float
   // A half-wave plate in front of both detectors: "none", "ideal" or "generic" (all 16 Mueller
   // entries non-zero), at the aperture or, with hwp_placement = "detector", behind the optics.
   std::string hwp = "none";

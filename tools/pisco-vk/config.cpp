@@ -525,6 +525,7 @@ EngineConfig read_engine(Table t) {
   EngineConfig e;
   e.options.backend = t.string("backend", "auto");
   e.options.device = t.string("device", "auto");
+  e.options.arithmetic = t.choice("arithmetic", "auto", {"auto", "float64", "float-float"});
   e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
                                 ? pisco::Normalization::integral
                                 : pisco::Normalization::per_sample;

@@ -92,6 +92,9 @@ int main(int argc, char** argv) {
   bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, vulkan, cuda (default: auto).");
   bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend (default: auto).");
   bench->add_option("--threads", bench_options.threads, "CPU backend threads (default: all).");
+  bench->add_option("--arithmetic", bench_options.arithmetic,
+                    "Vulkan kernel's float64 work: auto, float64, float-float (default: auto).")
+      ->check(CLI::IsMember({"auto", "float64", "float-float"}));
   bench->add_option("--hwp", bench_options.hwp,
                     "A half-wave plate before both detectors, turning at 2 Hz: none, ideal, generic (default: none).")
       ->check(CLI::IsMember({"none", "ideal", "generic"}));

@@ -1,0 +1,280 @@
+// The convolution of one sample (docs/vulkan.md, "The kernel"): its antenna basis, its disc walked
+// ring by ring as the float64 reference does (src/core/cpu_backend.cpp), and every pixel through the
+// float32 contribution (contribution.glsl) with a Kahan-compensated sum; a float64 path adds the sky's
+// monopole, I0 sum_k w_I(k), and the per-sample normalization when asked for. On devices without
+// float64 (PISCO_FF) the frame, the disc and that path run in float-float (ff.glsl).
+// convolve.comp runs it for every sample; tests/test_kernel_host.cpp compiles this same file as C++
+// and holds it to the reference. Reads the push constants `pc`, the buffers `pointing` and
+// `plate_angle`, the tables, and the specialization constants RADIAL, FLOAT64, PARTS, COLUMNS, PLATE.
+#ifndef PISCO_KERNEL_GLSL
+#define PISCO_KERNEL_GLSL
+
+#include "common.glsl"
+#include "contribution.glsl"
+#include "disc.glsl"
+#include "frame.glsl"
+
+// The running sums of one sample: Kahan-compensated float32, float64 monopole weight and norm.
+struct Sums {
+  float sum, comp;
+  PISCO_F64 s0, n0;
+};
+
+// What the pixel loop needs of a sample.
+struct Sample {
+  SampleFrame f;  // the float32 frame: the float64 one, rounded
+  Grid g;
+  mat4 m;  // PLATE: M(theta), m[j] its column j (w * m = w M)
+#if PISCO_FF
+  ff3 theta_p, phi_p;
+  vec2 m0[4];  // PLATE: M(theta)'s column 0, for the monopole's weight sum_a w_a M_a0
+#else
+  dvec3 theta_p, phi_p;
+  dvec4 m0;
+#endif
+};
+
+PISCO_FN Grid sample_grid() {
+  // Push constants read once, outside the pixel loops (lavapipe would read them again per lane and
+  // per pixel).
+  Grid g;
+  g.offset = int(pc.grid_offset);
+  g.offset64 = pc.grid_offset64;
+  g.n = int(pc.grid_n);
+  g.a = pc.grid_a32;
+  g.inv_step = pc.grid_inv_step32;
+  g.a64 = pc.grid_a;
+  g.inv_step64 = pc.grid_inv_step;
+  return g;
+}
+
+// M(theta) = R(-theta) M0 R(theta) in float32 from M0's rows and c = cos 2 theta, s = sin 2 theta;
+// R(theta) has rows (1,0,0,0), (0,c,s,0), (0,-s,c,0), (0,0,0,1).
+PISCO_FN mat4 plate_matrix(vec4 r0, vec4 r1, vec4 r2, vec4 r3, float c, float s) {
+  const mat4 m0 = transpose(mat4(r0, r1, r2, r3));  // m0[j][i] = (M0)_ij
+  mat4 rot = mat4(1.0f);                            // rot[j][i] = R(theta)_ij
+  rot[1][1] = c;
+  rot[2][1] = s;
+  rot[1][2] = -s;
+  rot[2][2] = c;
+  return transpose(rot) * m0 * rot;
+}
+
+// The pixels [b0, b0 + l0) then [b1, b1 + l1), in one loop.
+PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_INOUT(Sums) acc) {
+  const uint jump = b1 - (b0 + l0);  // from the end of the first range to the start of the second
+  for (uint q = 0u; q < l0 + l1; ++q) {
+    const uint p = b0 + q + (q >= l0 ? jump : 0u);
+    const vec4 a = uintBitsToFloat(texelFetch(sky, int(2u * p)));
+    const vec4 b = uintBitsToFloat(texelFetch(sky, int(2u * p + 1u)));
+    const vec3 k = vec3(a.x, a.y, a.z);
+    vec3 xyz;
+    float r2, cos2chi, sin2chi;
+    pixel_geometry(smp.f, k, xyz, r2, cos2chi, sin2chi);
+    // On the float64 path the beam coordinates come from the float64 pixel vectors, as the cuda
+    // kernel takes them (docs/vulkan.md, "Precision"): the float32 weights are interpolated there too.
+#if PISCO_FF
+    vec2 x64 = vec2(0.0f, 0.0f), y64 = vec2(0.0f, 0.0f);
+    if (FLOAT64) {
+      const ff3 k64 = sky_vector_ff(p);
+      x64 = ff_dot(k64, smp.theta_p);
+      y64 = ff_dot(k64, smp.phi_p);
+      xyz = vec3(x64.x, y64.x, xyz.z);
+    }
+#else
+    double x64 = 0.0lf, y64 = 0.0lf;
+    if (FLOAT64) {
+      const vec4 lo = uintBitsToFloat(texelFetch(sky_lo, int(p)));
+      const dvec3 k64 = dvec3(k) + dvec3(lo.x, lo.y, lo.z);
+      x64 = dot(k64, smp.theta_p);
+      y64 = dot(k64, smp.phi_p);
+      xyz = vec3(float(x64), float(y64), xyz.z);
+    }
+#endif
+    vec4 w = RADIAL ? interpolate_radial(smp.g, r2) : interpolate_weights(smp.g, xyz.x, xyz.y);
+    if (PLATE) w = w * smp.m;  // the effective weights w M(theta)
+    PISCO_PRECISE const float y = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.x, b.y, b.z)) - acc.comp;
+    PISCO_PRECISE const float t = acc.sum + y;
+    acc.comp = (t - acc.sum) - y;
+    acc.sum = t;
+    if (FLOAT64) {
+      const Stencil64 st = stencil64(smp.g, x64, y64);
+#if PISCO_FF
+      for (int q = 0; q < st.m; ++q) {
+        if (PLATE) {
+          vec2 wi, wq, wu, wv, wn;
+          plate_weight64(st.k[q], wi, wq, wu, wv, wn);
+          const vec2 w0 = ff_add(ff_add(ff_mul(wi, smp.m0[0]), ff_mul(wq, smp.m0[1])),
+                                 ff_add(ff_mul(wu, smp.m0[2]), ff_mul(wv, smp.m0[3])));
+          acc.s0 = ff_add(acc.s0, ff_mul(st.c[q], w0));
+          acc.n0 = ff_add(acc.n0, ff_mul(st.c[q], wn));
+        } else {
+          vec2 wi, wn;
+          weight64(st.k[q], wi, wn);
+          acc.s0 = ff_add(acc.s0, ff_mul(st.c[q], wi));
+          acc.n0 = ff_add(acc.n0, ff_mul(st.c[q], wn));
+        }
+      }
+#else
+      if (PLATE) {
+        dvec4 w64 = dvec4(0.0lf);
+        double n64 = 0.0lf;
+        for (int q = 0; q < st.m; ++q) {
+          w64 += st.c[q] * plate_weight64(st.k[q]);
+          n64 += st.c[q] * plate_norm_at(st.k[q]);
+        }
+        acc.s0 += dot(w64, smp.m0);
+        acc.n0 += n64;
+      } else {
+        dvec2 w64 = dvec2(0.0lf);
+        for (int q = 0; q < st.m; ++q) w64 += st.c[q] * weight64(st.k[q]);
+        acc.s0 += w64.x;
+        acc.n0 += w64.y;
+      }
+#endif
+    }
+  }
+}
+
+// Sample sid's sums over the rings part, part + PARTS, ... of its disc, and the pixels it counted.
+PISCO_FN void convolve_sample(uint sid, int part, PISCO_OUT(Sums) acc, PISCO_OUT(uint) count) {
+  acc.sum = 0.0f;
+  acc.comp = 0.0f;
+  count = 0u;
+  Sample smp;
+  smp.g = sample_grid();
+  const int nside = int(pc.nside);
+#if PISCO_FF
+  acc.s0 = vec2(0.0f, 0.0f);
+  acc.n0 = vec2(0.0f, 0.0f);
+  // The detector's antenna basis and line of sight (frame.glsl): the host gives every sample as a
+  // boresight quaternion on this path.
+  ffquat b, oq;
+  b.x = pointing[4u * sid];
+  b.y = pointing[4u * sid + 1u];
+  b.z = pointing[4u * sid + 2u];
+  b.w = pointing[4u * sid + 3u];
+  oq.x = pc.offset_quat[0];
+  oq.y = pc.offset_quat[1];
+  oq.z = pc.offset_quat[2];
+  oq.w = pc.offset_quat[3];
+  ff3 p;
+  ff_sample_frame((pc.flags & PISCO_FLAG_OFFSET) != 0u, b, oq, smp.theta_p, smp.phi_p, p);
+  smp.f.theta_p = ff3_hi(smp.theta_p);
+  smp.f.phi_p = ff3_hi(smp.phi_p);
+  smp.f.p = ff3_hi(p);
+  // The plate's Mueller matrix at this sample's angle: c = cos 2 theta and s = sin 2 theta come from
+  // the host in float-float.
+  smp.m = mat4(1.0f);
+  smp.m0[0] = vec2(1.0f, 0.0f);
+  smp.m0[1] = vec2(0.0f, 0.0f);
+  smp.m0[2] = vec2(0.0f, 0.0f);
+  smp.m0[3] = vec2(0.0f, 0.0f);
+  if (PLATE) {
+    const vec2 c = plate_angle[2u * sid], s = plate_angle[2u * sid + 1u];
+    const uint o = pc.plate_offset64;
+    smp.m = plate_matrix(vec4(plate_entry(o, 0, 0).x, plate_entry(o, 0, 1).x, plate_entry(o, 0, 2).x, plate_entry(o, 0, 3).x),
+                         vec4(plate_entry(o, 1, 0).x, plate_entry(o, 1, 1).x, plate_entry(o, 1, 2).x, plate_entry(o, 1, 3).x),
+                         vec4(plate_entry(o, 2, 0).x, plate_entry(o, 2, 1).x, plate_entry(o, 2, 2).x, plate_entry(o, 2, 3).x),
+                         vec4(plate_entry(o, 3, 0).x, plate_entry(o, 3, 1).x, plate_entry(o, 3, 2).x, plate_entry(o, 3, 3).x),
+                         c.x, s.x);
+    const vec2 m10 = plate_entry(o, 1, 0), m20 = plate_entry(o, 2, 0);
+    smp.m0[0] = plate_entry(o, 0, 0);
+    smp.m0[1] = ff_sub(ff_mul(c, m10), ff_mul(s, m20));
+    smp.m0[2] = ff_add(ff_mul(s, m10), ff_mul(c, m20));
+    smp.m0[3] = plate_entry(o, 3, 0);
+  }
+  const vec3 ec = pc.cos_zeta * smp.f.theta_p + pc.sin_zeta * smp.f.phi_p;
+  smp.f.e_c = ec;
+  // The disc: the rings that can meet it, each settled in float-float.
+  const vec2 sin_theta0 = ff_sqrt(ff_add(ff_mul(p.x, p.x), ff_mul(p.y, p.y)));
+  float phi0 = atan(p.y.x, p.x.x);
+  if (phi0 < 0.0f) phi0 += 6.28318530717958647693f;
+  int first_ring, last_ring;
+  ff_disc_rings(nside, p.z, sin_theta0, pc.cos_rho_max, first_ring, last_ring);
+  for (int iz = first_ring + part; iz <= last_ring; iz += PARTS) {
+    uint b0, l0, b1, l1;
+    ff_ring_ranges(ring_entry(iz), p, sin_theta0, phi0, pc.cos_rho_max, b0, l0, b1, l1);
+    count += l0 + l1;
+    accumulate(smp, b0, l0, b1, l1, acc);
+  }
+#else
+  acc.s0 = 0.0lf;
+  acc.n0 = 0.0lf;
+  // The detector's antenna basis and line of sight in float64 (frame.glsl): from the boresight's
+  // angles or quaternion, with the detector's offset applied.
+  const dvec4 b = dvec4(pointing[4u * sid], pointing[4u * sid + 1u], pointing[4u * sid + 2u], pointing[4u * sid + 3u]);
+  const dvec4 offset_quat = dvec4(pc.offset_quat[0], pc.offset_quat[1], pc.offset_quat[2], pc.offset_quat[3]);
+  dvec3 p64;
+  double theta, phi;
+  pisco_sample_frame((pc.flags & PISCO_FLAG_QUATERNION) != 0u, (pc.flags & PISCO_FLAG_OFFSET) != 0u, b, offset_quat,
+                     smp.theta_p, smp.phi_p, p64, theta, phi);
+  smp.f.theta_p = vec3(smp.theta_p);
+  smp.f.phi_p = vec3(smp.phi_p);
+  smp.f.p = vec3(p64);
+  // The plate's Mueller matrix at this sample's angle, in float64: M(theta) = R(-theta) M0 R(theta).
+  smp.m = mat4(1.0f);
+  smp.m0 = dvec4(1.0lf, 0.0lf, 0.0lf, 0.0lf);
+  if (PLATE) {
+    const double th = plate_angle[sid];
+    const double c = pisco_cos(2.0lf * th), s = pisco_sin(2.0lf * th);
+    const uint o = pc.plate_offset64;
+    const dvec4 r0 = plate_row(o, 0), r1 = plate_row(o, 1), r2 = plate_row(o, 2), r3 = plate_row(o, 3);
+    smp.m = plate_matrix(vec4(r0), vec4(r1), vec4(r2), vec4(r3), float(c), float(s));
+    smp.m0 = dvec4(r0.x, c * r1.x - s * r2.x, s * r1.x + c * r2.x, r3.x);
+  }
+  smp.f.e_c = pc.cos_zeta * smp.f.theta_p + pc.sin_zeta * smp.f.phi_p;
+  // The disc: for_each_disc_range of src/core/disc.hpp, with the polar caps as whole rings.
+  const double z0 = pisco_cos(theta);
+  const double xa = 1.0lf / sqrt((1.0lf - z0) * (1.0lf + z0));
+  int first_ring, last_ring, irmin, irmax;
+  disc_rings(nside, theta, pc.rho_max, first_ring, last_ring, irmin, irmax);
+  // One pixel loop for every range of the disc (a single copy of the pixel code): ring iz's first
+  // range, then its second (zero length when absent).
+  for (int iz = first_ring + part; iz <= last_ring; iz += PARTS) {
+    const RingEntry ring = ring_entry(iz);
+    uint b0, l0, b1, l1;
+    if (iz < irmin || iz > irmax) {
+      b0 = ring.first;
+      l0 = ring.count;
+      b1 = 0u;
+      l1 = 0u;
+    } else {
+      ring_ranges(ring, z0, xa, phi, pc.cos_rho_max, b0, l0, b1, l1);
+    }
+    count += l0 + l1;
+    accumulate(smp, b0, l0, b1, l1, acc);
+  }
+#endif
+}
+
+// float64 (float-float) sums: a + b.
+#if PISCO_FF
+PISCO_FN vec2 f64_add(vec2 a, vec2 b) { return ff_add(a, b); }
+#else
+PISCO_FN double f64_add(double a, double b) { return a + b; }
+#endif
+
+// The sample's compensated float32 sum, as a float64 number: sum - comp.
+PISCO_FN PISCO_F64 float_part(Sums acc) {
+#if PISCO_FF
+  return ff_two_sum(acc.sum, -acc.comp);
+#else
+  return double(acc.sum) - double(acc.comp);
+#endif
+}
+
+// The sample's TOD value from its float32 part d (float_part, summed over the parts of its disc) and
+// its float64 sums.
+PISCO_FN PISCO_F64 finish_sample(PISCO_F64 d, PISCO_F64 s0, PISCO_F64 n0) {
+  const bool per_sample = (pc.flags & PISCO_FLAG_PER_SAMPLE) != 0u;
+#if PISCO_FF
+  const vec2 v = ff_add(d, ff_mul(pc.monopole, s0));
+  return per_sample ? (n0.x > 0.0f ? ff_div(v, n0) : vec2(0.0f, 0.0f)) : v;
+#else
+  const double v = d + pc.monopole * s0;
+  return per_sample ? (n0 > 0.0lf ? v / n0 : 0.0lf) : v;
+#endif
+}
+
+#endif

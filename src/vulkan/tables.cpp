@@ -1,0 +1,201 @@
+#include "vulkan/tables.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <numbers>
+
+#include "core/disc.hpp"
+#include "pisco/quaternion.hpp"
+
+namespace pisco::detail::vk {
+namespace {
+
+// Weights stored per beam node: 2 when the detector's w_U and w_V vanish everywhere (any beam
+// without cross-polar response or Mueller leakage into U and V), so that a node and its neighbour fit
+// one 16-byte texel; 4 otherwise.
+std::uint32_t weight_columns(const PreparedDetector& d) {
+  for (std::size_t k = 0; k < d.weights.size(); k += 4)
+    if (d.weights[k + 2] != 0.0 || d.weights[k + 3] != 0.0) return 4;
+  return 2;
+}
+
+// x - double(float(x)): what float(x) lacks of x. Kept out of line: GCC 12's vectorizer at -O3 folds
+// x - double(float(x)) to zero when this runs inside a pixel loop.
+[[gnu::noinline]] float float_residual(double x) {
+  const float hi = float(x);
+  return float(x - double(hi));
+}
+
+}  // namespace
+
+double ff_bits(double x) {
+  const float pair[2] = {float(x), float_residual(x)};
+  double bits;
+  static_assert(sizeof(pair) == sizeof(bits));
+  std::memcpy(&bits, pair, sizeof bits);
+  return bits;
+}
+
+double from_ff_bits(double bits) {
+  float pair[2];
+  std::memcpy(pair, &bits, sizeof bits);
+  return double(pair[0]) + double(pair[1]);
+}
+
+KernelMode kernel_mode(const EngineInputs& in, const Sky& sky, bool ff) {
+  KernelMode m;
+  m.ff = ff;
+  m.monopole = float32_monopole(sky);
+  m.per_sample = in.normalization == Normalization::per_sample;
+  m.float64 = m.monopole != 0.0 || m.per_sample;
+  return m;
+}
+
+void pack_sky(const Sky& sky, double monopole, std::size_t first, std::size_t n, const double* xyz, float* out) {
+  for (std::size_t j = 0; j < n; ++j) {
+    const std::size_t p = first + j;
+    float* rec = out + 8 * j;
+    rec[0] = float(xyz[3 * j]);
+    rec[1] = float(xyz[3 * j + 1]);
+    rec[2] = float(xyz[3 * j + 2]);
+    rec[3] = float(sky.I()[p] - monopole);
+    rec[4] = float(sky.Q()[p]);
+    rec[5] = float(sky.U()[p]);
+    rec[6] = float(sky.V()[p]);
+    rec[7] = 0.0f;
+  }
+}
+
+void pack_sky_lo(std::size_t n, const double* xyz, float* out) {
+  for (std::size_t j = 0; j < n; ++j) {
+    for (int c = 0; c < 3; ++c) out[4 * j + c] = float_residual(xyz[3 * j + c]);
+    out[4 * j + 3] = 0.0f;
+  }
+}
+
+std::vector<std::uint32_t> pack_rings(const PreparedSky& sky, bool ff) {
+  std::vector<std::uint32_t> rings;
+  rings.reserve(4 * sky.rings.size());
+  for (const RingEntry& r : sky.rings) {
+    std::uint64_t z = 0;
+    const double zv = ff ? ff_bits(r.z) : r.z;
+    static_assert(sizeof(z) == sizeof(zv));
+    std::memcpy(&z, &zv, sizeof(z));
+    rings.insert(rings.end(), {std::uint32_t(z), std::uint32_t(z >> 32), r.first, r.count | (r.shifted ? 1u << 31 : 0u)});
+  }
+  return rings;
+}
+
+Grids pack_grids(const EngineInputs& in, const KernelMode& mode) {
+  Grids g;
+  std::vector<float>& w32 = g.w32;
+  std::vector<double>& w64 = g.w64;
+  for (const PreparedDetector& d : in.detectors) {
+    // Each node with its neighbour along x (or r), (w[k], w[k + 1]) in 2 x columns floats, so that
+    // the pair is one texel (2 columns) or two neighbouring ones (4 columns).
+    g.offset.push_back(std::uint32_t(w32.size() / 4));
+    const bool plate = d.plate == PreparedDetector::Plate::aperture;
+    // A plate detector's float64 nodes are 3 texels each (shaders/contribution.glsl), from a texel
+    // index divisible by 3.
+    if (plate && mode.float64)
+      while ((w64.size() / 2) % 3 != 0) w64.insert(w64.end(), {0.0, 0.0});
+    g.offset64.push_back(std::uint32_t(w64.size() / 2 / (plate ? 3 : 1)));
+    const std::size_t columns = weight_columns(d);
+    g.columns.push_back(std::uint32_t(columns));
+    const std::vector<float> dw = float32_weights(d);
+    const std::size_t nodes = dw.size() / 4;
+    for (std::size_t k = 0; k < nodes; ++k)
+      for (std::size_t m = 0; m < 2; ++m)
+        for (std::size_t c = 0; c < columns; ++c) {
+          const std::size_t src = 4 * (k + m) + c;
+          w32.push_back(src < dw.size() ? dw[src] : 0.0f);
+        }
+    if (mode.float64)
+      for (std::size_t k = 0; k < nodes; ++k) {
+        w64.push_back(d.weights[4 * k]);
+        w64.push_back(mode.per_sample ? d.norm_weights[4 * k] : 0.0);
+        if (plate) w64.insert(w64.end(), {d.weights[4 * k + 1], d.weights[4 * k + 2], d.weights[4 * k + 3], 0.0});
+      }
+    // The plate's M0, row by row: 8 texels.
+    g.plate_offset64.push_back(std::uint32_t(w64.size() / 2));
+    if (plate)
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) w64.push_back(d.plate_mueller[i][j]);
+  }
+  if (w64.empty()) w64.assign(2, 0.0);
+  if (mode.ff)
+    for (double& x : w64) x = ff_bits(x);
+  return g;
+}
+
+PushConstants push_constants(const EngineInputs& in, const Grids& grids, const KernelMode& mode, std::size_t detector,
+                             bool quaternions) {
+  const PreparedDetector& det = in.detectors.at(detector);
+  PushConstants push{};
+  push.rho_max = det.rho_max;
+  push.cos_rho_max = det.cos_rho_max;
+  push.monopole = mode.monopole;
+  push.grid_a = det.grid_a;
+  push.grid_inv_step = det.grid_inv_step;
+  push.offset_quat[0] = det.offset.quat.x;
+  push.offset_quat[1] = det.offset.quat.y;
+  push.offset_quat[2] = det.offset.quat.z;
+  push.offset_quat[3] = det.offset.quat.w;
+  push.grid_a32 = float(det.grid_a);
+  push.grid_inv_step32 = float(det.grid_inv_step);
+  push.cos_zeta = float(det.cos_zeta);
+  push.sin_zeta = float(det.sin_zeta);
+  push.grid_n = std::uint32_t(det.grid_n);
+  push.grid_offset = grids.offset.at(detector);
+  push.grid_offset64 = grids.offset64.at(detector);
+  push.plate_offset64 = grids.plate_offset64.at(detector);
+  push.nside = std::uint32_t(in.sky.nside);
+  push.flags = (mode.per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) | (quaternions || mode.ff ? PISCO_FLAG_QUATERNION : 0u) |
+               (det.offset.active ? PISCO_FLAG_OFFSET : 0u);
+  if (mode.ff)
+    for (double* x : {&push.rho_max, &push.cos_rho_max, &push.monopole, &push.grid_a, &push.grid_inv_step,
+                      &push.offset_quat[0], &push.offset_quat[1], &push.offset_quat[2], &push.offset_quat[3]})
+      *x = ff_bits(*x);
+  return push;
+}
+
+void pack_pointing(const PointingInput& pointing, bool ff, double* p) {
+  constexpr double twopi = 2 * std::numbers::pi;
+  const std::size_t n = pointing.size();
+  if (ff) {
+    // The float-float kernel takes every sample as a boresight quaternion (shaders/frame.glsl).
+    for (std::size_t i = 0; i < n; ++i) {
+      const Quat q = pointing.quaternions ? pointing.quats.quats[i]
+                                          : quat_from_pointing(pointing.angles.theta[i], pointing.angles.phi[i],
+                                                               pointing.angles.psi[i]);
+      p[4 * i] = ff_bits(q.x);
+      p[4 * i + 1] = ff_bits(q.y);
+      p[4 * i + 2] = ff_bits(q.z);
+      p[4 * i + 3] = ff_bits(q.w);
+    }
+  } else if (pointing.quaternions) {
+    std::memcpy(p, pointing.quats.quats.data(), n * sizeof(Quat));
+  } else {
+    for (std::size_t i = 0; i < n; ++i) {
+      double phi = pointing.angles.phi[i];
+      if (!(phi >= 0.0 && phi < twopi)) phi = wrap_phi(phi);  // as the reference does
+      p[4 * i] = pointing.angles.theta[i];
+      p[4 * i + 1] = phi;
+      p[4 * i + 2] = pointing.angles.psi[i];
+      p[4 * i + 3] = 0.0;
+    }
+  }
+}
+
+void pack_plate(std::span<const double> plate_angle, bool ff, double* out) {
+  if (!ff) {
+    std::memcpy(out, plate_angle.data(), plate_angle.size() * sizeof(double));
+    return;
+  }
+  for (std::size_t i = 0; i < plate_angle.size(); ++i) {
+    out[2 * i] = ff_bits(std::cos(2.0 * plate_angle[i]));
+    out[2 * i + 1] = ff_bits(std::sin(2.0 * plate_angle[i]));
+  }
+}
+
+}  // namespace pisco::detail::vk

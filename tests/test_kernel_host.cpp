@@ -1,0 +1,306 @@
+// The vulkan kernel's own source (shaders/kernel.glsl with contribution.glsl, disc.glsl, frame.glsl,
+// ff.glsl and fp64.glsl, turned into C++ by tests/glsl_to_cpp.cmake), compiled on glm's GLSL types and
+// run sample by sample on the very tables the device gets (src/vulkan/tables.hpp), against the float64
+// reference and HEALPix's query_disc. Built twice: PISCO_FF=0 runs the float64 kernel, PISCO_FF=1 the
+// float-float kernel of devices without shaderFloat64 (docs/vulkan.md, "Devices without float64"). The
+// vulkan tests hold the compiled kernels on a device to the same bars.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numbers>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include <healpix_base.h>
+#include <pointing.h>
+
+#include "backend_fixtures.hpp"
+#include "core/prepared.hpp"
+#include "pisco/hwp.hpp"
+#include "pisco/quaternion.hpp"
+#include "vulkan/tables.hpp"
+
+#ifndef PISCO_FF
+#error "PISCO_FF must be 0 (the float64 kernel) or 1 (the float-float kernel)"
+#endif
+
+// The kernel's world: GLSL's types and built-ins (glm), the bindings, push constants and
+// specialization constants it reads, then the kernel itself.
+namespace glsl {
+// Declarations, not `using namespace glm`: HEALPix has a vec3 of its own in the global namespace.
+using glm::dmat4, glm::dvec2, glm::dvec3, glm::dvec4, glm::mat4, glm::uvec2, glm::uvec4, glm::vec2, glm::vec3, glm::vec4;
+using glm::acos, glm::atan, glm::clamp, glm::dot, glm::max, glm::min, glm::packDouble2x32, glm::transpose,
+    glm::uintBitsToFloat;
+using uint = glm::uint;
+using std::abs;
+using std::floor;
+using std::sqrt;
+
+// The push constants as the kernel reads them: interface.h again, with the kernel's float64 type
+// (float-float: glm::vec2), filled with the bytes the host pushes.
+#undef PISCO_F64
+#if PISCO_FF
+#define PISCO_F64 glm::vec2
+#else
+#define PISCO_F64 double
+#endif
+#undef PISCO_SHADER_INTERFACE_H
+#include "interface.h"
+
+struct usamplerBuffer {
+  std::vector<uvec4> texels;
+};
+// Out of range is an error here (std::out_of_range), where a device would read zeros.
+inline uvec4 texelFetch(const usamplerBuffer& b, int i) { return b.texels.at(std::size_t(i)); }
+
+inline usamplerBuffer sky, sky_lo, rings, weight_pairs, weights64;
+inline std::vector<PISCO_F64> pointing, plate_angle;
+inline pisco::detail::vk::PushConstants pc;
+inline bool RADIAL = false, FLOAT64 = false, PLATE = false;
+inline int PARTS = 1, COLUMNS = 4;
+
+#include "kernel_host.hpp"  // shaders/kernel.glsl and its includes
+}  // namespace glsl
+
+namespace {
+
+namespace vk = pisco::detail::vk;
+constexpr double pi = std::numbers::pi;
+using pisco::deg;
+using pisco_test::compare;
+using pisco_test::Stats;
+
+// `bytes` of host data as texels.
+template <class T>
+glsl::usamplerBuffer texels(const std::vector<T>& v) {
+  glsl::usamplerBuffer b;
+  b.texels.resize((v.size() * sizeof(T) + 15) / 16);
+  std::memcpy(b.texels.data(), v.data(), v.size() * sizeof(T));
+  return b;
+}
+
+template <class To>
+std::vector<To> reinterpret(const std::vector<double>& v) {
+  static_assert(sizeof(To) == sizeof(double));
+  std::vector<To> out(v.size());
+  std::memcpy(out.data(), v.data(), v.size() * sizeof(double));
+  return out;
+}
+
+// The kernel's tables for a sky: what VulkanBackend uploads.
+void load_sky(const pisco::Sky& sky, const pisco::detail::PreparedSky& prepared, const vk::KernelMode& mode) {
+  const pisco::detail::PixelVectors vectors(sky.nside());
+  std::vector<double> xyz(3 * sky.npix());
+  vectors.get(0, sky.npix(), xyz.data(), 2);
+  std::vector<float> records(8 * sky.npix()), lo(4 * sky.npix());
+  vk::pack_sky(sky, mode.monopole, 0, sky.npix(), xyz.data(), records.data());
+  vk::pack_sky_lo(sky.npix(), xyz.data(), lo.data());
+  glsl::sky = texels(records);
+  glsl::sky_lo = texels(lo);
+  glsl::rings = texels(vk::pack_rings(prepared, mode.ff));
+}
+
+// The TOD of `detector` by the kernel source, sample by sample (one invocation a sample), with the
+// pixels each disc counted.
+std::vector<double> host_kernel(const pisco::detail::EngineInputs& in, const vk::KernelMode& mode,
+                                const vk::Grids& grids, std::size_t detector, const pisco::detail::PointingInput& p,
+                                std::vector<std::uint32_t>* counts = nullptr) {
+  const pisco::detail::PreparedDetector& det = in.detectors.at(detector);
+  glsl::RADIAL = det.radial;
+  glsl::FLOAT64 = mode.float64;
+  glsl::PLATE = det.plate == pisco::detail::PreparedDetector::Plate::aperture;
+  glsl::COLUMNS = int(grids.columns.at(detector));
+  glsl::PARTS = 1;
+  vk::PushConstants push = vk::push_constants(in, grids, mode, detector, p.quaternions);
+  push.sample_count = std::uint32_t(p.size());
+  static_assert(sizeof(push) == sizeof(glsl::pc));
+  std::memcpy(&glsl::pc, &push, sizeof push);
+  std::vector<double> packed(4 * p.size());
+  vk::pack_pointing(p, mode.ff, packed.data());
+  glsl::pointing = reinterpret<PISCO_F64>(packed);
+  if (glsl::PLATE) {
+    std::vector<double> plate(p.size() * (mode.ff ? 2 : 1));
+    vk::pack_plate(p.plate_angle, mode.ff, plate.data());
+    glsl::plate_angle = reinterpret<PISCO_F64>(plate);
+  }
+  std::vector<double> tod(p.size());
+  if (counts) counts->assign(p.size(), 0);
+  for (std::uint32_t sid = 0; sid < p.size(); ++sid) {
+    glsl::Sums acc;
+    std::uint32_t count = 0;
+    glsl::convolve_sample(sid, 0, acc, count);
+    const PISCO_F64 d = glsl::finish_sample(glsl::float_part(acc), acc.s0, acc.n0);
+    double v = 0.0;
+    std::memcpy(&v, &d, sizeof v);
+    tod[sid] = mode.ff ? vk::from_ff_bits(v) : v;
+    if (counts) (*counts)[sid] = count;
+  }
+  return tod;
+}
+
+// A generic plate: the ideal one with every entry perturbed.
+pisco::Mueller generic_plate() {
+  pisco::Mueller m0 = pisco::ideal_hwp_mueller();
+  const double leak[4][4] = {{0.0, 0.012, -0.008, 0.005},
+                             {0.021, -0.03, 0.017, -0.011},
+                             {-0.015, 0.009, 0.025, 0.04},
+                             {0.007, -0.02, 0.033, 0.02}};
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) m0[i][j] += leak[i][j];
+  return m0;
+}
+
+// The backends' scene (mismatched elliptical pair with cross-polar lobes and leakage, radial and 2D
+// grids with 2 and 4 weight columns), its detectors off the boresight and behind aperture plates in
+// turn, on a sky with and without a monopole, pointing as angles and as quaternions, with integral
+// and per-sample normalization: every sample within the B bars of the reference, and every disc
+// HEALPix's query_disc.
+TEST(KernelOnHost, MatchesTheReferenceAndQueryDisc) {
+  const int nside = 32;
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  const pisco::Pointing p = pisco_test::random_pointing(160, 5);
+  std::vector<pisco::Quat> q;
+  for (std::size_t i = 0; i < p.size(); ++i) q.push_back(pisco::quat_from_pointing(p.theta[i], p.phi[i], p.psi[i]));
+  std::vector<double> h(p.size());
+  for (std::size_t i = 0; i < h.size(); ++i) h[i] = 0.113 * double(i);
+  const double offsets[][3] = {{2 * deg, -1 * deg, 0.3}, {0, 0, 0}, {-4 * deg, 3 * deg, -1.2}, {0, 6 * deg, 0}, {1 * deg, 0, 2.5}};
+  const pisco_test::Scene plain = pisco_test::backend_scene(nside, 0.0);
+  int checked = 0;
+  for (const double monopole : {0.0, 2.725})
+    for (const bool plates : {false, true})
+      for (const auto norm : {pisco::Normalization::integral, pisco::Normalization::per_sample}) {
+        if (plates && norm == pisco::Normalization::per_sample) continue;
+        const pisco_test::Scene s = pisco_test::backend_scene(nside, monopole);
+        std::vector<pisco::Detector> dets = s.focal_plane.detectors();
+        for (std::size_t i = 0; i < dets.size(); ++i) {
+          dets[i].set_offset(offsets[i][0], offsets[i][1], offsets[i][2]);
+          if (plates) dets[i].hwp = pisco::HalfWavePlate{generic_plate(), pisco::HwpPlacement::aperture, 0.2 * double(i)};
+        }
+        const pisco::FocalPlane fp(dets);
+        pisco::EngineOptions o;
+        o.normalization = norm;
+        pisco::Engine cpu(s.sky, s.beams, fp, o);
+        pisco::Engine cpu_plain(plain.sky, plain.beams, fp, o);  // the anisotropies' scale
+        const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, fp, norm);
+        ASSERT_EQ(in.detectors.size(), fp.size());
+        const vk::KernelMode mode = vk::kernel_mode(in, s.sky, PISCO_FF != 0);
+        ASSERT_EQ(mode.float64, monopole != 0.0 || norm == pisco::Normalization::per_sample);
+        const vk::Grids grids = vk::pack_grids(in, mode);
+        load_sky(s.sky, in.sky, mode);
+        glsl::weight_pairs = texels(grids.w32);
+        glsl::weights64 = texels(grids.w64);
+        for (const bool quaternions : {false, true})
+          for (std::size_t d = 0; d < fp.size(); ++d) {
+            pisco::detail::PointingInput input;
+            input.quaternions = quaternions;
+            input.angles = p;
+            input.quats = pisco::QuatPointingView{q};
+            std::vector<double> theta(h.size());  // the plate's angle from the detector's axis, as the engine gives it
+            for (std::size_t i = 0; i < h.size(); ++i) theta[i] = h[i] - in.detectors[d].plate_gamma;
+            if (plates) input.plate_angle = theta;
+            std::vector<std::uint32_t> counts;
+            const std::vector<double> got = host_kernel(in, mode, grids, d, input, &counts);
+            std::vector<double> ref(p.size()), scale(p.size());
+            if (quaternions) {
+              cpu.convolve(d, pisco::QuatPointingView{q}, ref, false, plates ? h : std::vector<double>{});
+              cpu_plain.convolve(d, pisco::QuatPointingView{q}, scale, false, plates ? h : std::vector<double>{});
+            } else {
+              cpu.convolve(d, p, ref, false, plates ? h : std::vector<double>{});
+              cpu_plain.convolve(d, p, scale, false, plates ? h : std::vector<double>{});
+            }
+            const Stats st = compare(ref, got);
+            const double rms = compare(scale, scale).rms_ref;
+            const std::string what = fp[d].name + (monopole ? ", monopole" : "") + (plates ? ", plate" : "") +
+                                     (quaternions ? ", quaternions" : ", angles") +
+                                     (norm == pisco::Normalization::per_sample ? ", per-sample" : "");
+            EXPECT_EQ(st.non_finite, 0u) << what;
+            EXPECT_LE(st.rms_err, 1e-5 * rms) << what;
+            EXPECT_LE(st.max_err, 1e-4 * rms) << what;
+            if (d == 0) std::cout << what << ": relative rms error " << st.rms_err / rms << "\n";
+            // The disc of each sample: the offset detector's own line of sight.
+            pisco::Pointing los;
+            pisco::detector_pointing(p, fp[d].offset, los);
+            std::vector<int> pix;
+            for (std::size_t i = 0; i < p.size(); ++i) {
+              base.query_disc(pointing(los.theta[i], los.phi[i]), std::acos(in.detectors[d].cos_rho_max), pix);
+              EXPECT_EQ(counts[i], pix.size()) << what << ", sample " << i;
+            }
+            ++checked;
+          }
+      }
+  EXPECT_EQ(checked, 2 * 3 * 2 * 5);
+}
+
+// The disc walk alone (the kernel's ring bounds and ranges) against query_disc, pixel for pixel, from
+// NSIDE 4 to 512, radii 0.5 to 60 deg, on and near the poles and across phi = 0.
+TEST(KernelOnHost, DiscsArePixelForPixelQueryDisc) {
+  std::size_t discs = 0;
+  for (int nside : {4, 64, 512}) {
+    pisco::Sky sky(nside);
+    vk::KernelMode mode;
+    mode.ff = PISCO_FF != 0;
+    load_sky(sky, pisco::detail::prepare_sky(sky), mode);
+    const Healpix_Base base(nside, RING, SET_NSIDE);
+    pisco::Pointing p = pisco_test::random_pointing(nside == 512 ? 150 : 400, 7 + std::uint64_t(nside));
+    // On the poles and beside them. (Not closer than 1e-6: at 1e-9, cos(theta) rounds to 1 and
+    // query_disc takes the axis for the pole, where a ring lying on the disc's edge falls out whole.)
+    for (double t : {0.0, 1e-6, pi / 2, pi - 1e-6, pi}) p.push_back(t, 0.0, 0.0);
+    for (double rho_deg : {0.5, 5.0, 20.0, 60.0}) {
+      if (nside == 512 && rho_deg > 5) continue;  // keeps the test short
+      const double rho = rho_deg * deg;
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        std::vector<int> want;
+        base.query_disc(pointing(p.theta[i], p.phi[i]), rho, want);
+        std::sort(want.begin(), want.end());
+        std::vector<int> got;
+        auto add = [&](std::uint32_t b, std::uint32_t l) {
+          for (std::uint32_t k = 0; k < l; ++k) got.push_back(int(b + k));
+        };
+#if PISCO_FF
+        const pisco::Quat q = pisco::quat_from_pointing(p.theta[i], p.phi[i], p.psi[i]);
+        const auto ff = [](double x) { return glm::vec2(float(x), float(x - double(float(x)))); };
+        glsl::ffquat b{ff(q.x), ff(q.y), ff(q.z), ff(q.w)};
+        glsl::ff3 tp, pp, axis;
+        glsl::ff_sample_frame(false, b, b, tp, pp, axis);
+        const glm::vec2 sin_theta0 = glsl::ff_sqrt(glsl::ff_add(glsl::ff_mul(axis.x, axis.x), glsl::ff_mul(axis.y, axis.y)));
+        float phi0 = std::atan2(axis.y.x, axis.x.x);
+        if (phi0 < 0.0f) phi0 += 6.28318530717958647693f;
+        int first = 0, last = 0;
+        glsl::ff_disc_rings(nside, axis.z, sin_theta0, ff(std::cos(rho)), first, last);
+        for (int iz = first; iz <= last; ++iz) {
+          std::uint32_t b0, l0, b1, l1;
+          glsl::ff_ring_ranges(glsl::ring_entry(iz), axis, sin_theta0, phi0, ff(std::cos(rho)), b0, l0, b1, l1);
+          add(b0, l0);
+          add(b1, l1);
+        }
+#else
+        const double theta = p.theta[i], phi = pisco::detail::wrap_phi(p.phi[i]);
+        const double z0 = glsl::pisco_cos(theta), xa = 1.0 / std::sqrt((1.0 - z0) * (1.0 + z0));
+        int first = 0, last = 0, irmin = 0, irmax = 0;
+        glsl::disc_rings(nside, theta, rho, first, last, irmin, irmax);
+        for (int iz = first; iz <= last; ++iz) {
+          const glsl::RingEntry ring = glsl::ring_entry(iz);
+          if (iz < irmin || iz > irmax) {
+            add(ring.first, ring.count);
+            continue;
+          }
+          std::uint32_t b0, l0, b1, l1;
+          glsl::ring_ranges(ring, z0, xa, phi, std::cos(rho), b0, l0, b1, l1);
+          add(b0, l0);
+          add(b1, l1);
+        }
+#endif
+        std::sort(got.begin(), got.end());
+        EXPECT_EQ(got, want) << "NSIDE " << nside << ", rho " << rho_deg << " deg, theta " << p.theta[i] << ", phi "
+                             << p.phi[i];
+        ++discs;
+      }
+    }
+  }
+  std::cout << discs << " discs, each HEALPix's query_disc\n";
+}
+
+}  // namespace
