@@ -276,6 +276,7 @@ class Engine:
         chunk_samples: int = 0,
         normalization: str = "integral",
         threads: int = 0,
+        arithmetic: str = "auto",
     ) -> None: ...
     def convolve(
         self,

@@ -138,7 +138,7 @@ class PyEngine {
  public:
   PyEngine(const Sky& sky, nb::handle beams, const FocalPlane& focal_plane, const std::string& backend,
            const std::string& device, std::size_t chunk_samples, const std::string& normalization,
-           unsigned threads) {
+           unsigned threads, const std::string& arithmetic) {
     std::vector<Beamsor> beam_list;
     if (nb::isinstance<Beamsor>(beams)) {
       beam_list.push_back(nb::cast<Beamsor>(beams));
@@ -155,6 +155,7 @@ class PyEngine {
     options.chunk_samples = chunk_samples;
     options.normalization = normalization_from(normalization);
     options.threads = threads;
+    options.arithmetic = arithmetic;
     for (const auto& d : focal_plane.detectors()) names_.push_back(d.name);
     nb::gil_scoped_release release;
     engine_ = std::make_unique<Engine>(sky, beam_list, focal_plane, options);
@@ -316,14 +317,16 @@ void bind_engine(nb::module_& m) {
                        "The convolution engine: the sky, beams and focal plane are set up once for a backend,\n"
                        "then chunks of pointing become TOD.\n\n"
                        "Engine(sky, beams, focal_plane, backend='auto', device='auto', chunk_samples=0,\n"
-                       "       normalization='integral', threads=0)\n\n"
+                       "       normalization='integral', threads=0, arithmetic='auto')\n\n"
                        "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'vulkan',\n"
                        "'cuda' or 'auto' (the best present: pisco.devices()). device: an index or part of a name.\n"
+                       "arithmetic (vulkan): 'auto', 'float64' or 'float-float', the kernel's float64 work; 'auto'\n"
+                       "takes float-float on devices without float64.\n"
                        "Usable as a context manager; close() frees the device's memory.")
       .def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, std::size_t,
-                    const std::string&, unsigned>(),
+                    const std::string&, unsigned, const std::string&>(),
            "sky"_a, "beams"_a, "focal_plane"_a, "backend"_a = "auto", "device"_a = "auto", "chunk_samples"_a = 0,
-           "normalization"_a = "integral", "threads"_a = 0)
+           "normalization"_a = "integral", "threads"_a = 0, "arithmetic"_a = "auto")
       .def("convolve", &PyEngine::convolve, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
            "accumulate"_a = false, "hwp_angle"_a = nb::none(),

@@ -309,11 +309,16 @@ def test_vulkan_backend_agrees_with_the_reference():
         pytest.skip("no Vulkan device: " + next(b.detail for b in pisco.devices() if b.name == "vulkan"))
     sky, beam, fp = small_setup()
     theta, phi, psi = pointing(2000)
-    with pisco.Engine(sky, beam, fp, backend="cpu") as cpu, pisco.Engine(sky, beam, fp, backend="vulkan") as vk:
+    with pisco.Engine(sky, beam, fp, backend="cpu") as cpu, pisco.Engine(sky, beam, fp, backend="vulkan") as vk, \
+            pisco.Engine(sky, beam, fp, backend="vulkan", arithmetic="float-float") as ff:
+        assert "float-float" in ff.device
         for det in range(3):
             a = cpu.convolve(det, theta, phi, psi)
-            b = vk.convolve(det, theta, phi, psi)
-            assert np.sqrt(np.mean((a - b) ** 2) / np.mean(a**2)) < 1e-5
+            for engine in (vk, ff):
+                b = engine.convolve(det, theta, phi, psi)
+                assert np.sqrt(np.mean((a - b) ** 2) / np.mean(a**2)) < 1e-5
+    with pytest.raises(pisco.Error, match="unknown arithmetic"):
+        pisco.Engine(sky, beam, fp, backend="vulkan", arithmetic="float128")
 
 
 # --- half-wave plates ----------------------------------------------------------------------------
