@@ -18,6 +18,7 @@
 #include <pointing.h>
 
 #include "backend_fixtures.hpp"
+#include "support.hpp"
 #include "core/prepared.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/quaternion.hpp"
@@ -301,6 +302,19 @@ TEST(KernelOnHost, DiscsArePixelForPixelQueryDisc) {
     }
   }
   std::cout << discs << " discs, each HEALPix's query_disc\n";
+}
+
+// The arithmetic a device gets: float-float where it lacks float64 or where asked for; float64 asked
+// of a device without it, or an unknown name, is an error naming what was asked.
+TEST(KernelArithmetic, ChosenByTheDeviceOrAskedFor) {
+  EXPECT_FALSE(vk::use_float_float(true, "gpu", "auto"));
+  EXPECT_TRUE(vk::use_float_float(false, "gpu", "auto"));
+  EXPECT_TRUE(vk::use_float_float(true, "gpu", "float-float"));
+  EXPECT_TRUE(vk::use_float_float(false, "gpu", "float-float"));
+  EXPECT_FALSE(vk::use_float_float(true, "gpu", "float64"));
+  pisco_test::expect_error([] { vk::use_float_float(false, "Apple M2", "float64"); },
+                           "Apple M2 lacks shaderFloat64");
+  pisco_test::expect_error([] { vk::use_float_float(true, "gpu", "double"); }, "unknown arithmetic \"double\"");
 }
 
 }  // namespace

@@ -42,6 +42,18 @@ double from_ff_bits(double bits) {
   return double(pair[0]) + double(pair[1]);
 }
 
+bool use_float_float(bool device_float64, const std::string& device_name, const std::string& arithmetic) {
+  if (arithmetic == "auto") return !device_float64;
+  if (arithmetic == "float-float") return true;
+  if (arithmetic == "float64") {
+    if (!device_float64)
+      throw Error("vulkan: arithmetic \"float64\" was asked for, but " + device_name +
+                  " lacks shaderFloat64; use \"float-float\" or \"auto\"");
+    return false;
+  }
+  throw Error("vulkan: unknown arithmetic \"" + arithmetic + "\" (expected \"auto\", \"float64\" or \"float-float\")");
+}
+
 KernelMode kernel_mode(const EngineInputs& in, const Sky& sky, bool ff) {
   KernelMode m;
   m.ff = ff;

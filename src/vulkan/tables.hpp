@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "core/backend.hpp"
@@ -20,6 +21,12 @@ namespace pisco::detail::vk {
 // with hi + lo = x to about 48 bits, in the 8 bytes the float64 kernel reads as one double.
 double ff_bits(double x);
 double from_ff_bits(double bits);
+
+// Whether the kernel's float64 work runs in float-float on a device (`device_float64`: it has
+// shaderFloat64) for EngineOptions::arithmetic: "auto" (float-float only where float64 is missing),
+// "float-float" or "float64". Throws pisco::Error naming the device for float64 on a device without it,
+// and for an unknown value.
+bool use_float_float(bool device_float64, const std::string& device_name, const std::string& arithmetic);
 
 // How the kernel runs for a set of inputs.
 struct KernelMode {

@@ -35,19 +35,6 @@ constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 
 double mib(double bytes) { return bytes / double(1 << 20); }
 
-// The kernel's float64 work in float-float: on devices without shaderFloat64, or when asked for.
-bool use_float_float(const vk::DeviceInfo& info, const std::string& arithmetic) {
-  if (arithmetic == "auto") return !info.float64;
-  if (arithmetic == "float-float") return true;
-  if (arithmetic == "float64") {
-    if (!info.float64)
-      throw Error("vulkan: arithmetic \"float64\" was asked for, but " + info.name +
-                  " lacks shaderFloat64; use \"float-float\" or \"auto\"");
-    return false;
-  }
-  throw Error("vulkan: unknown arithmetic \"" + arithmetic + "\" (expected \"auto\", \"float64\" or \"float-float\")");
-}
-
 class VulkanBackend final : public Backend {
  public:
   VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options);
@@ -129,7 +116,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
   pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
   pi.queueFamilyIndex = info.queue_family;
   PISCO_VK(fn.vkCreateCommandPool(device_->handle(), &pi, nullptr, &pool_));
-  const bool ff = use_float_float(info, options.arithmetic);
+  const bool ff = vk::use_float_float(info.float64, info.name, options.arithmetic);
   const std::span<const std::uint32_t> spirv =
       ff ? std::span<const std::uint32_t>(pisco_spv_convolve_ff, sizeof(pisco_spv_convolve_ff) / sizeof(std::uint32_t))
          : std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t));
