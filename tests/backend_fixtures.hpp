@@ -15,6 +15,7 @@
 #include "pisco/beamsor.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/focal_plane.hpp"
+#include "pisco/hwp.hpp"
 #include "pisco/pointing.hpp"
 #include "pisco/sky.hpp"
 #include "pisco/units.hpp"
@@ -114,6 +115,18 @@ inline Scene backend_scene(int nside, double monopole = 0.0) {
   s.focal_plane.add({"ellip", 40 * deg, 0.0, 1.0, 3});
   s.focal_plane.add({"roundx", 70 * deg, 0.02, 1.0, 4});
   return s;
+}
+
+// A generic half-wave plate: the ideal one with all 16 entries perturbed (M_QI, M_UV, ... non-zero).
+inline pisco::Mueller generic_plate() {
+  pisco::Mueller m0 = pisco::ideal_hwp_mueller();
+  const double leak[4][4] = {{0.0, 0.012, -0.008, 0.005},
+                             {0.021, -0.03, 0.017, -0.011},
+                             {-0.015, 0.009, 0.025, 0.04},
+                             {0.007, -0.02, 0.033, 0.02}};
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) m0[i][j] += leak[i][j];
+  return m0;
 }
 
 // Why `backend` cannot run on this machine, or "" when it can.

@@ -270,13 +270,7 @@ TEST(CudaHostKernel, OffsetsAndQuaternionsMatchTheReference) {
 // plates between the optics and the detector itself): a generic plate, on a plain sky and on a
 // 2.725 K monopole sky, against the reference at the B bars (of the anisotropy's TOD).
 TEST(CudaHostKernel, AperturePlatesMatchTheReference) {
-  pisco::Mueller m0 = pisco::ideal_hwp_mueller();
-  const double leak[4][4] = {{0.0, 0.012, -0.008, 0.005},
-                             {0.021, -0.03, 0.017, -0.011},
-                             {-0.015, 0.009, 0.025, 0.04},
-                             {0.007, -0.02, 0.033, 0.02}};
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) m0[i][j] += leak[i][j];
+  const pisco::Mueller m0 = pisco_test::generic_plate();
   for (const double monopole : {0.0, 2.725}) {
     Scene s = scene(64, monopole);
     std::vector<pisco::Detector> dets = s.focal_plane.detectors();

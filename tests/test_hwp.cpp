@@ -17,6 +17,7 @@
 #include "pisco/hwp.hpp"
 #include "pisco/mapmaker.hpp"
 #include "pisco/scan.hpp"
+#include "backend_fixtures.hpp"
 #include "support.hpp"
 
 namespace {
@@ -103,16 +104,7 @@ pisco::Pointing random_pointing(std::size_t n, std::uint64_t seed) {
 }
 
 // A plate with all 16 entries non-zero (a non-ideal HWP with leakage everywhere).
-Mat generic_plate() {
-  Mat m = pisco::ideal_hwp_mueller();
-  const double leak[4][4] = {{0.0, 0.012, -0.008, 0.005},
-                             {0.021, -0.03, 0.017, -0.011},
-                             {-0.015, 0.009, 0.025, 0.04},
-                             {0.007, -0.02, 0.033, 0.02}};
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) m[i][j] += leak[i][j];
-  return m;
-}
+using pisco_test::generic_plate;
 
 double rms(const std::vector<double>& v) {
   double s = 0;

@@ -142,18 +142,6 @@ std::vector<double> host_kernel(const pisco::detail::EngineInputs& in, const vk:
   return tod;
 }
 
-// A generic plate: the ideal one with every entry perturbed.
-pisco::Mueller generic_plate() {
-  pisco::Mueller m0 = pisco::ideal_hwp_mueller();
-  const double leak[4][4] = {{0.0, 0.012, -0.008, 0.005},
-                             {0.021, -0.03, 0.017, -0.011},
-                             {-0.015, 0.009, 0.025, 0.04},
-                             {0.007, -0.02, 0.033, 0.02}};
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) m0[i][j] += leak[i][j];
-  return m0;
-}
-
 // The backends' scene (mismatched elliptical pair with cross-polar lobes and leakage, radial and 2D
 // grids with 2 and 4 weight columns), its detectors off the boresight and behind aperture plates in
 // turn, on a sky with and without a monopole, pointing as angles and as quaternions, with integral
@@ -178,7 +166,7 @@ TEST(KernelOnHost, MatchesTheReferenceAndQueryDisc) {
         std::vector<pisco::Detector> dets = s.focal_plane.detectors();
         for (std::size_t i = 0; i < dets.size(); ++i) {
           dets[i].set_offset(offsets[i][0], offsets[i][1], offsets[i][2]);
-          if (plates) dets[i].hwp = pisco::HalfWavePlate{generic_plate(), pisco::HwpPlacement::aperture, 0.2 * double(i)};
+          if (plates) dets[i].hwp = pisco::HalfWavePlate{pisco_test::generic_plate(), pisco::HwpPlacement::aperture, 0.2 * double(i)};
         }
         const pisco::FocalPlane fp(dets);
         pisco::EngineOptions o;
