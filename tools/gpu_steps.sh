@@ -2,7 +2,8 @@
 # Everything to run on a machine with an NVIDIA GPU, as-is, from anywhere in the checkout:
 #   tools/gpu_steps.sh [LOG_DIR]
 # configures and builds with CUDA and Vulkan, runs the device tests (ctest -L 'cuda|vulkan'), the
-# Table 1 benchmark on both GPU backends and the ducc0 comparison, writing each step's output to
+# Table 1 benchmark on both GPU backends, the ducc0 comparison and the crossover map (tools/crossover.py),
+# writing each step's output to
 # LOG_DIR (default gpu-logs-DATE/) and a summary at the end. Steps that fail are reported and the
 # script goes on; its exit status is non-zero if any failed.
 set -u
@@ -36,9 +37,14 @@ step() {  # step NAME COMMAND...: runs COMMAND, output to LOG_DIR/NAME.log
 } >"$logs/machine.txt" 2>&1
 
 cuda_arch=${CMAKE_CUDA_ARCHITECTURES:-80;90}
+# The crossover map needs the python tests' environment (ducc0, litebird_sim), made where PyPI is
+# reachable (scripts/run-tests.sh) and carried to this machine as build/python-venv.
+venv=${PISCO_VENV:-$root/build/python-venv}
+python_flags=()
+[ -x "$venv/bin/python" ] && python_flags=(-DPISCO_BUILD_PYTHON=ON "-DPython_EXECUTABLE=$venv/bin/python")
 step configure cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
   -DPISCO_WITH_CUDA=ON -DPISCO_WITH_VULKAN=ON "-DCMAKE_CUDA_ARCHITECTURES=$cuda_arch" \
-  -DPISCO_TEST_VK_VALIDATION=auto
+  -DPISCO_TEST_VK_VALIDATION=auto "${python_flags[@]}"
 step build cmake --build "$build" -j "$(nproc)"
 step devices "$build/tools/pisco-vk" devices
 step ctest-gpu ctest --test-dir "$build" -L 'cuda|vulkan' --output-on-failure -V
@@ -50,6 +56,13 @@ done
 step bench-cpu-5deg "$build/tools/pisco-vk" bench -b cpu --rho-max 5
 # shellcheck disable=SC2086
 step ducc0 python3 "$root/tools/ducc0_compare.py" --pisco "$build/tools/pisco-vk" -b cuda --rho-max $radii
+
+if [ ${#python_flags[@]} -gt 0 ]; then
+  step crossover env PYTHONPATH="$build/python" "$venv/bin/python" "$root/tools/crossover.py" --out "$logs/crossover"
+else
+  echo "== crossover: skipped ($venv/bin/python not found: run scripts/run-tests.sh where PyPI is reachable)" |
+    tee -a "$logs/summary.txt"
+fi
 
 echo | tee -a "$logs/summary.txt"
 for f in bench-cuda bench-vulkan ducc0; do
