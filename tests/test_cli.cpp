@@ -270,7 +270,7 @@ TEST_F(Cli, HalfWavePlateWithPerDetectorKeys) {
   const fs::path cfg = write("hwp.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
                                                 "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n",
                                                 "[focal_plane]\nfile = \"" + (dir_ / "fp.csv").string() + "\"\n", scan,
-                                                "spectra = false\n") + hwp);
+                                                "spectra = false\ntod_weights = true\ntod_pointing = true\n") + hwp);
   const Result r = run("run " + cfg.string() + " -q");
   ASSERT_EQ(r.status, 0) << r.output;
   const pisco::Sky sky = pisco::synthesize_sky(pisco::read_cl_table(pisco::default_cl_file(), 64, true), 32, 3);
@@ -300,6 +300,46 @@ TEST_F(Cli, HalfWavePlateWithPerDetectorKeys) {
     engine.convolve(d, p, tod, false, fp[d].hwp ? std::span<const double>(h) : std::span<const double>());
     EXPECT_EQ(pisco::read_tod_signal(dir_ / "out" / "tod.h5", fp[d].name), tod) << fp[d].name;
   }
+  // tod_weights: each sample's (I, Q, U) weights, the plate's modulation included; a map-maker of one's
+  // own that solves with them from the file alone gets the maps pisco-vk wrote.
+  const fs::path tod_file = dir_ / "out" / "tod.h5";
+  const Healpix_Base base(8, RING, SET_NSIDE);
+  std::vector<std::array<double, 9>> ata(base.Npix());
+  std::vector<std::array<double, 3>> atd(base.Npix());
+  for (std::size_t d = 0; d < 3; ++d) {
+    const std::vector<double> w = pisco::read_tod_weights(tod_file, fp[d].name);
+    const std::vector<double> signal = pisco::read_tod_signal(tod_file, fp[d].name);
+    const pisco::Pointing own = pisco::read_pointing_hdf5(tod_file, fp[d].name);
+    ASSERT_EQ(w.size(), 3 * p.size());
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      const std::array<double, 3> a = pisco::stokes_weights(fp[d], own.psi[i], h[i]);
+      ASSERT_TRUE(w[3 * i] == a[0] && w[3 * i + 1] == a[1] && w[3 * i + 2] == a[2]) << fp[d].name << ", sample " << i;
+      const std::size_t pix = std::size_t(base.ang2pix(pointing(own.theta[i], own.phi[i])));
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) ata[pix][3 * r + c] += w[3 * i + r] * w[3 * i + c];
+        atd[pix][r] += w[3 * i + r] * signal[i];
+      }
+    }
+  }
+  const pisco::Sky maps = pisco::Sky::read_fits(dir_ / "out" / "maps.fits", pisco::UnseenPolicy::zero);
+  double worst = 0.0, scale = 0.0;
+  for (std::size_t pix = 0; pix < ata.size(); ++pix) {
+    const auto& m = ata[pix];
+    const double det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
+                       m[2] * (m[3] * m[7] - m[4] * m[6]);
+    ASSERT_GT(std::abs(det), 0.0) << "pixel " << pix;
+    for (int k = 0; k < 3; ++k) {  // Cramer's rule
+      std::array<double, 9> mk = m;
+      for (int r = 0; r < 3; ++r) mk[3 * r + k] = atd[pix][r];
+      const double x = (mk[0] * (mk[4] * mk[8] - mk[5] * mk[7]) - mk[1] * (mk[3] * mk[8] - mk[5] * mk[6]) +
+                        mk[2] * (mk[3] * mk[7] - mk[4] * mk[6])) / det;
+      const double want = (k == 0 ? maps.I() : k == 1 ? maps.Q() : maps.U())[pix];
+      worst = std::max(worst, std::abs(x - want));
+      scale = std::max(scale, std::abs(want));
+    }
+  }
+  std::cout << "maps from the file's weights: largest difference " << worst / scale << " of the largest value\n";
+  EXPECT_LT(worst, 1e-9 * scale);
   // Plate keys without an [hwp] table are an error naming the detector.
   fs::remove_all(dir_ / "out");
   const fs::path bad = write("bad.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",

@@ -109,6 +109,7 @@ chunk_samples = 700
 [output]
 tod = true
 tod_pointing = true
+tod_weights = true
 maps = true
 spectra = false
 plots = false
@@ -119,6 +120,7 @@ struct Output {
   std::vector<pisco::TodFileDetector> detectors;
   std::vector<std::vector<double>> signal;
   std::vector<std::vector<pisco::Quat>> quats;
+  std::vector<std::vector<double>> weights;
   std::optional<pisco::Sky> maps;
 };
 
@@ -129,6 +131,7 @@ Output read_output(const fs::path& dir) {
   for (const auto& d : o.detectors) {
     o.signal.push_back(pisco::read_tod_signal(tod, d.name));
     o.quats.push_back(pisco::read_tod_quats(tod, d.name));
+    o.weights.push_back(pisco::read_tod_weights(tod, d.name));
   }
   o.maps.emplace(pisco::Sky::read_fits(dir / "maps.fits", pisco::UnseenPolicy::flag));
   return o;
@@ -146,6 +149,7 @@ void expect_same(const Output& one, const Output& many, int ranks) {
     ASSERT_EQ(one.quats[d].size(), many.quats[d].size());
     for (std::size_t i = 0; i < one.quats[d].size(); ++i)
       ASSERT_EQ(std::memcmp(&one.quats[d][i], &many.quats[d][i], sizeof(pisco::Quat)), 0) << "pointing of sample " << i;
+    EXPECT_EQ(one.weights[d], many.weights[d]) << ranks << " ranks: detector " << one.detectors[d].name << "'s weights";
   }
   double worst = 0, scale = 0;
   std::size_t solved = 0;

@@ -307,6 +307,40 @@ TEST_F(TodFile, WithPointingWritesThetaPhiPsi) {
       << message;
 }
 
+TEST_F(TodFile, WithWeightsWritesThreePerSample) {
+  std::cout << "checking: with_weights writes each sample's (I, Q, U) weights, read back bit for bit; a write "
+               "without them, with the wrong number, or to a file without weights is an error naming the detector\n";
+  const std::size_t n = 3000;
+  const FocalPlane fp = two_detectors();
+  const fs::path file = dir_ / "weights.h5";
+  pisco::TodWriter w(file, fp, n, TodPrecision::float64, false, {}, false, true);
+  std::vector<std::vector<double>> weights(2);
+  for (std::size_t d = 0; d < 2; ++d) {
+    weights[d] = random_signal(3 * n, 20 + d);
+    const std::vector<double> signal = random_signal(n, 30 + d);
+    for (std::size_t off = 0; off < n; off += 1000)  // in pieces
+      w.write(d, off, std::span<const double>(signal).subspan(off, 1000), nullptr, {},
+              std::span<const double>(weights[d]).subspan(3 * off, 3000));
+  }
+  const std::vector<double> two(2 * 3, 0.5);
+  const std::string missing = error_of([&] { w.write(0, 0, std::span<const double>(two).first(2)); });
+  EXPECT_TRUE(contains(missing, "'z_det'") && contains(missing, "0 weights for 2 signal samples")) << missing;
+  const std::string short_ = error_of([&] { w.write(1, 0, std::span<const double>(two).first(2), nullptr, {}, std::span<const double>(two).first(5)); });
+  EXPECT_TRUE(contains(short_, "'a_det'") && contains(short_, "5 weights for 2 signal samples")) << short_;
+  w.commit();
+  EXPECT_EQ(pisco::read_tod_weights(file, "z_det"), weights[0]);
+  EXPECT_EQ(pisco::read_tod_weights(file, "a_det"), weights[1]);
+  const fs::path plain = dir_ / "plain.h5";
+  pisco::TodWriter p(plain, fp, 2, TodPrecision::float64, false, {});
+  const std::string unasked = error_of([&] { p.write(0, 0, std::span<const double>(two).first(2), nullptr, {}, std::span<const double>(two)); });
+  EXPECT_TRUE(contains(unasked, "weights given, but the file is written without weights")) << unasked;
+  p.write(0, 0, std::span<const double>(two).first(2));
+  p.write(1, 0, std::span<const double>(two).first(2));
+  p.commit();
+  const std::string none = error_of([&] { pisco::read_tod_weights(plain, "a_det"); });
+  EXPECT_TRUE(contains(none, plain.string()) && contains(none, "'weights'")) << none;
+}
+
 TEST_F(TodFile, CommitRenamesAndLeavesNoTemporary) {
   std::cout << "checking: the writer works under file.tmp-<pid>, commit() renames it over an existing file\n";
   const fs::path file = dir_ / "out.h5";

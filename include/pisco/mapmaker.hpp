@@ -2,6 +2,7 @@
 // spectra").
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -19,6 +20,13 @@ struct BinnedMaps {
   std::vector<std::uint32_t> hits;        // samples per pixel
   std::vector<double> rcond;              // reciprocal condition number of each pixel's 3x3 matrix
 };
+
+// A sample's weights (a_I, a_Q, a_U): the detector's response to the sky's I, Q and U in the pixel it
+// points at, signal = a . (I, Q, U) for a sky smooth on the beam's scale (docs/physics.md, "The
+// Map-making and spectra"): s/2 ((1 + eps), (1 - eps) cos 2g, (1 - eps) sin 2g) with g = psi + zeta; behind a
+// half-wave plate (Detector::hwp), D(0) M(hwp_angle - gamma) R(g) with the plate's own Mueller matrix.
+// What BinnedMapmaker::add bins, and what `[output] tod_weights` writes beside the TOD.
+std::array<double, 3> stokes_weights(const Detector& detector, double psi, double hwp_angle = 0.0);
 
 class BinnedMapmaker {
  public:

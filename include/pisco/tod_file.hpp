@@ -70,7 +70,8 @@ class TodWriter {
   // must be unique, non-empty, and contain no '/'.
   TodWriter(const std::filesystem::path& file, const FocalPlane& focal_plane,
             std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
-            const std::map<std::string, std::string>& attributes, bool with_flags = false);
+            const std::map<std::string, std::string>& attributes, bool with_flags = false,
+            bool with_weights = false);
   ~TodWriter();
 
   // Shared files (SharedTodOptions): the leader creates the temporary file `file` + temporary_suffix
@@ -80,10 +81,10 @@ class TodWriter {
   static void create_shared(const std::filesystem::path& file, const FocalPlane& focal_plane,
                             std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
                             const std::map<std::string, std::string>& attributes, bool with_flags,
-                            const std::string& temporary_suffix);
+                            const std::string& temporary_suffix, bool with_weights = false);
   static TodWriter open_shared(const std::filesystem::path& file, const FocalPlane& focal_plane,
                                std::size_t samples_per_detector, TodPrecision precision, bool with_pointing,
-                               bool with_flags, const SharedTodOptions& options);
+                               bool with_flags, const SharedTodOptions& options, bool with_weights = false);
 
   TodWriter(TodWriter&&) noexcept;
   TodWriter& operator=(TodWriter&&) noexcept;
@@ -93,11 +94,14 @@ class TodWriter {
   // Writes signal[0..n) to samples [offset, offset + n) of detector `detector` (float32 files round
   // to nearest). With with_pointing, `pointing` is required and must have n samples; without it,
   // `pointing` is ignored. `flags` (n values, files written with_flags only) go to the `flags`
-  // dataset; samples written without flags read back as 0. Throws pisco::Error on a detector index
-  // beyond the focal plane, a range beyond samples_per_detector, a missing or mis-sized pointing
-  // chunk or flags, after commit(), or when the disk is full (the write that meets it names its samples).
+  // dataset; samples written without flags read back as 0. With with_weights, `weights` (3 n values:
+  // each sample's response to I, Q, U, pisco::stokes_weights) go to the `weights` dataset (samples, 3).
+  // Throws pisco::Error on a detector index beyond the focal plane, a range beyond
+  // samples_per_detector, a missing or mis-sized pointing chunk, flags or weights, after commit(), or
+  // when the disk is full (the write that meets it names its samples).
   void write(std::size_t detector, std::size_t offset, std::span<const double> signal,
-             const PointingView* pointing = nullptr, std::span<const std::uint8_t> flags = {});
+             const PointingView* pointing = nullptr, std::span<const std::uint8_t> flags = {},
+             std::span<const double> weights = {});
 
   // Checks that every sample of every detector was written (else pisco::Error naming the detector and
   // the first missing sample, and the temporary file is removed when the writer is destroyed), closes
@@ -113,7 +117,7 @@ class TodWriter {
   TodWriter() = default;
   void create(const FocalPlane& focal_plane, std::size_t samples_per_detector, TodPrecision precision,
               bool with_pointing, const std::map<std::string, std::string>& attributes, bool with_flags,
-              bool shared);
+              bool with_weights, bool shared);
   std::filesystem::path file_, temporary_;
   std::size_t samples_ = 0;
   std::unique_ptr<Impl> impl_;
@@ -135,6 +139,10 @@ std::vector<double> read_tod_signal(const std::filesystem::path& file, const std
 
 // The detector quaternions (`quat`, (samples, 4)) of a TOD file written with pointing.
 std::vector<Quat> read_tod_quats(const std::filesystem::path& file, const std::string& detector);
+
+// The `weights` of one detector (written with_weights), 3 values a sample (I, Q, U), sample after
+// sample; throws pisco::Error naming the file and detector when the file has none.
+std::vector<double> read_tod_weights(const std::filesystem::path& file, const std::string& detector);
 
 // The `flags` of one detector (written with_flags); empty when the file has none (no sample flagged).
 std::vector<std::uint8_t> read_tod_flags(const std::filesystem::path& file, const std::string& detector);

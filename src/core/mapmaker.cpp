@@ -100,6 +100,19 @@ void check_inputs(const Detector& det, const PointingView& ptg, std::span<const 
 
 }  // namespace
 
+std::array<double, 3> stokes_weights(const Detector& detector, double psi, double hwp_angle) {
+  const double co = 0.5 * detector.gain * (1.0 + detector.epsilon);
+  const double pol = 0.5 * detector.gain * (1.0 - detector.epsilon);
+  const double gamma = psi + detector.zeta;
+  const double c2 = std::cos(2.0 * gamma), s2 = std::sin(2.0 * gamma);
+  if (!detector.hwp) return {co, pol * c2, pol * s2};
+  // r = D(0) M(theta) R(gamma), D(0) = (co, pol, 0, 0): the plate-modulated response to I, Q, U.
+  const Mueller m = rotated_mueller(detector.hwp->mueller, hwp_angle - detector.hwp->gamma);
+  double dm[4];
+  for (int b = 0; b < 4; ++b) dm[b] = co * m[0][b] + pol * m[1][b];
+  return {dm[0], dm[1] * c2 - dm[2] * s2, dm[1] * s2 + dm[2] * c2};
+}
+
 BinnedMapmaker::BinnedMapmaker(int nside, double rcond_min) : nside_(nside), rcond_min_(rcond_min) {
   check_nside(nside, "BinnedMapmaker");
   if (!std::isfinite(rcond_min) || rcond_min < 0.0 || rcond_min > 1.0)
@@ -131,23 +144,10 @@ void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
     throw Error("BinnedMapmaker::add: detector '" + detector.name + "' has no half-wave plate, but plate angles were given");
   }
   const Base base(int64(nside_), RING, SET_NSIDE);
-  const double co = 0.5 * detector.gain * (1.0 + detector.epsilon);
-  const double pol = 0.5 * detector.gain * (1.0 - detector.epsilon);
   for (std::size_t i = 0; i < tod.size(); ++i) {
     if (!flags.empty() && flags[i] != 0) continue;
     const std::size_t pix = std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i])));
-    const double gamma = ptg.psi[i] + detector.zeta;
-    const double c2 = std::cos(2.0 * gamma), s2 = std::sin(2.0 * gamma);
-    double a[3] = {co, pol * c2, pol * s2};
-    if (detector.hwp) {
-      // r = D(0) M(theta) R(gamma), D(0) = (co, pol, 0, 0): the plate-modulated response to I, Q, U.
-      const Mueller m = rotated_mueller(detector.hwp->mueller, hwp_angle[i] - detector.hwp->gamma);
-      double dm[4];
-      for (int b = 0; b < 4; ++b) dm[b] = co * m[0][b] + pol * m[1][b];
-      a[0] = dm[0];
-      a[1] = dm[1] * c2 - dm[2] * s2;
-      a[2] = dm[1] * s2 + dm[2] * c2;
-    }
+    const std::array<double, 3> a = stokes_weights(detector, ptg.psi[i], detector.hwp ? hwp_angle[i] : 0.0);
     double* m = &ata_[6 * pix];
     m[0] += a[0] * a[0];
     m[1] += a[0] * a[1];

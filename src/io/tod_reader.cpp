@@ -124,6 +124,20 @@ std::vector<Quat> read_tod_quats(const fs::path& file, const std::string& detect
   return out;
 }
 
+std::vector<double> read_tod_weights(const fs::path& file, const std::string& detector) {
+  Session session;
+  const std::string where = file.string();
+  Handle h = open_read_only(file);
+  Handle group = open_detector_group(h.get(), where, detector);
+  const std::string expected = "a float64 dataset 'weights' of shape (samples, 3), written with tod_weights";
+  const Float64Array a = read_float64_dataset(group.get(), tod::weights_name, "/" + detector + "/" + tod::weights_name,
+                                              2, where, expected);
+  if (a.shape[1] != 3)
+    throw Error(where + ": dataset " + in_quotes("/" + detector + "/" + tod::weights_name) + " has " +
+                std::to_string(a.shape[1]) + " columns (expected " + expected + ")");
+  return a.values;
+}
+
 std::vector<std::uint8_t> read_tod_flags(const fs::path& file, const std::string& detector) {
   Session session;
   const std::string where = file.string();

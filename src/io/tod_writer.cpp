@@ -70,6 +70,7 @@ struct TodWriter::Impl {
   TodPrecision precision = TodPrecision::float64;
   bool with_pointing = false;
   bool with_flags = false;
+  bool with_weights = false;
   bool committed = false;
   bool closed = false;
   std::optional<SharedTodOptions> shared;  // a shared file (open_shared)
@@ -77,7 +78,7 @@ struct TodWriter::Impl {
   // The datasets of the detector written last (signal, theta, phi, psi): only one detector's are kept
   // open, so HDF5's chunk caches stay bounded whatever the number of detectors.
   std::size_t open_detector = static_cast<std::size_t>(-1);
-  Handle datasets[6];  // signal, theta, phi, psi, quat, flags
+  Handle datasets[7];  // signal, theta, phi, psi, quat, flags, weights
   std::vector<float> buffer;
   std::vector<Quat> quats;
 
@@ -112,10 +113,14 @@ struct TodWriter::Impl {
     if (with_flags)
       datasets[5] = checked(H5Dopen2(group.get(), tod::flags_name, dapl.get()), H5Dclose, where,
                             "cannot open dataset " + in_quotes("/" + name + "/" + tod::flags_name));
+    if (with_weights)
+      datasets[6] = checked(H5Dopen2(group.get(), tod::weights_name, dapl.get()), H5Dclose, where,
+                            "cannot open dataset " + in_quotes("/" + name + "/" + tod::weights_name));
     open_detector = detector;
   }
 
-  // Samples [offset, offset + count) of dataset `which`; `columns` values a sample (1, or 4 for quat).
+  // Samples [offset, offset + count) of dataset `which`; `columns` values a sample (1, 4 for quat, 3 for
+  // weights).
   void write_slab(int which, const char* name, std::size_t detector, std::size_t offset, std::size_t count,
                   hid_t mem_type, const void* data, hsize_t columns = 1) {
     const std::string what = "dataset " + in_quotes("/" + names[detector] + "/" + name);
@@ -136,16 +141,16 @@ struct TodWriter::Impl {
 
 TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,
                      TodPrecision precision, bool with_pointing,
-                     const std::map<std::string, std::string>& attributes, bool with_flags)
+                     const std::map<std::string, std::string>& attributes, bool with_flags, bool with_weights)
     : file_(file),
       temporary_(fs::path(file.string() + ".tmp-" + std::to_string(::getpid()))),
       samples_(samples_per_detector) {
-  create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, false);
+  create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, with_weights, false);
 }
 
 void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_detector, TodPrecision precision,
                        bool with_pointing, const std::map<std::string, std::string>& attributes, bool with_flags,
-                       bool shared) {
+                       bool with_weights, bool shared) {
   const fs::path& file = file_;
   Session session;
   const std::string where = file.string();
@@ -174,6 +179,7 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
   s.precision = precision;
   s.with_pointing = with_pointing;
   s.with_flags = with_flags;
+  s.with_weights = with_weights;
   s.written.resize(focal_plane.size());
   s.dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
   check(H5Pset_chunk_cache(s.dapl.get(), 0, 0, 1.0), where, "cannot switch the chunk cache off");
@@ -216,6 +222,15 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
     const hsize_t chunk[2] = {std::min<hsize_t>(quat_dims[0], kChunkSamples), 4};
     check(H5Pset_chunk(quat_dcpl.get(), 2, chunk), where, "cannot set the dataset chunk size");
   }
+  // The weights: (samples, 3), chunked along samples.
+  const hsize_t weights_dims[2] = {static_cast<hsize_t>(samples_per_detector), 3};
+  Handle weights_space = checked(H5Screate_simple(2, weights_dims, nullptr), H5Sclose, where,
+                                 "cannot create the weights dataspace");
+  Handle weights_dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
+  if (samples_per_detector > 0) {
+    const hsize_t chunk[2] = {std::min<hsize_t>(weights_dims[0], kChunkSamples), 3};
+    check(H5Pset_chunk(weights_dcpl.get(), 2, chunk), where, "cannot set the dataset chunk size");
+  }
 
   // Flags: unflagged (0) wherever nothing was written.
   Handle flags_dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
@@ -227,7 +242,7 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
   // independently (with parallel HDF5, allocation is collective), and nothing filled (each process
   // writes its own samples; filling would write the whole file once more).
   if (shared)
-    for (const Handle* list : {&dcpl, &quat_dcpl, &flags_dcpl}) {
+    for (const Handle* list : {&dcpl, &quat_dcpl, &flags_dcpl, &weights_dcpl}) {
       check(H5Pset_alloc_time(list->get(), H5D_ALLOC_TIME_EARLY), where, "cannot set the allocation time");
       check(H5Pset_fill_time(list->get(), H5D_FILL_TIME_NEVER), where, "cannot set the fill time");
     }
@@ -270,6 +285,14 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
       write_string_attribute(ds.get(), "meaning", tod::flags_meaning, where);
       if (!ds.close()) fail(where, "cannot close dataset " + path);
     }
+    if (with_weights) {
+      const std::string path = in_quotes("/" + d.name + "/" + tod::weights_name);
+      Handle ds = checked(H5Dcreate2(group.get(), tod::weights_name, H5T_IEEE_F64LE, weights_space.get(), H5P_DEFAULT,
+                                     weights_dcpl.get(), s.dapl.get()),
+                          H5Dclose, where, "cannot create dataset " + path);
+      write_string_attribute(ds.get(), "meaning", tod::weights_meaning, where);
+      if (!ds.close()) fail(where, "cannot close dataset " + path);
+    }
     if (!group.close()) fail(where, "cannot close group " + group_path);
   }
 }
@@ -277,12 +300,12 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
 void TodWriter::create_shared(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,
                               TodPrecision precision, bool with_pointing,
                               const std::map<std::string, std::string>& attributes, bool with_flags,
-                              const std::string& temporary_suffix) {
+                              const std::string& temporary_suffix, bool with_weights) {
   TodWriter w;
   w.file_ = file;
   w.temporary_ = fs::path(file.string() + temporary_suffix);
   w.samples_ = samples_per_detector;
-  w.create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, true);
+  w.create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, with_weights, true);
   Session session;
   Impl& s = *w.impl_;
   const std::string where = file.string();
@@ -296,7 +319,7 @@ void TodWriter::create_shared(const fs::path& file, const FocalPlane& focal_plan
 
 TodWriter TodWriter::open_shared(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,
                                  TodPrecision precision, bool with_pointing, bool with_flags,
-                                 const SharedTodOptions& options) {
+                                 const SharedTodOptions& options, bool with_weights) {
   Session session;
   const std::string where = file.string();
   TodWriter w;
@@ -311,6 +334,7 @@ TodWriter TodWriter::open_shared(const fs::path& file, const FocalPlane& focal_p
   s.precision = precision;
   s.with_pointing = with_pointing;
   s.with_flags = with_flags;
+  s.with_weights = with_weights;
   s.written.resize(focal_plane.size());
   s.shared = options;
   s.dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
@@ -329,7 +353,8 @@ TodWriter::TodWriter(TodWriter&&) noexcept = default;
 TodWriter& TodWriter::operator=(TodWriter&&) noexcept = default;
 
 void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const double> signal,
-                      const PointingView* pointing, std::span<const std::uint8_t> flags) {
+                      const PointingView* pointing, std::span<const std::uint8_t> flags,
+                      std::span<const double> weights) {
   Session session;
   const std::string where = file_.string();
   if (!impl_) throw Error(where + ": TodWriter::write() on a moved-from writer");
@@ -363,6 +388,11 @@ void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const 
                 std::to_string(count) + " signal samples (expected equal lengths, or no flags)");
   if (!flags.empty() && !s.with_flags)
     throw Error(where + ": detector " + in_quotes(name) + ": flags given, but the file is written without flags");
+  if (s.with_weights && weights.size() != 3 * count)
+    throw Error(where + ": detector " + in_quotes(name) + ": " + std::to_string(weights.size()) + " weights for " +
+                std::to_string(count) + " signal samples (expected 3 a sample, I, Q, U: the file is written with weights)");
+  if (!s.with_weights && !weights.empty())
+    throw Error(where + ": detector " + in_quotes(name) + ": weights given, but the file is written without weights");
   if (count == 0) return;
 
   // The chunks this write allocates, in every dataset it writes to: those it touches that no earlier
@@ -371,7 +401,7 @@ void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const 
   for (std::size_t c = offset / kChunkSamples; c <= (offset + count - 1) / kChunkSamples; ++c)
     chunks += !overlaps(s.written[detector], c * kChunkSamples, (c + 1) * kChunkSamples);
   const std::size_t per_sample = (s.precision == TodPrecision::float32 ? 4 : 8) + (s.with_pointing ? 7 * 8 : 0) +
-                                 (s.with_flags ? 1 : 0);
+                                 (s.with_flags ? 1 : 0) + (s.with_weights ? 3 * 8 : 0);
   check_room_for_data(s.temporary, static_cast<unsigned long long>(chunks) * kChunkSamples * per_sample, where,
                       "samples " + std::to_string(offset) + ".." + std::to_string(offset + count - 1) + " of detector " +
                           in_quotes(name));
@@ -394,6 +424,8 @@ void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const 
   }
   if (s.with_flags && !flags.empty())
     s.write_slab(5, tod::flags_name, detector, offset, count, H5T_NATIVE_UINT8, flags.data());
+  if (s.with_weights)
+    s.write_slab(6, tod::weights_name, detector, offset, count, H5T_NATIVE_DOUBLE, weights.data(), 3);
   add_interval(s.written[detector], offset, offset + count);
 }
 

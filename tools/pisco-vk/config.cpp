@@ -550,6 +550,7 @@ OutputConfig read_output(Table t) {
                         ? pisco::TodPrecision::float64
                         : pisco::TodPrecision::float32;
   o.tod_pointing = t.boolean("tod_pointing", false);
+  o.tod_weights = t.boolean("tod_weights", false);
   o.maps = t.boolean("maps", true);
   const std::int64_t maps_nside = t.integer("maps_nside", 0);
   if (maps_nside != 0 && !pisco::valid_nside(maps_nside))

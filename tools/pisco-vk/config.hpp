@@ -74,6 +74,7 @@ struct OutputConfig {
   bool tod = true;
   pisco::TodPrecision tod_precision = pisco::TodPrecision::float64;
   bool tod_pointing = false;
+  bool tod_weights = false;  // each sample's (I, Q, U) weights in the TOD file
   bool maps = true;
   int maps_nside = 0;            // 0: the scan's NSIDE (or the sky's for pointing files)
   double rcond_min = 1e-3;

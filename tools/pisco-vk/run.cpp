@@ -323,7 +323,7 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
                                                         {"config", c.text}};
     if (!cl.parallel()) {
       tod_file.emplace(tod_path, fp, samples_per_detector, c.output.tod_precision, c.output.tod_pointing, attributes,
-                       flagging);
+                       flagging, c.output.tod_weights);
     } else {
       // One file for all ranks (parallel HDF5): rank 0 creates it whole, then every rank opens it and
       // writes its own samples; rank 0 renames it once every rank has closed it.
@@ -335,11 +335,13 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
       cl.step([&] {
         if (cl.leader())
           pisco::TodWriter::create_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
-                                          c.output.tod_pointing, attributes, flagging, shared.temporary_suffix);
+                                          c.output.tod_pointing, attributes, flagging, shared.temporary_suffix,
+                                          c.output.tod_weights);
       });
       cl.step([&] {
         tod_file.emplace(pisco::TodWriter::open_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
-                                                       c.output.tod_pointing, flagging, shared));
+                                                       c.output.tod_pointing, flagging, shared,
+                                                       c.output.tod_weights));
       });
     }
   }
@@ -431,11 +433,12 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     for (auto& d : modelled)
       if (d.hwp) d.hwp->mueller = pisco::ideal_hwp_mueller();
   pisco::Pointing own;
+  std::vector<double> weights;
   auto finish = [&](const Job& j) {
     engine.wait(j.ticket);
     const std::span<double> t(tod[j.slot].data(), j.count);
     const pisco::Detector& det = fp[j.detector];
-    if (mapper || (tod_file && c.output.tod_pointing)) {
+    if (mapper || (tod_file && (c.output.tod_pointing || c.output.tod_weights))) {
       const BoresightChunk& b = bore[j.bslot];
       if (per_detector_file)
         pisco::detector_pointing(file_pointing[j.detector % 2].view().subspan(j.first, j.count), det.offset, own);
@@ -453,7 +456,18 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
                              : flag_samples(j.detector, b.angles.view());
     }
     if (mapper) mapper->add(modelled[j.detector], detector_view, t, hwp_of(j), fl);
-    if (tod_file) tod_file->write(j.detector, j.first, t, c.output.tod_pointing ? &detector_view : nullptr, fl);
+    if (tod_file && c.output.tod_weights) {  // the map-maker's weights of each sample
+      const std::span<const double> h = hwp_of(j);
+      weights.resize(3 * j.count);
+      for (std::size_t i = 0; i < j.count; ++i) {
+        const std::array<double, 3> a = pisco::stokes_weights(modelled[j.detector], detector_view.psi[i],
+                                                              h.empty() ? 0.0 : h[i]);
+        std::copy(a.begin(), a.end(), weights.begin() + std::ptrdiff_t(3 * i));
+      }
+    }
+    if (tod_file)
+      tod_file->write(j.detector, j.first, t, c.output.tod_pointing ? &detector_view : nullptr, fl,
+                      c.output.tod_weights ? std::span<const double>(weights) : std::span<const double>());
     progress.advance(j.count);
   };
   int next_slot = 0;
