@@ -28,6 +28,9 @@ import os
 import sys
 
 UNSEEN = -1.6375e30
+# Debian's healpy-data (a dependency of the project): the pixel windows, which healpy from PyPI would
+# otherwise download.
+HEALPY_DATA = "/usr/share/healpy/data"
 
 
 class InputError(Exception):
@@ -53,6 +56,21 @@ def galactic_latitude_deg(nside, coord):
     if coord != "G":
         theta, phi = hp.Rotator(coord=[coord, "G"])(theta, phi)
     return 90.0 - np.degrees(theta)
+
+
+def pixel_window(nside, lmax):
+    """Temperature and polarization pixel windows of NSIDE from healpy-data (l = 0..lmax)."""
+    import numpy as np
+    from astropy.io import fits
+    path = os.path.join(HEALPY_DATA, f"pixel_window_n{nside:04d}.fits")
+    if not os.path.isfile(path):
+        raise InputError(f"{path}: no such file (Debian's healpy-data holds the pixel windows)")
+    with fits.open(path) as f:
+        t = f[1].data
+        pt, pp = np.asarray(t.field(0), dtype=float), np.asarray(t.field(1), dtype=float)
+    if pt.size <= lmax:
+        raise InputError(f"{path}: the pixel window stops at l = {pt.size - 1}; the spectra need l <= {lmax}")
+    return pt[: lmax + 1], pp[: lmax + 1]
 
 
 def read_beam_window(path, lmax):
@@ -100,7 +118,7 @@ def masked_spectra(maps_path, hits_path, out, beam_window=None, fwhm_deg=None, h
         bl = hp.gauss_beam(math.radians(fwhm_deg), lmax=lmax)
     else:
         bl = np.ones(lmax + 1)
-    pt, pp = hp.pixwin(nside, pol=True, lmax=lmax)
+    pt, pp = pixel_window(nside, lmax)
     pp = np.where(np.arange(lmax + 1) < 2, 1.0, pp)
     f0 = nmt.NmtField(mask, [maps[0]], beam=bl * pt, lmax=lmax)
     f2 = nmt.NmtField(mask, [maps[1], maps[2]], beam=bl * pp, purify_b=purify, lmax=lmax)
