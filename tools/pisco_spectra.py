@@ -178,7 +178,7 @@ def report(case_dir, args):
                                             apodize=args.apodize_deg, bin_width=10)
         rl, rbb = tensor_reference(int(ell.max()) + 10)
         ref = np.interp(ell, rl, rbb)
-        sel = ell >= 2
+        sel = (ell >= 2) & (ell <= 2 * (ell.max() + 5) / 3)  # to l = 2 NSIDE, where the windows are reliable
         peak_i = int(np.argmax(np.where(sel, dl["BB"], -np.inf)))
         above = np.nonzero(sel & (dl["BB"] > ref))[0]
         fig, ax = plt.subplots(figsize=(7, 4.2))
