@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -278,3 +279,36 @@ TEST(Spectra, DeconvolveWindowsAndDl) {
 }
 
 }  // namespace
+
+TEST(Spectra, RadialBeamWindow) {
+  // exp(kappa cos theta) over the whole sphere has b_l = I_{l+1/2}(kappa) / I_{1/2}(kappa) exactly.
+  const double kappa = 100.0;
+  const auto vmf = pisco::radial_beam_window([&](double t) { return std::exp(kappa * (std::cos(t) - 1.0)); },
+                                             std::numbers::pi, 200, 20000);
+  double worst = 0;
+  for (int l = 0; l <= 200; ++l)
+    worst = std::max(worst, std::abs(vmf[l] - std::cyl_bessel_i(l + 0.5, kappa) / std::cyl_bessel_i(0.5, kappa)));
+  std::printf("radial window of exp(kappa cos theta), l <= 200: max error %.2e\n", worst);
+  EXPECT_LT(worst, 1e-10);
+  // A 1.5 deg round Gaussian cut at 5 deg against the flat-sky window exp(-l(l+1) s^2 / 2): they differ
+  // by O(s^2) only.
+  const double fwhm = 1.5 * pisco::deg;
+  const auto g = pisco::radial_beam_window(
+      [&](double t) { return pisco::elliptical_gaussian_radial_profile(fwhm, fwhm, t); }, 5 * pisco::deg, 256);
+  const auto ref = pisco::gaussian_beam_window(fwhm, 256, false);
+  for (int l = 0; l <= 256; l += 16) EXPECT_NEAR(g[l], ref[l], 2e-4 * (1 + l * l * 1e-4)) << l;
+  // The elliptical profile is the azimuthal mean of the elliptical Gaussian (trapezoid rule in phi,
+  // exact to rounding for this periodic integrand).
+  const double fx = 1.55 * pisco::deg, fy = 1.45 * pisco::deg, s = 1.0 / std::sqrt(8 * std::log(2.0));
+  for (double t : {0.0, 0.3 * pisco::deg, 1.0 * pisco::deg, 3.0 * pisco::deg}) {
+    double mean = 0;
+    const int n = 256;
+    for (int k = 0; k < n; ++k) {
+      const double phi = 2 * std::numbers::pi * k / n, u = t * std::cos(phi), v = t * std::sin(phi);
+      mean += std::exp(-(u * u / (2 * std::pow(fx * s, 2)) + v * v / (2 * std::pow(fy * s, 2)))) / n;
+    }
+    EXPECT_NEAR(pisco::elliptical_gaussian_radial_profile(fx, fy, t), mean, 1e-14) << t;
+  }
+  EXPECT_THROW(pisco::radial_beam_window([](double) { return 1.0; }, 4.0, 10), pisco::Error);
+  EXPECT_THROW(pisco::radial_beam_window([](double) { return NAN; }, 0.1, 10), pisco::Error);
+}

@@ -7,6 +7,7 @@
 #include "pisco/focal_plane.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/mapmaker.hpp"
+#include "pisco/mismatch.hpp"
 #include "pisco/output_file.hpp"
 #include "pisco/pointing.hpp"
 #include "pisco/pointing_file.hpp"

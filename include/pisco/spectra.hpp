@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <span>
 #include <string>
 #include <vector>
@@ -35,6 +36,16 @@ Spectra anafast(std::span<const double> I, std::span<const double> Q, std::span<
 
 // Beam and pixel windows.
 std::vector<double> gaussian_beam_window(double fwhm, int lmax, bool polarization);
+// The beam window of a circularly symmetric profile b(theta) (paper 7.1.4: the mean radial profile
+// of the focal plane's beams): b_l = int b P_l(cos theta) sin theta dtheta / int b sin theta dtheta
+// over [0, theta_max], by the composite Simpson rule on `steps` intervals (even; the profile must be
+// resolved by theta_max / steps). Throws pisco::Error for theta_max outside (0, pi], a profile with no
+// positive integral, or a non-finite value.
+std::vector<double> radial_beam_window(const std::function<double(double)>& profile, double theta_max, int lmax,
+                                       int steps = 20000);
+// The azimuthal mean of the elliptical Gaussian exp(-(u^2/2 s_x^2 + v^2/2 s_y^2)) at radius theta:
+// exp(-theta^2 (a + b)/2) I0(theta^2 (a - b)/2), a = 1/2 s_x^2, b = 1/2 s_y^2 (s = FWHM / sqrt(8 ln 2)).
+double elliptical_gaussian_radial_profile(double fwhm_x, double fwhm_y, double theta);
 // HEALPix pixel window of `nside` from healpy-data (temperature or polarization column).
 std::vector<double> pixel_window(int nside, int lmax, bool polarization);
 

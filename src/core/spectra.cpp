@@ -254,6 +254,47 @@ Spectra anafast(std::span<const double> I, std::span<const double> Q, std::span<
   return s;
 }
 
+std::vector<double> radial_beam_window(const std::function<double(double)>& profile, double theta_max, int lmax,
+                                       int steps) {
+  check_lmax("radial_beam_window", lmax);
+  if (!(theta_max > 0.0 && theta_max <= std::numbers::pi))
+    throw Error("radial_beam_window: theta_max = " + std::to_string(theta_max) + " rad must be in (0, pi]");
+  if (steps < 2 || steps % 2) throw Error("radial_beam_window: steps = " + std::to_string(steps) + " must be even and >= 2");
+  std::vector<double> sum(std::size_t(lmax) + 1, 0.0);
+  const double h = theta_max / steps;
+  for (int i = 0; i <= steps; ++i) {
+    const double theta = i * h, b = profile(theta);
+    if (!std::isfinite(b))
+      throw Error("radial_beam_window: the profile is not finite at theta = " + std::to_string(theta) + " rad");
+    const double w = (i == 0 || i == steps ? 1.0 : (i % 2 ? 4.0 : 2.0)) * b * std::sin(theta);
+    if (w == 0.0) continue;
+    // P_l(x) by the three-term recurrence.
+    const double x = std::cos(theta);
+    double p0 = 1.0, p1 = x;
+    sum[0] += w;
+    if (lmax >= 1) sum[1] += w * x;
+    for (int l = 2; l <= lmax; ++l) {
+      const double p2 = ((2.0 * l - 1.0) * x * p1 - (l - 1.0) * p0) / l;
+      sum[l] += w * p2;
+      p0 = p1;
+      p1 = p2;
+    }
+  }
+  if (!(sum[0] > 0.0)) throw Error("radial_beam_window: the profile's integral is not positive");
+  std::vector<double> bl(sum.size());
+  for (std::size_t l = 0; l < sum.size(); ++l) bl[l] = sum[l] / sum[0];
+  return bl;
+}
+
+double elliptical_gaussian_radial_profile(double fwhm_x, double fwhm_y, double theta) {
+  const double to_sigma = 1.0 / std::sqrt(8.0 * std::log(2.0));
+  const double a = 0.5 / std::pow(fwhm_x * to_sigma, 2), b = 0.5 / std::pow(fwhm_y * to_sigma, 2);
+  const double t2 = theta * theta;
+  // exp(-t2 (a+b)/2) I0(t2 |a-b|/2), written with the exponentially scaled I0 to stay finite.
+  const double z = 0.5 * t2 * std::abs(a - b);
+  return std::exp(-t2 * (a + b) / 2 + z) * (z < 700 ? std::cyl_bessel_i(0.0, z) * std::exp(-z) : 1.0 / std::sqrt(2 * std::numbers::pi * z));
+}
+
 std::vector<double> gaussian_beam_window(double fwhm, int lmax, bool polarization) {
   if (!std::isfinite(fwhm) || fwhm < 0.0)
     throw Error("gaussian_beam_window: fwhm = " + std::to_string(fwhm) +

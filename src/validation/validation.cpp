@@ -281,7 +281,8 @@ CaseResult pointing_offsets(Scale scale, const std::string& backend) {
 
 std::vector<std::function<CaseResult(Scale)>> all_cases(const std::string& backend) {
   return {[backend](Scale s) { return point_source(s, backend); }, [backend](Scale s) { return ideal_cmb(s, backend); },
-          [backend](Scale s) { return pointing_offsets(s, backend); }};
+          [backend](Scale s) { return pointing_offsets(s, backend); },
+          [backend](Scale s) { return class_survey(s, backend); }};
 }
 
 }  // namespace pisco::validation

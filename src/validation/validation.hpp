@@ -3,6 +3,7 @@
 // (which asserts each figure) and by `pisco-vk validate` (which prints them as a table).
 #pragma once
 
+#include <filesystem>
 #include <functional>
 #include <string>
 #include <vector>
@@ -41,6 +42,24 @@ CaseResult ideal_cmb(Scale scale, const std::string& backend = "cpu");
 // E (paper 6.3): the same with random offsets from the pixel centres (spurious BB), symmetric
 // offsets (BB falls by >= 1e3), and an unpolarized sky (no T->P).
 CaseResult pointing_offsets(Scale scale, const std::string& backend = "cpu");
+
+// F (paper 7): a CLASS-like survey of constant-elevation scans with PSB pairs: matched pairs on an
+// unpolarized sky (no EE, BB), pointing mismatch (delta_p = 0.42% and half of it) and beam mismatch
+// (delta_b = 1.73% and half of it) leaking T into B as delta^2, and, at full scale, matched pairs on a
+// polarized r = 0 sky (P -> B from uneven intra-pixel coverage). Test scale: 4 h, 4 pairs, NSIDE 64;
+// full: a week, 36 pairs, NSIDE 128 (the paper's 871 million samples).
+enum class Mismatch { none, pointing, beam };
+struct SurveyOptions {
+  int nside = 0;       // 0: the scale's
+  int pairs = 0;       // 0: the scale's
+  double hours = 0;    // 0: the scale's
+  bool polarized = false;  // run the polarized case at test scale too
+  // Non-empty: maps, hits, spectra and beam window of every case under report_dir/F/<case>/, and
+  // report_dir/F/report.md.
+  std::filesystem::path report_dir;
+  std::filesystem::path assets_dir;  // empty: the source tree's assets/
+};
+CaseResult class_survey(Scale scale, const std::string& backend = "cpu", const SurveyOptions& options = {});
 
 // Every case, in order, through the given backend.
 std::vector<std::function<CaseResult(Scale)>> all_cases(const std::string& backend = "cpu");

@@ -1,5 +1,8 @@
 // pisco-vk: the command line of PISCO-VK (README.md, "The command line"), a thin layer over the library.
+#include <algorithm>
 #include <cstdio>
+#include <functional>
+#include <vector>
 #include <filesystem>
 #include <string>
 #include <unistd.h>
@@ -32,11 +35,33 @@ fs::path data_dir() {
 }
 
 // A pass/fail table of the validation cases with their figures; the exit status says whether all passed.
-int validate(bool full, const std::string& backend) {
+struct ValidateOptions {
+  bool full = false;
+  std::string backend = "cpu";
+  std::vector<std::string> cases;  // empty: all
+  std::string report_dir;          // F's report; --full defaults to docs/validation
+  pisco::validation::SurveyOptions survey;
+  std::string spectra_python;      // NaMaster's python for F's report; default <data>/build/spectra-venv
+};
+
+int validate(const ValidateOptions& o, const fs::path& data) {
   using namespace pisco::validation;
+  const Scale scale = o.full ? Scale::full : Scale::test;
+  SurveyOptions survey = o.survey;
+  survey.assets_dir = data / "assets";
+  survey.report_dir = !o.report_dir.empty() ? fs::path(o.report_dir) : o.full ? fs::path("docs/validation") : fs::path();
+  const std::vector<std::pair<std::string, std::function<CaseResult()>>> cases{
+      {"C", [&] { return point_source(scale, o.backend); }},
+      {"D", [&] { return ideal_cmb(scale, o.backend); }},
+      {"E", [&] { return pointing_offsets(scale, o.backend); }},
+      {"F", [&] { return class_survey(scale, o.backend, survey); }}};
+  for (const auto& c : o.cases)
+    if (c != "C" && c != "D" && c != "E" && c != "F")
+      throw pisco::Error("validate --case: expected C, D, E or F, got '" + c + "'");
   bool all = true;
-  for (const auto& run_case : all_cases(backend)) {
-    const CaseResult r = run_case(full ? Scale::full : Scale::test);
+  for (const auto& [id, run_case] : cases) {
+    if (!o.cases.empty() && std::find(o.cases.begin(), o.cases.end(), id) == o.cases.end()) continue;
+    const CaseResult r = run_case();
     std::printf("\n%s  %s  [%s, %.1f s]\n", r.id.c_str(), r.title.c_str(), r.pass() ? "pass" : "FAIL", r.seconds);
     for (const auto& n : r.notes) std::printf("    %s\n", n.c_str());
     for (const auto& f : r.figures)
@@ -44,8 +69,25 @@ int validate(bool full, const std::string& backend) {
                   f.unit.c_str(), f.bar);
     std::fflush(stdout);
     all = all && r.pass();
+    if (id == "F" && !survey.report_dir.empty()) {
+      // NaMaster's mask-corrected spectra and the report's figures (tools/pisco_spectra.py).
+      const fs::path python = !o.spectra_python.empty() ? fs::path(o.spectra_python)
+                                                        : data / "build" / "spectra-venv" / "bin" / "python";
+      if (!fs::exists(python)) {
+        std::printf("    spectra: skipped (%s not found: make it with tools/spectra_env.py, or give --spectra-python)\n",
+                    python.c_str());
+      } else {
+        const auto st = pisco_cli::run_child(
+            {python.string(), (data / "tools" / "pisco_spectra.py").string(), "--report", (survey.report_dir / "F").string()},
+            false);
+        if (st.spawn_error || st.code || st.signal) {
+          std::printf("    spectra: tools/pisco_spectra.py failed (status %d)\n", st.code);
+          all = false;
+        }
+      }
+    }
   }
-  std::printf("\nvalidation (%s scale): %s\n", full ? "full" : "test", all ? "all cases pass" : "FAILED");
+  std::printf("\nvalidation (%s scale): %s\n", o.full ? "full" : "test", all ? "all cases pass" : "FAILED");
   return all ? 0 : 1;
 }
 
@@ -101,11 +143,17 @@ int main(int argc, char** argv) {
   bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
       ->check(CLI::IsMember({"aperture", "detector"}));
 
-  auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E) and print a pass/fail table.");
-  bool full = false;
-  std::string validate_backend = "cpu";
-  val->add_flag("--full", full, "Paper scale (C at three beam resolutions, D with an NSIDE 512 sky); minutes on a CPU.");
-  val->add_option("-b,--backend", validate_backend, "Backend the cases run through (default: cpu, the reference).");
+  auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E, F) and print a pass/fail table.");
+  ValidateOptions vo;
+  val->add_flag("--full", vo.full, "Paper scale (C at three beam resolutions, D and E with an NSIDE 512 sky, F a week of 36 pairs at NSIDE 128); hours on a CPU.");
+  val->add_option("-b,--backend", vo.backend, "Backend the cases run through (default: cpu, the reference).");
+  val->add_option("--case", vo.cases, "Only these cases (C, D, E, F; repeatable).");
+  val->add_option("--report-dir", vo.report_dir, "Where F writes its maps, spectra and report.md (default with --full: docs/validation).");
+  val->add_option("--f-hours", vo.survey.hours, "F: hours of scan instead of the scale's (test 4, full 168).")->check(CLI::PositiveNumber);
+  val->add_option("--f-pairs", vo.survey.pairs, "F: PSB pairs instead of the scale's (test 4, full 36).")->check(CLI::Range(1, 400));
+  val->add_option("--f-nside", vo.survey.nside, "F: NSIDE of sky and maps instead of the scale's (test 64, full 128).")->check(CLI::IsMember({16, 32, 64, 128, 256, 512}));
+  val->add_flag("--f-polarized", vo.survey.polarized, "F: run the polarized case at test scale too.");
+  val->add_option("--spectra-python", vo.spectra_python, "F: the Python of the NaMaster environment (tools/spectra_env.py; default build/spectra-venv).");
 
   try {
     app.parse(argc, argv);
@@ -116,7 +164,7 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("devices")) return devices();
     if (app.got_subcommand("bench")) return pisco_cli::run_bench(bench_options);
-    if (app.got_subcommand("validate")) return validate(full, validate_backend);
+    if (app.got_subcommand("validate")) return validate(vo, data_dir());
     const fs::path data = data_dir();
     const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
     pisco_cli::SimulationConfig config;
