@@ -128,7 +128,9 @@ SurveyRun observe(const Geometry& g, const Sky& sky, Mismatch kind, double delta
       beams.push_back(Beamsor::elliptical_gaussian(s.fwhm_x, s.fwhm_y, s.angle, bo));
       widths.push_back({s.fwhm_x, s.fwhm_y});
       Detector d;
-      d.name = "q" + std::to_string(k) + (half ? "b" : "a");
+      d.name = "q";
+      d.name += std::to_string(k);
+      d.name += half ? 'b' : 'a';
       d.zeta = zeta - half * pi / 2;
       d.beam = beams.size() - 1;
       d.set_offset(s.xi, s.eta, 0.0);

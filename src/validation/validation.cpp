@@ -18,6 +18,13 @@
 namespace pisco::validation {
 namespace {
 
+// An ideal detector on the boresight: zeta 0, epsilon 0, gain 1, beam 0.
+Detector one_detector() {
+  Detector d;
+  d.name = "det";
+  return d;
+}
+
 constexpr double pi = std::numbers::pi;
 const double fwhm = 1.5 * deg;
 
@@ -78,7 +85,7 @@ void observe_point_source(double I, double Q, double U, double grid_step, const 
   o.grid_step = grid_step;
   std::vector<Beamsor> beams{Beamsor::gaussian(fwhm, o)};
   FocalPlane fp;
-  fp.add({"det", 0.0, 0.0, 1.0, 0});
+  fp.add(one_detector());
   Engine engine(sky, beams, fp, {.backend = backend});
   if (r.notes.empty()) r.notes.push_back("engine: " + engine.backend_name() + ", " + engine.device_name());
   const Pointing raster = raster_scan(at.theta, at.phi, radius, nside, {0.0, 45 * deg, 90 * deg});
@@ -165,7 +172,7 @@ CmbObservation observe_cmb(Scale scale, Offsets offsets, bool unpolarized, const
   o.rho_max = 5 * deg;
   std::vector<Beamsor> beams{Beamsor::gaussian(fwhm, o)};
   FocalPlane fp;
-  fp.add({"det", 0.0, 0.0, 1.0, 0});
+  fp.add(one_detector());
   Engine engine(sky, beams, fp, {.backend = backend});
   const std::vector<double> psis{0.0, 45 * deg, 90 * deg};
   const Pointing scan = offsets == Offsets::none ? pixel_centre_scan(nside_out, psis)
