@@ -34,7 +34,9 @@ MODULES = ["pymaster", "healpy", "numpy", "matplotlib"]
 BINARY = ["numpy", "healpy", "ducc0", "matplotlib"]
 PYMASTER = "pymaster==3.0.1"
 REGISTRY = "https://pypi.org/simple/pip/"
-CHEALPIX = ("/usr/lib/x86_64-linux-gnu/libchealpix.so", "/usr/include/chealpix.h")
+# Debian's chealpix (libchealpix-dev): the shared library in the machine's multiarch directory.
+CHEALPIX = (next(iter(sorted(glob.glob("/usr/lib/*/libchealpix.so"))), "/usr/lib/<multiarch>/libchealpix.so"),
+            "/usr/include/chealpix.h")
 
 
 class Unavailable(Exception):
