@@ -69,6 +69,7 @@ struct BackendEntry {
 const std::vector<BackendEntry>& backend_registry();
 
 BackendEntry cpu_backend_entry();
+BackendEntry simd_backend_entry();    // src/simd/, when built with Highway
 BackendEntry vulkan_backend_entry();  // src/vulkan/, when built with Vulkan
 BackendEntry cuda_backend_entry();    // src/cuda/, when built with CUDA
 

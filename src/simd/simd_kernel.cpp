@@ -1,0 +1,305 @@
+// The simd backend's kernel (docs/simd.md): one sample's disc, a vector of float32 lanes at a time.
+// Highway compiles this file once per instruction set (foreach_target.h re-includes it with each
+// target's HWY_NAMESPACE) and HWY_DYNAMIC_DISPATCH picks the best the processor supports at run time:
+// AVX-512 (Highway's AVX3), AVX2, SSE4 or the portable EMU128 on x86-64; NEON on Arm.
+//
+// The per-pixel formulas are core/contribution-inl.hpp, included into each target's namespace with
+// T = F, a float32 vector with +, -, *, /: the reference's own arithmetic, lane by lane. Only what
+// cannot be written as a formula of T is vector code here: loads, gathers of the beam weights,
+// the interpolation's index arithmetic and masks, and the compensated sum.
+//
+// The pixels of a range are consecutive in RING order, so the sky is stored as structure of arrays
+// and a vector of pixels is one contiguous load per quantity; a range's last vector is loaded whole
+// (the arrays are padded) and its lanes past the range are masked out of the sum. Each range starts
+// at lane 0: which lane evaluates a pixel depends only on the disc, so results are deterministic and
+// independent of the chunk size and of the thread that runs the sample.
+
+// Scalable vectors cannot be members of a struct (F below): no SVE or RVV targets. SSSE3 adds little
+// beside SSE4 and costs compile time.
+#ifndef HWY_DISABLED_TARGETS
+#define HWY_DISABLED_TARGETS (HWY_SSSE3 | HWY_SVE | HWY_SVE2 | HWY_SVE_256 | HWY_SVE2_128 | HWY_RVV)
+#endif
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "simd/simd_kernel.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <vector>
+
+#include "simd/simd_kernel.hpp"
+#include "pisco/error.hpp"
+
+HWY_BEFORE_NAMESPACE();
+namespace pisco::detail::simd {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+using DF = hn::ScalableTag<float>;
+using DI = hn::RebindToSigned<DF>;
+using VF = hn::Vec<DF>;
+using VI = hn::Vec<DI>;
+using MF = hn::Mask<DF>;
+
+// A vector of float32 lanes as the number type of the shared formulas. Trivially constructible, as
+// float is: the formulas' aggregates (Vec3<F>, PixelGeometry<F>) get implicit constructors, which
+// GCC compiles without the target's instruction set.
+struct F {
+  VF v;
+  F() = default;
+  HWY_INLINE F(float x) : v(hn::Set(DF(), x)) {}  // NOLINT: T(1), T(2) in the formulas
+  HWY_INLINE F(VF x) : v(x) {}                    // NOLINT
+};
+HWY_INLINE F operator+(const F& a, const F& b) { return F(hn::Add(a.v, b.v)); }
+HWY_INLINE F operator-(const F& a, const F& b) { return F(hn::Sub(a.v, b.v)); }
+HWY_INLINE F operator*(const F& a, const F& b) { return F(hn::Mul(a.v, b.v)); }
+HWY_INLINE F operator/(const F& a, const F& b) { return F(hn::Div(a.v, b.v)); }
+
+// The formulas of the reference, in this target's namespace (Vec3, SampleFrame, pixel_geometry,
+// stokes_response, effective_weights, ...).
+#include "core/contribution-inl.hpp"
+
+constexpr std::size_t max_lanes = 64;
+static_assert(HWY_MAX_BYTES / sizeof(float) <= max_lanes, "scratch arrays hold one vector of float32 lanes");
+
+HWY_INLINE Vec3<F> broadcast(const detail::Vec3<double>& a) {
+  return {F(float(a.x)), F(float(a.y)), F(float(a.z))};
+}
+
+// One sample. Radial: weights from a radial profile (else a 2D grid); Columns: weight columns stored
+// (2: w_U = w_V = 0); Plate: effective weights w M(theta); Exact: the float64 sums (monopole,
+// per-sample normalization), whose float64 beam coordinates the float32 evaluation then uses too,
+// as the GPU kernels do (docs/vulkan.md, "Precision").
+template <bool Radial, int Columns, bool Plate, bool Exact>
+HWY_NOINLINE void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  const DF df;
+  const DI di;
+  const std::size_t N = hn::Lanes(df);
+  const detail::SampleFrame<double>& fd = *in.frame;
+  SampleFrame<F> f;
+  f.theta_p = broadcast(fd.theta_p);
+  f.phi_p = broadcast(fd.phi_p);
+  f.p = broadcast(fd.p);
+  f.e_c = broadcast(fd.e_c);
+  F m[16];
+  double col0[4] = {1.0, 0.0, 0.0, 0.0};
+  if constexpr (Plate) {
+    for (int k = 0; k < 16; ++k) m[k] = F(float(in.plate[k]));
+    for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
+  }
+  const F inv_step(det.grid_inv_step), grid_a(det.grid_a), last(float(det.grid_n - 1)), one(1.0f);
+  const VI zero_i = hn::Zero(di), max_i = hn::Set(di, det.grid_n - 2), n_i = hn::Set(di, det.grid_n);
+  const VF zero = hn::Zero(df);
+  const float* w0 = det.w[0];
+  const float* w1 = det.w[1];
+  const float* w2 = det.w[Columns == 4 ? 2 : 0];
+  const float* w3 = det.w[Columns == 4 ? 3 : 0];
+
+  VF sum = zero, carry = zero;
+  double monopole = 0.0, norm = 0.0;
+  HWY_ALIGN float xs[max_lanes] = {}, ys[max_lanes] = {};
+
+  for (std::size_t r = 0; r < in.range_count; ++r) {
+    const std::uint32_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
+    for (std::size_t p = begin; p < end; p += N) {
+      const std::size_t live_lanes = std::min<std::size_t>(N, end - p);
+      const MF live = hn::FirstN(df, live_lanes);
+      const Vec3<F> k{F(hn::LoadU(df, sky.kx + p)), F(hn::LoadU(df, sky.ky + p)), F(hn::LoadU(df, sky.kz + p))};
+      PixelGeometry<F> g = pixel_geometry(f, k);
+
+      if constexpr (Exact) {
+        // The float64 sums, pixel by pixel with the reference's interpolation (T = double), and
+        // the float64 beam coordinates for the float32 lanes.
+        for (std::size_t l = 0; l < live_lanes; ++l) {
+          const double* kv = sky.vectors + 3 * (p + l);
+          const detail::Vec3<double> kd{kv[0], kv[1], kv[2]};
+          const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
+          xs[l] = float(x);
+          ys[l] = float(y);
+          double w[4];
+          if (Radial)
+            detail::interpolate_radial(det.weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
+          else
+            detail::interpolate_weights(det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
+          if (in.monopole) monopole += Plate ? w[0] * col0[0] + w[1] * col0[1] + w[2] * col0[2] + w[3] * col0[3] : w[0];
+          if (in.per_sample) {
+            double wn[4];
+            if (Radial)
+              detail::interpolate_radial(det.norm_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wn);
+            else
+              detail::interpolate_weights(det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wn);
+            norm += wn[0];
+          }
+        }
+        g.x = F(hn::Load(df, xs));
+        g.y = F(hn::Load(df, ys));
+      }
+
+      // The beam weights (interpolate_radial / interpolate_weights of the formulas, with gathers).
+      F w[4] = {F(zero), F(zero), F(zero), F(zero)};
+      MF inside;
+      if constexpr (Radial) {
+        const F u = F(hn::Sqrt(hn::Max(g.r2.v, zero))) * inv_step;
+        inside = hn::Le(u.v, last.v);  // false for NaN
+        const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
+        const F fr = u - F(hn::ConvertTo(df, i));
+        const F gr = one - fr;
+        auto column = [&](const float* c) {
+          return gr * F(hn::GatherIndex(df, c, i)) + fr * F(hn::GatherIndex(df, c + 1, i));
+        };
+        w[0] = column(w0);
+        w[1] = column(w1);
+        if constexpr (Columns == 4) {
+          w[2] = column(w2);
+          w[3] = column(w3);
+        }
+      } else {
+        const F u = (g.x + grid_a) * inv_step;
+        const F v = (g.y + grid_a) * inv_step;
+        inside = hn::And(hn::And(hn::Ge(u.v, zero), hn::Ge(v.v, zero)), hn::And(hn::Le(u.v, last.v), hn::Le(v.v, last.v)));
+        const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
+        const VI j = hn::Min(hn::Max(hn::ConvertTo(di, v.v), zero_i), max_i);
+        const F fu = u - F(hn::ConvertTo(df, i));
+        const F fv = v - F(hn::ConvertTo(df, j));
+        const F c00 = (one - fu) * (one - fv), c10 = fu * (one - fv), c01 = (one - fu) * fv, c11 = fu * fv;
+        const VI node = hn::Add(hn::Mul(j, n_i), i);
+        const std::size_t n = std::size_t(det.grid_n);
+        auto column = [&](const float* c) {
+          return c00 * F(hn::GatherIndex(df, c, node)) + c10 * F(hn::GatherIndex(df, c + 1, node)) +
+                 c01 * F(hn::GatherIndex(df, c + n, node)) + c11 * F(hn::GatherIndex(df, c + n + 1, node));
+        };
+        w[0] = column(w0);
+        w[1] = column(w1);
+        if constexpr (Columns == 4) {
+          w[2] = column(w2);
+          w[3] = column(w3);
+        }
+      }
+
+      const F I(hn::LoadU(df, sky.i + p)), Q(hn::LoadU(df, sky.q + p)), U(hn::LoadU(df, sky.u + p));
+      F response;
+      if constexpr (Plate) {
+        F v[4];
+        effective_weights(w, m, v);
+        response = stokes_response(v, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, sky.v + p)));
+      } else if constexpr (Columns == 4) {
+        response = stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, sky.v + p)));
+      } else {
+        // stokes_response with w_U = w_V = 0.
+        response = w[0] * I + w[1] * (Q * g.cos2chi + U * g.sin2chi);
+      }
+      const VF value = hn::IfThenElseZero(hn::And(live, inside), response.v);
+      // Kahan-compensated float32 sum, lane by lane (as each GPU lane sums its pixels).
+      const VF y = hn::Sub(value, carry);
+      const VF t = hn::Add(sum, y);
+      carry = hn::Sub(hn::Sub(t, sum), y);
+      sum = t;
+    }
+  }
+  HWY_ALIGN float totals[max_lanes];
+  hn::Store(hn::Sub(sum, carry), df, totals);
+  double total = 0.0;
+  for (std::size_t l = 0; l < N; ++l) total += double(totals[l]);
+  out.sum = total;
+  out.monopole_weight = monopole;
+  out.norm = norm;
+}
+
+template <bool Radial, int Columns, bool Plate>
+HWY_INLINE void SampleExact(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (in.monopole || in.per_sample)
+    Sample<Radial, Columns, Plate, true>(sky, det, in, out);
+  else
+    Sample<Radial, Columns, Plate, false>(sky, det, in, out);
+}
+
+template <bool Radial, int Columns>
+HWY_INLINE void SamplePlate(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (in.plate)
+    SampleExact<Radial, Columns, true>(sky, det, in, out);
+  else
+    SampleExact<Radial, Columns, false>(sky, det, in, out);
+}
+
+template <bool Radial>
+HWY_INLINE void SampleColumns(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (det.columns == 4)
+    SamplePlate<Radial, 4>(sky, det, in, out);
+  else
+    SamplePlate<Radial, 2>(sky, det, in, out);
+}
+
+void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (det.radial)
+    SampleColumns<true>(sky, det, in, out);
+  else
+    SampleColumns<false>(sky, det, in, out);
+}
+
+const char* TargetHere() { return hwy::TargetName(HWY_TARGET); }
+std::size_t LanesHere() { return hn::Lanes(DF()); }
+
+}  // namespace HWY_NAMESPACE
+}  // namespace pisco::detail::simd
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace pisco::detail::simd {
+
+HWY_EXPORT(ConvolveSample);
+HWY_EXPORT(TargetHere);
+HWY_EXPORT(LanesHere);
+
+namespace {
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+constexpr std::size_t table_size = sizeof(HWY_DISPATCH_TABLE(ConvolveSample)) / sizeof(HWY_DISPATCH_TABLE(ConvolveSample)[0]);
+}  // namespace
+
+Kernel choose_kernel(const std::string& name) {
+  const std::vector<std::int64_t> targets = hwy::SupportedAndGeneratedTargets();  // best first
+  std::string available;
+  for (const std::int64_t t : targets) available += (available.empty() ? "" : ", ") + std::string(hwy::TargetName(t));
+  std::int64_t pick = 0;
+  if (name.empty() || lower(name) == "auto") {
+    if (!targets.empty()) pick = targets.front();
+  } else {
+    for (const std::int64_t t : targets)
+      if (!pick && lower(hwy::TargetName(t)) == lower(name)) pick = t;
+    if (!pick)
+      throw Error("simd: no instruction set named '" + name + "' on this machine; available: " + available +
+                  " (or auto)");
+  }
+  Kernel k;
+  if (pick) {
+    hwy::ChosenTarget chosen;  // this engine's own choice, not Highway's process-wide one
+    chosen.Update(pick);
+    k.index = chosen.GetIndex();
+  }
+  if (!pick || k.index >= table_size) {  // a build with a single target: its static dispatch
+    k.index = table_size;
+    k.description = std::string(hwy::TargetName(HWY_STATIC_TARGET)) + ", " +
+                    std::to_string(HWY_STATIC_DISPATCH(LanesHere)()) + " float32 lanes";
+    return k;
+  }
+  k.description = std::string(HWY_DISPATCH_TABLE(TargetHere)[k.index]()) + ", " +
+                  std::to_string(HWY_DISPATCH_TABLE(LanesHere)[k.index]()) + " float32 lanes";
+  return k;
+}
+
+void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const SampleInput& in,
+                     SampleSums& out) {
+  if (kernel.index < table_size)
+    HWY_DISPATCH_TABLE(ConvolveSample)[kernel.index](sky, det, in, out);
+  else
+    HWY_STATIC_DISPATCH(ConvolveSample)(sky, det, in, out);
+}
+
+}  // namespace pisco::detail::simd
+#endif  // HWY_ONCE
