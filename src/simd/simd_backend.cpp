@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <thread>
@@ -39,7 +40,7 @@ std::string requested_target(const std::string& device) {
 // One detector's weights in the kernel's layout: float32 columns (float32_weights, the GPU
 // backends' rule) and the reference's float64 tables.
 struct DetectorTables {
-  std::vector<float> columns[4];
+  std::vector<std::uint64_t> columns[4];
   KernelDetector view{};
 };
 
@@ -56,12 +57,18 @@ DetectorTables detector_tables(const PreparedDetector& det, std::size_t index) {
   bool polarized_uv = false;
   for (std::size_t k = 0; k < nodes; ++k) polarized_uv = polarized_uv || w32[4 * k + 2] != 0.0f || w32[4 * k + 3] != 0.0f;
   const int columns = polarized_uv ? 4 : 2;
+  auto bits = [](float x) {
+    std::uint32_t b;
+    std::memcpy(&b, &x, sizeof b);
+    return std::uint64_t(b);
+  };
   for (int c = 0; c < columns; ++c) {
-    t.columns[c].resize(nodes + 1, 0.0f);  // one node past the end: never weighted, but gathered
-    for (std::size_t k = 0; k < nodes; ++k) t.columns[c][k] = w32[4 * k + c];
+    t.columns[c].resize(nodes + 1, 0);  // one pair past the end: never weighted, but gathered
+    for (std::size_t k = 0; k < nodes; ++k)
+      t.columns[c][k] = bits(w32[4 * k + c]) | (k + 1 < nodes ? bits(w32[4 * (k + 1) + c]) << 32 : 0);
   }
   KernelDetector& v = t.view;
-  for (int c = 0; c < 4; ++c) v.w[c] = c < columns ? t.columns[c].data() : nullptr;
+  for (int c = 0; c < 4; ++c) v.pairs[c] = c < columns ? t.columns[c].data() : nullptr;
   v.columns = columns;
   v.radial = det.radial;
   v.grid_n = det.grid_n;

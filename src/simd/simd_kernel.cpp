@@ -69,12 +69,38 @@ HWY_INLINE Vec3<F> broadcast(const detail::Vec3<double>& a) {
   return {F(float(a.x)), F(float(a.y)), F(float(a.z))};
 }
 
+// A node's weight and its neighbour's (along r, or along x), g0 = w(node) and g1 = w(node + 1), for
+// every lane, from the detector's table of pairs: one 64-bit gather element per lane instead of two
+// 32-bit ones (gathers cost about one cycle an element: half the gathered elements, the kernel's
+// largest cost).
+HWY_INLINE void gather_pair(const std::uint64_t* pairs, VI node, F& g0, F& g1) {
+  const DF df;
+#if HWY_TARGET == HWY_SCALAR
+  const float* flat = reinterpret_cast<const float*>(pairs);
+  const VI twice = hn::Add(node, node);
+  g0 = F(hn::GatherIndex(df, flat, twice));
+  g1 = F(hn::GatherIndex(df, flat + 1, twice));
+#else
+  const DI di;
+  const hn::Half<DI> dh;
+  const hn::Repartition<std::int64_t, DF> d64;
+  const hn::Repartition<std::uint64_t, DF> du64;
+  const VF lo = hn::BitCast(df, hn::GatherIndex(du64, pairs, hn::PromoteTo(d64, hn::LowerHalf(dh, node))));
+  const VF hi = hn::BitCast(df, hn::GatherIndex(du64, pairs, hn::PromoteTo(d64, hn::UpperHalf(dh, node))));
+  (void)di;
+  g0 = F(hn::ConcatEven(df, hi, lo));
+  g1 = F(hn::ConcatOdd(df, hi, lo));
+#endif
+}
+
 // One sample. Radial: weights from a radial profile (else a 2D grid); Columns: weight columns stored
 // (2: w_U = w_V = 0); Plate: effective weights w M(theta); Exact: the float64 sums (monopole,
 // per-sample normalization), whose float64 beam coordinates the float32 evaluation then uses too,
 // as the GPU kernels do (docs/vulkan.md, "Precision").
+// flatten: the formulas, the lambdas and Highway's operations inlined into one loop (left to its
+// heuristics, GCC calls pixel_geometry<F> out of line and passes its vectors through memory).
 template <bool Radial, int Columns, bool Plate, bool Exact>
-HWY_NOINLINE void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
   const DF df;
   const DI di;
   const std::size_t N = hn::Lanes(df);
@@ -93,112 +119,150 @@ HWY_NOINLINE void Sample(const KernelSky& sky, const KernelDetector& det, const 
   const F inv_step(det.grid_inv_step), grid_a(det.grid_a), last(float(det.grid_n - 1)), one(1.0f);
   const VI zero_i = hn::Zero(di), max_i = hn::Set(di, det.grid_n - 2), n_i = hn::Set(di, det.grid_n);
   const VF zero = hn::Zero(df);
-  const float* w0 = det.w[0];
-  const float* w1 = det.w[1];
-  const float* w2 = det.w[Columns == 4 ? 2 : 0];
-  const float* w3 = det.w[Columns == 4 ? 3 : 0];
+  const std::uint64_t* w0 = det.pairs[0];
+  const std::uint64_t* w1 = det.pairs[1];
+  const std::uint64_t* w2 = det.pairs[Columns == 4 ? 2 : 0];
+  const std::uint64_t* w3 = det.pairs[Columns == 4 ? 3 : 0];
 
   VF sum = zero, carry = zero;
   double monopole = 0.0, norm = 0.0;
-  HWY_ALIGN float xs[max_lanes] = {}, ys[max_lanes] = {};
 
+  // The float64 sums of pixels [p, p + count), pixel by pixel with the reference's interpolation
+  // (T = double), and their float64 beam coordinates rounded to float32 into xs, ys.
+  auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) {
+    for (std::size_t l = 0; l < count; ++l) {
+      const double* kv = sky.vectors + 3 * (p + l);
+      const detail::Vec3<double> kd{kv[0], kv[1], kv[2]};
+      const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
+      xs[l] = float(x);
+      ys[l] = float(y);
+      double w[4];
+      if (Radial)
+        detail::interpolate_radial(det.weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
+      else
+        detail::interpolate_weights(det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
+      if (in.monopole) monopole += Plate ? w[0] * col0[0] + w[1] * col0[1] + w[2] * col0[2] + w[3] * col0[3] : w[0];
+      if (in.per_sample) {
+        double wn[4];
+        if (Radial)
+          detail::interpolate_radial(det.norm_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wn);
+        else
+          detail::interpolate_weights(det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wn);
+        norm += wn[0];
+      }
+    }
+  };
+
+  // One vector of pixels: s[0..6] point at kx, ky, kz, I - I0, Q, U, V of its first pixel (in the
+  // sky or in the staging area), xy at its float64 beam coordinates (Exact); lanes outside `live`
+  // add nothing.
+  auto evaluate = [&](const float* const* s, const float* xs, const float* ys, MF live) HWY_ATTR {
+    const Vec3<F> k{F(hn::LoadU(df, s[0])), F(hn::LoadU(df, s[1])), F(hn::LoadU(df, s[2]))};
+    PixelGeometry<F> g = pixel_geometry(f, k);
+    if constexpr (Exact) {
+      g.x = F(hn::LoadU(df, xs));
+      g.y = F(hn::LoadU(df, ys));
+    }
+
+    // The beam weights (interpolate_radial / interpolate_weights of the formulas, with gathers).
+    F w[4] = {F(zero), F(zero), F(zero), F(zero)};
+    MF inside;
+    if constexpr (Radial) {
+      const F u = F(hn::Sqrt(hn::Max(g.r2.v, zero))) * inv_step;
+      inside = hn::Le(u.v, last.v);  // false for NaN
+      const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
+      const F fr = u - F(hn::ConvertTo(df, i));
+      const F gr = one - fr;
+      auto column = [&](const std::uint64_t* c) HWY_ATTR {
+        F g0, g1;
+        gather_pair(c, i, g0, g1);
+        return gr * g0 + fr * g1;
+      };
+      w[0] = column(w0);
+      w[1] = column(w1);
+      if constexpr (Columns == 4) {
+        w[2] = column(w2);
+        w[3] = column(w3);
+      }
+    } else {
+      const F u = (g.x + grid_a) * inv_step;
+      const F v = (g.y + grid_a) * inv_step;
+      inside = hn::And(hn::And(hn::Ge(u.v, zero), hn::Ge(v.v, zero)), hn::And(hn::Le(u.v, last.v), hn::Le(v.v, last.v)));
+      const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
+      const VI j = hn::Min(hn::Max(hn::ConvertTo(di, v.v), zero_i), max_i);
+      const F fu = u - F(hn::ConvertTo(df, i));
+      const F fv = v - F(hn::ConvertTo(df, j));
+      const F c00 = (one - fu) * (one - fv), c10 = fu * (one - fv), c01 = (one - fu) * fv, c11 = fu * fv;
+      const VI node = hn::Add(hn::Mul(j, n_i), i);
+      const std::size_t n = std::size_t(det.grid_n);
+      auto column = [&](const std::uint64_t* c) HWY_ATTR {
+        F g00, g10, g01, g11;
+        gather_pair(c, node, g00, g10);
+        gather_pair(c + n, node, g01, g11);
+        return c00 * g00 + c10 * g10 + c01 * g01 + c11 * g11;
+      };
+      w[0] = column(w0);
+      w[1] = column(w1);
+      if constexpr (Columns == 4) {
+        w[2] = column(w2);
+        w[3] = column(w3);
+      }
+    }
+
+    const F I(hn::LoadU(df, s[3])), Q(hn::LoadU(df, s[4])), U(hn::LoadU(df, s[5]));
+    F response;
+    if constexpr (Plate) {
+      F v[4];
+      effective_weights(w, m, v);
+      response = stokes_response(v, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, s[6])));
+    } else if constexpr (Columns == 4) {
+      response = stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, s[6])));
+    } else {
+      // stokes_response with w_U = w_V = 0.
+      response = w[0] * I + w[1] * (Q * g.cos2chi + U * g.sin2chi);
+    }
+    const VF value = hn::IfThenElseZero(hn::And(live, inside), response.v);
+    // Kahan-compensated float32 sum, lane by lane (as each GPU lane sums its pixels).
+    const VF y = hn::Sub(value, carry);
+    const VF t = hn::Add(sum, y);
+    carry = hn::Sub(hn::Sub(t, sum), y);
+    sum = t;
+  };
+
+  // Whole vectors of a range straight from the sky; the rest of the range (fewer than N pixels)
+  // is appended to a staging area, evaluated whenever it holds a whole vector. Rings crossing a
+  // Table 1 disc are 17 to 40 pixels long: masking each range's last vector would leave up to half
+  // of the lanes idle. The staging order depends only on the disc (deterministic results).
+  const float* const columns[7] = {sky.kx, sky.ky, sky.kz, sky.i, sky.q, sky.u, sky.v};
+  constexpr int quantities = (Columns == 4 || Plate) ? 7 : 6;  // V only where a weight multiplies it
+  HWY_ALIGN float stage[9][2 * max_lanes];
+  float* const staged[7] = {stage[0], stage[1], stage[2], stage[3], stage[4], stage[5], stage[6]};
+  HWY_ALIGN float xs[max_lanes];
+  HWY_ALIGN float ys[max_lanes];
+  std::size_t fill = 0;
+  const MF all = hn::FirstN(df, N);
   for (std::size_t r = 0; r < in.range_count; ++r) {
-    const std::uint32_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
-    for (std::size_t p = begin; p < end; p += N) {
-      const std::size_t live_lanes = std::min<std::size_t>(N, end - p);
-      const MF live = hn::FirstN(df, live_lanes);
-      const Vec3<F> k{F(hn::LoadU(df, sky.kx + p)), F(hn::LoadU(df, sky.ky + p)), F(hn::LoadU(df, sky.kz + p))};
-      PixelGeometry<F> g = pixel_geometry(f, k);
-
-      if constexpr (Exact) {
-        // The float64 sums, pixel by pixel with the reference's interpolation (T = double), and
-        // the float64 beam coordinates for the float32 lanes.
-        for (std::size_t l = 0; l < live_lanes; ++l) {
-          const double* kv = sky.vectors + 3 * (p + l);
-          const detail::Vec3<double> kd{kv[0], kv[1], kv[2]};
-          const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
-          xs[l] = float(x);
-          ys[l] = float(y);
-          double w[4];
-          if (Radial)
-            detail::interpolate_radial(det.weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
-          else
-            detail::interpolate_weights(det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
-          if (in.monopole) monopole += Plate ? w[0] * col0[0] + w[1] * col0[1] + w[2] * col0[2] + w[3] * col0[3] : w[0];
-          if (in.per_sample) {
-            double wn[4];
-            if (Radial)
-              detail::interpolate_radial(det.norm_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wn);
-            else
-              detail::interpolate_weights(det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wn);
-            norm += wn[0];
-          }
-        }
-        g.x = F(hn::Load(df, xs));
-        g.y = F(hn::Load(df, ys));
-      }
-
-      // The beam weights (interpolate_radial / interpolate_weights of the formulas, with gathers).
-      F w[4] = {F(zero), F(zero), F(zero), F(zero)};
-      MF inside;
-      if constexpr (Radial) {
-        const F u = F(hn::Sqrt(hn::Max(g.r2.v, zero))) * inv_step;
-        inside = hn::Le(u.v, last.v);  // false for NaN
-        const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
-        const F fr = u - F(hn::ConvertTo(df, i));
-        const F gr = one - fr;
-        auto column = [&](const float* c) {
-          return gr * F(hn::GatherIndex(df, c, i)) + fr * F(hn::GatherIndex(df, c + 1, i));
-        };
-        w[0] = column(w0);
-        w[1] = column(w1);
-        if constexpr (Columns == 4) {
-          w[2] = column(w2);
-          w[3] = column(w3);
-        }
-      } else {
-        const F u = (g.x + grid_a) * inv_step;
-        const F v = (g.y + grid_a) * inv_step;
-        inside = hn::And(hn::And(hn::Ge(u.v, zero), hn::Ge(v.v, zero)), hn::And(hn::Le(u.v, last.v), hn::Le(v.v, last.v)));
-        const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
-        const VI j = hn::Min(hn::Max(hn::ConvertTo(di, v.v), zero_i), max_i);
-        const F fu = u - F(hn::ConvertTo(df, i));
-        const F fv = v - F(hn::ConvertTo(df, j));
-        const F c00 = (one - fu) * (one - fv), c10 = fu * (one - fv), c01 = (one - fu) * fv, c11 = fu * fv;
-        const VI node = hn::Add(hn::Mul(j, n_i), i);
-        const std::size_t n = std::size_t(det.grid_n);
-        auto column = [&](const float* c) {
-          return c00 * F(hn::GatherIndex(df, c, node)) + c10 * F(hn::GatherIndex(df, c + 1, node)) +
-                 c01 * F(hn::GatherIndex(df, c + n, node)) + c11 * F(hn::GatherIndex(df, c + n + 1, node));
-        };
-        w[0] = column(w0);
-        w[1] = column(w1);
-        if constexpr (Columns == 4) {
-          w[2] = column(w2);
-          w[3] = column(w3);
-        }
-      }
-
-      const F I(hn::LoadU(df, sky.i + p)), Q(hn::LoadU(df, sky.q + p)), U(hn::LoadU(df, sky.u + p));
-      F response;
-      if constexpr (Plate) {
-        F v[4];
-        effective_weights(w, m, v);
-        response = stokes_response(v, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, sky.v + p)));
-      } else if constexpr (Columns == 4) {
-        response = stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, sky.v + p)));
-      } else {
-        // stokes_response with w_U = w_V = 0.
-        response = w[0] * I + w[1] * (Q * g.cos2chi + U * g.sin2chi);
-      }
-      const VF value = hn::IfThenElseZero(hn::And(live, inside), response.v);
-      // Kahan-compensated float32 sum, lane by lane (as each GPU lane sums its pixels).
-      const VF y = hn::Sub(value, carry);
-      const VF t = hn::Add(sum, y);
-      carry = hn::Sub(hn::Sub(t, sum), y);
-      sum = t;
+    const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
+    std::size_t p = begin;
+    for (; p + N <= end; p += N) {
+      const float* here[7];
+      for (int c = 0; c < quantities; ++c) here[c] = columns[c] + p;
+      if constexpr (Exact) exact(p, N, xs, ys);
+      evaluate(here, xs, ys, all);
+    }
+    if (p == end) continue;
+    const std::size_t rest = end - p;
+    for (int c = 0; c < quantities; ++c) hn::StoreU(hn::LoadU(df, columns[c] + p), df, stage[c] + fill);
+    if constexpr (Exact) exact(p, rest, stage[7] + fill, stage[8] + fill);
+    fill += rest;
+    if (fill >= N) {
+      evaluate(staged, stage[7], stage[8], all);
+      fill -= N;
+      for (int c = 0; c < 9; ++c) hn::Store(hn::Load(df, stage[c] + N), df, stage[c]);
     }
   }
+  if (fill > 0) evaluate(staged, stage[7], stage[8], hn::FirstN(df, fill));
+
   HWY_ALIGN float totals[max_lanes];
   hn::Store(hn::Sub(sum, carry), df, totals);
   double total = 0.0;

@@ -33,10 +33,11 @@ struct KernelSky {
 };
 
 // A detector's weights: the float32 table (float32_weights) split into one array per column,
-// columns 2 and 3 absent (columns = 2) when w_U and w_V vanish at every node; the reference's float64
-// tables for the float64 path.
+// columns 2 and 3 absent (columns = 2) when w_U and w_V vanish at every node, each stored as pairs:
+// element k holds the float32 weights of node k (low half) and of node k + 1 (high half), the two
+// ends of an interpolation along r or x; the reference's float64 tables for the float64 path.
 struct KernelDetector {
-  const float* w[4];
+  const std::uint64_t* pairs[4];
   int columns;  // 2 or 4
   bool radial;
   int grid_n;
