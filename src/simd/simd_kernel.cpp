@@ -153,15 +153,14 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
     }
   };
 
-  // One vector of pixels: s[0..6] point at kx, ky, kz, I - I0, Q, U, V of its first pixel (in the
-  // sky or in the staging area), xy at its float64 beam coordinates (Exact); lanes outside `live`
-  // add nothing.
-  auto evaluate = [&](const float* const* s, const float* xs, const float* ys, MF live) HWY_ATTR {
-    const Vec3<F> k{F(hn::LoadU(df, s[0])), F(hn::LoadU(df, s[1])), F(hn::LoadU(df, s[2]))};
+  // One vector of pixels: s[0..6] hold kx, ky, kz, I - I0, Q, U, V, and s[7], s[8] the float64 beam
+  // coordinates rounded to float32 (Exact); lanes outside `live` add nothing.
+  auto evaluate = [&](const VF* s, MF live) HWY_ATTR {
+    const Vec3<F> k{F(s[0]), F(s[1]), F(s[2])};
     PixelGeometry<F> g = pixel_geometry(f, k);
     if constexpr (Exact) {
-      g.x = F(hn::LoadU(df, xs));
-      g.y = F(hn::LoadU(df, ys));
+      g.x = F(s[7]);
+      g.y = F(s[8]);
     }
 
     // The beam weights (interpolate_radial / interpolate_weights of the formulas, with gathers).
@@ -209,14 +208,14 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       }
     }
 
-    const F I(hn::LoadU(df, s[3])), Q(hn::LoadU(df, s[4])), U(hn::LoadU(df, s[5]));
+    const F I(s[3]), Q(s[4]), U(s[5]);
     F response;
     if constexpr (Plate) {
       F v[4];
       effective_weights(w, m, v);
-      response = stokes_response(v, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, s[6])));
+      response = stokes_response(v, g.cos2chi, g.sin2chi, I, Q, U, F(s[6]));
     } else if constexpr (Columns == 4) {
-      response = stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, F(hn::LoadU(df, s[6])));
+      response = stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, F(s[6]));
     } else {
       // stokes_response with w_U = w_V = 0.
       response = w[0] * I + w[1] * (Q * g.cos2chi + U * g.sin2chi);
@@ -230,38 +229,54 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   };
 
   // Whole vectors of a range straight from the sky; the rest of the range (fewer than N pixels)
-  // is appended to a staging area, evaluated whenever it holds a whole vector. Rings crossing a
-  // Table 1 disc are 17 to 40 pixels long: masking each range's last vector would leave up to half
-  // of the lanes idle. The staging order depends only on the disc (deterministic results).
+  // joins a staging vector, which is evaluated whenever it is full. Rings crossing a Table 1 disc
+  // are 17 to 40 pixels long: masking each range's last vector would leave up to half of the lanes
+  // idle. The staging stays in registers: the rest of a range is rotated by the staging's fill
+  // (one table lookup) and blended in; the lanes rotated round to the front are the overflow that
+  // starts the next staging vector. The order depends only on the disc (deterministic results).
   const float* const columns[7] = {sky.kx, sky.ky, sky.kz, sky.i, sky.q, sky.u, sky.v};
   constexpr int quantities = (Columns == 4 || Plate) ? 7 : 6;  // V only where a weight multiplies it
-  HWY_ALIGN float stage[9][2 * max_lanes];
-  float* const staged[7] = {stage[0], stage[1], stage[2], stage[3], stage[4], stage[5], stage[6]};
-  HWY_ALIGN float xs[max_lanes];
-  HWY_ALIGN float ys[max_lanes];
+  constexpr int staged = Exact ? 9 : 7;
+  HWY_ALIGN float xs[max_lanes] = {};
+  HWY_ALIGN float ys[max_lanes] = {};
+  VF stage[9], q[9];
+  for (int c = 0; c < 9; ++c) stage[c] = q[c] = zero;
   std::size_t fill = 0;
   const MF all = hn::FirstN(df, N);
+  const VI iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
     std::size_t p = begin;
     for (; p + N <= end; p += N) {
-      const float* here[7];
-      for (int c = 0; c < quantities; ++c) here[c] = columns[c] + p;
-      if constexpr (Exact) exact(p, N, xs, ys);
-      evaluate(here, xs, ys, all);
+      for (int c = 0; c < quantities; ++c) q[c] = hn::LoadU(df, columns[c] + p);
+      if constexpr (Exact) {
+        exact(p, N, xs, ys);
+        q[7] = hn::Load(df, xs);
+        q[8] = hn::Load(df, ys);
+      }
+      evaluate(q, all);
     }
     if (p == end) continue;
     const std::size_t rest = end - p;
-    for (int c = 0; c < quantities; ++c) hn::StoreU(hn::LoadU(df, columns[c] + p), df, stage[c] + fill);
-    if constexpr (Exact) exact(p, rest, stage[7] + fill, stage[8] + fill);
+    if constexpr (Exact) exact(p, rest, xs, ys);
+    const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
+    const MF keep = hn::FirstN(df, fill);
+    for (int c = 0; c < staged; ++c) {
+      if (c >= quantities && c < 7) continue;
+      const VF v = c < 7 ? hn::LoadU(df, columns[c] + p) : hn::Load(df, c == 7 ? xs : ys);
+      const VF rotated = hn::TableLookupLanes(v, rotate);
+      q[c] = hn::IfThenElse(keep, stage[c], rotated);
+      stage[c] = rotated;
+    }
     fill += rest;
     if (fill >= N) {
-      evaluate(staged, stage[7], stage[8], all);
+      evaluate(q, all);
       fill -= N;
-      for (int c = 0; c < 9; ++c) hn::Store(hn::Load(df, stage[c] + N), df, stage[c]);
+    } else {
+      for (int c = 0; c < staged; ++c) stage[c] = q[c];
     }
   }
-  if (fill > 0) evaluate(staged, stage[7], stage[8], hn::FirstN(df, fill));
+  if (fill > 0) evaluate(stage, hn::FirstN(df, fill));
 
   HWY_ALIGN float totals[max_lanes];
   hn::Store(hn::Sub(sum, carry), df, totals);
