@@ -96,6 +96,9 @@ int main(int argc, char** argv) {
   bench->add_option("--hwp", bench_options.hwp,
                     "A half-wave plate before both detectors, turning at 2 Hz: none, ideal, generic (default: none).")
       ->check(CLI::IsMember({"none", "ideal", "generic"}));
+  bench->add_option("--monopole", bench_options.monopole_uk,
+                    "A monopole added to the sky's I, in uK, e.g. 2.725e6 (default: 0): the float32 backends' "
+                    "float64 path.");
   bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
       ->check(CLI::IsMember({"aperture", "detector"}));
 
