@@ -120,7 +120,8 @@ class SimdBackend final : public Backend {
   void pack_sky(const Sky& sky) {
     const std::size_t npix = sky.npix();
     for (auto* c : {&kx_, &ky_, &kz_, &i_, &q_, &u_, &v_}) c->assign(npix + simd::pad_floats, 0.0f);
-    if (exact_) vectors_.assign(3 * npix, 0.0);
+    if (exact_)
+      for (auto* c : {&vx_, &vy_, &vz_}) c->assign(npix + simd::pad_floats, 0.0);
     const PixelVectors vectors(sky.nside());
     constexpr std::size_t piece = std::size_t(1) << 16;
     std::vector<double> xyz(3 * std::min(piece, npix));
@@ -137,10 +138,15 @@ class SimdBackend final : public Backend {
         u_[p] = float(sky.U()[p]);
         v_[p] = float(sky.V()[p]);
       }
-      if (exact_) std::copy(xyz.begin(), xyz.begin() + std::ptrdiff_t(3 * n), vectors_.begin() + std::ptrdiff_t(3 * first));
+      if (exact_)
+        for (std::size_t j = 0; j < n; ++j) {
+          vx_[first + j] = xyz[3 * j];
+          vy_[first + j] = xyz[3 * j + 1];
+          vz_[first + j] = xyz[3 * j + 2];
+        }
     }
     sky_ = {kx_.data(), ky_.data(), kz_.data(), i_.data(), q_.data(), u_.data(), v_.data(),
-            exact_ ? vectors_.data() : nullptr, monopole_};
+            exact_ ? vx_.data() : nullptr, exact_ ? vy_.data() : nullptr, exact_ ? vz_.data() : nullptr, monopole_};
   }
 
   // Samples [begin, end) of one chunk; returns the number of pixels evaluated. The frame and the
@@ -188,7 +194,7 @@ class SimdBackend final : public Backend {
   double monopole_ = 0.0;
   bool per_sample_ = false, exact_ = false;
   std::vector<float> kx_, ky_, kz_, i_, q_, u_, v_;
-  std::vector<double> vectors_;  // float64 path only: 3 doubles a pixel
+  std::vector<double> vx_, vy_, vz_;  // float64 path only
   KernelSky sky_{};
   std::vector<DetectorTables> tables_;
   std::uint64_t evaluated_ = 0;

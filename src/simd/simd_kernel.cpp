@@ -127,12 +127,14 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   VF sum = zero, carry = zero;
   double monopole = 0.0, norm = 0.0;
 
-  // The float64 sums of pixels [p, p + count), pixel by pixel with the reference's interpolation
-  // (T = double), and their float64 beam coordinates rounded to float32 into xs, ys.
+  // The float64 sums of pixels [p, p + count), count <= N, and their float64 beam coordinates
+  // rounded to float32 into xs, ys: the reference's arithmetic (interpolate_radial,
+  // interpolate_weights with T = double, the weights from its own tables), in vectors of N / 2
+  // doubles; the branches of the interpolation become masks. Sums are kept per lane.
+#if HWY_TARGET == HWY_SCALAR
   auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) {
     for (std::size_t l = 0; l < count; ++l) {
-      const double* kv = sky.vectors + 3 * (p + l);
-      const detail::Vec3<double> kd{kv[0], kv[1], kv[2]};
+      const detail::Vec3<double> kd{sky.vx[p + l], sky.vy[p + l], sky.vz[p + l]};
       const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
       xs[l] = float(x);
       ys[l] = float(y);
@@ -152,6 +154,93 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       }
     }
   };
+  auto finish_exact = [&] {};
+#else
+  const hn::Half<DF> dh;
+  const hn::Rebind<double, hn::Half<DF>> dd;
+  const hn::RebindToSigned<decltype(dd)> dl;
+  using VD = hn::Vec<decltype(dd)>;
+  const std::size_t H = hn::Lanes(dd);
+  const VD th_x = hn::Set(dd, fd.theta_p.x), th_y = hn::Set(dd, fd.theta_p.y), th_z = hn::Set(dd, fd.theta_p.z);
+  const VD ph_x = hn::Set(dd, fd.phi_p.x), ph_y = hn::Set(dd, fd.phi_p.y), ph_z = hn::Set(dd, fd.phi_p.z);
+  const VD zero_d = hn::Zero(dd), one_d = hn::Set(dd, 1.0), last_d = hn::Set(dd, double(det.grid_n - 1));
+  const VD max_node_d = hn::Set(dd, double(det.grid_n - 2)), n_d = hn::Set(dd, double(det.grid_n));
+  const VD inv_d = hn::Set(dd, det.grid_inv_step_d), a_d = hn::Set(dd, det.grid_a_d);
+  VD mono_acc = zero_d, norm_acc = zero_d;
+  VD mcol[4];
+  for (int a = 0; a < 4; ++a) mcol[a] = hn::Set(dd, col0[a]);
+  auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) HWY_ATTR {
+    hn::Vec<hn::Half<DF>> xf[2], yf[2];
+    for (std::size_t h = 0; h < 2; ++h) {
+      const std::size_t first = p + h * H;
+      const std::size_t live = count > h * H ? std::min(H, count - h * H) : 0;
+      const VD kx = hn::LoadU(dd, sky.vx + first), ky = hn::LoadU(dd, sky.vy + first), kz = hn::LoadU(dd, sky.vz + first);
+      // dot(k, theta'), dot(k, phi') as the reference writes them.
+      const VD x = hn::Add(hn::Add(hn::Mul(kx, th_x), hn::Mul(ky, th_y)), hn::Mul(kz, th_z));
+      const VD y = hn::Add(hn::Add(hn::Mul(kx, ph_x), hn::Mul(ky, ph_y)), hn::Mul(kz, ph_z));
+      xf[h] = hn::DemoteTo(dh, x);
+      yf[h] = hn::DemoteTo(dh, y);
+      auto inside = hn::FirstN(dd, live);
+      VD c0, c1, c2, c3;  // interpolation coefficients of the nodes at offsets o0..o3
+      hn::Vec<decltype(dl)> o0, o1, o2, o3;
+      if constexpr (Radial) {
+        const VD r2 = hn::Add(hn::Mul(x, x), hn::Mul(y, y));
+        const VD u = hn::Mul(hn::Sqrt(hn::Max(r2, zero_d)), inv_d);
+        inside = hn::And(inside, hn::Le(u, last_d));
+        const VD node = hn::Floor(hn::Min(hn::IfThenElseZero(inside, u), max_node_d));
+        const VD f = hn::Sub(u, node);
+        c0 = hn::Sub(one_d, f);
+        c1 = f;
+        o0 = hn::ConvertTo(dl, hn::Mul(node, hn::Set(dd, 4.0)));
+        o1 = hn::Add(o0, hn::Set(dl, 4));
+      } else {
+        const VD u = hn::Mul(hn::Add(x, a_d), inv_d);
+        const VD v = hn::Mul(hn::Add(y, a_d), inv_d);
+        inside = hn::And(inside, hn::And(hn::And(hn::Ge(u, zero_d), hn::Ge(v, zero_d)),
+                                         hn::And(hn::Le(u, last_d), hn::Le(v, last_d))));
+        const VD i = hn::Floor(hn::Min(hn::IfThenElseZero(inside, u), max_node_d));
+        const VD j = hn::Floor(hn::Min(hn::IfThenElseZero(inside, v), max_node_d));
+        const VD fu = hn::Sub(u, i), fv = hn::Sub(v, j);
+        const VD gu = hn::Sub(one_d, fu), gv = hn::Sub(one_d, fv);
+        c0 = hn::Mul(gu, gv);
+        c1 = hn::Mul(fu, gv);
+        c2 = hn::Mul(gu, fv);
+        c3 = hn::Mul(fu, fv);
+        o0 = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(j, n_d), i), hn::Set(dd, 4.0)));
+        o1 = hn::Add(o0, hn::Set(dl, 4));
+        o2 = hn::Add(o0, hn::Set(dl, 4 * det.grid_n));
+        o3 = hn::Add(o2, hn::Set(dl, 4));
+      }
+      auto column = [&](const double* table) HWY_ATTR {
+        if constexpr (Radial)
+          return hn::Add(hn::Mul(c0, hn::GatherIndex(dd, table, o0)), hn::Mul(c1, hn::GatherIndex(dd, table, o1)));
+        else
+          return hn::Add(hn::Add(hn::Add(hn::Mul(c0, hn::GatherIndex(dd, table, o0)),
+                                         hn::Mul(c1, hn::GatherIndex(dd, table, o1))),
+                                 hn::Mul(c2, hn::GatherIndex(dd, table, o2))),
+                         hn::Mul(c3, hn::GatherIndex(dd, table, o3)));
+      };
+      if (in.monopole) {
+        VD w = column(det.weights);
+        if constexpr (Plate) {
+          w = hn::Mul(w, mcol[0]);
+          for (int a = 1; a < 4; ++a) w = hn::Add(w, hn::Mul(column(det.weights + a), mcol[a]));
+        }
+        mono_acc = hn::Add(mono_acc, hn::IfThenElseZero(inside, w));
+      }
+      if (in.per_sample) norm_acc = hn::Add(norm_acc, hn::IfThenElseZero(inside, column(det.norm_weights)));
+    }
+    hn::StoreU(hn::Combine(df, xf[1], xf[0]), df, xs);
+    hn::StoreU(hn::Combine(df, yf[1], yf[0]), df, ys);
+  };
+  auto finish_exact = [&]() HWY_ATTR {
+    HWY_ALIGN double lanes[max_lanes];
+    hn::Store(mono_acc, dd, lanes);
+    for (std::size_t l = 0; l < H; ++l) monopole += lanes[l];
+    hn::Store(norm_acc, dd, lanes);
+    for (std::size_t l = 0; l < H; ++l) norm += lanes[l];
+  };
+#endif
 
   // One vector of pixels: s[0..6] hold kx, ky, kz, I - I0, Q, U, V, and s[7], s[8] the float64 beam
   // coordinates rounded to float32 (Exact); lanes outside `live` add nothing.
@@ -278,6 +367,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   }
   if (fill > 0) evaluate(stage, hn::FirstN(df, fill));
 
+  if constexpr (Exact) finish_exact();
   HWY_ALIGN float totals[max_lanes];
   hn::Store(hn::Sub(sum, carry), df, totals);
   double total = 0.0;

@@ -28,7 +28,11 @@ struct KernelSky {
   const float* q;
   const float* u;
   const float* v;
-  const double* vectors;  // 3 doubles a pixel (the reference's unit vectors); only for the float64 path
+  // The reference's float64 unit vectors, one array per component, padded as the float32 arrays;
+  // only for the float64 path (null otherwise).
+  const double* vx;
+  const double* vy;
+  const double* vz;
   double monopole;        // I0
 };
 
