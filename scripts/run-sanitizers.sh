@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The sanitizer build: the library, the command line and the unit, cli and robustness tests built with
+# The sanitizer build: the library, the command line and the unit, cli, robustness and simd tests built with
 # AddressSanitizer and UndefinedBehaviorSanitizer in <repo>/build-asan, and those tests run there, so
 # that a memory error, a leak or undefined behaviour fails the test it happens in. Called by .ci/run
 # after scripts/run-tests.sh (which sets the machine up); extra arguments go to both ctest runs.
@@ -33,7 +33,7 @@ cmake --build "$build" -j"$(nproc)"
 export OMP_WAIT_POLICY=passive
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0"
-tests=(--test-dir "$build" --output-on-failure -j"$(nproc)" -L "unit|cli|robustness"
+tests=(--test-dir "$build" --output-on-failure -j"$(nproc)" -L "unit|cli|robustness|simd"
        -E "consumer_find_package|readme_library_example|cli_installed")
 echo "run-sanitizers: memory errors and undefined behaviour (vulkan on lavapipe)"
 ASAN_OPTIONS="detect_leaks=0:halt_on_error=1:strict_string_checks=1" ctest "${tests[@]}" "$@"

@@ -8,6 +8,7 @@ packages=(build-essential cmake ninja-build pkg-config libhealpix-cxx-dev libcfi
           libgtest-dev libglm-dev libtomlplusplus-dev libcli11-dev libhdf5-dev healpy-data python3-healpy python3-numpy python3-matplotlib python3-venv python3-dev
           libgsl-dev libfftw3-dev libchealpix-dev
           libvulkan-dev libvulkan-volk-dev glslang-tools mesa-vulkan-drivers vulkan-validationlayers
+          libhwy-dev
           openmpi-bin libopenmpi-dev libhdf5-openmpi-dev)
 
 missing=()

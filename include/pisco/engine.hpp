@@ -1,5 +1,5 @@
 // The engine: given a sky, beamsors and detectors once, turns chunks of pointing into TOD.
-// The backend ("cpu", later "vulkan", "cuda") is chosen at run time by name.
+// The backend ("cpu", "simd", "vulkan", "cuda") is chosen at run time by name.
 #pragma once
 
 #include <cstddef>
@@ -22,11 +22,12 @@ enum class Normalization {
 };
 
 struct EngineOptions {
-  std::string backend = "cpu";  // "cpu", "vulkan", "cuda" or "auto" (the best backend compiled in and present)
-  std::string device = "auto";  // vulkan/cuda: device index, or part of its name; "auto" prefers a discrete GPU
+  std::string backend = "cpu";  // "cpu", "simd", "vulkan", "cuda" or "auto" (the fastest backend compiled in and present)
+  std::string device = "auto";  // vulkan/cuda: device index, or part of its name; "auto" prefers a discrete GPU;
+                                // simd: instruction set ("AVX3", "AVX2", "SSE4", "NEON", ...; "auto": the best)
   std::size_t chunk_samples = 0;  // vulkan/cuda: samples per device chunk; 0 = fitted to the device's limits
   Normalization normalization = Normalization::integral;
-  unsigned threads = 0;         // cpu backend: worker threads, 0 = all hardware threads; at most max_threads()
+  unsigned threads = 0;         // cpu and simd backends: worker threads, 0 = all hardware threads; at most max_threads()
   // vulkan: the arithmetic of the kernel's float64 work (frame, disc selection, monopole and
   // normalization): "float64" (devices with shaderFloat64), "float-float" (pairs of float32, any
   // device), or "auto": float64 where the device has it, float-float elsewhere.

@@ -166,7 +166,7 @@ def add_convolved_sky_to_observations(
     coordinates : litebird_sim.CoordinateSystem or None
         The frame of a pisco.Sky; None: the HealpixMap's, else galactic, as litebird_sim assumes.
     backend, device : str
-        PISCO-VK's backend ('auto', 'cpu', 'vulkan', 'cuda') and device.
+        PISCO-VK's backend ('auto', 'cpu', 'simd', 'vulkan', 'cuda') and device.
     beam_rho_max : float
         Default beams are summed out to this many FWHM.
     hwp_placement : str

@@ -122,7 +122,7 @@ class PixelConvolve(Operator):
 
     zero = Bool(False, help="If True, overwrite det_data instead of adding into it")
 
-    backend = Unicode("auto", help="PISCO-VK backend: 'auto', 'cpu', 'vulkan' or 'cuda'")
+    backend = Unicode("auto", help="PISCO-VK backend: 'auto', 'cpu', 'simd', 'vulkan' or 'cuda'")
 
     device = Unicode("auto", help="Device index or part of its name ('auto': the best)")
 

@@ -56,19 +56,23 @@ class Backend {
 
 struct BackendEntry {
   std::string name;
-  int priority;  // "auto" picks the available backend with the highest priority
+  // "auto" picks the available backend with the highest priority, ranked by measured speed on the
+  // machines of BENCHMARKS.md: cuda 20, vulkan on a GPU 10, simd 5, vulkan on a CPU device -1
+  // (lavapipe), the float64 reference -2.
+  int priority;
   std::function<BackendInfo()> probe;
   // Makes the backend; it packs the sky's pixels from `sky` into what it keeps, during the call only.
   std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const Sky&, const EngineOptions&)>
       create;
   // When set, replaces `priority` for "auto" once the backend is known to be available (the vulkan
-  // backend ranks below the float64 reference when its only device is a CPU: docs/vulkan.md says why).
+  // backend ranks below simd when its only device is a CPU: docs/vulkan.md says why).
   std::function<int()> auto_priority = nullptr;
 };
 
 const std::vector<BackendEntry>& backend_registry();
 
 BackendEntry cpu_backend_entry();
+BackendEntry simd_backend_entry();    // src/simd/, when built with Highway
 BackendEntry vulkan_backend_entry();  // src/vulkan/, when built with Vulkan
 BackendEntry cuda_backend_entry();    // src/cuda/, when built with CUDA
 

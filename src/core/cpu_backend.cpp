@@ -151,7 +151,8 @@ class CpuBackend final : public Backend {
 }  // namespace
 
 BackendEntry cpu_backend_entry() {
-  return {"cpu", 0,
+  // Last for "auto": simd and vulkan on lavapipe are faster on the same cores (BENCHMARKS.md).
+  return {"cpu", -2,
           [] {
             return BackendInfo{"cpu", true,
                                "float64 reference on " +

@@ -17,6 +17,9 @@ const std::vector<BackendEntry>& backend_registry() {
   static const std::vector<BackendEntry> registry = [] {
     std::vector<BackendEntry> r;
     r.push_back(cpu_backend_entry());
+#ifdef PISCO_HAVE_SIMD
+    r.push_back(simd_backend_entry());
+#endif
 #ifdef PISCO_HAVE_VULKAN
     r.push_back(vulkan_backend_entry());
 #endif

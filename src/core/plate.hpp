@@ -5,6 +5,7 @@
 
 #include <cmath>
 
+#include "core/contribution.hpp"
 #include "core/hd.hpp"
 
 namespace pisco::detail {
@@ -28,10 +29,7 @@ PISCO_HD void plate_at(const double* m0, double c, double s, double* out) {
   }
 }
 
-// v = w M (a row vector times M, row-major): the effective weights of a pixel behind the plate.
-template <class T>
-PISCO_HD void effective_weights(const T w[4], const T* m, T v[4]) {
-  for (int b = 0; b < 4; ++b) v[b] = w[0] * m[b] + w[1] * m[4 + b] + w[2] * m[8 + b] + w[3] * m[12 + b];
-}
+// effective_weights (v = w M, a pixel's weights behind the plate) is in core/contribution-inl.hpp,
+// with the other per-pixel formulas.
 
 }  // namespace pisco::detail

@@ -545,7 +545,7 @@ void bind_helpers(nb::module_& m) {
                b.detail + "')";
       });
   m.def("devices", &Engine::backends,
-        "The backends compiled in ('cpu', 'vulkan', 'cuda'), each with whether it is available on this\n"
+        "The backends compiled in ('cpu', 'simd', 'vulkan', 'cuda'), each with whether it is available on this\n"
         "machine and its device or the reason it is not.");
   m.def("offset_quat", [](double xi, double eta, double gamma) { return quat_array(offset_quat(xi, eta, gamma)); },
         "xi"_a, "eta"_a, "gamma"_a, "The offset quaternion of focal-plane coordinates (xi, eta, gamma), radians.");

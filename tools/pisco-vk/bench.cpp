@@ -37,7 +37,7 @@ int run_bench(const BenchOptions& options) {
   std::mt19937_64 rng(1);
   std::normal_distribution<double> g(0, 1);
   for (std::size_t i = 0; i < sky.npix(); ++i) {
-    sky.I()[i] = 100 * g(rng);
+    sky.I()[i] = options.monopole_uk + 100 * g(rng);
     sky.Q()[i] = 5 * g(rng);
     sky.U()[i] = 5 * g(rng);
   }
@@ -69,10 +69,13 @@ int run_bench(const BenchOptions& options) {
   const std::size_t samples = scan.size() * fp.size();
   const double beam_step = std::sqrt(4 * std::numbers::pi / (12.0 * 512 * 512));  // beam NSIDE 512
 
+  const std::string monopole =
+      options.monopole_uk != 0.0 ? ", monopole " + std::to_string(options.monopole_uk) + " uK" : std::string();
   std::printf("Table 1 workload: NSIDE %d sky, %zu samples (%zu pointings x %zu detectors), "
-              "FWHM 1.5 deg, beam grid step %.2f arcmin%s\n",
+              "FWHM 1.5 deg, beam grid step %.2f arcmin%s%s\n",
               nside, samples, scan.size(), fp.size(), beam_step / deg * 60,
-              options.hwp == "none" ? "" : (", " + options.hwp + " half-wave plate at the " + options.hwp_placement).c_str());
+              options.hwp == "none" ? "" : (", " + options.hwp + " half-wave plate at the " + options.hwp_placement).c_str(),
+              monopole.c_str());
   std::printf("%8s %9s %10s %10s %12s %12s %10s\n", "rho_max", "pixels", "setup_s", "conv_s",
               "evals/s", "paper_ms", "speedup");
   for (double rho : radii) {

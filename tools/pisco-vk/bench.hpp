@@ -15,6 +15,9 @@ struct BenchOptions {
   // entries non-zero), at the aperture or, with hwp_placement = "detector", behind the optics.
   std::string hwp = "none";
   std::string hwp_placement = "aperture";
+  // A monopole added to the sky's I, in uK (2.725e6 for the CMB's): the float32 backends then sum
+  // the monopole's weight in float64 (docs/vulkan.md, "Precision"), which this measures.
+  double monopole_uk = 0.0;
 };
 
 // The paper's Table 1 workload: a table of evaluations/s and the ratio to the paper's GTX 1080.

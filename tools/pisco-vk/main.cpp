@@ -120,8 +120,9 @@ int main(int argc, char** argv) {
   run->add_option("config", config_path,
                   "Simulation file (TOML). Without one, the bundled quick-start assets/examples/quickstart.toml.");
   run->add_option("-o,--output", output_dir, "Output directory (overrides [output] dir).");
-  run->add_option("-b,--backend", backend, "Backend: auto, cpu, vulkan, cuda (overrides [engine] backend).");
-  run->add_option("-d,--device", device, "Device of the vulkan or cuda backend: auto, an index or part of its name "
+  run->add_option("-b,--backend", backend, "Backend: auto, cpu, simd, vulkan, cuda (overrides [engine] backend).");
+  run->add_option("-d,--device", device, "Device of the vulkan or cuda backend: auto, an index or part of its name; "
+                                         "simd: an instruction set, e.g. AVX2 "
                                          "(overrides [engine] device; `pisco-vk devices` lists them).");
   run->add_flag("-q,--quiet", quiet, "Print nothing but errors.");
   run->add_flag("--no-plots", no_plots, "Do not run the plotting tool.");
@@ -131,15 +132,18 @@ int main(int argc, char** argv) {
   auto* bench = app.add_subcommand("bench", "Benchmark the paper's Table 1 workload (docs/validation.md, case G).");
   pisco_cli::BenchOptions bench_options;
   bench->add_option("--rho-max", bench_options.rho_max_deg, "Disc radii in degrees (default: 5 10).");
-  bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, vulkan, cuda (default: auto).");
-  bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend (default: auto).");
-  bench->add_option("--threads", bench_options.threads, "CPU backend threads (default: all).");
+  bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, simd, vulkan, cuda (default: auto).");
+  bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend, or the simd backend's instruction set (default: auto).");
+  bench->add_option("--threads", bench_options.threads, "cpu and simd backend threads (default: all).");
   bench->add_option("--arithmetic", bench_options.arithmetic,
                     "Vulkan kernel's float64 work: auto, float64, float-float (default: auto).")
       ->check(CLI::IsMember({"auto", "float64", "float-float"}));
   bench->add_option("--hwp", bench_options.hwp,
                     "A half-wave plate before both detectors, turning at 2 Hz: none, ideal, generic (default: none).")
       ->check(CLI::IsMember({"none", "ideal", "generic"}));
+  bench->add_option("--monopole", bench_options.monopole_uk,
+                    "A monopole added to the sky's I, in uK, e.g. 2.725e6 (default: 0): the float32 backends' "
+                    "float64 path.");
   bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
       ->check(CLI::IsMember({"aperture", "detector"}));
 

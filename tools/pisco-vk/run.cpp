@@ -226,14 +226,15 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   engine_options.unseen = c.sky.unseen;
   std::optional<pisco::Engine> engine_holder;
   cl.step([&] {
-    // Several ranks on a node share it out: on cpu, the hardware threads; on a GPU backend, the
+    // Several ranks on a node share it out: on cpu and simd, the hardware threads; on a GPU backend, the
     // devices "auto" chooses among, rank k on the node taking device k modulo their number. With
     // backend "auto", the backend is known once an engine is made (and then made again if need be).
     auto share_out = [&](const std::string& backend, pisco::EngineOptions& o) {
       if (cl.node_size() <= 1) return;
-      if (backend == "cpu" && o.threads == 0) {
+      const bool threaded = backend == "cpu" || backend == "simd";  // the backends with a thread pool
+      if (threaded && o.threads == 0) {
         o.threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
-      } else if (backend != "cpu" && (o.device == "auto" || o.device.empty())) {
+      } else if (!threaded && (o.device == "auto" || o.device.empty())) {
         for (const auto& b : pisco::Engine::backends())
           if (b.name == backend && !b.devices.empty())
             o.device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);

@@ -1,0 +1,30 @@
+# The simd backend (docs/simd.md): the float32 kernel on the CPU's vector units, written with Google's
+# Highway (Debian's libhwy-dev), which compiles it once per instruction set and picks the best the
+# processor supports at run time. Built when Highway is found (its CMake package, else pkg-config
+# libhwy); without it the library builds without the backend.
+option(PISCO_WITH_SIMD "Build the simd backend when Highway (libhwy-dev) is found" ON)
+set(PISCO_HAVE_SIMD OFF CACHE INTERNAL "The simd backend is built")
+if(NOT PISCO_WITH_SIMD)
+  return()
+endif()
+
+set(pisco_hwy "")
+find_package(hwy CONFIG QUIET)
+if(TARGET hwy::hwy)
+  set(pisco_hwy hwy::hwy)
+else()
+  pkg_check_modules(HWY QUIET IMPORTED_TARGET libhwy)
+  if(HWY_FOUND)
+    set(pisco_hwy PkgConfig::HWY)
+  endif()
+endif()
+if(NOT pisco_hwy)
+  message(STATUS "simd backend: Highway not found (Debian: apt-get install libhwy-dev); building without it")
+  return()
+endif()
+message(STATUS "simd backend: Highway ${hwy_VERSION}${HWY_VERSION}")
+
+target_sources(pisco PRIVATE simd/simd_backend.cpp simd/simd_kernel.cpp)
+target_link_libraries(pisco PRIVATE ${pisco_hwy})
+target_compile_definitions(pisco PRIVATE PISCO_HAVE_SIMD)
+set(PISCO_HAVE_SIMD ON CACHE INTERNAL "The simd backend is built")

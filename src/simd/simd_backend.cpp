@@ -1,0 +1,224 @@
+// The simd backend (docs/simd.md): the GPU kernels' float32 contract on the CPU's vector units.
+// This file is the driver: it packs the sky and the weights into the kernel's layout once, and per
+// sample computes the antenna frame and walks the disc in float64 with the reference's own code
+// (core/frame.hpp, core/disc.hpp), then hands the disc's pixel ranges to the kernel
+// (simd_kernel.cpp, compiled per instruction set by Highway). Samples are spread over a thread pool
+// as in the float64 reference.
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <thread>
+#include <utility>
+
+#include "core/backend.hpp"
+#include "core/disc.hpp"
+#include "core/frame.hpp"
+#include "core/plate.hpp"
+#include "core/thread_pool.hpp"
+#include "simd/simd_kernel.hpp"
+
+namespace pisco::detail {
+namespace {
+
+using simd::KernelDetector;
+using simd::KernelSky;
+
+unsigned hardware_threads() { return std::max(1u, std::thread::hardware_concurrency()); }
+
+// The instruction set: `device` when it names one, else PISCO_SIMD_TARGET (how the test suite runs
+// on another instruction set), else the best the processor supports.
+std::string requested_target(const std::string& device) {
+  if (!device.empty() && device != "auto") return device;
+  const char* t = std::getenv("PISCO_SIMD_TARGET");
+  return t ? std::string(t) : std::string();
+}
+
+// One detector's weights in the kernel's layout: float32 columns (float32_weights, the GPU
+// backends' rule) and the reference's float64 tables.
+struct DetectorTables {
+  std::vector<std::uint64_t> columns[4];
+  KernelDetector view{};
+};
+
+DetectorTables detector_tables(const PreparedDetector& det, std::size_t index) {
+  const std::size_t nodes = det.weights.size() / 4;
+  if (det.grid_n < 2 || nodes == 0)
+    throw Error("simd: detector " + std::to_string(index) + " has a weight grid of " + std::to_string(det.grid_n) +
+                " nodes a side; the kernel needs at least 2");
+  if (nodes + std::size_t(det.grid_n) + 2 > std::size_t(std::numeric_limits<std::int32_t>::max()))
+    throw Error("simd: detector " + std::to_string(index) + "'s weight grid has " + std::to_string(nodes) +
+                " nodes, more than the kernel's 32-bit gather indices reach");
+  const std::vector<float> w32 = float32_weights(det);
+  DetectorTables t;
+  bool polarized_uv = false;
+  for (std::size_t k = 0; k < nodes; ++k) polarized_uv = polarized_uv || w32[4 * k + 2] != 0.0f || w32[4 * k + 3] != 0.0f;
+  const int columns = polarized_uv ? 4 : 2;
+  auto bits = [](float x) {
+    std::uint32_t b;
+    std::memcpy(&b, &x, sizeof b);
+    return std::uint64_t(b);
+  };
+  for (int c = 0; c < columns; ++c) {
+    t.columns[c].resize(nodes + 1, 0);  // one pair past the end: never weighted, but gathered
+    for (std::size_t k = 0; k < nodes; ++k)
+      t.columns[c][k] = bits(w32[4 * k + c]) | (k + 1 < nodes ? bits(w32[4 * (k + 1) + c]) << 32 : 0);
+  }
+  KernelDetector& v = t.view;
+  for (int c = 0; c < 4; ++c) v.pairs[c] = c < columns ? t.columns[c].data() : nullptr;
+  v.columns = columns;
+  v.radial = det.radial;
+  v.grid_n = det.grid_n;
+  v.grid_a = float(det.grid_a);
+  v.grid_inv_step = float(det.grid_inv_step);
+  v.weights = det.weights.data();
+  v.norm_weights = det.norm_weights.empty() ? nullptr : det.norm_weights.data();
+  v.grid_a_d = det.grid_a;
+  v.grid_inv_step_d = det.grid_inv_step;
+  return t;
+}
+
+class SimdBackend final : public Backend {
+ public:
+  SimdBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options)
+      : in_(std::move(inputs)),
+        pool_(options.threads ? options.threads : hardware_threads()),
+        kernel_(simd::choose_kernel(requested_target(options.device))) {
+    monopole_ = float32_monopole(sky);
+    per_sample_ = in_->normalization == Normalization::per_sample;
+    exact_ = monopole_ != 0.0 || per_sample_;
+    pack_sky(sky);
+    tables_.reserve(in_->detectors.size());
+    for (std::size_t d = 0; d < in_->detectors.size(); ++d) tables_.push_back(detector_tables(in_->detectors[d], d));
+  }
+
+  std::string name() const override { return "simd"; }
+  std::string device() const override {
+    return "Highway " + kernel_.description + ", " + std::to_string(pool_.size()) + " threads" +
+           (exact_ ? ", float64 path (monopole or per-sample normalization)" : "");
+  }
+
+  // Computed at submit(), as the reference: the results are ready when the call returns.
+  void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
+              std::uint64_t) override {
+    const PreparedDetector& det = in_->detectors.at(detector);
+    const KernelDetector& kd = tables_.at(detector).view;
+    std::atomic<std::uint64_t> pixels{0};
+    pool_.parallel_for(pointing.size(), 64, [&](std::size_t begin, std::size_t end) {
+      pixels += convolve_samples(det, kd, pointing, tod.data(), accumulate, begin, end);
+    });
+    evaluated_ += pixels;
+  }
+
+  std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
+
+ private:
+  // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).
+  void pack_sky(const Sky& sky) {
+    const std::size_t npix = sky.npix();
+    for (auto* c : {&kx_, &ky_, &kz_, &i_, &q_, &u_, &v_}) c->assign(npix + simd::pad_floats, 0.0f);
+    if (exact_)
+      for (auto* c : {&vx_, &vy_, &vz_}) c->assign(npix + simd::pad_floats, 0.0);
+    const PixelVectors vectors(sky.nside());
+    constexpr std::size_t piece = std::size_t(1) << 16;
+    std::vector<double> xyz(3 * std::min(piece, npix));
+    for (std::size_t first = 0; first < npix; first += piece) {
+      const std::size_t n = std::min(piece, npix - first);
+      vectors.get(first, n, xyz.data(), unsigned(pool_.size()));
+      for (std::size_t j = 0; j < n; ++j) {
+        const std::size_t p = first + j;
+        kx_[p] = float(xyz[3 * j]);
+        ky_[p] = float(xyz[3 * j + 1]);
+        kz_[p] = float(xyz[3 * j + 2]);
+        i_[p] = float(sky.I()[p] - monopole_);
+        q_[p] = float(sky.Q()[p]);
+        u_[p] = float(sky.U()[p]);
+        v_[p] = float(sky.V()[p]);
+      }
+      if (exact_)
+        for (std::size_t j = 0; j < n; ++j) {
+          vx_[first + j] = xyz[3 * j];
+          vy_[first + j] = xyz[3 * j + 1];
+          vz_[first + j] = xyz[3 * j + 2];
+        }
+    }
+    sky_ = {kx_.data(), ky_.data(), kz_.data(), i_.data(), q_.data(), u_.data(), v_.data(),
+            exact_ ? vx_.data() : nullptr, exact_ ? vy_.data() : nullptr, exact_ ? vz_.data() : nullptr, monopole_};
+  }
+
+  // Samples [begin, end) of one chunk; returns the number of pixels evaluated. The frame and the
+  // disc are the reference's (cpu_backend.cpp), in float64.
+  std::uint64_t convolve_samples(const PreparedDetector& det, const KernelDetector& kd, const PointingInput& in,
+                                 double* tod, bool accumulate, std::size_t begin, std::size_t end) const {
+    std::uint64_t count = 0;
+    const bool plate = det.plate == PreparedDetector::Plate::aperture;
+    const PreparedSky& sky = in_->sky;
+    std::vector<std::uint32_t> ranges;
+    ranges.reserve(512);
+    double m[16];
+    for (std::size_t i = begin; i < end; ++i) {
+      double theta = 0.0, phi = 0.0;
+      const SampleFrame<double> f =
+          in.quaternions
+              ? quat_sample({in.quats.quats[i].x, in.quats.quats[i].y, in.quats.quats[i].z, in.quats.quats[i].w},
+                            det.offset, det.cos_zeta, det.sin_zeta, theta, phi)
+              : angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta,
+                             det.sin_zeta, theta, phi);
+      if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * in.plate_angle[i]), std::sin(2 * in.plate_angle[i]), m);
+      ranges.clear();
+      for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
+                          [&](std::uint32_t b, std::uint32_t e) {
+                            if (e <= b) return;
+                            ranges.push_back(b);
+                            ranges.push_back(e);
+                            count += e - b;
+                          });
+      const simd::SampleInput sample{&f, ranges.data(), ranges.size() / 2, plate ? m : nullptr, monopole_ != 0.0,
+                                     per_sample_};
+      simd::SampleSums sums;
+      simd::convolve_sample(kernel_, sky_, kd, sample, sums);
+      // As the reference and the GPU kernels: float32 sum plus I0 sum w_I, over the normalization.
+      double d = sums.sum + monopole_ * sums.monopole_weight;
+      if (per_sample_) d = sums.norm > 0 ? d / sums.norm : 0.0;
+      tod[i] = accumulate ? tod[i] + d : d;
+    }
+    return count;
+  }
+
+  std::shared_ptr<const EngineInputs> in_;
+  mutable ThreadPool pool_;
+  simd::Kernel kernel_;
+  double monopole_ = 0.0;
+  bool per_sample_ = false, exact_ = false;
+  std::vector<float> kx_, ky_, kz_, i_, q_, u_, v_;
+  std::vector<double> vx_, vy_, vz_;  // float64 path only
+  KernelSky sky_{};
+  std::vector<DetectorTables> tables_;
+  std::uint64_t evaluated_ = 0;
+};
+
+}  // namespace
+
+BackendEntry simd_backend_entry() {
+  // Above the float64 reference and vulkan on a CPU device (lavapipe), below a GPU: BENCHMARKS.md.
+  return {"simd", 5,
+          [] {
+            try {
+              const simd::Kernel k = simd::choose_kernel(requested_target(""));
+              return BackendInfo{"simd", true,
+                                 "Highway " + k.description + " on " +
+                                     std::to_string(hardware_threads()) + " hardware threads",
+                                 {}};
+            } catch (const Error& e) {
+              return BackendInfo{"simd", false, e.what(), {}};
+            }
+          },
+          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+            return std::make_unique<SimdBackend>(std::move(in), sky, o);
+          }};
+}
+
+}  // namespace pisco::detail

@@ -1,0 +1,474 @@
+// The simd backend's kernel (docs/simd.md): one sample's disc, a vector of float32 lanes at a time.
+// Highway compiles this file once per instruction set (foreach_target.h re-includes it with each
+// target's HWY_NAMESPACE) and HWY_DYNAMIC_DISPATCH picks the best the processor supports at run time:
+// AVX-512 (Highway's AVX3), AVX2, SSE4 or the portable EMU128 on x86-64; NEON on Arm.
+//
+// The per-pixel formulas are core/contribution-inl.hpp, included into each target's namespace with
+// T = F, a float32 vector with +, -, *, /: the reference's own arithmetic, lane by lane. Only what
+// cannot be written as a formula of T is vector code here: loads, gathers of the beam weights,
+// the interpolation's index arithmetic and masks, and the compensated sum.
+//
+// The pixels of a range are consecutive in RING order, so the sky is stored as structure of arrays
+// and a vector of pixels is one contiguous load per quantity; a range's last vector is loaded whole
+// (the arrays are padded) and its lanes past the range are masked out of the sum. Each range starts
+// at lane 0: which lane evaluates a pixel depends only on the disc, so results are deterministic and
+// independent of the chunk size and of the thread that runs the sample.
+
+// Scalable vectors cannot be members of a struct (F below): no SVE or RVV targets. SSSE3 adds little
+// beside SSE4 and costs compile time.
+#ifndef HWY_DISABLED_TARGETS
+#define HWY_DISABLED_TARGETS (HWY_SSSE3 | HWY_SVE | HWY_SVE2 | HWY_SVE_256 | HWY_SVE2_128 | HWY_RVV)
+#endif
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "simd/simd_kernel.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <vector>
+
+#include "simd/simd_kernel.hpp"
+#include "pisco/error.hpp"
+
+HWY_BEFORE_NAMESPACE();
+namespace pisco::detail::simd {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+using DF = hn::ScalableTag<float>;
+using DI = hn::RebindToSigned<DF>;
+using VF = hn::Vec<DF>;
+using VI = hn::Vec<DI>;
+using MF = hn::Mask<DF>;
+
+// A vector of float32 lanes as the number type of the shared formulas. Trivially constructible, as
+// float is: the formulas' aggregates (Vec3<F>, PixelGeometry<F>) get implicit constructors, which
+// GCC compiles without the target's instruction set.
+struct F {
+  VF v;
+  F() = default;
+  HWY_INLINE F(float x) : v(hn::Set(DF(), x)) {}  // NOLINT: T(1), T(2) in the formulas
+  HWY_INLINE F(VF x) : v(x) {}                    // NOLINT
+};
+HWY_INLINE F operator+(const F& a, const F& b) { return F(hn::Add(a.v, b.v)); }
+HWY_INLINE F operator-(const F& a, const F& b) { return F(hn::Sub(a.v, b.v)); }
+HWY_INLINE F operator*(const F& a, const F& b) { return F(hn::Mul(a.v, b.v)); }
+HWY_INLINE F operator/(const F& a, const F& b) { return F(hn::Div(a.v, b.v)); }
+
+// The formulas of the reference, in this target's namespace (Vec3, SampleFrame, pixel_geometry,
+// stokes_response, effective_weights, ...).
+#include "core/contribution-inl.hpp"
+
+constexpr std::size_t max_lanes = 64;
+static_assert(HWY_MAX_BYTES / sizeof(float) <= max_lanes, "scratch arrays hold one vector of float32 lanes");
+
+HWY_INLINE Vec3<F> broadcast(const detail::Vec3<double>& a) {
+  return {F(float(a.x)), F(float(a.y)), F(float(a.z))};
+}
+
+// A node's weight and its neighbour's (along r, or along x), g0 = w(node) and g1 = w(node + 1), for
+// every lane, from the detector's table of pairs: one 64-bit gather element per lane instead of two
+// 32-bit ones (gathers cost about one cycle an element: half the gathered elements, the kernel's
+// largest cost).
+HWY_INLINE void gather_pair(const std::uint64_t* pairs, VI node, F& g0, F& g1) {
+  const DF df;
+#if HWY_TARGET == HWY_SCALAR
+  const float* flat = reinterpret_cast<const float*>(pairs);
+  const VI twice = hn::Add(node, node);
+  g0 = F(hn::GatherIndex(df, flat, twice));
+  g1 = F(hn::GatherIndex(df, flat + 1, twice));
+#else
+  const DI di;
+  const hn::Half<DI> dh;
+  const hn::Repartition<std::int64_t, DF> d64;
+  const hn::Repartition<std::uint64_t, DF> du64;
+  const VF lo = hn::BitCast(df, hn::GatherIndex(du64, pairs, hn::PromoteTo(d64, hn::LowerHalf(dh, node))));
+  const VF hi = hn::BitCast(df, hn::GatherIndex(du64, pairs, hn::PromoteTo(d64, hn::UpperHalf(dh, node))));
+  (void)di;
+  g0 = F(hn::ConcatEven(df, hi, lo));
+  g1 = F(hn::ConcatOdd(df, hi, lo));
+#endif
+}
+
+// One sample. Radial: weights from a radial profile (else a 2D grid); Columns: weight columns stored
+// (2: w_U = w_V = 0); Plate: effective weights w M(theta); Exact: the float64 sums (monopole,
+// per-sample normalization), whose float64 beam coordinates the float32 evaluation then uses too,
+// as the GPU kernels do (docs/vulkan.md, "Precision").
+// flatten: the formulas, the lambdas and Highway's operations inlined into one loop (left to its
+// heuristics, GCC calls pixel_geometry<F> out of line and passes its vectors through memory).
+template <bool Radial, int Columns, bool Plate, bool Exact>
+HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  const DF df;
+  const DI di;
+  const std::size_t N = hn::Lanes(df);
+  const detail::SampleFrame<double>& fd = *in.frame;
+  SampleFrame<F> f;
+  f.theta_p = broadcast(fd.theta_p);
+  f.phi_p = broadcast(fd.phi_p);
+  f.p = broadcast(fd.p);
+  f.e_c = broadcast(fd.e_c);
+  F m[16];
+  double col0[4] = {1.0, 0.0, 0.0, 0.0};
+  if constexpr (Plate) {
+    for (int k = 0; k < 16; ++k) m[k] = F(float(in.plate[k]));
+    for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
+  }
+  const F inv_step(det.grid_inv_step), grid_a(det.grid_a), last(float(det.grid_n - 1)), one(1.0f);
+  const VI zero_i = hn::Zero(di), max_i = hn::Set(di, det.grid_n - 2), n_i = hn::Set(di, det.grid_n);
+  const VF zero = hn::Zero(df);
+  const std::uint64_t* w0 = det.pairs[0];
+  const std::uint64_t* w1 = det.pairs[1];
+  const std::uint64_t* w2 = det.pairs[Columns == 4 ? 2 : 0];
+  const std::uint64_t* w3 = det.pairs[Columns == 4 ? 3 : 0];
+
+  VF sum = zero, carry = zero;
+  double monopole = 0.0, norm = 0.0;
+
+  // The float64 sums of pixels [p, p + count), count <= N, and their float64 beam coordinates
+  // rounded to float32 into xs, ys: the reference's arithmetic (interpolate_radial,
+  // interpolate_weights with T = double, the weights from its own tables), in vectors of N / 2
+  // doubles; the branches of the interpolation become masks. Sums are kept per lane.
+#if HWY_TARGET == HWY_SCALAR
+  auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) {
+    for (std::size_t l = 0; l < count; ++l) {
+      const detail::Vec3<double> kd{sky.vx[p + l], sky.vy[p + l], sky.vz[p + l]};
+      const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
+      xs[l] = float(x);
+      ys[l] = float(y);
+      double w[4];
+      if (Radial)
+        detail::interpolate_radial(det.weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
+      else
+        detail::interpolate_weights(det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
+      if (in.monopole) monopole += Plate ? w[0] * col0[0] + w[1] * col0[1] + w[2] * col0[2] + w[3] * col0[3] : w[0];
+      if (in.per_sample) {
+        double wn[4];
+        if (Radial)
+          detail::interpolate_radial(det.norm_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wn);
+        else
+          detail::interpolate_weights(det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wn);
+        norm += wn[0];
+      }
+    }
+  };
+  auto finish_exact = [&] {};
+#else
+  const hn::Half<DF> dh;
+  const hn::Rebind<double, hn::Half<DF>> dd;
+  const hn::RebindToSigned<decltype(dd)> dl;
+  using VD = hn::Vec<decltype(dd)>;
+  const std::size_t H = hn::Lanes(dd);
+  const VD th_x = hn::Set(dd, fd.theta_p.x), th_y = hn::Set(dd, fd.theta_p.y), th_z = hn::Set(dd, fd.theta_p.z);
+  const VD ph_x = hn::Set(dd, fd.phi_p.x), ph_y = hn::Set(dd, fd.phi_p.y), ph_z = hn::Set(dd, fd.phi_p.z);
+  const VD zero_d = hn::Zero(dd), one_d = hn::Set(dd, 1.0), last_d = hn::Set(dd, double(det.grid_n - 1));
+  const VD max_node_d = hn::Set(dd, double(det.grid_n - 2)), n_d = hn::Set(dd, double(det.grid_n));
+  const VD inv_d = hn::Set(dd, det.grid_inv_step_d), a_d = hn::Set(dd, det.grid_a_d);
+  VD mono_acc = zero_d, norm_acc = zero_d;
+  VD mcol[4];
+  for (int a = 0; a < 4; ++a) mcol[a] = hn::Set(dd, col0[a]);
+  auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) HWY_ATTR {
+    hn::Vec<hn::Half<DF>> xf[2], yf[2];
+    for (std::size_t h = 0; h < 2; ++h) {
+      const std::size_t first = p + h * H;
+      const std::size_t live = count > h * H ? std::min(H, count - h * H) : 0;
+      const VD kx = hn::LoadU(dd, sky.vx + first), ky = hn::LoadU(dd, sky.vy + first), kz = hn::LoadU(dd, sky.vz + first);
+      // dot(k, theta'), dot(k, phi') as the reference writes them.
+      const VD x = hn::Add(hn::Add(hn::Mul(kx, th_x), hn::Mul(ky, th_y)), hn::Mul(kz, th_z));
+      const VD y = hn::Add(hn::Add(hn::Mul(kx, ph_x), hn::Mul(ky, ph_y)), hn::Mul(kz, ph_z));
+      xf[h] = hn::DemoteTo(dh, x);
+      yf[h] = hn::DemoteTo(dh, y);
+      auto inside = hn::FirstN(dd, live);
+      VD c0, c1, c2, c3;  // interpolation coefficients of the nodes at offsets o0..o3
+      hn::Vec<decltype(dl)> o0, o1, o2, o3;
+      if constexpr (Radial) {
+        const VD r2 = hn::Add(hn::Mul(x, x), hn::Mul(y, y));
+        const VD u = hn::Mul(hn::Sqrt(hn::Max(r2, zero_d)), inv_d);
+        inside = hn::And(inside, hn::Le(u, last_d));
+        const VD node = hn::Floor(hn::Min(hn::IfThenElseZero(inside, u), max_node_d));
+        const VD f = hn::Sub(u, node);
+        c0 = hn::Sub(one_d, f);
+        c1 = f;
+        o0 = hn::ConvertTo(dl, hn::Mul(node, hn::Set(dd, 4.0)));
+        o1 = hn::Add(o0, hn::Set(dl, 4));
+      } else {
+        const VD u = hn::Mul(hn::Add(x, a_d), inv_d);
+        const VD v = hn::Mul(hn::Add(y, a_d), inv_d);
+        inside = hn::And(inside, hn::And(hn::And(hn::Ge(u, zero_d), hn::Ge(v, zero_d)),
+                                         hn::And(hn::Le(u, last_d), hn::Le(v, last_d))));
+        const VD i = hn::Floor(hn::Min(hn::IfThenElseZero(inside, u), max_node_d));
+        const VD j = hn::Floor(hn::Min(hn::IfThenElseZero(inside, v), max_node_d));
+        const VD fu = hn::Sub(u, i), fv = hn::Sub(v, j);
+        const VD gu = hn::Sub(one_d, fu), gv = hn::Sub(one_d, fv);
+        c0 = hn::Mul(gu, gv);
+        c1 = hn::Mul(fu, gv);
+        c2 = hn::Mul(gu, fv);
+        c3 = hn::Mul(fu, fv);
+        o0 = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(j, n_d), i), hn::Set(dd, 4.0)));
+        o1 = hn::Add(o0, hn::Set(dl, 4));
+        o2 = hn::Add(o0, hn::Set(dl, 4 * det.grid_n));
+        o3 = hn::Add(o2, hn::Set(dl, 4));
+      }
+      auto column = [&](const double* table) HWY_ATTR {
+        if constexpr (Radial)
+          return hn::Add(hn::Mul(c0, hn::GatherIndex(dd, table, o0)), hn::Mul(c1, hn::GatherIndex(dd, table, o1)));
+        else
+          return hn::Add(hn::Add(hn::Add(hn::Mul(c0, hn::GatherIndex(dd, table, o0)),
+                                         hn::Mul(c1, hn::GatherIndex(dd, table, o1))),
+                                 hn::Mul(c2, hn::GatherIndex(dd, table, o2))),
+                         hn::Mul(c3, hn::GatherIndex(dd, table, o3)));
+      };
+      if (in.monopole) {
+        VD w = column(det.weights);
+        if constexpr (Plate) {
+          w = hn::Mul(w, mcol[0]);
+          for (int a = 1; a < 4; ++a) w = hn::Add(w, hn::Mul(column(det.weights + a), mcol[a]));
+        }
+        mono_acc = hn::Add(mono_acc, hn::IfThenElseZero(inside, w));
+      }
+      if (in.per_sample) norm_acc = hn::Add(norm_acc, hn::IfThenElseZero(inside, column(det.norm_weights)));
+    }
+    hn::StoreU(hn::Combine(df, xf[1], xf[0]), df, xs);
+    hn::StoreU(hn::Combine(df, yf[1], yf[0]), df, ys);
+  };
+  auto finish_exact = [&]() HWY_ATTR {
+    HWY_ALIGN double lanes[max_lanes];
+    hn::Store(mono_acc, dd, lanes);
+    for (std::size_t l = 0; l < H; ++l) monopole += lanes[l];
+    hn::Store(norm_acc, dd, lanes);
+    for (std::size_t l = 0; l < H; ++l) norm += lanes[l];
+  };
+#endif
+
+  // One vector of pixels: s[0..6] hold kx, ky, kz, I - I0, Q, U, V, and s[7], s[8] the float64 beam
+  // coordinates rounded to float32 (Exact); lanes outside `live` add nothing.
+  auto evaluate = [&](const VF* s, MF live) HWY_ATTR {
+    const Vec3<F> k{F(s[0]), F(s[1]), F(s[2])};
+    PixelGeometry<F> g = pixel_geometry(f, k);
+    if constexpr (Exact) {
+      g.x = F(s[7]);
+      g.y = F(s[8]);
+    }
+
+    // The beam weights (interpolate_radial / interpolate_weights of the formulas, with gathers).
+    F w[4] = {F(zero), F(zero), F(zero), F(zero)};
+    MF inside;
+    if constexpr (Radial) {
+      const F u = F(hn::Sqrt(hn::Max(g.r2.v, zero))) * inv_step;
+      inside = hn::Le(u.v, last.v);  // false for NaN
+      const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
+      const F fr = u - F(hn::ConvertTo(df, i));
+      const F gr = one - fr;
+      auto column = [&](const std::uint64_t* c) HWY_ATTR {
+        F g0, g1;
+        gather_pair(c, i, g0, g1);
+        return gr * g0 + fr * g1;
+      };
+      w[0] = column(w0);
+      w[1] = column(w1);
+      if constexpr (Columns == 4) {
+        w[2] = column(w2);
+        w[3] = column(w3);
+      }
+    } else {
+      const F u = (g.x + grid_a) * inv_step;
+      const F v = (g.y + grid_a) * inv_step;
+      inside = hn::And(hn::And(hn::Ge(u.v, zero), hn::Ge(v.v, zero)), hn::And(hn::Le(u.v, last.v), hn::Le(v.v, last.v)));
+      const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
+      const VI j = hn::Min(hn::Max(hn::ConvertTo(di, v.v), zero_i), max_i);
+      const F fu = u - F(hn::ConvertTo(df, i));
+      const F fv = v - F(hn::ConvertTo(df, j));
+      const F c00 = (one - fu) * (one - fv), c10 = fu * (one - fv), c01 = (one - fu) * fv, c11 = fu * fv;
+      const VI node = hn::Add(hn::Mul(j, n_i), i);
+      const std::size_t n = std::size_t(det.grid_n);
+      auto column = [&](const std::uint64_t* c) HWY_ATTR {
+        F g00, g10, g01, g11;
+        gather_pair(c, node, g00, g10);
+        gather_pair(c + n, node, g01, g11);
+        return c00 * g00 + c10 * g10 + c01 * g01 + c11 * g11;
+      };
+      w[0] = column(w0);
+      w[1] = column(w1);
+      if constexpr (Columns == 4) {
+        w[2] = column(w2);
+        w[3] = column(w3);
+      }
+    }
+
+    const F I(s[3]), Q(s[4]), U(s[5]);
+    F response;
+    if constexpr (Plate) {
+      F v[4];
+      effective_weights(w, m, v);
+      response = stokes_response(v, g.cos2chi, g.sin2chi, I, Q, U, F(s[6]));
+    } else if constexpr (Columns == 4) {
+      response = stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, F(s[6]));
+    } else {
+      // stokes_response with w_U = w_V = 0.
+      response = w[0] * I + w[1] * (Q * g.cos2chi + U * g.sin2chi);
+    }
+    const VF value = hn::IfThenElseZero(hn::And(live, inside), response.v);
+    // Kahan-compensated float32 sum, lane by lane (as each GPU lane sums its pixels).
+    const VF y = hn::Sub(value, carry);
+    const VF t = hn::Add(sum, y);
+    carry = hn::Sub(hn::Sub(t, sum), y);
+    sum = t;
+  };
+
+  // Whole vectors of a range straight from the sky; the rest of the range (fewer than N pixels)
+  // joins a staging vector, which is evaluated whenever it is full. Rings crossing a Table 1 disc
+  // are 17 to 40 pixels long: masking each range's last vector would leave up to half of the lanes
+  // idle. The staging stays in registers: the rest of a range is rotated by the staging's fill
+  // (one table lookup) and blended in; the lanes rotated round to the front are the overflow that
+  // starts the next staging vector. The order depends only on the disc (deterministic results).
+  const float* const columns[7] = {sky.kx, sky.ky, sky.kz, sky.i, sky.q, sky.u, sky.v};
+  constexpr int quantities = (Columns == 4 || Plate) ? 7 : 6;  // V only where a weight multiplies it
+  constexpr int staged = Exact ? 9 : 7;
+  HWY_ALIGN float xs[max_lanes] = {};
+  HWY_ALIGN float ys[max_lanes] = {};
+  VF stage[9], q[9];
+  for (int c = 0; c < 9; ++c) stage[c] = q[c] = zero;
+  std::size_t fill = 0;
+  const MF all = hn::FirstN(df, N);
+  const VI iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
+  for (std::size_t r = 0; r < in.range_count; ++r) {
+    const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
+    std::size_t p = begin;
+    for (; p + N <= end; p += N) {
+      for (int c = 0; c < quantities; ++c) q[c] = hn::LoadU(df, columns[c] + p);
+      if constexpr (Exact) {
+        exact(p, N, xs, ys);
+        q[7] = hn::Load(df, xs);
+        q[8] = hn::Load(df, ys);
+      }
+      evaluate(q, all);
+    }
+    if (p == end) continue;
+    const std::size_t rest = end - p;
+    if constexpr (Exact) exact(p, rest, xs, ys);
+    const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
+    const MF keep = hn::FirstN(df, fill);
+    for (int c = 0; c < staged; ++c) {
+      if (c >= quantities && c < 7) continue;
+      const VF v = c < 7 ? hn::LoadU(df, columns[c] + p) : hn::Load(df, c == 7 ? xs : ys);
+      const VF rotated = hn::TableLookupLanes(v, rotate);
+      q[c] = hn::IfThenElse(keep, stage[c], rotated);
+      stage[c] = rotated;
+    }
+    fill += rest;
+    if (fill >= N) {
+      evaluate(q, all);
+      fill -= N;
+    } else {
+      for (int c = 0; c < staged; ++c) stage[c] = q[c];
+    }
+  }
+  if (fill > 0) evaluate(stage, hn::FirstN(df, fill));
+
+  if constexpr (Exact) finish_exact();
+  HWY_ALIGN float totals[max_lanes];
+  hn::Store(hn::Sub(sum, carry), df, totals);
+  double total = 0.0;
+  for (std::size_t l = 0; l < N; ++l) total += double(totals[l]);
+  out.sum = total;
+  out.monopole_weight = monopole;
+  out.norm = norm;
+}
+
+template <bool Radial, int Columns, bool Plate>
+HWY_INLINE void SampleExact(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (in.monopole || in.per_sample)
+    Sample<Radial, Columns, Plate, true>(sky, det, in, out);
+  else
+    Sample<Radial, Columns, Plate, false>(sky, det, in, out);
+}
+
+template <bool Radial, int Columns>
+HWY_INLINE void SamplePlate(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (in.plate)
+    SampleExact<Radial, Columns, true>(sky, det, in, out);
+  else
+    SampleExact<Radial, Columns, false>(sky, det, in, out);
+}
+
+template <bool Radial>
+HWY_INLINE void SampleColumns(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (det.columns == 4)
+    SamplePlate<Radial, 4>(sky, det, in, out);
+  else
+    SamplePlate<Radial, 2>(sky, det, in, out);
+}
+
+void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  if (det.radial)
+    SampleColumns<true>(sky, det, in, out);
+  else
+    SampleColumns<false>(sky, det, in, out);
+}
+
+const char* TargetHere() { return hwy::TargetName(HWY_TARGET); }
+std::size_t LanesHere() { return hn::Lanes(DF()); }
+
+}  // namespace HWY_NAMESPACE
+}  // namespace pisco::detail::simd
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace pisco::detail::simd {
+
+HWY_EXPORT(ConvolveSample);
+HWY_EXPORT(TargetHere);
+HWY_EXPORT(LanesHere);
+
+namespace {
+std::string lower(std::string s) {
+  for (char& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+constexpr std::size_t table_size = sizeof(HWY_DISPATCH_TABLE(ConvolveSample)) / sizeof(HWY_DISPATCH_TABLE(ConvolveSample)[0]);
+}  // namespace
+
+Kernel choose_kernel(const std::string& name) {
+  const std::vector<std::int64_t> targets = hwy::SupportedAndGeneratedTargets();  // best first
+  std::string available;
+  for (const std::int64_t t : targets) available += (available.empty() ? "" : ", ") + std::string(hwy::TargetName(t));
+  std::int64_t pick = 0;
+  if (name.empty() || lower(name) == "auto") {
+    if (!targets.empty()) pick = targets.front();
+  } else {
+    for (const std::int64_t t : targets)
+      if (!pick && lower(hwy::TargetName(t)) == lower(name)) pick = t;
+    if (!pick)
+      throw Error("simd: no instruction set named '" + name + "' on this machine; available: " + available +
+                  " (or auto)");
+  }
+  Kernel k;
+  if (pick) {
+    hwy::ChosenTarget chosen;  // this engine's own choice, not Highway's process-wide one
+    chosen.Update(pick);
+    k.index = chosen.GetIndex();
+  }
+  if (!pick || k.index >= table_size) {  // a build with a single target: its static dispatch
+    k.index = table_size;
+    k.description = std::string(hwy::TargetName(HWY_STATIC_TARGET)) + ", " +
+                    std::to_string(HWY_STATIC_DISPATCH(LanesHere)()) + " float32 lanes";
+    return k;
+  }
+  k.description = std::string(HWY_DISPATCH_TABLE(TargetHere)[k.index]()) + ", " +
+                  std::to_string(HWY_DISPATCH_TABLE(LanesHere)[k.index]()) + " float32 lanes";
+  return k;
+}
+
+void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const SampleInput& in,
+                     SampleSums& out) {
+  if (kernel.index < table_size)
+    HWY_DISPATCH_TABLE(ConvolveSample)[kernel.index](sky, det, in, out);
+  else
+    HWY_STATIC_DISPATCH(ConvolveSample)(sky, det, in, out);
+}
+
+}  // namespace pisco::detail::simd
+#endif  // HWY_ONCE

@@ -1,0 +1,89 @@
+// The simd backend's per-sample kernel (docs/simd.md), compiled once per instruction set by Highway
+// (simd_kernel.cpp) and chosen at run time: plain C++ types only, so that the backend's driver
+// (simd_backend.cpp) needs no Highway header.
+//
+// The driver computes each sample's antenna frame and walks its disc in float64 with the reference's
+// own code (core/frame.hpp, core/disc.hpp); the kernel evaluates the disc's pixels, range by range,
+// a vector of float32 lanes at a time, with the formulas of core/contribution-inl.hpp.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "core/contribution.hpp"
+
+namespace pisco::detail::simd {
+
+// The sky as the kernel reads it: structure of arrays, one float32 array per quantity, each padded
+// past the last pixel by pad_floats (a range's last vector is loaded whole and its surplus lanes
+// masked). I is stored without the monopole I0.
+constexpr std::size_t pad_floats = 64;
+
+struct KernelSky {
+  const float* kx;
+  const float* ky;
+  const float* kz;
+  const float* i;  // I - I0
+  const float* q;
+  const float* u;
+  const float* v;
+  // The reference's float64 unit vectors, one array per component, padded as the float32 arrays;
+  // only for the float64 path (null otherwise).
+  const double* vx;
+  const double* vy;
+  const double* vz;
+  double monopole;        // I0
+};
+
+// A detector's weights: the float32 table (float32_weights) split into one array per column,
+// columns 2 and 3 absent (columns = 2) when w_U and w_V vanish at every node, each stored as pairs:
+// element k holds the float32 weights of node k (low half) and of node k + 1 (high half), the two
+// ends of an interpolation along r or x; the reference's float64 tables for the float64 path.
+struct KernelDetector {
+  const std::uint64_t* pairs[4];
+  int columns;  // 2 or 4
+  bool radial;
+  int grid_n;
+  float grid_a, grid_inv_step;
+  const double* weights;       // reference table (w_I, w_Q, w_U, w_V) per node, float64 path
+  const double* norm_weights;  // (wn, 0, 0, 0) per node, per-sample normalization only
+  double grid_a_d, grid_inv_step_d;
+};
+
+// One sample: its frame in float64, its disc as ranges [begin, end), the plate's M(theta) in float64
+// (aperture plates; null otherwise), and which float64 sums it needs.
+struct SampleInput {
+  const SampleFrame<double>* frame;
+  const std::uint32_t* ranges;  // begin, end pairs
+  std::size_t range_count;
+  const double* plate;  // 16, row-major
+  bool monopole;        // sum I0 w_I in float64 (the sky's monopole was removed)
+  bool per_sample;      // sum the normalization weight in float64
+};
+
+// The sample's sums: the float32 contributions (Kahan-compensated per lane, lanes added in float64
+// in lane order), the monopole's weight and the normalization, both float64.
+struct SampleSums {
+  double sum = 0.0;
+  double monopole_weight = 0.0;
+  double norm = 0.0;
+};
+
+// The kernel compiled for one instruction set.
+struct Kernel {
+  std::size_t index = 0;    // in Highway's dispatch table
+  std::string description;  // e.g. "AVX2, 8 float32 lanes"
+};
+
+// The kernel for the instruction set `name`: a Highway target name, case-insensitive ("AVX3" for
+// AVX-512, "AVX2", "SSE4", "EMU128", "NEON", ...), or "" / "auto" for the best the processor supports.
+// Throws pisco::Error listing the instruction sets this machine can run when `name` is not one of them.
+// Each engine keeps its own choice: nothing process-wide changes.
+Kernel choose_kernel(const std::string& name);
+
+// Evaluates one sample with `kernel`.
+void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const SampleInput& in,
+                     SampleSums& out);
+
+}  // namespace pisco::detail::simd
