@@ -226,7 +226,12 @@ def main():
     p.add_argument("--samples", type=int, default=100_000, help="samples timed per workload (default 1e5)")
     p.add_argument("--out", default=".", help="directory for crossover.md and crossover.png")
     p.add_argument("--backends", nargs="*", help="PISCO-VK backends (default: every one present)")
+    p.add_argument("--from-table", metavar="CROSSOVER_MD",
+                   help="no measurement: redraw the map and the tables from a report's measured components")
     args = p.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    if args.from_table:
+        return redraw(args.from_table, args.out)
 
     import healpy as hp
     import pisco
@@ -284,7 +289,27 @@ def main():
     write_report(args.out, rows, lmaxes, beams, check, time.perf_counter() - started, ducc0, litebird_sim, pisco)
 
 
-def write_report(out, rows, lmaxes, beams, check, wall, ducc0, litebird_sim, pisco):
+def redraw(table, out):
+    """The report again from the measured components of an earlier one (its first lines kept)."""
+    rows, head, check = [], [], None
+    with open(table) as f:
+        text = f.read().splitlines()
+    for line in text:
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 8 and cells[0].isdigit():
+            rows.append((int(cells[0]), cells[1], cells[2] == "generic", cells[3], float(cells[4]), float(cells[5]),
+                         float(cells[6]) * 1e-6, cells[7]))
+        m = __import__("re").match(r"Model check: (.*), (\d+) detectors x (\d+) samples: predicted ([\d.]+) s, run ([\d.]+) s",
+                                   line)
+        if m:
+            check = (m.group(1), int(m.group(2)), int(m.group(3)), float(m.group(4)), float(m.group(5)))
+    head = text[0]
+    lmaxes = tuple(sorted({r[0] for r in rows}))
+    beams = {k: None for k in dict.fromkeys(r[1] for r in rows)}
+    write_report(out, rows, lmaxes, beams, check, None, None, None, None, first_line=head)
+
+
+def write_report(out, rows, lmaxes, beams, check, wall, ducc0, litebird_sim, pisco, first_line=None):
     import platform
 
     import matplotlib
@@ -299,9 +324,11 @@ def write_report(out, rows, lmaxes, beams, check, wall, ducc0, litebird_sim, pis
     except (OSError, StopIteration):
         pass
     ns = np.logspace(4, 7, 31)
-    lines = [f"Machine: {cpu}, {os.cpu_count()} hardware threads, {platform.system()} {platform.release()}; "
-             f"one thread per code. pisco {pisco.__version__}, ducc0 {ducc0.__version__}, litebird_sim "
-             f"{litebird_sim.__version__}. Wall time of the run: {wall:.0f} s.", "",
+    if first_line is None:
+        first_line = (f"Machine: {cpu}, {os.cpu_count()} hardware threads, {platform.system()} {platform.release()}; "
+                      f"one thread per code. pisco {pisco.__version__}, ducc0 {ducc0.__version__}, litebird_sim "
+                      f"{litebird_sim.__version__}. Wall time of the run: {wall:.0f} s.")
+    lines = [first_line, "",
              "Measured components (set-up of the sky once, of each beam once, then per sample):", "",
              "| lmax | beam | plate | code | sky set-up s | beam set-up s | us/sample | device |",
              "|---|---|---|---|---|---|---|---|"]
@@ -346,7 +373,8 @@ def write_report(out, rows, lmaxes, beams, check, wall, ducc0, litebird_sim, pis
                 panels.append((kind, plate, detectors, grid))
     with open(os.path.join(out, "crossover.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
-    fig, axes = plt.subplots(len(panels) // 2, 2, figsize=(10, 2.0 * len(panels) // 2 + 1), squeeze=False)
+    fig, axes = plt.subplots(len(panels) // 2, 2, figsize=(10, 2.2 * len(panels) // 2 + 1), squeeze=False,
+                             constrained_layout=True)
     for ax, (kind, plate, detectors, grid) in zip(axes.flat, panels):
         im = ax.pcolormesh(ns, np.arange(len(lmaxes)), np.log10(grid), cmap="RdBu", vmin=-2, vmax=2,
                            shading="nearest")
@@ -354,7 +382,8 @@ def write_report(out, rows, lmaxes, beams, check, wall, ducc0, litebird_sim, pis
         ax.set_yticks(np.arange(len(lmaxes)))
         ax.set_yticklabels([str(l) for l in lmaxes])
         ax.set_title(f"{kind}, {'generic plate' if plate else 'no plate'}, {detectors} detector(s)", fontsize=8)
-        ax.set_xlabel("samples per detector", fontsize=8)
+        if ax in axes[-1]:
+            ax.set_xlabel("samples per detector", fontsize=8)
         ax.set_ylabel("lmax", fontsize=8)
     fig.colorbar(im, ax=axes, label="log10 (ducc0 time / pisco-vk time): blue, pixel space wins")
     fig.savefig(os.path.join(out, "crossover.png"), dpi=90)
