@@ -19,6 +19,7 @@
 #include "pisco/hwp.hpp"
 #include "pisco/quaternion.hpp"
 #include "pisco/scan.hpp"
+#include "pisco/units.hpp"
 
 #ifndef PISCO_TEST_BACKEND
 #error "PISCO_TEST_BACKEND must name the backend under test"
@@ -27,7 +28,7 @@
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 const std::string backend = PISCO_TEST_BACKEND;
 
 using pisco_test::cmb_like_sky;

@@ -15,11 +15,12 @@
 #include "support.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 using Mat = std::array<std::array<double, 4>, 4>;
 
 Mat lambda(double chi) {

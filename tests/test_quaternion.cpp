@@ -11,12 +11,13 @@
 #include "pisco/focal_plane.hpp"
 #include "pisco/pointing.hpp"
 #include "pisco/quaternion.hpp"
+#include "pisco/units.hpp"
 #include "support.hpp"
 
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 using V = std::array<double, 3>;
 
 V theta_hat(double t, double p) { return {std::cos(t) * std::cos(p), std::cos(t) * std::sin(p), -std::sin(t)}; }

@@ -16,7 +16,7 @@
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 using V = std::array<double, 3>;
 using Frame = pisco::SatelliteScan::Frame;
 

@@ -14,11 +14,12 @@
 #include "support.hpp"
 #include "pisco/error.hpp"
 #include "pisco/scan.hpp"
+#include "pisco/units.hpp"
 
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
+using pisco::deg;
 
 using Base = T_Healpix_Base<std::int64_t>;
 

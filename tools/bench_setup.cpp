@@ -10,7 +10,6 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <numbers>
 #include <string>
 
 #include "pisco/pisco.hpp"
@@ -38,7 +37,7 @@ int main(int argc, char** argv) {
     const int nside = std::atoi(argv[1]);
     const std::string backend = argv[2];
     const std::string device = argc > 3 ? argv[3] : "auto";
-    const double deg = std::numbers::pi / 180;
+    using pisco::deg;
     pisco::Sky sky(nside, "K_CMB");
     std::uint64_t x = 88172645463325252ull;  // xorshift: a cheap, deterministic noise sky
     auto next = [&] {

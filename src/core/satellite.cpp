@@ -6,12 +6,12 @@
 
 #include "pisco/error.hpp"
 #include "pisco/scan.hpp"
+#include "pisco/units.hpp"
 
 namespace pisco {
 namespace {
 
 constexpr double pi = std::numbers::pi;
-constexpr double deg = pi / 180;
 
 // Fixed rotations between celestial frames.
 // - Ecliptic to equatorial: a rotation by the obliquity about the x axis (the equinox), the IAU 1976

@@ -8,11 +8,13 @@
 
 #include <toml++/toml.h>
 
+#include "pisco/units.hpp"
+
 namespace pisco_cli {
 namespace {
 
 namespace fs = std::filesystem;
-constexpr double deg = std::numbers::pi / 180;
+using pisco::deg;
 constexpr double arcmin = deg / 60;
 
 // A TOML table with the context for error messages; finish() rejects keys nobody asked for, so a
