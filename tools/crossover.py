@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Where pixel space wins: PISCO-VK against ducc0's harmonic total convolution, per core (VALIDATION G).
+"""Where pixel space wins: PISCO-VK against ducc0's harmonic total convolution, per core (docs/validation.md, G).
 
 Run it with the python tests' environment and the package of a build tree:
 

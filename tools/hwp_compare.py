@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""PISCO-VK through a half-wave plate against litebird_sim's MuellerConvolver (VALIDATION H3), and both timed.
+"""PISCO-VK through a half-wave plate against litebird_sim's MuellerConvolver (docs/validation.md, H3), and both timed.
 
 Run it with a Python that has litebird_sim, ducc0, healpy, h5py and numpy, e.g. the python tests'
 environment: build/python-venv/bin/python tools/hwp_compare.py [--bench]. The ctest

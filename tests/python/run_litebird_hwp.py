@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """ctest python.litebird_hwp: PISCO-VK through a half-wave plate against litebird_sim's MuellerConvolver.
 
-VALIDATION H3. Runs with the system Python (standard library only):
+docs/validation.md, H3. Runs with the system Python (standard library only):
 
 1. the python tests' virtual environment at BUILD/python-venv (python_env.py; litebird_sim,
    ducc0, healpy, h5py and numpy from PyPI, binary wheels only); when packages are missing
