@@ -52,55 +52,89 @@ PISCO_HD std::int64_t ring_above(std::int64_t nside, double z) {
 // The table for all 4 nside - 1 rings; entry r - 1 describes ring r.
 std::vector<RingEntry> make_ring_table(int nside);
 
+// The rings a disc of radius rho around colatitude theta0 crosses, first ... last (1-based), and
+// whether it holds a pole; z0 = cos(theta0) and xa = 1 / sin(theta0), as the ring bounds need them.
+struct DiscRings {
+  std::int64_t first, last;
+  bool north, south;  // every ring north of `first` (south of `last`) lies wholly inside
+  double z0, xa;
+};
+
+PISCO_HD DiscRings disc_rings(std::int64_t nside, double theta0, double rho) {
+  const double pi = 3.141592653589793238462643383279502884;
+  const std::int64_t nrings = 4 * nside - 1;
+  DiscRings d;
+  d.z0 = cos(theta0);
+  d.xa = 1.0 / sqrt((1.0 - d.z0) * (1.0 + d.z0));
+  const double rlat1 = theta0 - rho;
+  d.first = ring_above(nside, cos(rlat1)) + 1;
+  d.north = rlat1 <= 0 && d.first > 1;
+  const double rlat2 = theta0 + rho;
+  d.last = ring_above(nside, cos(rlat2));
+  if (d.last > nrings) d.last = nrings;
+  if (d.first < 1) d.first = 1;
+  d.south = rlat2 >= pi && d.last + 1 < 4 * nside;
+  return d;
+}
+
+// Where ring r crosses the disc's edge: x = cos(dphi) sin(theta_r) in the units of the ring's
+// radius, and ysq = 1 - z^2 - x^2 (the ring does not cross the edge unless ysq > 0); the ring's
+// half-width in longitude is then dphi = atan2(sqrt(ysq), x).
+PISCO_HD void ring_edge(const RingEntry& r, const DiscRings& d, double cos_rho, double& x, double& ysq) {
+  const double z = r.z;
+  x = (cos_rho - z * d.z0) * d.xa;
+  ysq = 1.0 - z * z - x * x;
+}
+
+// The argument whose floor is a bound of the ring's pixel indices: floor(arg(phi0 - dphi)) + 1 is the
+// first pixel, floor(arg(phi0 + dphi)) the last.
+PISCO_HD double ring_bound_arg(const RingEntry& r, double phi) {
+  const double inv_twopi = 0.5 / 3.141592653589793238462643383279502884;
+  const double shift = r.shifted ? 0.5 : 0.0;
+  return double(r.count) * inv_twopi * phi - shift;
+}
+
+// Emits ring r's pixels first ... last, indices taken modulo the ring (one range, or two where they
+// wrap through phi = 0); none when first > last.
+template <class Emit>
+PISCO_HD void emit_ring_pixels(const RingEntry& r, std::int64_t ip_lo, std::int64_t ip_hi, Emit&& emit) {
+  const std::int64_t nr = r.count;
+  if (ip_lo > ip_hi) return;
+  if (ip_hi >= nr) {
+    ip_lo -= nr;
+    ip_hi -= nr;
+  }
+  if (ip_lo < 0) {
+    emit(r.first, std::uint32_t(r.first + ip_hi + 1));
+    emit(std::uint32_t(r.first + ip_lo + nr), r.first + r.count);
+  } else {
+    emit(std::uint32_t(r.first + ip_lo), std::uint32_t(r.first + ip_hi + 1));
+  }
+}
+
 // Calls emit(begin, end) for each range [begin, end) of pixels in the disc of radius rho around
 // (theta0, phi0); cos_rho = cos(rho). rho must be in (0, pi/2].
 template <class Emit>
 PISCO_HD void for_each_disc_range(const RingEntry* rings, std::int64_t nside, double theta0,
                                   double phi0, double rho, double cos_rho, Emit&& emit) {
-  const double pi = 3.141592653589793238462643383279502884;
-  const double inv_twopi = 0.5 / pi;
-  const std::int64_t nrings = 4 * nside - 1;
   const std::int64_t npix = 12 * nside * nside;
-  const double z0 = cos(theta0);
-  const double xa = 1.0 / sqrt((1.0 - z0) * (1.0 + z0));
-
-  const double rlat1 = theta0 - rho;
-  std::int64_t irmin = ring_above(nside, cos(rlat1)) + 1;
-  if (rlat1 <= 0 && irmin > 1) {  // north pole inside: every ring north of irmin entirely
-    const RingEntry& r = rings[irmin - 2];
+  const DiscRings d = disc_rings(nside, theta0, rho);
+  if (d.north) {  // north pole inside: every ring north of d.first entirely
+    const RingEntry& r = rings[d.first - 2];
     emit(std::uint32_t(0), r.first + r.count);
   }
-  const double rlat2 = theta0 + rho;
-  std::int64_t irmax = ring_above(nside, cos(rlat2));
-  if (irmax > nrings) irmax = nrings;
-  if (irmin < 1) irmin = 1;
-
-  for (std::int64_t iz = irmin; iz <= irmax; ++iz) {
+  for (std::int64_t iz = d.first; iz <= d.last; ++iz) {
     const RingEntry& r = rings[iz - 1];
-    const double z = r.z;
-    const double x = (cos_rho - z * z0) * xa;
-    const double ysq = 1.0 - z * z - x * x;
+    double x, ysq;
+    ring_edge(r, d, cos_rho, x, ysq);
     if (ysq <= 0) continue;  // the ring does not cross the disc boundary
     const double dphi = atan2(sqrt(ysq), x);
     if (!(dphi > 0)) continue;
-    const std::int64_t nr = r.count;
-    const double shift = r.shifted ? 0.5 : 0.0;
-    std::int64_t ip_lo = std::int64_t(floor(double(nr) * inv_twopi * (phi0 - dphi) - shift)) + 1;
-    std::int64_t ip_hi = std::int64_t(floor(double(nr) * inv_twopi * (phi0 + dphi) - shift));
-    if (ip_lo > ip_hi) continue;
-    if (ip_hi >= nr) {
-      ip_lo -= nr;
-      ip_hi -= nr;
-    }
-    if (ip_lo < 0) {
-      emit(r.first, std::uint32_t(r.first + ip_hi + 1));
-      emit(std::uint32_t(r.first + ip_lo + nr), r.first + r.count);
-    } else {
-      emit(std::uint32_t(r.first + ip_lo), std::uint32_t(r.first + ip_hi + 1));
-    }
+    emit_ring_pixels(r, std::int64_t(floor(ring_bound_arg(r, phi0 - dphi))) + 1,
+                     std::int64_t(floor(ring_bound_arg(r, phi0 + dphi))), emit);
   }
-  if (rlat2 >= pi && irmax + 1 < 4 * nside) {  // south pole inside
-    const RingEntry& r = rings[irmax];
+  if (d.south) {  // south pole inside
+    const RingEntry& r = rings[d.last];
     emit(r.first, std::uint32_t(npix));
   }
 }

@@ -1,7 +1,7 @@
 // The simd backend (docs/simd.md): the GPU kernels' float32 contract on the CPU's vector units.
 // This file is the driver: it packs the sky and the weights into the kernel's layout once, and per
-// sample computes the antenna frame and walks the disc in float64 with the reference's own code
-// (core/frame.hpp, core/disc.hpp), then hands the disc's pixel ranges to the kernel
+// sample computes the antenna frame in float64 with the reference's own code (core/frame.hpp) and the
+// disc's ranges (simd::disc_ranges: the reference's, core/disc.hpp), then hands them to the kernel
 // (simd_kernel.cpp, compiled per instruction set by Highway). Samples are spread over a thread pool
 // as in the float64 reference.
 #include <algorithm>
@@ -169,13 +169,8 @@ class SimdBackend final : public Backend {
                              det.sin_zeta, theta, phi);
       if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * in.plate_angle[i]), std::sin(2 * in.plate_angle[i]), m);
       ranges.clear();
-      for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
-                          [&](std::uint32_t b, std::uint32_t e) {
-                            if (e <= b) return;
-                            ranges.push_back(b);
-                            ranges.push_back(e);
-                            count += e - b;
-                          });
+      simd::disc_ranges(kernel_, sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max, ranges);
+      for (std::size_t r = 0; r < ranges.size(); r += 2) count += ranges[r + 1] - ranges[r];
       const simd::SampleInput sample{&f, ranges.data(), ranges.size() / 2, plate ? m : nullptr, monopole_ != 0.0,
                                      per_sample_};
       simd::SampleSums sums;

@@ -2,8 +2,8 @@
 // (simd_kernel.cpp) and chosen at run time: plain C++ types only, so that the backend's driver
 // (simd_backend.cpp) needs no Highway header.
 //
-// The driver computes each sample's antenna frame and walks its disc in float64 with the reference's
-// own code (core/frame.hpp, core/disc.hpp); the kernel evaluates the disc's pixels, range by range,
+// The driver computes each sample's antenna frame with the reference's own code (core/frame.hpp) and
+// its disc's ranges with disc_ranges (the reference's, core/disc.hpp, in vectors); the kernel evaluates the disc's pixels, range by range,
 // a vector of float32 lanes at a time, with the formulas of core/contribution-inl.hpp.
 #pragma once
 
@@ -11,7 +11,10 @@
 #include <cstdint>
 #include <string>
 
+#include <vector>
+
 #include "core/contribution.hpp"
+#include "core/disc.hpp"
 
 namespace pisco::detail::simd {
 
@@ -81,6 +84,15 @@ struct Kernel {
 // Throws pisco::Error listing the instruction sets this machine can run when `name` is not one of them.
 // Each engine keeps its own choice: nothing process-wide changes.
 Kernel choose_kernel(const std::string& name);
+
+// Appends the [begin, end) pixel ranges of the disc of radius rho around (theta0, phi0) to `ranges`:
+// exactly for_each_disc_range's (empty ranges left out), the rings' arctangents taken in vectors.
+// `redone`, when given, counts the rings redone with the reference's scalar arithmetic because a
+// bound fell within the vector arithmetic's margin of an integer: count / 2 pi x 1e-12 + `margin`
+// (tests widen it to send every ring through the scalar arithmetic).
+void disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
+                 double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone = nullptr,
+                 double margin = 1e-9);
 
 // Evaluates one sample with `kernel`.
 void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const SampleInput& in,
