@@ -12,6 +12,10 @@
 #include <numbers>
 #include <string>
 #include <sys/wait.h>
+#include <utility>
+#include <vector>
+
+#include <hdf5.h>
 
 #include "backend_fixtures.hpp"
 #include "pisco/pisco.hpp"
@@ -440,6 +444,75 @@ TEST_F(Cli, InputFileErrors) {
                "sample 7");
   expect_error("run " + write("p2.toml", config("[sky]\nnside = 32\n", beam, det, "[scan]\ntype = \"file\"\nfile = \"theta.h5\"\n")).string(),
                "sample 7");
+}
+
+
+// A pointing file of per-detector groups (docs/formats.md, "Pointing files"): groups[k].second samples
+// of theta, phi, psi in the group named groups[k].first.
+void write_detector_pointing(const fs::path& file, const std::vector<std::pair<std::string, std::size_t>>& groups) {
+  const hid_t f = H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  ASSERT_GE(f, 0) << file;
+  for (const auto& [name, n] : groups) {
+    const hid_t g = H5Gcreate2(f, name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    std::vector<double> v[3];
+    for (std::size_t i = 0; i < n; ++i) {
+      v[0].push_back(0.5 + 0.01 * double(i));  // theta
+      v[1].push_back(0.1 * double(i));         // phi
+      v[2].push_back(0.0);                     // psi
+    }
+    const char* names[3] = {"theta", "phi", "psi"};
+    for (int k = 0; k < 3; ++k) {
+      const hsize_t dims[1] = {n};
+      const hid_t space = H5Screate_simple(1, dims, nullptr);
+      const hid_t ds = H5Dcreate2(g, names[k], H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+      if (n > 0) H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v[k].data());
+      H5Dclose(ds);
+      H5Sclose(space);
+    }
+    H5Gclose(g);
+  }
+  H5Fclose(f);
+}
+
+// Per-detector pointing files whose detectors have different sample counts: one error naming the file,
+// the detector and both counts, a non-zero exit and no output, whichever detector is the odd one (the
+// first one empty included). The same file with equal counts runs.
+TEST_F(Cli, PerDetectorPointingOfUnequalLengthsLeavesNoOutput) {
+  const std::string beam = "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n";
+  const std::string dets = "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d1\"\nbeam = \"main\"\n"
+                           "[[focal_plane.detectors]]\nname = \"d2\"\nbeam = \"main\"\nzeta_deg = 45\n";
+  auto cfg = [&](const std::string& file) {
+    return write(file + ".toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n", beam, dets,
+                                        "[scan]\ntype = \"file\"\nfile = \"" + file + ".h5\"\n",
+                                        "spectra = false\nmaps = false\n"));
+  };
+  write_detector_pointing(dir_ / "even.h5", {{"d1", 20}, {"d2", 20}});
+  const Result ok = run("run " + cfg("even").string());
+  ASSERT_EQ(ok.status, 0) << ok.output;
+  EXPECT_NE(ok.output.find("2 detectors x 20 samples"), std::string::npos) << ok.output;
+  EXPECT_EQ(pisco::read_tod_signal(dir_ / "out" / "tod.h5", "d2").size(), 20u);
+  fs::remove_all(dir_ / "out");
+
+  write_detector_pointing(dir_ / "short.h5", {{"d1", 20}, {"d2", 15}});
+  expect_error("run " + cfg("short").string(), (dir_ / "short.h5").string() + ": detector 'd2' has 15 samples, detector 'd1' 20");
+  write_detector_pointing(dir_ / "long.h5", {{"d1", 20}, {"d2", 21}});
+  expect_error("run " + cfg("long").string(), (dir_ / "long.h5").string() + ": detector 'd2' has 21 samples, detector 'd1' 20");
+  write_detector_pointing(dir_ / "empty.h5", {{"d1", 0}, {"d2", 20}});
+  expect_error("run " + cfg("empty").string(), (dir_ / "empty.h5").string() + ": detector 'd2' has 20 samples, detector 'd1' 0");
+}
+
+// A per-detector pointing file gives each detector its own lines of sight; a focal plane that also gives
+// a detector an offset from the boresight is contradictory: one error naming the file and the detector,
+// a non-zero exit and no output.
+TEST_F(Cli, PerDetectorPointingWithOffsetsLeavesNoOutput) {
+  write_detector_pointing(dir_ / "ptg.h5", {{"d1", 20}, {"d2", 20}});
+  const std::string dets = "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d1\"\nbeam = \"main\"\n"
+                           "[[focal_plane.detectors]]\nname = \"d2\"\nbeam = \"main\"\nxi_deg = 1.0\neta_deg = -0.5\n";
+  const fs::path c = write("offsets.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                  "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n", dets,
+                                                  "[scan]\ntype = \"file\"\nfile = \"ptg.h5\"\n", "spectra = false\n"));
+  expect_error("run " + c.string(), (dir_ / "ptg.h5").string() + ": the file gives detector 'd2' its own pointing, but " +
+                                        "the focal plane also gives it an offset from the boresight");
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -99,6 +100,67 @@ TEST_F(PointingFile, MalformedFilesAreNamed) {
   }
   expect_error([&] { pisco::BoresightFile{file}; }, "'/times' has 7 samples but '/boresight' has 10");
   expect_error([&] { pisco::BoresightFile::write(dir_ / "x.h5", q, {1.0, 2.0}); }, "2 times for 10 quaternions");
+}
+
+// The plate's angles, one per quaternion: a dataset '/hwp_angle' of another length or shape is an error
+// naming the file and both lengths when the file is opened; a non-finite angle names its sample; write()
+// refuses angles of another length and leaves no file behind.
+TEST_F(PointingFile, HwpAngleOfAnotherLengthIsNamed) {
+  const std::vector<pisco::Quat> q = some_quats(10);
+  std::vector<double> angles(q.size());
+  for (std::size_t i = 0; i < angles.size(); ++i) angles[i] = 0.25 * double(i);
+  const fs::path good = dir_ / "good.h5";
+  pisco::BoresightFile::write(good, q, {}, angles);
+  {
+    const pisco::BoresightFile f(good);
+    ASSERT_TRUE(f.has_hwp_angle());
+    std::vector<double> h;
+    f.read_hwp_angle(2, 5, h);
+    ASSERT_EQ(h.size(), 5u);
+    EXPECT_EQ(h[0], angles[2]);
+    EXPECT_EQ(h[4], angles[6]);
+    expect_error([&] { f.read_hwp_angle(8, 5, h); }, "'/hwp_angle' has 10");
+  }
+
+  // A boresight of 10 quaternions with `name`'s 'hwp_angle' of shape `dims`.
+  auto with_hwp = [&](const std::string& name, std::vector<hsize_t> dims, double value) {
+    const fs::path file = dir_ / name;
+    pisco::BoresightFile::write(file, q);
+    const hid_t f = H5Fopen(file.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    const hid_t space = H5Screate_simple(int(dims.size()), dims.data(), nullptr);
+    const hid_t ds = H5Dcreate2(f, "hwp_angle", H5T_IEEE_F64LE, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    hsize_t n = 1;
+    for (hsize_t d : dims) n *= d;
+    const std::vector<double> v(n, value);
+    H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    H5Dclose(ds);
+    H5Sclose(space);
+    H5Fclose(f);
+    return file;
+  };
+  const fs::path shorter = with_hwp("short.h5", {7}, 0.5);
+  const std::string message = pisco_test::error_of([&] { pisco::BoresightFile{shorter}; });
+  EXPECT_NE(message.find(shorter.string()), std::string::npos) << message;
+  EXPECT_NE(message.find("'/hwp_angle' has 7 samples but '/boresight' has 10"), std::string::npos) << message;
+  expect_error([&] { pisco::BoresightFile{with_hwp("long.h5", {13}, 0.5)}; },
+               "'/hwp_angle' has 13 samples but '/boresight' has 10");
+  expect_error([&] { pisco::BoresightFile{with_hwp("empty.h5", {0}, 0.5)}; },
+               "'/hwp_angle' has 0 samples but '/boresight' has 10");
+  expect_error([&] { pisco::BoresightFile{with_hwp("table.h5", {10, 2}, 0.5)}; }, "hwp_angle");
+
+  angles[6] = NAN;
+  const fs::path nan = dir_ / "nan.h5";
+  pisco::BoresightFile::write(nan, q, {}, angles);
+  const pisco::BoresightFile f(nan);
+  std::vector<double> h;
+  f.read_hwp_angle(0, 6, h);  // the good part reads
+  expect_error([&] { f.read_hwp_angle(4, 4, h); }, "'/hwp_angle' sample 6 is not finite");
+
+  const fs::path refused = dir_ / "refused.h5";
+  expect_error([&] { pisco::BoresightFile::write(refused, q, {}, {0.1, 0.2, 0.3}); },
+               "3 plate angles for 10 quaternions");
+  EXPECT_FALSE(fs::exists(refused));
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir_), fs::directory_iterator()), 6);  // nothing half-written
 }
 
 TEST_F(PointingFile, BadSamplesAreNamed) {

@@ -278,16 +278,21 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   std::size_t samples_per_detector = 0;
   cl.step([&] {
     if (per_detector_file) {
+      const std::string* first = nullptr;  // the detector whose sample count the others must match
       for (const auto& d : fp.detectors()) {
         if (d.has_offset())
           throw pisco::Error(c.scan.file.string() + ": the file gives detector '" + d.name +
                              "' its own pointing, but the focal plane also gives it an offset from the boresight " +
                              "(expected a boresight pointing file, or detectors without offsets)");
         const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
-        if (samples_per_detector == 0) samples_per_detector = n;
-        if (n != samples_per_detector)
+        if (!first) {
+          first = &d.name;
+          samples_per_detector = n;
+        } else if (n != samples_per_detector) {
           throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
-                             " samples, the others " + std::to_string(samples_per_detector));
+                             " samples, detector '" + *first + "' " + std::to_string(samples_per_detector) +
+                             " (expected the same number of samples for every detector)");
+        }
       }
     } else {
       boresight.emplace(c.scan, c.hwp);
