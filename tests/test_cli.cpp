@@ -2,11 +2,13 @@
 // "Errors and partial files") with its message, a non-zero exit status and no output file left behind.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <sstream>
 #include <numbers>
@@ -513,6 +515,147 @@ TEST_F(Cli, PerDetectorPointingWithOffsetsLeavesNoOutput) {
                                                   "[scan]\ntype = \"file\"\nfile = \"ptg.h5\"\n", "spectra = false\n"));
   expect_error("run " + c.string(), (dir_ / "ptg.h5").string() + ": the file gives detector 'd2' its own pointing, but " +
                                         "the focal plane also gives it an offset from the boresight");
+}
+
+// The numbers of the [scan] table of a simulation file (key = number lines; comments and other tables
+// passed over).
+std::map<std::string, double> scan_numbers(const fs::path& file) {
+  std::ifstream in(file);
+  std::map<std::string, double> out;
+  bool in_scan = false;
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    if (line[0] == '[') {
+      in_scan = line.rfind("[scan]", 0) == 0;
+      continue;
+    }
+    const std::size_t eq = line.find('=');
+    if (!in_scan || eq == std::string::npos) continue;
+    std::string key = line.substr(0, eq);
+    key.erase(key.find_last_not_of(' ') + 1);
+    try {
+      out[key] = std::stod(line.substr(eq + 1));
+    } catch (const std::exception&) {  // a string value (type, frame)
+    }
+  }
+  return out;
+}
+
+// 19042 -> "19,042", as README.md writes its figures.
+std::string with_commas(std::uint64_t n) {
+  std::string s = std::to_string(n);
+  for (int i = int(s.size()) - 3; i > 0; i -= 3) s.insert(std::size_t(i), ",");
+  return s;
+}
+
+// The row of README.md's table of examples for `example` ("| satellite.toml | ... |").
+std::string readme_row(const std::string& example) {
+  std::ifstream in(fs::path(PISCO_TEST_ASSETS_DIR) / ".." / "README.md");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("| " + example + " |", 0) == 0) return line;
+  ADD_FAILURE() << "README.md has no row for " << example;
+  return "";
+}
+
+// One of the satellite examples run whole (a second or so on two cores) as README.md says a user runs
+// it: the figures it prints against what they must be. The samples per detector are duration x rate; the
+// hit map is, pixel for pixel, twice the library's boresight scan (a PSB pair without offsets) binned at
+// the maps' NSIDE, summing to detectors x samples; the solved pixels it prints are the maps' pixels that
+// are not UNSEEN; README.md's row for the example quotes the same numbers. Returns the run's output.
+std::string run_satellite_example(const fs::path& dir, const std::string& example) {
+  const fs::path cfg = fs::path(PISCO_TEST_ASSETS_DIR) / "examples" / example;
+  const fs::path out = dir / "out";
+  const Result r = run("run " + cfg.string() + " -o " + out.string() + " --no-plots --backend cpu");
+  std::cout << r.output;
+  EXPECT_EQ(r.status, 0) << r.output;
+  if (r.status != 0) return r.output;
+
+  const auto num = scan_numbers(cfg);
+  auto get = [&](const char* key, double fallback) {
+    const auto it = num.find(key);
+    return it == num.end() ? fallback : it->second;
+  };
+  pisco::SatelliteScan sat;
+  sat.spin_sun_angle = get("spin_sun_angle_deg", 45) * pisco::deg;
+  sat.spin_boresight_angle = get("spin_boresight_angle_deg", 50) * pisco::deg;
+  sat.precession_period = get("precession_period_min", 192.348) * 60;
+  sat.spin_period = get("spin_period_min", 20) * 60;
+  sat.sample_rate = get("sample_rate_hz", 19);
+  sat.start_time = get("start_time_s", 0);
+  sat.precession_phase = get("precession_phase_deg", 0) * pisco::deg;
+  sat.spin_phase = get("spin_phase_deg", 0) * pisco::deg;
+  sat.samples = std::size_t(std::llround(get("duration_hours", 1) * 3600 * sat.sample_rate));
+  const int nside = int(get("nside", 64));
+  const std::size_t npix = 12 * std::size_t(nside) * std::size_t(nside);
+  const std::size_t samples = 2 * sat.samples;  // one PSB pair
+
+  EXPECT_NE(r.output.find("scan: satellite, 2 detectors x " + std::to_string(sat.samples) + " samples"), std::string::npos);
+  EXPECT_NE(r.output.find("summary: " + std::to_string(samples) + " samples"), std::string::npos);
+  const std::string maps_line = "maps: NSIDE " + std::to_string(nside) + ", ";
+  const std::size_t at = r.output.find(maps_line);
+  EXPECT_NE(at, std::string::npos) << r.output;
+  if (at == std::string::npos) return r.output;
+  std::size_t solved = 0;
+  char of[64] = {};
+  EXPECT_EQ(std::sscanf(r.output.c_str() + at + maps_line.size(), "%zu of %63s", &solved, of), 2);
+  EXPECT_EQ(std::string(of), std::to_string(npix));
+
+  std::vector<pisco::Quat> q;
+  sat.generate(0, sat.samples, q);
+  std::vector<double> want(npix, 0.0);
+  for (const pisco::Quat& b : q) {
+    const auto v = pisco::rotate(b, {0, 0, 1});
+    want[pisco::ang2pix(nside, std::acos(std::clamp(v[2], -1.0, 1.0)), std::atan2(v[1], v[0]))] += 2;
+  }
+  const pisco::Sky hits = pisco::Sky::read_fits(out / "hits.fits");
+  EXPECT_EQ(hits.nside(), nside);
+  if (hits.nside() != nside) return r.output;
+  std::size_t hit = 0, differ = 0;
+  double sum = 0;
+  for (std::size_t p = 0; p < npix; ++p) {
+    sum += hits.I()[p];
+    hit += hits.I()[p] > 0;
+    differ += hits.I()[p] != want[p];
+  }
+  EXPECT_EQ(sum, double(samples));
+  EXPECT_EQ(differ, 0u) << "pixels whose hits are not the library scan's";
+  const pisco::Sky maps = pisco::Sky::read_fits(out / "maps.fits", pisco::UnseenPolicy::flag);
+  const std::size_t seen = npix - std::size_t(std::count_if(maps.I().begin(), maps.I().end(), pisco::is_unseen));
+  EXPECT_EQ(seen, solved);
+  EXPECT_LE(solved, hit);
+  std::cout << example << ": " << sat.samples << " samples per detector, " << hit << " pixels hit, " << solved
+            << " solved of " << npix << "\n";
+
+  const std::string row = readme_row(example);
+  EXPECT_NE(row.find(with_commas(solved) + " "), std::string::npos) << "README.md: " << row;
+  if (example == "satellite.toml") {
+    EXPECT_NE(row.find(with_commas(sat.samples) + " samples per detector"), std::string::npos) << "README.md: " << row;
+    EXPECT_NE(row.find(with_commas(solved) + " of " + with_commas(npix) + " NSIDE " + std::to_string(nside)),
+              std::string::npos)
+        << "README.md: " << row;
+  }
+  return r.output;
+}
+
+// assets/examples/satellite.toml, whole: the README's figures.
+TEST_F(Cli, SatelliteExampleAsTheReadmeSays) { run_satellite_example(dir_, "satellite.toml"); }
+
+// assets/examples/hwp_satellite.toml, whole: the README's figures, and its leakage figure as README.md
+// and docs/validation.md (H4) quote it, to two digits.
+TEST_F(Cli, HwpSatelliteExampleAsTheReadmeSays) {
+  const std::string output = run_satellite_example(dir_, "hwp_satellite.toml");
+  const std::string key = "leakage figure rms P / rms I = ";
+  const std::size_t at = output.find(key);
+  ASSERT_NE(at, std::string::npos) << output;
+  const double leakage = std::stod(output.substr(at + key.size()));
+  ASSERT_GT(leakage, 0.0);
+  const int e = int(std::floor(std::log10(leakage)));
+  char quoted[32];
+  std::snprintf(quoted, sizeof quoted, "rms P / rms I = %.1fe%d", leakage / std::pow(10.0, e), e);
+  EXPECT_NE(readme_row("hwp_satellite.toml").find(quoted), std::string::npos) << quoted;
+  std::ifstream v(fs::path(PISCO_TEST_ASSETS_DIR) / ".." / "docs" / "validation.md");
+  const std::string validation((std::istreambuf_iterator<char>(v)), std::istreambuf_iterator<char>());
+  EXPECT_NE(validation.find(quoted), std::string::npos) << "docs/validation.md, H4: " << quoted;
 }
 
 }  // namespace
