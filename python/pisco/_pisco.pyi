@@ -2,12 +2,13 @@
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, Literal
 
 import numpy
 from numpy.typing import ArrayLike, NDArray
 
 Float64Array = NDArray[numpy.float64]
+UnseenPolicy = Literal["error", "zero", "flag"]
 
 __version__: str
 deg: float
@@ -57,8 +58,16 @@ class Sky:
     def from_maps(maps: Float64Array | Sequence[Float64Array], units: str = "K_CMB") -> Sky:
         """A sky from k = 1, 3 or 4 RING maps (I; I, Q, U; I, Q, U, V), copied into the sky."""
     @staticmethod
-    def read_fits(path: str | os.PathLike[str]) -> Sky:
-        """Reads a HEALPix FITS map (1, 3 or 4 columns); NESTED becomes RING, IAU becomes COSMO."""
+    def read_fits(path: str | os.PathLike[str], unseen: UnseenPolicy = "error") -> Sky:
+        """Reads a HEALPix FITS map (1, 3 or 4 columns); NESTED becomes RING, IAU becomes COSMO.
+
+        unseen: UNSEEN pixels (a masked map) raise pisco.Error ('error'), are set to 0 ('zero') or
+        are kept as UNSEEN for an Engine made with unseen='flag' ('flag').
+        """
+    def unseen_pixels(self) -> NDArray[numpy.int64]:
+        """The RING indices of the pixels UNSEEN in any Stokes map, ascending."""
+    def zero_unseen(self) -> int:
+        """Sets the UNSEEN values to 0; returns the number of pixels changed."""
     def write_fits(self, path: str | os.PathLike[str]) -> None:
         """Writes I, Q, U, V as a HEALPix FITS file (RING, COSMO), atomically."""
     @property
@@ -277,6 +286,7 @@ class Engine:
         normalization: str = "integral",
         threads: int = 0,
         arithmetic: str = "auto",
+        unseen: UnseenPolicy = "error",
     ) -> None: ...
     def convolve(
         self,
@@ -308,6 +318,16 @@ class Engine:
         hwp_angle: Float64Array | None = None,
     ) -> int:
         """convolve(), asynchronously; `out` (required) is written by the time wait(ticket) returns."""
+    def flag_samples(
+        self,
+        detector: int | str,
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+    ) -> NDArray[numpy.bool_]:
+        """Masked skies (unseen='flag'): True where the sample's disc holds an UNSEEN sky pixel."""
     def wait(self, ticket: int | None = None) -> None: ...
     def close(self) -> None: ...
     @property
@@ -318,6 +338,9 @@ class Engine:
     def device(self) -> str: ...
     @property
     def mean_disc_pixels(self) -> float: ...
+    @property
+    def unseen_pixels(self) -> int:
+        """The number of UNSEEN sky pixels taken as 0 (unseen='zero' or 'flag')."""
     @property
     def focal_plane(self) -> FocalPlane: ...
     def __len__(self) -> int: ...

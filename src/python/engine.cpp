@@ -37,6 +37,18 @@ Normalization normalization_from(const std::string& name) {
   throw nb::value_error(("normalization: expected 'integral' or 'per_sample', got '" + name + "'").c_str());
 }
 
+}  // namespace
+
+// The `unseen` arguments (Engine, Sky.read_fits): what is done with a masked sky's UNSEEN pixels.
+UnseenPolicy unseen_policy_from(const std::string& name) {
+  if (name == "error") return UnseenPolicy::error;
+  if (name == "zero") return UnseenPolicy::zero;
+  if (name == "flag") return UnseenPolicy::flag;
+  throw nb::value_error(("unseen: expected 'error', 'zero' or 'flag', got '" + name + "'").c_str());
+}
+
+namespace {
+
 // The pointing of one call, checked and viewed (no copy): angles or boresight quaternions.
 struct PointingArgs {
   std::optional<ConstVector> theta, phi, psi;
@@ -51,21 +63,23 @@ struct PointingArgs {
   }
 };
 
-PointingArgs pointing_args(nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats) {
+// `call` names the method in the messages ("convolve", "flag_samples").
+PointingArgs pointing_args(nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
+                           const std::string& call = "convolve") {
   const bool angles = !theta.is_none() || !phi.is_none() || !psi.is_none();
   if (angles == !quats.is_none())
-    throw nb::type_error("convolve: give either theta, phi and psi (the boresight's angles) or boresight_quats "
-                         "(one quaternion x, y, z, w per sample), not both and not neither");
+    throw nb::type_error((call + ": give either theta, phi and psi (the boresight's angles) or boresight_quats "
+                                 "(one quaternion x, y, z, w per sample), not both and not neither").c_str());
   PointingArgs p;
   if (angles) {
     if (theta.is_none() || phi.is_none() || psi.is_none())
-      throw nb::type_error("convolve: theta, phi and psi must all be given");
+      throw nb::type_error((call + ": theta, phi and psi must all be given").c_str());
     p.theta = const_vector(theta, "theta");
     p.phi = const_vector(phi, "phi");
     p.psi = const_vector(psi, "psi");
     p.size = p.theta->shape(0);
     if (p.phi->shape(0) != p.size || p.psi->shape(0) != p.size)
-      throw nb::value_error(("convolve: theta, phi and psi have different lengths (" + std::to_string(p.size) + ", " +
+      throw nb::value_error((call + ": theta, phi and psi have different lengths (" + std::to_string(p.size) + ", " +
                              std::to_string(p.phi->shape(0)) + ", " + std::to_string(p.psi->shape(0)) + ")").c_str());
   } else {
     p.quats = const_matrix(quats, "boresight_quats", 4);
@@ -138,7 +152,7 @@ class PyEngine {
  public:
   PyEngine(const Sky& sky, nb::handle beams, const FocalPlane& focal_plane, const std::string& backend,
            const std::string& device, std::size_t chunk_samples, const std::string& normalization,
-           unsigned threads, const std::string& arithmetic) {
+           unsigned threads, const std::string& arithmetic, const std::string& unseen) {
     std::vector<Beamsor> beam_list;
     if (nb::isinstance<Beamsor>(beams)) {
       beam_list.push_back(nb::cast<Beamsor>(beams));
@@ -156,6 +170,7 @@ class PyEngine {
     options.normalization = normalization_from(normalization);
     options.threads = threads;
     options.arithmetic = arithmetic;
+    options.unseen = unseen_policy_from(unseen);
     for (const auto& d : focal_plane.detectors()) names_.push_back(d.name);
     nb::gil_scoped_release release;
     engine_ = std::make_unique<Engine>(sky, beam_list, focal_plane, options);
@@ -223,6 +238,32 @@ class PyEngine {
     return ticket;
   }
 
+  // Masked skies: a new bool array, True where the sample's disc holds an UNSEEN sky pixel.
+  nb::object flag_samples(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats) {
+    const std::size_t d = detector_index(detector);
+    const PointingArgs p = pointing_args(theta, phi, psi, quats, "flag_samples");
+    nb::object result = nb::module_::import_("numpy").attr("zeros")(p.size, "bool");
+    auto flags = nb::cast<nb::ndarray<bool, nb::ndim<1>, nb::c_contig, nb::device::cpu>>(result);
+    // bool is one byte holding 0 or 1: the engine's uint8 flags are written into it in place.
+    static_assert(sizeof(bool) == sizeof(std::uint8_t));
+    const std::span<std::uint8_t> out(reinterpret_cast<std::uint8_t*>(flags.data()), p.size);
+    std::string problem;
+    {
+      nb::gil_scoped_release release;
+      problem = check_values(p);
+      if (problem.empty()) {
+        std::lock_guard lock(mutex_);
+        Engine& e = open();
+        if (p.theta)
+          e.flag_samples(d, p.angles(), out);
+        else
+          e.flag_samples(d, p.quaternions(), out);
+      }
+    }
+    if (!problem.empty()) throw nb::value_error(problem.c_str());
+    return result;
+  }
+
   void wait(std::optional<std::uint64_t> ticket) {
     {
       nb::gil_scoped_release release;
@@ -252,6 +293,7 @@ class PyEngine {
   std::string backend_name() { return locked([](Engine& e) { return e.backend_name(); }); }
   std::string device_name() { return locked([](Engine& e) { return e.device_name(); }); }
   double mean_disc_pixels() { return locked([](Engine& e) { return e.mean_disc_pixels(); }); }
+  std::size_t unseen_pixels() { return locked([](Engine& e) { return e.unseen_pixels(); }); }
   FocalPlane focal_plane() { return locked([](Engine& e) { return e.focal_plane(); }); }
   std::size_t size() const { return names_.size(); }
 
@@ -317,16 +359,19 @@ void bind_engine(nb::module_& m) {
                        "The convolution engine: the sky, beams and focal plane are set up once for a backend,\n"
                        "then chunks of pointing become TOD.\n\n"
                        "Engine(sky, beams, focal_plane, backend='auto', device='auto', chunk_samples=0,\n"
-                       "       normalization='integral', threads=0, arithmetic='auto')\n\n"
+                       "       normalization='integral', threads=0, arithmetic='auto', unseen='error')\n\n"
                        "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'vulkan',\n"
                        "'cuda' or 'auto' (the best present: pisco.devices()). device: an index or part of a name.\n"
                        "arithmetic (vulkan): 'auto', 'float64' or 'float-float', the kernel's float64 work; 'auto'\n"
                        "takes float-float on devices without float64.\n"
+                       "unseen: the sky's UNSEEN pixels (a masked map): 'error' (the default: pisco.Error naming\n"
+                       "their number and the first), 'zero' (taken as 0), or 'flag' (taken as 0, and\n"
+                       "flag_samples() tells which samples' discs hold one).\n"
                        "Usable as a context manager; close() frees the device's memory.")
       .def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, std::size_t,
-                    const std::string&, unsigned, const std::string&>(),
+                    const std::string&, unsigned, const std::string&, const std::string&>(),
            "sky"_a, "beams"_a, "focal_plane"_a, "backend"_a = "auto", "device"_a = "auto", "chunk_samples"_a = 0,
-           "normalization"_a = "integral", "threads"_a = 0, "arithmetic"_a = "auto")
+           "normalization"_a = "integral", "threads"_a = 0, "arithmetic"_a = "auto", "unseen"_a = "error")
       .def("convolve", &PyEngine::convolve, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
            "accumulate"_a = false, "hwp_angle"_a = nb::none(),
@@ -344,6 +389,13 @@ void bind_engine(nb::module_& m) {
            "accumulate"_a = false, "hwp_angle"_a = nb::none(),
            "Like convolve(), asynchronously: the pointing (and hwp_angle) are read before submit() returns\n"
            "a ticket; out (required) is written by the time wait(ticket) returns.")
+      .def("flag_samples", &PyEngine::flag_samples, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
+           "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),
+           "Masked skies (unseen='flag'): a new 1-D bool array, True where the sample's disc (the\n"
+           "detector's, its offset applied; the convolution's own disc: the sky pixels whose centres lie\n"
+           "within the beam's rho_max) holds a pixel UNSEEN in the sky. Such samples are convolved with\n"
+           "those pixels taken as 0: leave them out of maps. All False with no UNSEEN pixel or another\n"
+           "policy. Pointing as for convolve(), checked alike; computed on the host, without the GIL.")
       .def("wait", &PyEngine::wait, "ticket"_a = nb::none(),
            "Waits for submission `ticket` and every earlier one (all, without a ticket).")
       .def("close", &PyEngine::close, "Frees the engine (its device memory); later calls raise ValueError.")
@@ -352,6 +404,8 @@ void bind_engine(nb::module_& m) {
       .def_prop_ro("device", &PyEngine::device_name, "The device in use.")
       .def_prop_ro("mean_disc_pixels", &PyEngine::mean_disc_pixels,
                    "Mean number of sky pixels summed per sample so far.")
+      .def_prop_ro("unseen_pixels", &PyEngine::unseen_pixels,
+                   "The number of UNSEEN sky pixels taken as 0 (unseen='zero' or 'flag').")
       .def_prop_ro("focal_plane", &PyEngine::focal_plane, "The engine's focal plane (a copy).")
       .def("__len__", &PyEngine::size)
       .def("__enter__", [](nb::handle self) { return nb::borrow(self); })

@@ -3,6 +3,7 @@
 // framework adapters (pisco.toast, pisco.litebird).
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <numbers>
 #include <optional>
@@ -27,6 +28,7 @@ using namespace nb::literals;
 
 namespace pisco::python {
 void bind_engine(nb::module_& m);
+UnseenPolicy unseen_policy_from(const std::string& name);  // engine.cpp
 
 namespace {
 
@@ -222,8 +224,29 @@ void bind_sky(nb::module_& m) {
           "maps"_a, "units"_a = "K_CMB",
           "A sky from HEALPix RING maps: a (k, npix) float64 array or a sequence of k 1-D float64 arrays,\n"
           "k = 1 (I), 3 (I, Q, U) or 4 (I, Q, U, V), COSMO convention. The values are copied into the sky.")
-      .def_static("read_fits", [](const std::filesystem::path& path) { return Sky::read_fits(path); }, "path"_a,
-                  "Reads a HEALPix FITS map (1, 3 or 4 columns); NESTED is converted to RING, IAU to COSMO.")
+      .def_static(
+          "read_fits",
+          [](const std::filesystem::path& path, const std::string& unseen) {
+            const UnseenPolicy policy = unseen_policy_from(unseen);
+            nb::gil_scoped_release release;
+            return Sky::read_fits(path, policy);
+          },
+          "path"_a, "unseen"_a = "error",
+          "Reads a HEALPix FITS map (1, 3 or 4 columns); NESTED is converted to RING, IAU to COSMO.\n\n"
+          "unseen: what is done with UNSEEN pixels (pisco.unseen, a masked map): 'error' (the default:\n"
+          "pisco.Error naming the file, the column, their number and the first), 'zero' (set to 0), or\n"
+          "'flag' (kept as UNSEEN, for an Engine made with unseen='flag').")
+      .def(
+          "unseen_pixels",
+          [](const Sky& s) {
+            auto* pixels = new std::vector<std::int64_t>();
+            for (std::size_t p : s.unseen_pixels()) pixels->push_back(static_cast<std::int64_t>(p));
+            nb::capsule owner(pixels, [](void* p) noexcept { delete static_cast<std::vector<std::int64_t>*>(p); });
+            return nb::ndarray<nb::numpy, std::int64_t, nb::ndim<1>>(pixels->data(), {pixels->size()}, owner);
+          },
+          "The RING indices of the pixels UNSEEN (pisco.unseen) in any Stokes map, ascending (int64).")
+      .def("zero_unseen", &Sky::zero_unseen,
+           "Sets the UNSEEN values of every Stokes map to 0; returns the number of pixels changed.")
       .def("write_fits", &Sky::write_fits, "path"_a,
            "Writes I, Q, U, V as a HEALPix FITS file (RING, COSMO), atomically.")
       .def_prop_ro("nside", &Sky::nside)
