@@ -9,6 +9,8 @@
 #include <fstream>
 #include <numeric>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "cli_runner.hpp"
 #include "pisco/pisco.hpp"
@@ -65,28 +67,41 @@ void expect_one_error(const CliResult& r, const std::string& needle) {
 }
 
 // The output directory reaches the plotting tool as one argument, never through a shell: command
-// substitutions, backticks, quotes, semicolons and spaces in it run nothing.
+// substitutions, backticks, quotes, semicolons and spaces in it run nothing; and never as an option:
+// a directory named "-x" (given as --output=-x) comes after "--", which ends the tool's options.
 TEST_F(Reliability, HostileOutputDirectoryReachesNoShell) {
   const std::string hostile = "out $(touch PWNED1) `touch PWNED2` \"q\" 's' ; touch PWNED3 & x";
-  const fs::path out = dir_ / hostile;
   const fs::path data = fake_plotter(
       "import os, sys\n"
-      "open(os.path.join(sys.argv[1], 'plot-args.txt'), 'w').write('\\n'.join(sys.argv[1:]))\n");
+      "open(os.path.join(sys.argv[-1], 'plot-args.txt'), 'w').write('\\n'.join(sys.argv[1:]) + '\\n')\n");
   const fs::path cfg = write("sim.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
                                                 "[scan]\ntype = \"pixel_centres\"\nnside = 16\n",
                                                 "plots = true\nspectra = false\n"));
-  const CliResult r = run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {{"PISCO_DATA_DIR", data.string()}}, 120, dir_);
-  ASSERT_TRUE(r.exited && r.status == 0) << r.describe() << "\n" << r.output;
-  std::ifstream args(out / "plot-args.txt");
-  std::string got;
-  std::getline(args, got);
-  EXPECT_EQ(got, out.string()) << "the plotting tool's one argument";
-  // The real plotting tool on the same directory: plots, or a skip message where healpy is missing.
-  const CliResult real = run_cli({"run", cfg.string(), "-o", out.string()}, {}, 120, dir_);
-  std::cout << real.output;
-  EXPECT_TRUE(real.exited && real.status == 0) << real.describe() << "\n" << real.output;
-  EXPECT_TRUE(contains(real.output, "plots: wrote") || contains(real.output, "plots: skipped")) << real.output;
-  if (contains(real.output, "plots: wrote")) EXPECT_TRUE(fs::exists(out / "maps_mollview.png"));
+  // {the command line's output option, the directory the plotting tool must be given}; the runs' working
+  // directory is dir_, so that "-x" is dir_/-x.
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
+      {{"-o", (dir_ / hostile).string()}, (dir_ / hostile).string()},
+      {{"--output=-x"}, "-x"},
+  };
+  for (const auto& [output, dir] : cases) {
+    const fs::path out = dir_ / dir;
+    const std::string option = joined(output);
+    std::vector<std::string> args{"run", "-q", cfg.string()};
+    args.insert(args.end(), output.begin(), output.end());
+    const CliResult r = run_cli(args, {{"PISCO_DATA_DIR", data.string()}}, 120, dir_);
+    ASSERT_TRUE(r.exited && r.status == 0) << option << ": " << r.describe() << "\n" << r.output;
+    std::ifstream recorded(out / "plot-args.txt");
+    std::vector<std::string> got;
+    for (std::string line; std::getline(recorded, line);) got.push_back(line);
+    EXPECT_EQ(got, (std::vector<std::string>{"--", dir})) << "the plotting tool's arguments, for " << option;
+    // The real plotting tool on the same directory: plots, or a skip message where healpy is missing.
+    args.erase(args.begin() + 1);  // not quiet: the plotting tool's messages
+    const CliResult real = run_cli(args, {}, 120, dir_);
+    std::cout << real.output;
+    EXPECT_TRUE(real.exited && real.status == 0) << option << ": " << real.describe() << "\n" << real.output;
+    EXPECT_TRUE(contains(real.output, "plots: wrote") || contains(real.output, "plots: skipped")) << real.output;
+    if (contains(real.output, "plots: wrote")) EXPECT_TRUE(fs::exists(out / "maps_mollview.png")) << option;
+  }
   for (const auto& f : files_under(dir_))
     EXPECT_FALSE(contains(fs::path(f).filename().string(), "PWNED")) << "a shell ran: " << f;
   EXPECT_TRUE(temporaries_under(dir_).empty()) << joined(temporaries_under(dir_));
@@ -122,7 +137,7 @@ TEST_F(Reliability, FullDiskAtEachWriter) {
                  "checked through a stand-in)\n";
     const fs::path data = fake_plotter(
         "import os, sys\n"
-        "sys.stderr.write('pisco_plot: ' + os.path.join(sys.argv[1], 'maps_mollview.png') + ': No space left on device\\n')\n"
+        "sys.stderr.write('pisco_plot: ' + os.path.join(sys.argv[-1], 'maps_mollview.png') + ': No space left on device\\n')\n"
         "sys.exit(4)\n");
     const CliResult f = run_cli({"run", "-q", cfg_plots.string(), "-o", (dir_ / "out-fake").string()},
                                 {{"PISCO_DATA_DIR", data.string()}});
@@ -218,7 +233,7 @@ TEST_F(Reliability, StopSignalsEndTheRunAndRemoveTemporaries) {
 TEST_F(Reliability, StopSignalReachesThePlottingTool) {
   const fs::path data = fake_plotter(
       "import os, signal, sys, time\n"
-      "tmp = os.path.join(sys.argv[1], 'maps_mollview.png.tmp-%d' % os.getpid())\n"
+      "tmp = os.path.join(sys.argv[-1], 'maps_mollview.png.tmp-%d' % os.getpid())\n"
       "def stop(signum, frame):\n"
       "    os.remove(tmp)\n"
       "    print('fake plotter: stopped by signal %d' % signum, flush=True)\n"

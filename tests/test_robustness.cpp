@@ -91,6 +91,18 @@ std::string variant(const std::string& name) {
   if (name == "satellite")
     return with_table(c, "[scan]", "type = \"satellite\"\nsample_rate_hz = 2\nduration_hours = 0.05\nnside = 8\n");
   if (name == "scan_file") return with_table(c, "[scan]", "type = \"file\"\nfile = \"bore.h5\"\n");
+  // Half-wave plates: a rotating plate (the scan has no time: the table gives the rate), one by
+  // frequency, a stepped one, a Mueller matrix of its own, detectors of their own with plates, and the
+  // angles of a pointing file's hwp_angle dataset.
+  const std::string plate = "[hwp]\nrpm = 10\nsample_rate_hz = 2\n";
+  if (name == "hwp") return c + plate;
+  if (name == "hwp_frequency") return c + "[hwp]\nfrequency_hz = 0.5\nsample_rate_hz = 2\n";
+  if (name == "hwp_steps") return c + "[hwp]\nsteps_deg = [0, 22.5, 45]\nstep_seconds = 10\nsample_rate_hz = 2\n";
+  if (name == "hwp_mueller")
+    return c + "[hwp]\nmodel = \"mueller\"\nmueller = [1, 0.01, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1]\n"
+               "rpm = 10\nsample_rate_hz = 2\n";
+  if (name == "hwp_detectors") return variant("detectors") + plate;
+  if (name == "hwp_file") return with_table(c, "[scan]", "type = \"file\"\nfile = \"bore_hwp.h5\"\n") + "[hwp]\n";
   ADD_FAILURE() << "no variant " << name;
   return c;
 }
@@ -130,7 +142,7 @@ std::vector<Key> keys() {
   using K = Kind;
   const std::string sky = "[sky]", beam = "[beams.main]", pair = "[[focal_plane.pairs]]",
                     det = "[[focal_plane.detectors]]", fp = "[focal_plane]", scan = "[scan]", engine = "[engine]",
-                    out = "[output]";
+                    out = "[output]", hwp = "[hwp]";
   return {
       {"base", sky, "nside", K::integer, {"0", "3", "-8", "16384", "4294967304"}},
       {"base", sky, "lmax", K::integer, {"-1", "33", "2147483648"}},
@@ -212,15 +224,34 @@ std::vector<Key> keys() {
       {"satellite", scan, "frame", K::choice, {}},
       {"satellite", scan, "duration_hours", K::number, {"0", "1e12"}},
       {"scan_file", scan, "file", K::path, {}},
+      {"hwp", hwp, "model", K::choice, {}},
+      {"hwp_mueller", hwp, "mueller", K::numbers, {"[1, 0, 0]", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1, 0]"}},
+      {"hwp", hwp, "placement", K::choice, {}},
+      {"hwp", hwp, "mapmaker", K::choice, {}},
+      {"hwp", hwp, "rpm", K::number, {}},
+      {"hwp_frequency", hwp, "frequency_hz", K::number, {}},
+      {"hwp", hwp, "phase_deg", K::number, {}},
+      {"hwp_steps", hwp, "steps_deg", K::numbers, {}},
+      {"hwp_steps", hwp, "step_seconds", K::number, {"0", "-1"}},
+      {"hwp", hwp, "sample_rate_hz", K::number, {"0", "-2"}},
+      {"hwp", hwp, "start_time_s", K::number, {}},
+      {"hwp", pair, "hwp", K::boolean, {}},
+      {"hwp", pair, "hwp_gamma_deg", K::number, {}},
+      {"hwp", pair, "hwp_mueller", K::numbers, {"[1, 0, 0, 0]"}},
+      {"hwp_detectors", det, "hwp", K::boolean, {}},
+      {"hwp_detectors", det, "hwp_gamma_deg", K::number, {}},
+      {"hwp_detectors", det, "hwp_mueller", K::numbers, {"[1, 0, 0, 0]"}},
       {"base", engine, "backend", K::choice, {}},
       {"base", engine, "device", K::string, {}, true},
       {"base", engine, "normalization", K::choice, {}},
+      {"base", engine, "arithmetic", K::choice, {}},
       {"base", engine, "threads", K::integer, {"-1", "1000000", "4294967297"}},
       {"base", engine, "chunk_samples", K::integer, {"0", "-1", "10000000000"}},
       {"base", out, "dir", K::string, {}},
       {"base", out, "tod", K::boolean, {}},
       {"base", out, "tod_precision", K::choice, {}},
       {"base", out, "tod_pointing", K::boolean, {}},
+      {"base", out, "tod_weights", K::boolean, {}},
       {"base", out, "maps", K::boolean, {}},
       {"base", out, "maps_nside", K::integer, {"-1", "3", "16384"}},
       {"base", out, "rcond_min", K::number, {"-0.1", "1.5"}},
@@ -254,6 +285,13 @@ class Robustness : public ::testing::Test {
     sat.samples = 400;
     sat.generate(0, sat.samples, q);
     pisco::BoresightFile::write(dir_ / "bore.h5", q);
+    pisco::BoresightFile::write(dir_ / "bore_hwp.h5", q, {}, plate_angles(q.size()));
+  }
+  // A plate turning at 1 rad per sample: the hwp_angle dataset of bore_hwp.h5.
+  static std::vector<double> plate_angles(std::size_t n) {
+    std::vector<double> h(n);
+    for (std::size_t i = 0; i < n; ++i) h[i] = double(i);
+    return h;
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
 
@@ -313,7 +351,8 @@ int Robustness::cases_ = 0;
 // Every variant runs as it is: the failures below are the bad value's alone.
 TEST_F(Robustness, VariantsRun) {
   for (const std::string v : {"base", "r", "point", "file_sky", "elliptical", "file_beam", "detectors", "pair_ab",
-                              "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file"}) {
+                              "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file", "hwp",
+                              "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file"}) {
     const fs::path cfg = write("variant.toml", variant(v));
     const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "variant-out").string()}, {}, 60);
     EXPECT_TRUE(r.exited && r.status == 0) << v << ": " << r.describe() << "\n" << r.output << "\n" << variant(v);
@@ -358,6 +397,38 @@ TEST_F(Robustness, MalformedFiles) {
   for (const auto& [text, needle] : cases) expect_clean_error("file " + text.substr(0, 40), text, needle);
 }
 
+// Half-wave plates: keys that each read but do not go together, plate keys without a plate, and a
+// pointing file whose angles are missing or not finite.
+TEST_F(Robustness, MalformedHalfWavePlates) {
+  const std::string c = base_config;
+  const std::string rate = "sample_rate_hz = 2\n";
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {c + "[hwp]\n" + rate, "expected the plate's rotation (rpm or frequency_hz) or its steps"},
+      {c + "[hwp]\nrpm = 10\nfrequency_hz = 1\n" + rate, "[hwp] rpm: give rpm or frequency_hz, not both"},
+      {c + "[hwp]\nrpm = 10\nsteps_deg = [0, 45]\nstep_seconds = 1\n" + rate, "[hwp] steps_deg: a plate either rotates"},
+      {c + "[hwp]\nsteps_deg = [0, 45]\n" + rate, "[hwp] step_seconds: a stepped plate needs the time"},
+      {c + "[hwp]\nstep_seconds = 1\n" + rate, "[hwp] steps_deg: a stepped plate needs at least one angle"},
+      {c + "[hwp]\nmodel = \"mueller\"\nrpm = 10\n" + rate, "[hwp] mueller: model = \"mueller\" needs"},
+      {c + "[hwp]\nmueller = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1]\nrpm = 10\n" + rate,
+       "[hwp] mueller: only with model = \"mueller\""},
+      {c + "[hwp]\nrpm = 10\n", "[hwp] sample_rate_hz: the scan has no sample rate"},
+      {with_key(c, "[[focal_plane.pairs]]", "hwp", "true"), "detector 'pa' has half-wave plate keys"},
+      {with_key(c, "[[focal_plane.pairs]]", "hwp_mueller", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1]"),
+       "but there is no [hwp] table"},
+      {with_key(variant("scan_file"), "[hwp]", "phase_deg", "10"), "no rotation or steps, and the pointing file has no "
+                                                                   "'hwp_angle' dataset"},
+  };
+  for (const auto& [text, needle] : cases) expect_clean_error("[hwp]: " + needle, text, needle);
+  // The pointing file's plate angles: one not finite.
+  std::vector<pisco::Quat> q;
+  pisco::BoresightFile(dir_ / "bore_hwp.h5").read(0, 400, q);
+  std::vector<double> h = plate_angles(q.size());
+  h[321] = std::nan("");
+  pisco::BoresightFile::write(dir_ / "bore_hwp.h5", q, {}, h);
+  expect_clean_error("a NaN plate angle", variant("hwp_file"), "'/hwp_angle' sample 321 is not finite");
+  pisco::BoresightFile::write(dir_ / "bore_hwp.h5", q, {}, plate_angles(q.size()));
+}
+
 // Focal-plane tables: CSV and TOML files with every kind of bad row.
 TEST_F(Robustness, MalformedFocalPlaneTables) {
   const std::string cfg = variant("fp_file");
@@ -379,6 +450,10 @@ TEST_F(Robustness, MalformedFocalPlaneTables) {
       {"name,beam\nd,side\n", "no beam named 'side'"},
       {"name,beam\n,main\n", "empty detector name"},
       {"name,beam\nd,main\nd,main\n", "detector 'd' is also on line 2"},
+      {"name,hwp,beam\nd,maybe,main\n", "column 'hwp'"},
+      {"name,hwp_gamma_deg,beam\nd,abc,main\n", "column 'hwp_gamma_deg'"},
+      {"name,hwp_gamma_deg,beam\nd,nan,main\n", "column 'hwp_gamma_deg'"},
+      {"name,hwp,beam\nd,1,main\n", "detector 'd' has half-wave plate keys"},
       {std::string("\0\1\2\3\xff,\n", 7), "fp.csv:1"},
   };
   for (const auto& [text, needle] : csv) {

@@ -2,7 +2,9 @@
 """Plots of a `pisco-vk run` output directory: PNG maps (mollview and a zoomed gnomview) and D_l
 spectra with the input's and the r = 0.1 tensor BB reference curve.
 
-    /usr/bin/python3 tools/pisco_plot.py OUTPUT_DIR [--dpi N] [--no-gnomview]
+    /usr/bin/python3 tools/pisco_plot.py [--dpi N] [--no-gnomview] [--] OUTPUT_DIR
+
+(`pisco-vk run` gives "--" before the directory, so that a directory named like "-x" is not an option.)
 
 Needs Debian's python3-healpy and python3-matplotlib (they live under /usr/bin/python3); exits with
 status 3 without them, 4 when a file cannot be written (a full disk), 128 + N when stopped by signal N.

@@ -172,12 +172,17 @@ void write_spectra(const fs::path& file, const pisco::Spectra& s, int lmax, cons
 }
 
 // The plotting tool (tools/pisco_plot.py), started with an argument vector, never through a shell:
-// the output directory reaches it as one argument whatever its characters. Returns false when it
-// cannot plot here (no Python, or no healpy or matplotlib: the tool exits with status 3), saying why;
-// throws pisco::Error when it fails otherwise (a full disk: status 4; a crash).
+// the output directory reaches it as one argument whatever its characters. Nothing is read as an
+// option: the script's path is absolute (Python would take a path beginning with '-' as its own
+// option), and "--" ends the tool's options before the directory (argparse would take "-x" as one).
+// Returns false when it cannot plot here (no Python, or no healpy or matplotlib: the tool exits with
+// status 3), saying why; throws pisco::Error when it fails otherwise (a full disk: status 4; a crash).
 bool run_plots(const fs::path& python, const fs::path& script, const fs::path& dir, bool quiet,
                const std::function<void(const std::string&)>& say) {
-  const std::vector<std::string> args{python.string(), script.string(), dir.string()};
+  std::error_code ec;
+  fs::path absolute_script = fs::absolute(script, ec);
+  if (ec) absolute_script = script;
+  const std::vector<std::string> args{python.string(), absolute_script.string(), "--", dir.string()};
   const ChildStatus st = run_child(args, quiet);
   if (st.spawn_error != 0) {
     say("plots: skipped (" + python.string() + " could not be started: " + std::strerror(st.spawn_error) + ")\n");
