@@ -415,6 +415,7 @@ TEST_F(Robustness, MalformedHalfWavePlates) {
       {with_key(c, "[[focal_plane.pairs]]", "hwp", "true"), "detector 'pa' has half-wave plate keys"},
       {with_key(c, "[[focal_plane.pairs]]", "hwp_mueller", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1]"),
        "but there is no [hwp] table"},
+      {with_key(c, "[[focal_plane.pairs]]", "hwp_gamma_deg", "10"), "detector 'pa' has half-wave plate keys"},
       {with_key(variant("scan_file"), "[hwp]", "phase_deg", "10"), "no rotation or steps, and the pointing file has no "
                                                                    "'hwp_angle' dataset"},
   };

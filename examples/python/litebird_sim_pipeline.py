@@ -28,7 +28,7 @@ import pisco.litebird
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--hours", type=float, default=4.0, help="observation length (default 4)")
-    p.add_argument("--backend", default="auto", help="pisco backend: auto, cpu, vulkan, cuda")
+    p.add_argument("--backend", default="auto", help="pisco backend: auto, cpu, simd, vulkan, cuda")
     p.add_argument("--nside-sky", type=int, default=256)
     p.add_argument("--nside-map", type=int, default=64)
     p.add_argument("--out", default="pisco-litebird-example", help="output folder")

@@ -307,7 +307,10 @@ std::optional<std::pair<std::size_t, std::size_t>> repeated_name(const std::vect
 DetectorHwp read_detector_hwp(Table& t) {
   DetectorHwp h;
   if (t.has("hwp")) h.enabled = t.boolean("hwp", true);
-  if (const auto g = t.number("hwp_gamma_deg")) h.gamma = *g * deg;
+  if (const auto g = t.number("hwp_gamma_deg")) {
+    h.gamma = *g * deg;
+    h.gamma_key = true;
+  }
   if (t.has("hwp_mueller")) {
     const std::vector<double> m = t.numbers("hwp_mueller", {});
     if (m.size() != 16) t.fail("hwp_mueller", "expected 16 numbers, row by row, got " + std::to_string(m.size()));
@@ -677,7 +680,10 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
         if (f[i] == "1" || f[i] == "true") plate.enabled = true;
         else if (f[i] == "0" || f[i] == "false") plate.enabled = false;
         else throw pisco::Error(where + "column 'hwp': expected 1, 0, true or false, got '" + f[i] + "'");
-      } else if (header[i] == "hwp_gamma_deg") plate.gamma = num(f[i]) * deg;
+      } else if (header[i] == "hwp_gamma_deg") {
+        plate.gamma = num(f[i]) * deg;
+        plate.gamma_key = true;
+      }
       else {
         auto it = std::find_if(beams.begin(), beams.end(), [&](const BeamConfig& b) { return b.name == f[i]; });
         if (it == beams.end()) throw pisco::Error(where + "no beam named '" + f[i] + "' in [beams]");
@@ -767,11 +773,11 @@ void assign_plates(SimulationConfig& c, const fs::path& file) {
   for (std::size_t i = 0; i < c.detectors.size(); ++i) {
     pisco::Detector& d = c.detectors[i];
     const DetectorHwp& o = c.detector_hwp[i];
-    const bool has_keys = o.enabled.has_value() || o.mueller.has_value();
+    const bool has_keys = o.enabled.has_value() || o.mueller.has_value() || o.gamma_key;
     if (!c.hwp.enabled) {
       if (has_keys && o.enabled.value_or(true))
         throw pisco::Error(file.string() + ": detector '" + d.name +
-                           "' has half-wave plate keys (hwp, hwp_mueller) but there is no [hwp] table");
+                           "' has half-wave plate keys (hwp, hwp_gamma_deg, hwp_mueller) but there is no [hwp] table");
       continue;
     }
     if (!o.enabled.value_or(true)) continue;

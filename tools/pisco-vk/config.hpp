@@ -61,6 +61,7 @@ struct HwpConfig {
 struct DetectorHwp {
   std::optional<bool> enabled;
   std::optional<double> gamma;           // radians
+  bool gamma_key = false;                // set by the row's hwp_gamma_deg (not a TOAST table's gamma)
   std::optional<pisco::Mueller> mueller;
 };
 
