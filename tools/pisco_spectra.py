@@ -168,6 +168,8 @@ def report(case_dir, args):
              "B-mode purification, bins of 10, the beam window of the mean radial profile and the pixel window "
              "divided out (tools/pisco_spectra.py). For the polarized case the harmonic image of the input is "
              "not subtracted here: its BB is the observation's P -> B plus the estimator's floor.", "",
+             "Bandpowers to l = 2 NSIDE; \"above r = 0.1 from l\" is the first bin of the run above the r = 0.1 "
+             "tensor BB that reaches l = 2 NSIDE.", "",
              "| case | f_sky | BB peak (uK^2) | at l | above r = 0.1 from l | figure |", "|---|---|---|---|---|---|"]
     for case in cases:
         d = os.path.join(case_dir, case)
@@ -180,11 +182,20 @@ def report(case_dir, args):
         ref = np.interp(ell, rl, rbb)
         sel = (ell >= 2) & (ell <= 2 * (ell.max() + 5) / 3)  # to l = 2 NSIDE, where the windows are reliable
         peak_i = int(np.argmax(np.where(sel, dl["BB"], -np.inf)))
-        above = np.nonzero(sel & (dl["BB"] > ref))[0]
+        # Where the leakage crosses r = 0.1: the first bin of the run above the tensor BB that reaches
+        # l = 2 NSIDE (a low-l bin above it, such as the polarized case's E -> B floor, is not a crossing).
+        idx = np.nonzero(sel)[0]
+        above = np.zeros(0, dtype=int)
+        if idx.size and dl["BB"][idx[-1]] > ref[idx[-1]]:
+            k = idx[-1]
+            while k - 1 >= idx[0] and dl["BB"][k - 1] > ref[k - 1]:
+                k -= 1
+            above = np.array([k])
         fig, ax = plt.subplots(figsize=(7, 4.2))
         for k, c in (("EE", "tab:blue"), ("BB", "tab:red")):
-            ax.plot(ell, np.abs(dl[k]), color=c, label=f"|{k}|")
-        ax.plot(rl, rbb, "k--", lw=1, label="r = 0.1 tensor BB")
+            ax.plot(ell[sel], np.abs(dl[k][sel]), color=c, label=f"|{k}|")
+        keep = rl <= ell[sel].max()
+        ax.plot(rl[keep], rbb[keep], "k--", lw=1, label="r = 0.1 tensor BB")
         ax.set_yscale("log")
         ax.set_xlabel(r"$\ell$")
         ax.set_ylabel(r"$D_\ell$ [$\mu$K$^2$]")
