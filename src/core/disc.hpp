@@ -86,12 +86,17 @@ PISCO_HD void ring_edge(const RingEntry& r, const DiscRings& d, double cos_rho, 
   ysq = 1.0 - z * z - x * x;
 }
 
+// A ring's pixels per radian of longitude, and the offset of its pixel centres in pixels.
+PISCO_HD double ring_pixels_per_radian(const RingEntry& r) {
+  const double inv_twopi = 0.5 / 3.141592653589793238462643383279502884;
+  return double(r.count) * inv_twopi;
+}
+PISCO_HD double ring_shift(const RingEntry& r) { return r.shifted ? 0.5 : 0.0; }
+
 // The argument whose floor is a bound of the ring's pixel indices: floor(arg(phi0 - dphi)) + 1 is the
 // first pixel, floor(arg(phi0 + dphi)) the last.
 PISCO_HD double ring_bound_arg(const RingEntry& r, double phi) {
-  const double inv_twopi = 0.5 / 3.141592653589793238462643383279502884;
-  const double shift = r.shifted ? 0.5 : 0.0;
-  return double(r.count) * inv_twopi * phi - shift;
+  return ring_pixels_per_radian(r) * phi - ring_shift(r);
 }
 
 // Emits ring r's pixels first ... last, indices taken modulo the ring (one range, or two where they
@@ -112,31 +117,45 @@ PISCO_HD void emit_ring_pixels(const RingEntry& r, std::int64_t ip_lo, std::int6
   }
 }
 
+// Emits the pixels of ring r within dphi = atan2(sqrt(ysq), x) of phi0 (ring_edge's x and ysq > 0),
+// with the C library's arctangent.
+template <class Emit>
+PISCO_HD void emit_ring_crossing(const RingEntry& r, double phi0, double x, double ysq, Emit&& emit) {
+  const double dphi = atan2(sqrt(ysq), x);
+  if (!(dphi > 0)) return;
+  emit_ring_pixels(r, std::int64_t(floor(ring_bound_arg(r, phi0 - dphi))) + 1,
+                   std::int64_t(floor(ring_bound_arg(r, phi0 + dphi))), emit);
+}
+
+// The polar caps of a disc that holds a pole: every ring north of d.first (south of d.last) whole.
+template <class Emit>
+PISCO_HD void emit_north_cap(const RingEntry* rings, const DiscRings& d, Emit&& emit) {
+  if (!d.north) return;
+  const RingEntry& r = rings[d.first - 2];
+  emit(std::uint32_t(0), r.first + r.count);
+}
+template <class Emit>
+PISCO_HD void emit_south_cap(const RingEntry* rings, std::int64_t nside, const DiscRings& d, Emit&& emit) {
+  if (!d.south) return;
+  const RingEntry& r = rings[d.last];
+  emit(r.first, std::uint32_t(12 * nside * nside));
+}
+
 // Calls emit(begin, end) for each range [begin, end) of pixels in the disc of radius rho around
 // (theta0, phi0); cos_rho = cos(rho). rho must be in (0, pi/2].
 template <class Emit>
 PISCO_HD void for_each_disc_range(const RingEntry* rings, std::int64_t nside, double theta0,
                                   double phi0, double rho, double cos_rho, Emit&& emit) {
-  const std::int64_t npix = 12 * nside * nside;
   const DiscRings d = disc_rings(nside, theta0, rho);
-  if (d.north) {  // north pole inside: every ring north of d.first entirely
-    const RingEntry& r = rings[d.first - 2];
-    emit(std::uint32_t(0), r.first + r.count);
-  }
+  emit_north_cap(rings, d, emit);
   for (std::int64_t iz = d.first; iz <= d.last; ++iz) {
     const RingEntry& r = rings[iz - 1];
     double x, ysq;
     ring_edge(r, d, cos_rho, x, ysq);
     if (ysq <= 0) continue;  // the ring does not cross the disc boundary
-    const double dphi = atan2(sqrt(ysq), x);
-    if (!(dphi > 0)) continue;
-    emit_ring_pixels(r, std::int64_t(floor(ring_bound_arg(r, phi0 - dphi))) + 1,
-                     std::int64_t(floor(ring_bound_arg(r, phi0 + dphi))), emit);
+    emit_ring_crossing(r, phi0, x, ysq, emit);
   }
-  if (d.south) {  // south pole inside
-    const RingEntry& r = rings[d.last];
-    emit(r.first, std::uint32_t(npix));
-  }
+  emit_south_cap(rings, nside, d, emit);
 }
 
 }  // namespace pisco::detail

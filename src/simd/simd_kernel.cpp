@@ -425,17 +425,13 @@ void DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, doubl
   using VD = hn::Vec<decltype(dd)>;
   const std::size_t L = hn::Lanes(dd);
   const double pi = 3.141592653589793238462643383279502884;
-  const double inv_twopi = 0.5 / pi;
   auto emit = [&](std::uint32_t b, std::uint32_t e) {
     if (e <= b) return;
     ranges.push_back(b);
     ranges.push_back(e);
   };
   const DiscRings d = disc_rings(nside, theta0, rho);
-  if (d.north) {
-    const RingEntry& r = rings[d.first - 2];
-    emit(std::uint32_t(0), r.first + r.count);
-  }
+  emit_north_cap(rings, d, emit);
   // Rings a block at a time: their edges (scalar, the reference's arithmetic), then the block's
   // vectors (independent of one another: the processor overlaps their long square-root, division
   // and polynomial chains), then the ranges.
@@ -452,8 +448,8 @@ void DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, doubl
       if (l < n) {
         const RingEntry& r = rings[first + std::int64_t(l) - 1];
         ring_edge(r, d, cos_rho, x[l], ysq[l]);
-        scale[l] = double(r.count) * inv_twopi;
-        shift[l] = r.shifted ? 0.5 : 0.0;
+        scale[l] = ring_pixels_per_radian(r);
+        shift[l] = ring_shift(r);
       } else {
         x[l] = 1.0;
         ysq[l] = scale[l] = shift[l] = 0.0;
@@ -488,16 +484,10 @@ void DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, doubl
         continue;
       }
       if (redone) ++*redone;
-      const double dphi_exact = atan2(sqrt(ysq[l]), x[l]);
-      if (!(dphi_exact > 0)) continue;
-      emit_ring_pixels(r, std::int64_t(floor(ring_bound_arg(r, phi0 - dphi_exact))) + 1,
-                       std::int64_t(floor(ring_bound_arg(r, phi0 + dphi_exact))), emit);
+      emit_ring_crossing(r, phi0, x[l], ysq[l], emit);
     }
   }
-  if (d.south) {
-    const RingEntry& r = rings[d.last];
-    emit(r.first, std::uint32_t(12 * nside * nside));
-  }
+  emit_south_cap(rings, nside, d, emit);
 }
 
 const char* TargetHere() { return hwy::TargetName(HWY_TARGET); }

@@ -3,14 +3,14 @@
 // (simd_backend.cpp) needs no Highway header.
 //
 // The driver computes each sample's antenna frame with the reference's own code (core/frame.hpp) and
-// its disc's ranges with disc_ranges (the reference's, core/disc.hpp, in vectors); the kernel evaluates the disc's pixels, range by range,
-// a vector of float32 lanes at a time, with the formulas of core/contribution-inl.hpp.
+// its disc's ranges with disc_ranges (the reference's, core/disc.hpp, in vectors); the kernel
+// evaluates the disc's pixels, range by range, a vector of float32 lanes at a time, with the
+// formulas of core/contribution-inl.hpp.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
-
 #include <vector>
 
 #include "core/contribution.hpp"
