@@ -18,6 +18,7 @@
 #include <vector>
 
 #include <hdf5.h>
+#include <toml++/toml.h>
 
 #include "backend_fixtures.hpp"
 #include "pisco/pisco.hpp"
@@ -517,27 +518,13 @@ TEST_F(Cli, PerDetectorPointingWithOffsetsLeavesNoOutput) {
                                         "the focal plane also gives it an offset from the boresight");
 }
 
-// The numbers of the [scan] table of a simulation file (key = number lines; comments and other tables
-// passed over).
+// The numbers of the [scan] table of a simulation file.
 std::map<std::string, double> scan_numbers(const fs::path& file) {
-  std::ifstream in(file);
+  const toml::table t = toml::parse_file(file.string());
   std::map<std::string, double> out;
-  bool in_scan = false;
-  for (std::string line; std::getline(in, line);) {
-    if (line.empty() || line[0] == '#') continue;
-    if (line[0] == '[') {
-      in_scan = line.rfind("[scan]", 0) == 0;
-      continue;
-    }
-    const std::size_t eq = line.find('=');
-    if (!in_scan || eq == std::string::npos) continue;
-    std::string key = line.substr(0, eq);
-    key.erase(key.find_last_not_of(' ') + 1);
-    try {
-      out[key] = std::stod(line.substr(eq + 1));
-    } catch (const std::exception&) {  // a string value (type, frame)
-    }
-  }
+  if (const toml::table* scan = t["scan"].as_table())
+    for (const auto& [key, value] : *scan)
+      if (const auto x = value.value<double>()) out[std::string(key.str())] = *x;
   return out;
 }
 
