@@ -40,11 +40,12 @@ std::string requested_target(const std::string& device) {
 // One detector's weights in the kernel's layout: float32 columns (float32_weights, the GPU
 // backends' rule) and the reference's float64 tables.
 struct DetectorTables {
-  std::vector<std::uint64_t> columns[4];
+  std::vector<float> records[2];
+  std::vector<double> pairs64[5];  // the float64 path only
   KernelDetector view{};
 };
 
-DetectorTables detector_tables(const PreparedDetector& det, std::size_t index) {
+DetectorTables detector_tables(const PreparedDetector& det, std::size_t index, bool float64_path) {
   const std::size_t nodes = det.weights.size() / 4;
   if (det.grid_n < 2 || nodes == 0)
     throw Error("simd: detector " + std::to_string(index) + " has a weight grid of " + std::to_string(det.grid_n) +
@@ -57,18 +58,31 @@ DetectorTables detector_tables(const PreparedDetector& det, std::size_t index) {
   bool polarized_uv = false;
   for (std::size_t k = 0; k < nodes; ++k) polarized_uv = polarized_uv || w32[4 * k + 2] != 0.0f || w32[4 * k + 3] != 0.0f;
   const int columns = polarized_uv ? 4 : 2;
-  auto bits = [](float x) {
-    std::uint32_t b;
-    std::memcpy(&b, &x, sizeof b);
-    return std::uint64_t(b);
-  };
-  for (int c = 0; c < columns; ++c) {
-    t.columns[c].resize(nodes + 1, 0);  // one pair past the end: never weighted, but gathered
+  for (int c = 0; c < columns; c += 2) {
+    std::vector<float>& r = t.records[c / 2];
+    r.assign(4 * nodes, 0.0f);
     for (std::size_t k = 0; k < nodes; ++k)
-      t.columns[c][k] = bits(w32[4 * k + c]) | (k + 1 < nodes ? bits(w32[4 * (k + 1) + c]) << 32 : 0);
+      for (int h = 0; h < 2; ++h) {
+        r[4 * k + std::size_t(h)] = w32[4 * k + std::size_t(c + h)];
+        if (k + 1 < nodes) r[4 * k + 2 + std::size_t(h)] = w32[4 * (k + 1) + std::size_t(c + h)];
+      }
+  }
+  if (float64_path) {
+    // (w(k), w(k + 1)) of one column of a float64 table of 4 values a node.
+    auto pairs = [nodes](const std::vector<double>& table, int c) {
+      std::vector<double> out(2 * nodes, 0.0);
+      for (std::size_t k = 0; k < nodes; ++k) {
+        out[2 * k] = table[4 * k + std::size_t(c)];
+        if (k + 1 < nodes) out[2 * k + 1] = table[4 * (k + 1) + std::size_t(c)];
+      }
+      return out;
+    };
+    for (int c = 0; c < 4; ++c) t.pairs64[c] = pairs(det.weights, c);
+    if (!det.norm_weights.empty()) t.pairs64[4] = pairs(det.norm_weights, 0);
   }
   KernelDetector& v = t.view;
-  for (int c = 0; c < 4; ++c) v.pairs[c] = c < columns ? t.columns[c].data() : nullptr;
+  for (int c = 0; c < 2; ++c) v.records[c] = t.records[c].empty() ? nullptr : t.records[c].data();
+  for (int c = 0; c < 5; ++c) v.pairs64[c] = t.pairs64[c].empty() ? nullptr : t.pairs64[c].data();
   v.columns = columns;
   v.radial = det.radial;
   v.grid_n = det.grid_n;
@@ -92,7 +106,7 @@ class SimdBackend final : public Backend {
     exact_ = monopole_ != 0.0 || per_sample_;
     pack_sky(sky);
     tables_.reserve(in_->detectors.size());
-    for (std::size_t d = 0; d < in_->detectors.size(); ++d) tables_.push_back(detector_tables(in_->detectors[d], d));
+    for (std::size_t d = 0; d < in_->detectors.size(); ++d) tables_.push_back(detector_tables(in_->detectors[d], d, exact_));
   }
 
   std::string name() const override { return "simd"; }
@@ -156,8 +170,7 @@ class SimdBackend final : public Backend {
     std::uint64_t count = 0;
     const bool plate = det.plate == PreparedDetector::Plate::aperture;
     const PreparedSky& sky = in_->sky;
-    std::vector<std::uint32_t> ranges;
-    ranges.reserve(512);
+    std::vector<std::uint32_t> ranges;  // disc_ranges' buffer
     double m[16];
     for (std::size_t i = begin; i < end; ++i) {
       double theta = 0.0, phi = 0.0;
@@ -168,11 +181,10 @@ class SimdBackend final : public Backend {
               : angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta,
                              det.sin_zeta, theta, phi);
       if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * in.plate_angle[i]), std::sin(2 * in.plate_angle[i]), m);
-      ranges.clear();
-      simd::disc_ranges(kernel_, sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max, ranges);
-      for (std::size_t r = 0; r < ranges.size(); r += 2) count += ranges[r + 1] - ranges[r];
-      const simd::SampleInput sample{&f, ranges.data(), ranges.size() / 2, plate ? m : nullptr, monopole_ != 0.0,
-                                     per_sample_};
+      const std::size_t n =
+          simd::disc_ranges(kernel_, sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max, ranges);
+      for (std::size_t r = 0; r < n; r += 2) count += ranges[r + 1] - ranges[r];
+      const simd::SampleInput sample{&f, ranges.data(), n / 2, plate ? m : nullptr, monopole_ != 0.0, per_sample_};
       simd::SampleSums sums;
       simd::convolve_sample(kernel_, sky_, kd, sample, sums);
       // As the reference and the GPU kernels: float32 sum plus I0 sum w_I, over the normalization.

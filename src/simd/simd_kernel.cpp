@@ -70,29 +70,86 @@ HWY_INLINE Vec3<F> broadcast(const detail::Vec3<double>& a) {
   return {F(float(a.x)), F(float(a.y)), F(float(a.z))};
 }
 
-// A node's weight and its neighbour's (along r, or along x), g0 = w(node) and g1 = w(node + 1), for
-// every lane, from the detector's table of pairs: one 64-bit gather element per lane instead of two
-// 32-bit ones (gathers cost about one cycle an element: half the gathered elements, the kernel's
-// largest cost).
-HWY_INLINE void gather_pair(const std::uint64_t* pairs, VI node, F& g0, F& g1) {
+// Four weights of a node for every lane: the record at table + 4 node of each lane, (w_a(k),
+// w_b(k), w_a(k + 1), w_b(k + 1)) for two columns a, b and a node k, as four vectors of its fields.
+// Each lane's record is one 16-byte load; the records of lanes j, j + 4, j + 8, ... fill one vector
+// block by block, and a 4 x 4 transpose within the blocks (two rounds of interleaves) puts every
+// field in lane order. On the x86 processors measured (docs/simd.md) a gather costs about two cycles
+// an element: the loads and shuffles here cost about a quarter of the gathers they replace.
+template <std::size_t N = hn::MaxLanes(DF())>
+HWY_INLINE void lookup_records(const float* table, VI node, F out[4]) {
   const DF df;
 #if HWY_TARGET == HWY_SCALAR
-  const float* flat = reinterpret_cast<const float*>(pairs);
-  const VI twice = hn::Add(node, node);
-  g0 = F(hn::GatherIndex(df, flat, twice));
-  g1 = F(hn::GatherIndex(df, flat + 1, twice));
+  const VI o = hn::ShiftLeft<2>(node);
+  for (int k = 0; k < 4; ++k) out[k] = F(hn::GatherIndex(df, table + k, o));
 #else
   const DI di;
-  const hn::Half<DI> dh;
-  const hn::Repartition<std::int64_t, DF> d64;
-  const hn::Repartition<std::uint64_t, DF> du64;
-  const VF lo = hn::BitCast(df, hn::GatherIndex(du64, pairs, hn::PromoteTo(d64, hn::LowerHalf(dh, node))));
-  const VF hi = hn::BitCast(df, hn::GatherIndex(du64, pairs, hn::PromoteTo(d64, hn::UpperHalf(dh, node))));
-  (void)di;
-  g0 = F(hn::ConcatEven(df, hi, lo));
-  g1 = F(hn::ConcatOdd(df, hi, lo));
+  static_assert(N == 4 || N == 8 || N == 16, "vectors of whole 16-byte blocks, at most four");
+  HWY_ALIGN std::int32_t at[N];
+  hn::Store(hn::ShiftLeft<2>(node), di, at);
+#if HWY_ARCH_X86 && (defined(__GNUC__) || defined(__clang__))
+  // Read the offsets back from memory: left to itself, GCC extracts them from the vector one by one
+  // (vpextrd: two micro-ops each, and a lane-crossing extract every four), slower than a store and
+  // sixteen scalar loads.
+  asm("" : "+m"(at));
+#endif
+  const hn::Full128<float> d4;
+  VF v[4];
+  for (std::size_t j = 0; j < 4; ++j) {
+    if constexpr (N == 4) {
+      v[j] = hn::Load(d4, table + at[j]);
+    } else if constexpr (N == 8) {
+      v[j] = hn::Combine(df, hn::Load(d4, table + at[j + 4]), hn::Load(d4, table + at[j]));
+    } else {
+      const hn::Half<DF> d8;
+      v[j] = hn::Combine(df, hn::Combine(d8, hn::Load(d4, table + at[j + 12]), hn::Load(d4, table + at[j + 8])),
+                         hn::Combine(d8, hn::Load(d4, table + at[j + 4]), hn::Load(d4, table + at[j])));
+    }
+  }
+  const hn::Repartition<double, DF> dd;
+  const auto t0 = hn::BitCast(dd, hn::InterleaveLower(df, v[0], v[1]));  // f0 f0 f1 f1 of lanes 0, 1 a block
+  const auto t1 = hn::BitCast(dd, hn::InterleaveUpper(df, v[0], v[1]));  // f2 f2 f3 f3
+  const auto t2 = hn::BitCast(dd, hn::InterleaveLower(df, v[2], v[3]));  // the same of lanes 2, 3
+  const auto t3 = hn::BitCast(dd, hn::InterleaveUpper(df, v[2], v[3]));
+  out[0] = F(hn::BitCast(df, hn::InterleaveLower(dd, t0, t2)));
+  out[1] = F(hn::BitCast(df, hn::InterleaveUpper(dd, t0, t2)));
+  out[2] = F(hn::BitCast(df, hn::InterleaveLower(dd, t1, t3)));
+  out[3] = F(hn::BitCast(df, hn::InterleaveUpper(dd, t1, t3)));
 #endif
 }
+
+#if HWY_TARGET != HWY_SCALAR  // the float64 path there is the reference's scalar code
+// The float64 path's counterpart of lookup_records: for every lane of a vector of doubles the
+// record at table + off, (w(k), w(k + 1)) of one column; the even lanes' records fill one vector, the
+// odd lanes' another, and one interleave puts w(k) and w(k + 1) each in lane order.
+template <class DD, std::size_t H = hn::MaxLanes(DD())>
+HWY_INLINE void lookup_pairs(DD dd, const double* table, hn::Vec<hn::RebindToSigned<DD>> off, hn::Vec<DD>& g0,
+                             hn::Vec<DD>& g1) {
+  static_assert(H == 2 || H == 4 || H == 8, "vectors of whole 16-byte blocks, at most four");
+  HWY_ALIGN std::int64_t at[H];
+  hn::Store(off, hn::RebindToSigned<DD>(), at);
+#if HWY_ARCH_X86 && (defined(__GNUC__) || defined(__clang__))
+  asm("" : "+m"(at));  // as in lookup_records
+#endif
+  const hn::Full128<double> d2;
+  hn::Vec<DD> even, odd;
+  if constexpr (H == 2) {
+    even = hn::Load(d2, table + at[0]);
+    odd = hn::Load(d2, table + at[1]);
+  } else if constexpr (H == 4) {
+    even = hn::Combine(dd, hn::Load(d2, table + at[2]), hn::Load(d2, table + at[0]));
+    odd = hn::Combine(dd, hn::Load(d2, table + at[3]), hn::Load(d2, table + at[1]));
+  } else {
+    const hn::Half<DD> dq;
+    even = hn::Combine(dd, hn::Combine(dq, hn::Load(d2, table + at[6]), hn::Load(d2, table + at[4])),
+                       hn::Combine(dq, hn::Load(d2, table + at[2]), hn::Load(d2, table + at[0])));
+    odd = hn::Combine(dd, hn::Combine(dq, hn::Load(d2, table + at[7]), hn::Load(d2, table + at[5])),
+                      hn::Combine(dq, hn::Load(d2, table + at[3]), hn::Load(d2, table + at[1])));
+  }
+  g0 = hn::InterleaveLower(dd, even, odd);
+  g1 = hn::InterleaveUpper(dd, even, odd);
+}
+#endif
 
 // One sample. Radial: weights from a radial profile (else a 2D grid); Columns: weight columns stored
 // (2: w_U = w_V = 0); Plate: effective weights w M(theta); Exact: the float64 sums (monopole,
@@ -120,10 +177,8 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   const F inv_step(det.grid_inv_step), grid_a(det.grid_a), last(float(det.grid_n - 1)), one(1.0f);
   const VI zero_i = hn::Zero(di), max_i = hn::Set(di, det.grid_n - 2), n_i = hn::Set(di, det.grid_n);
   const VF zero = hn::Zero(df);
-  const std::uint64_t* w0 = det.pairs[0];
-  const std::uint64_t* w1 = det.pairs[1];
-  const std::uint64_t* w2 = det.pairs[Columns == 4 ? 2 : 0];
-  const std::uint64_t* w3 = det.pairs[Columns == 4 ? 3 : 0];
+  const float* r01 = det.records[0];
+  const float* r23 = det.records[Columns == 4 ? 1 : 0];
 
   VF sum = zero, carry = zero;
   double monopole = 0.0, norm = 0.0;
@@ -182,8 +237,8 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       xf[h] = hn::DemoteTo(dh, x);
       yf[h] = hn::DemoteTo(dh, y);
       auto inside = hn::FirstN(dd, live);
-      VD c0, c1, c2, c3;  // interpolation coefficients of the nodes at offsets o0..o3
-      hn::Vec<decltype(dl)> o0, o1, o2, o3;
+      VD c0, c1, c2, c3;  // interpolation coefficients of w(k), w(k + 1) in records rec and above
+      hn::Vec<decltype(dl)> rec, above;
       if constexpr (Radial) {
         const VD r2 = hn::Add(hn::Mul(x, x), hn::Mul(y, y));
         const VD u = hn::Mul(hn::Sqrt(hn::Max(r2, zero_d)), inv_d);
@@ -192,8 +247,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
         const VD f = hn::Sub(u, node);
         c0 = hn::Sub(one_d, f);
         c1 = f;
-        o0 = hn::ConvertTo(dl, hn::Mul(node, hn::Set(dd, 4.0)));
-        o1 = hn::Add(o0, hn::Set(dl, 4));
+        rec = hn::ConvertTo(dl, hn::Add(node, node));
       } else {
         const VD u = hn::Mul(hn::Add(x, a_d), inv_d);
         const VD v = hn::Mul(hn::Add(y, a_d), inv_d);
@@ -207,29 +261,31 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
         c1 = hn::Mul(fu, gv);
         c2 = hn::Mul(gu, fv);
         c3 = hn::Mul(fu, fv);
-        o0 = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(j, n_d), i), hn::Set(dd, 4.0)));
-        o1 = hn::Add(o0, hn::Set(dl, 4));
-        o2 = hn::Add(o0, hn::Set(dl, 4 * det.grid_n));
-        o3 = hn::Add(o2, hn::Set(dl, 4));
+        rec = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(j, n_d), i), hn::Set(dd, 2.0)));
+        above = hn::Add(rec, hn::Set(dl, 2 * det.grid_n));
       }
+      // The reference's interpolation of one column (records of its float64 weights), the same sums
+      // in the same order: c0 w(i) + c1 w(i + 1) (+ c2 w(i, j + 1) + c3 w(i + 1, j + 1)).
       auto column = [&](const double* table) HWY_ATTR {
-        if constexpr (Radial)
-          return hn::Add(hn::Mul(c0, hn::GatherIndex(dd, table, o0)), hn::Mul(c1, hn::GatherIndex(dd, table, o1)));
-        else
-          return hn::Add(hn::Add(hn::Add(hn::Mul(c0, hn::GatherIndex(dd, table, o0)),
-                                         hn::Mul(c1, hn::GatherIndex(dd, table, o1))),
-                                 hn::Mul(c2, hn::GatherIndex(dd, table, o2))),
-                         hn::Mul(c3, hn::GatherIndex(dd, table, o3)));
+        VD g0, g1;
+        lookup_pairs(dd, table, rec, g0, g1);
+        if constexpr (Radial) {
+          return hn::Add(hn::Mul(c0, g0), hn::Mul(c1, g1));
+        } else {
+          VD h0, h1;
+          lookup_pairs(dd, table, above, h0, h1);
+          return hn::Add(hn::Add(hn::Add(hn::Mul(c0, g0), hn::Mul(c1, g1)), hn::Mul(c2, h0)), hn::Mul(c3, h1));
+        }
       };
       if (in.monopole) {
-        VD w = column(det.weights);
+        VD w = column(det.pairs64[0]);
         if constexpr (Plate) {
           w = hn::Mul(w, mcol[0]);
-          for (int a = 1; a < 4; ++a) w = hn::Add(w, hn::Mul(column(det.weights + a), mcol[a]));
+          for (int a = 1; a < 4; ++a) w = hn::Add(w, hn::Mul(column(det.pairs64[a]), mcol[a]));
         }
         mono_acc = hn::Add(mono_acc, hn::IfThenElseZero(inside, w));
       }
-      if (in.per_sample) norm_acc = hn::Add(norm_acc, hn::IfThenElseZero(inside, column(det.norm_weights)));
+      if (in.per_sample) norm_acc = hn::Add(norm_acc, hn::IfThenElseZero(inside, column(det.pairs64[4])));
     }
     hn::StoreU(hn::Combine(df, xf[1], xf[0]), df, xs);
     hn::StoreU(hn::Combine(df, yf[1], yf[0]), df, ys);
@@ -262,16 +318,15 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
       const F fr = u - F(hn::ConvertTo(df, i));
       const F gr = one - fr;
-      auto column = [&](const std::uint64_t* c) HWY_ATTR {
-        F g0, g1;
-        gather_pair(c, i, g0, g1);
-        return gr * g0 + fr * g1;
-      };
-      w[0] = column(w0);
-      w[1] = column(w1);
+      // Columns 0 and 1 (and 2 and 3): w(i) and w(i + 1) of each, in one record a lane.
+      F a[4];
+      lookup_records(r01, i, a);
+      w[0] = gr * a[0] + fr * a[2];
+      w[1] = gr * a[1] + fr * a[3];
       if constexpr (Columns == 4) {
-        w[2] = column(w2);
-        w[3] = column(w3);
+        lookup_records(r23, i, a);
+        w[2] = gr * a[0] + fr * a[2];
+        w[3] = gr * a[1] + fr * a[3];
       }
     } else {
       const F u = (g.x + grid_a) * inv_step;
@@ -283,19 +338,18 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       const F fv = v - F(hn::ConvertTo(df, j));
       const F c00 = (one - fu) * (one - fv), c10 = fu * (one - fv), c01 = (one - fu) * fv, c11 = fu * fv;
       const VI node = hn::Add(hn::Mul(j, n_i), i);
-      const std::size_t n = std::size_t(det.grid_n);
-      auto column = [&](const std::uint64_t* c) HWY_ATTR {
-        F g00, g10, g01, g11;
-        gather_pair(c, node, g00, g10);
-        gather_pair(c + n, node, g01, g11);
-        return c00 * g00 + c10 * g10 + c01 * g01 + c11 * g11;
+      const VI above = hn::Add(node, n_i);
+      // Nodes (i, j), (i + 1, j) in the record at node and (i, j + 1), (i + 1, j + 1) in the record at
+      // node + n, for columns 0 and 1, then 2 and 3.
+      auto columns = [&](const float* table, F& wa, F& wb) HWY_ATTR {
+        F lo[4], hi[4];
+        lookup_records(table, node, lo);
+        lookup_records(table, above, hi);
+        wa = c00 * lo[0] + c10 * lo[2] + c01 * hi[0] + c11 * hi[2];
+        wb = c00 * lo[1] + c10 * lo[3] + c01 * hi[1] + c11 * hi[3];
       };
-      w[0] = column(w0);
-      w[1] = column(w1);
-      if constexpr (Columns == 4) {
-        w[2] = column(w2);
-        w[3] = column(w3);
-      }
+      columns(r01, w[0], w[1]);
+      if constexpr (Columns == 4) columns(r23, w[2], w[3]);
     }
 
     const F I(s[3]), Q(s[4]), U(s[5]);
@@ -419,18 +473,25 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
 // argument, far wider than that error and than the arithmetic's rounding. A ring where either bound
 // falls within its margin of an integer (about 1e-9 of rings) is done again with the reference's own
 // arithmetic: the ranges are the reference's, bit for bit.
-void DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, double phi0, double rho, double cos_rho,
-                std::vector<std::uint32_t>& ranges, std::size_t* redone, double margin_abs) {
+std::size_t DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, double phi0, double rho,
+                       double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone, double margin_abs) {
   const hn::ScalableTag<double> dd;
   using VD = hn::Vec<decltype(dd)>;
   const std::size_t L = hn::Lanes(dd);
   const double pi = 3.141592653589793238462643383279502884;
-  auto emit = [&](std::uint32_t b, std::uint32_t e) {
-    if (e <= b) return;
-    ranges.push_back(b);
-    ranges.push_back(e);
-  };
   const DiscRings d = disc_rings(nside, theta0, rho);
+  // At most two ranges a ring and one a polar cap, written through a pointer (the ranges are most of
+  // what the walk writes; a growing vector's checks cost more than the writes).
+  const std::size_t most = 4 * std::size_t(std::max<std::int64_t>(0, d.last - d.first + 1)) + 4;
+  if (ranges.size() < most) ranges.resize(std::max(most, 2 * ranges.size()));
+  std::uint32_t* const out = ranges.data();
+  std::uint32_t* w = out;
+  auto emit = [&w](std::uint32_t b, std::uint32_t e) {
+    if (e <= b) return;
+    w[0] = b;
+    w[1] = e;
+    w += 2;
+  };
   emit_north_cap(rings, d, emit);
   // Rings a block at a time: their edges (scalar, the reference's arithmetic), then the block's
   // vectors (independent of one another: the processor overlaps their long square-root, division
@@ -488,6 +549,7 @@ void DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, doubl
     }
   }
   emit_south_cap(rings, nside, d, emit);
+  return std::size_t(w - out);
 }
 
 const char* TargetHere() { return hwy::TargetName(HWY_TARGET); }
@@ -553,12 +615,12 @@ void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDet
     HWY_STATIC_DISPATCH(ConvolveSample)(sky, det, in, out);
 }
 
-void disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
-                 double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone, double margin) {
+std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
+                        double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone,
+                        double margin) {
   if (kernel.index < table_size)
-    HWY_DISPATCH_TABLE(DiscRanges)[kernel.index](rings, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
-  else
-    HWY_STATIC_DISPATCH(DiscRanges)(rings, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
+    return HWY_DISPATCH_TABLE(DiscRanges)[kernel.index](rings, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
+  return HWY_STATIC_DISPATCH(DiscRanges)(rings, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
 }
 
 }  // namespace pisco::detail::simd

@@ -39,17 +39,21 @@ struct KernelSky {
   double monopole;        // I0
 };
 
-// A detector's weights: the float32 table (float32_weights) split into one array per column,
-// columns 2 and 3 absent (columns = 2) when w_U and w_V vanish at every node, each stored as pairs:
-// element k holds the float32 weights of node k (low half) and of node k + 1 (high half), the two
-// ends of an interpolation along r or x; the reference's float64 tables for the float64 path.
+// A detector's weights: the float32 table (float32_weights) as records of two columns, columns 0
+// and 1 in records[0], 2 and 3 in records[1] (absent, columns = 2, when w_U and w_V vanish at every
+// node). Record k is four floats, (w_a(k), w_b(k), w_a(k + 1), w_b(k + 1)): the two ends of an
+// interpolation along r or x in one 16-byte load (zero past the last node); the reference's float64
+// tables for the float64 path.
 struct KernelDetector {
-  const std::uint64_t* pairs[4];
+  const float* records[2];
   int columns;  // 2 or 4
   bool radial;
   int grid_n;
   float grid_a, grid_inv_step;
   const double* weights;       // reference table (w_I, w_Q, w_U, w_V) per node, float64 path
+  // The float64 path's records: (w(k), w(k + 1)) of the reference's columns w_I, w_Q, w_U, w_V
+  // (0 to 3) and of the normalization weight (4, per-sample normalization only); null without it.
+  const double* pairs64[5];
   const double* norm_weights;  // (wn, 0, 0, 0) per node, per-sample normalization only
   double grid_a_d, grid_inv_step_d;
 };
@@ -85,14 +89,16 @@ struct Kernel {
 // Each engine keeps its own choice: nothing process-wide changes.
 Kernel choose_kernel(const std::string& name);
 
-// Appends the [begin, end) pixel ranges of the disc of radius rho around (theta0, phi0) to `ranges`:
-// exactly for_each_disc_range's (empty ranges left out), the rings' arctangents taken in vectors.
+// Writes the [begin, end) pixel ranges of the disc of radius rho around (theta0, phi0) at the start of
+// `ranges` and returns how many numbers it wrote (two a range): exactly for_each_disc_range's (empty
+// ranges left out), the rings' arctangents taken in vectors. `ranges` is a buffer: grown when it may
+// be too short for the disc, never shrunk, its entries past the returned count left as they were.
 // `redone`, when given, counts the rings redone with the reference's scalar arithmetic because a
 // bound fell within the vector arithmetic's margin of an integer: count / 2 pi x 1e-12 + `margin`
 // (tests widen it to send every ring through the scalar arithmetic).
-void disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
-                 double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone = nullptr,
-                 double margin = 1e-9);
+std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
+                        double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone = nullptr,
+                        double margin = 1e-9);
 
 // Evaluates one sample with `kernel`.
 void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const SampleInput& in,
