@@ -24,7 +24,13 @@ if(NOT pisco_hwy)
 endif()
 message(STATUS "simd backend: Highway ${hwy_VERSION}${HWY_VERSION}")
 
-target_sources(pisco PRIVATE simd/simd_backend.cpp simd/simd_kernel.cpp)
+target_sources(pisco PRIVATE simd/simd_backend.cpp simd/simd_kernel.cpp simd/simd_disc.cpp)
 target_link_libraries(pisco PRIVATE ${pisco_hwy})
 target_compile_definitions(pisco PRIVATE PISCO_HAVE_SIMD)
 set(PISCO_HAVE_SIMD ON CACHE INTERNAL "The simd backend is built")
+# The float32 kernel lets the compiler fuse multiply-adds (the rest of the project compiles expressions
+# as written, CMakeLists.txt): 3% faster on the Table 1 workload, 10% with a plate (BENCHMARKS.md,
+# 2026-11-24), within float32 rounding of the unfused arithmetic, which the parity bars hold either way.
+if(CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
+  set_source_files_properties(simd/simd_kernel.cpp PROPERTIES COMPILE_OPTIONS "-ffp-contract=fast")
+endif()

@@ -14,11 +14,7 @@
 // at lane 0: which lane evaluates a pixel depends only on the disc, so results are deterministic and
 // independent of the chunk size and of the thread that runs the sample.
 
-// Scalable vectors cannot be members of a struct (F below): no SVE or RVV targets. SSSE3 adds little
-// beside SSE4 and costs compile time.
-#ifndef HWY_DISABLED_TARGETS
-#define HWY_DISABLED_TARGETS (HWY_SSSE3 | HWY_SVE | HWY_SVE2 | HWY_SVE_256 | HWY_SVE2_128 | HWY_RVV)
-#endif
+#include "simd/targets.hpp"
 
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "simd/simd_kernel.cpp"
@@ -463,95 +459,6 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
     SampleColumns<false>(sky, det, in, out);
 }
 
-// The disc's pixel ranges, exactly for_each_disc_range's (core/disc.hpp), with the arctangent of
-// each ring's half-width taken a vector of rings at a time. The reference computes
-// floor(arg(phi0 -+ dphi)) with dphi = atan2(sqrt(ysq), x), the C library's arctangent, some 30 ns a
-// ring: a third of this backend's time at rho_max = 5 deg. Here x and ysq are the reference's
-// (ring_edge, scalar), the square root is IEEE's in both, and the arctangent is Highway's (within 3
-// ulp), so the vector's dphi is within 1e-15 rad of the reference's; a bound is taken from it only
-// when floor() gives the same integer anywhere within a margin (count / 2 pi x 1e-12 + 1e-9) of the
-// argument, far wider than that error and than the arithmetic's rounding. A ring where either bound
-// falls within its margin of an integer (about 1e-9 of rings) is done again with the reference's own
-// arithmetic: the ranges are the reference's, bit for bit.
-std::size_t DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, double phi0, double rho,
-                       double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone, double margin_abs) {
-  const hn::ScalableTag<double> dd;
-  using VD = hn::Vec<decltype(dd)>;
-  const std::size_t L = hn::Lanes(dd);
-  const double pi = 3.141592653589793238462643383279502884;
-  const DiscRings d = disc_rings(nside, theta0, rho);
-  // At most two ranges a ring and one a polar cap, written through a pointer (the ranges are most of
-  // what the walk writes; a growing vector's checks cost more than the writes).
-  const std::size_t most = 4 * std::size_t(std::max<std::int64_t>(0, d.last - d.first + 1)) + 4;
-  if (ranges.size() < most) ranges.resize(std::max(most, 2 * ranges.size()));
-  std::uint32_t* const out = ranges.data();
-  std::uint32_t* w = out;
-  auto emit = [&w](std::uint32_t b, std::uint32_t e) {
-    if (e <= b) return;
-    w[0] = b;
-    w[1] = e;
-    w += 2;
-  };
-  emit_north_cap(rings, d, emit);
-  // Rings a block at a time: their edges (scalar, the reference's arithmetic), then the block's
-  // vectors (independent of one another: the processor overlaps their long square-root, division
-  // and polynomial chains), then the ranges.
-  constexpr std::size_t block = 64;
-  static_assert(block % max_lanes == 0 || max_lanes % block == 0, "whole vectors of doubles per block");
-  HWY_ALIGN double x[block], ysq[block], scale[block], shift[block], lo[block], hi[block], ok[block];
-  const VD zero = hn::Zero(dd), half_pi = hn::Set(dd, 0.5 * pi), pi_v = hn::Set(dd, pi);
-  const VD phi_v = hn::Set(dd, phi0), rel = hn::Set(dd, 1e-12), abs_margin = hn::Set(dd, margin_abs);
-  const VD one = hn::Set(dd, 1.0), tiny = hn::Set(dd, 1e-300);
-  for (std::int64_t first = d.first; first <= d.last; first += std::int64_t(block)) {
-    const std::size_t n = std::size_t(std::min<std::int64_t>(std::int64_t(block), d.last - first + 1));
-    const std::size_t padded = (n + L - 1) / L * L;
-    for (std::size_t l = 0; l < padded; ++l) {
-      if (l < n) {
-        const RingEntry& r = rings[first + std::int64_t(l) - 1];
-        ring_edge(r, d, cos_rho, x[l], ysq[l]);
-        scale[l] = ring_pixels_per_radian(r);
-        shift[l] = ring_shift(r);
-      } else {
-        x[l] = 1.0;
-        ysq[l] = scale[l] = shift[l] = 0.0;
-      }
-    }
-    for (std::size_t v = 0; v < padded; v += L) {
-      const VD xv = hn::Load(dd, x + v);
-      const VD s = hn::Sqrt(hn::Max(hn::Load(dd, ysq + v), zero));
-      const VD ax = hn::Abs(xv);
-      // atan2(s, x) for s >= 0 from the arctangent of a ratio within [0, 1].
-      const auto steep = hn::Lt(ax, s);
-      const VD num = hn::IfThenElse(steep, ax, s), den = hn::IfThenElse(steep, s, ax);
-      VD a = hn::Atan(dd, hn::Div(num, hn::Max(den, tiny)));
-      a = hn::IfThenElse(steep, hn::Sub(half_pi, a), a);
-      const VD dphi = hn::IfThenElse(hn::Lt(xv, zero), hn::Sub(pi_v, a), a);
-      const VD t = hn::Load(dd, scale + v), sh = hn::Load(dd, shift + v);
-      const VD margin = hn::Add(hn::Mul(t, rel), abs_margin);
-      const VD arg_lo = hn::Sub(hn::Mul(t, hn::Sub(phi_v, dphi)), sh);
-      const VD arg_hi = hn::Sub(hn::Mul(t, hn::Add(phi_v, dphi)), sh);
-      const VD f_lo = hn::Floor(hn::Sub(arg_lo, margin)), f_hi = hn::Floor(hn::Sub(arg_hi, margin));
-      const auto sure = hn::And(hn::Eq(f_lo, hn::Floor(hn::Add(arg_lo, margin))),
-                                hn::Eq(f_hi, hn::Floor(hn::Add(arg_hi, margin))));
-      hn::Store(f_lo, dd, lo + v);
-      hn::Store(f_hi, dd, hi + v);
-      hn::Store(hn::IfThenElseZero(sure, one), dd, ok + v);
-    }
-    for (std::size_t l = 0; l < n; ++l) {
-      if (ysq[l] <= 0) continue;  // the ring does not cross the disc boundary
-      const RingEntry& r = rings[first + std::int64_t(l) - 1];
-      if (ok[l] == 1.0) {
-        emit_ring_pixels(r, std::int64_t(lo[l]) + 1, std::int64_t(hi[l]), emit);
-        continue;
-      }
-      if (redone) ++*redone;
-      emit_ring_crossing(r, phi0, x[l], ysq[l], emit);
-    }
-  }
-  emit_south_cap(rings, nside, d, emit);
-  return std::size_t(w - out);
-}
-
 const char* TargetHere() { return hwy::TargetName(HWY_TARGET); }
 std::size_t LanesHere() { return hn::Lanes(DF()); }
 
@@ -565,7 +472,6 @@ namespace pisco::detail::simd {
 HWY_EXPORT(ConvolveSample);
 HWY_EXPORT(TargetHere);
 HWY_EXPORT(LanesHere);
-HWY_EXPORT(DiscRanges);
 
 namespace {
 std::string lower(std::string s) {
@@ -613,14 +519,6 @@ void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDet
     HWY_DISPATCH_TABLE(ConvolveSample)[kernel.index](sky, det, in, out);
   else
     HWY_STATIC_DISPATCH(ConvolveSample)(sky, det, in, out);
-}
-
-std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
-                        double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone,
-                        double margin) {
-  if (kernel.index < table_size)
-    return HWY_DISPATCH_TABLE(DiscRanges)[kernel.index](rings, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
-  return HWY_STATIC_DISPATCH(DiscRanges)(rings, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
 }
 
 }  // namespace pisco::detail::simd
