@@ -15,6 +15,27 @@
 
 #include "simd/simd_kernel.hpp"
 
+#ifndef PISCO_SIMD_DISC_RANGE_WRITER  // once, not once per target
+#define PISCO_SIMD_DISC_RANGE_WRITER
+namespace pisco::detail::simd {
+namespace {
+// Writes non-empty ranges through a pointer. Defined outside the targets' namespaces, with no target
+// attribute, as core/disc.hpp's emitters that call it: GCC inlines a function only into one whose
+// instruction set includes its own, so a lambda of the walk (AVX-512, say) would be called out of
+// line, vectors saved around each call.
+struct RangeWriter {
+  std::uint32_t* w;
+  void operator()(std::uint32_t b, std::uint32_t e) {
+    if (e <= b) return;
+    w[0] = b;
+    w[1] = e;
+    w += 2;
+  }
+};
+}  // namespace
+}  // namespace pisco::detail::simd
+#endif
+
 HWY_BEFORE_NAMESPACE();
 namespace pisco::detail::simd {
 namespace HWY_NAMESPACE {
@@ -42,13 +63,7 @@ std::size_t DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0
   const std::size_t most = 4 * std::size_t(std::max<std::int64_t>(0, d.last - d.first + 1)) + 4;
   if (ranges.size() < most) ranges.resize(std::max(most, 2 * ranges.size()));
   std::uint32_t* const out = ranges.data();
-  std::uint32_t* w = out;
-  auto emit = [&w](std::uint32_t b, std::uint32_t e) {
-    if (e <= b) return;
-    w[0] = b;
-    w[1] = e;
-    w += 2;
-  };
+  RangeWriter emit{out};
   emit_north_cap(rings, d, emit);
   // Rings a block at a time: their edges (scalar, the reference's arithmetic), then the block's
   // vectors (independent of one another: the processor overlaps their long square-root, division
@@ -106,7 +121,7 @@ std::size_t DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0
     }
   }
   emit_south_cap(rings, nside, d, emit);
-  return std::size_t(w - out);
+  return std::size_t(emit.w - out);
 }
 
 }  // namespace HWY_NAMESPACE
