@@ -29,8 +29,9 @@ target_link_libraries(pisco PRIVATE ${pisco_hwy})
 target_compile_definitions(pisco PRIVATE PISCO_HAVE_SIMD)
 set(PISCO_HAVE_SIMD ON CACHE INTERNAL "The simd backend is built")
 # The float32 kernel lets the compiler fuse multiply-adds (the rest of the project compiles expressions
-# as written, CMakeLists.txt): 3% faster on the Table 1 workload, 10% with a plate (BENCHMARKS.md,
-# 2026-11-24), within float32 rounding of the unfused arithmetic, which the parity bars hold either way.
+# as written, CMakeLists.txt): up to 1.07x faster on the Table 1 workload, 1.09x to 1.16x with a plate
+# (BENCHMARKS.md, 2026-11-24), within float32 rounding of the unfused arithmetic; the parity bars hold
+# either way.
 if(CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
   set_source_files_properties(simd/simd_kernel.cpp PROPERTIES COMPILE_OPTIONS "-ffp-contract=fast")
 endif()
