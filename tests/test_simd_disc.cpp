@@ -50,14 +50,22 @@ struct Tally {
   std::size_t discs = 0, rings = 0, redone = 0;
 };
 
-void compare(const detail::simd::Kernel& k, const std::vector<detail::RingEntry>& rings, std::int64_t nside,
+// A ring table and its columns, as the simd backend holds them.
+struct Rings {
+  std::vector<detail::RingEntry> table;
+  detail::simd::RingColumns columns;
+  explicit Rings(std::int64_t nside) : table(detail::make_ring_table(int(nside))), columns(table) {}
+};
+
+void compare(const detail::simd::Kernel& k, const Rings& rings, std::int64_t nside,
              double theta, double phi, double rho, Tally& tally, double margin = 1e-9) {
   phi = detail::wrap_phi(phi);
-  const std::vector<std::uint32_t> want = reference(rings, nside, theta, phi, rho);
+  const std::vector<std::uint32_t> want = reference(rings.table, nside, theta, phi, rho);
   std::vector<std::uint32_t> got;
   std::size_t redone = 0;
   got.assign(3, 7u);  // a buffer with something in it: disc_ranges writes from its start
-  got.resize(detail::simd::disc_ranges(k, rings.data(), nside, theta, phi, rho, std::cos(rho), got, &redone, margin));
+  got.resize(detail::simd::disc_ranges(k, rings.table.data(), rings.columns, nside, theta, phi, rho, std::cos(rho), got,
+                                       &redone, margin));
   ASSERT_EQ(got, want) << k.description << ": NSIDE " << nside << " theta " << theta << " phi " << phi << " rho "
                        << rho / deg << " deg";
   const detail::DiscRings d = detail::disc_rings(nside, theta, rho);
@@ -72,7 +80,7 @@ TEST(SimdDisc, RandomDiscsAreTheReferencesOnEveryInstructionSet) {
     std::uniform_real_distribution<double> u(0.0, 1.0);
     Tally tally;
     for (std::int64_t nside : {1, 2, 16, 64, 512, 2048}) {
-      const auto rings = detail::make_ring_table(int(nside));
+      const Rings rings(nside);
       for (int n = 0; n < 400; ++n) {
         const double theta = std::acos(1.0 - 2.0 * u(rng));
         const double phi = 2.0 * pi * u(rng);
@@ -100,9 +108,9 @@ TEST(SimdDisc, DiscsAtPixelCentresAreTheReferences) {
   for (const auto& k : kernels()) {
     Tally tally;
     for (std::int64_t nside : {128, 256, 1024}) {
-      const auto rings = detail::make_ring_table(int(nside));
-      for (std::size_t ring = 1; ring <= rings.size(); ring += std::size_t(nside / 16)) {
-        const detail::RingEntry& r = rings[ring - 1];
+      const Rings rings(nside);
+      for (std::size_t ring = 1; ring <= rings.table.size(); ring += std::size_t(nside / 16)) {
+        const detail::RingEntry& r = rings.table[ring - 1];
         const double theta = std::acos(r.z);
         for (std::uint32_t j = 0; j < r.count; j += std::max(1u, r.count / 7)) {
           const double phi = (j + (r.shifted ? 0.5 : 0.0)) * 2.0 * pi / r.count;
@@ -121,7 +129,7 @@ TEST(SimdDisc, TheScalarFallbackIsTheReference) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   Tally tally;
   for (std::int64_t nside : {4, 64, 1024}) {
-    const auto rings = detail::make_ring_table(int(nside));
+    const Rings rings(nside);
     for (int n = 0; n < 200; ++n)
       compare(k, rings, nside, std::acos(1.0 - 2.0 * u(rng)), 2.0 * pi * u(rng), 30.0 * deg * u(rng) + 1e-3, tally,
               0.5);

@@ -100,7 +100,8 @@ class SimdBackend final : public Backend {
   SimdBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options)
       : in_(std::move(inputs)),
         pool_(options.threads ? options.threads : hardware_threads()),
-        kernel_(simd::choose_kernel(requested_target(options.device))) {
+        kernel_(simd::choose_kernel(requested_target(options.device))),
+        ring_columns_(in_->sky.rings) {
     monopole_ = float32_monopole(sky);
     per_sample_ = in_->normalization == Normalization::per_sample;
     exact_ = monopole_ != 0.0 || per_sample_;
@@ -181,8 +182,8 @@ class SimdBackend final : public Backend {
               : angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta,
                              det.sin_zeta, theta, phi);
       if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * in.plate_angle[i]), std::sin(2 * in.plate_angle[i]), m);
-      const std::size_t n =
-          simd::disc_ranges(kernel_, sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max, ranges);
+      const std::size_t n = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, theta, phi,
+                                              det.rho_max, det.cos_rho_max, ranges);
       for (std::size_t r = 0; r < n; r += 2) count += ranges[r + 1] - ranges[r];
       const simd::SampleInput sample{&f, ranges.data(), n / 2, plate ? m : nullptr, monopole_ != 0.0, per_sample_};
       simd::SampleSums sums;
@@ -198,6 +199,7 @@ class SimdBackend final : public Backend {
   std::shared_ptr<const EngineInputs> in_;
   mutable ThreadPool pool_;
   simd::Kernel kernel_;
+  simd::RingColumns ring_columns_;
   double monopole_ = 0.0;
   bool per_sample_ = false, exact_ = false;
   std::vector<float> kx_, ky_, kz_, i_, q_, u_, v_;

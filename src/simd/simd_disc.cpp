@@ -45,14 +45,15 @@ namespace hn = hwy::HWY_NAMESPACE;
 // each ring's half-width taken a vector of rings at a time. The reference computes
 // floor(arg(phi0 -+ dphi)) with dphi = atan2(sqrt(ysq), x), the C library's arctangent, some 30 ns a
 // ring: a third of this backend's time at rho_max = 5 deg. Here x and ysq are the reference's
-// (ring_edge, scalar), the square root is IEEE's in both, and the arctangent is Highway's (within 3
+// (ring_edge's operations, in vectors), the square root is IEEE's in both, and the arctangent is Highway's (within 3
 // ulp), so the vector's dphi is within 1e-15 rad of the reference's; a bound is taken from it only
 // when floor() gives the same integer anywhere within a margin (count / 2 pi x 1e-12 + 1e-9) of the
 // argument, far wider than that error and than the arithmetic's rounding. A ring where either bound
 // falls within its margin of an integer (about 1e-9 of rings) is done again with the reference's own
 // arithmetic: the ranges are the reference's, bit for bit.
-std::size_t DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0, double phi0, double rho,
-                       double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone, double margin_abs) {
+std::size_t DiscRanges(const RingEntry* rings, const RingColumns* columns, std::int64_t nside, double theta0,
+                       double phi0, double rho, double cos_rho, std::vector<std::uint32_t>& ranges,
+                       std::size_t* redone, double margin_abs) {
   const hn::ScalableTag<double> dd;
   using VD = hn::Vec<decltype(dd)>;
   const std::size_t L = hn::Lanes(dd);
@@ -65,32 +66,31 @@ std::size_t DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0
   std::uint32_t* const out = ranges.data();
   RangeWriter emit{out};
   emit_north_cap(rings, d, emit);
-  // Rings a block at a time: their edges (scalar, the reference's arithmetic), then the block's
-  // vectors (independent of one another: the processor overlaps their long square-root, division
-  // and polynomial chains), then the ranges.
+  // Rings a block at a time: the block's vectors (independent of one another: the processor overlaps
+  // their long square-root, division and polynomial chains), then the ranges. Each ring's edge x,
+  // ysq is ring_edge's arithmetic, operation for operation (correctly rounded in a vector lane as in
+  // a scalar register, no operation fused: simd.cmake), from the columns' z; lanes past the disc's
+  // last ring read the columns' padding and are not used.
   constexpr std::size_t block = 64;
   static_assert(block % (HWY_MAX_BYTES / sizeof(double)) == 0, "whole vectors of doubles per block");
-  HWY_ALIGN double x[block], ysq[block], scale[block], shift[block], lo[block], hi[block], ok[block];
+  static_assert(RingColumns::pad >= HWY_MAX_BYTES / sizeof(double), "a vector of rings past the last");
+  HWY_ALIGN double x[block], ysq[block], lo[block], hi[block], ok[block];
   const VD zero = hn::Zero(dd), half_pi = hn::Set(dd, 0.5 * pi), pi_v = hn::Set(dd, pi);
   const VD phi_v = hn::Set(dd, phi0), rel = hn::Set(dd, 1e-12), abs_margin = hn::Set(dd, margin_abs);
   const VD one = hn::Set(dd, 1.0), tiny = hn::Set(dd, 1e-300);
+  const VD z0 = hn::Set(dd, d.z0), xa = hn::Set(dd, d.xa), cr = hn::Set(dd, cos_rho);
   for (std::int64_t first = d.first; first <= d.last; first += std::int64_t(block)) {
     const std::size_t n = std::size_t(std::min<std::int64_t>(std::int64_t(block), d.last - first + 1));
     const std::size_t padded = (n + L - 1) / L * L;
-    for (std::size_t l = 0; l < padded; ++l) {
-      if (l < n) {
-        const RingEntry& r = rings[first + std::int64_t(l) - 1];
-        ring_edge(r, d, cos_rho, x[l], ysq[l]);
-        scale[l] = ring_pixels_per_radian(r);
-        shift[l] = ring_shift(r);
-      } else {
-        x[l] = 1.0;
-        ysq[l] = scale[l] = shift[l] = 0.0;
-      }
-    }
+    const std::size_t at = std::size_t(first - 1);  // ring `first`'s entry
     for (std::size_t v = 0; v < padded; v += L) {
-      const VD xv = hn::Load(dd, x + v);
-      const VD s = hn::Sqrt(hn::Max(hn::Load(dd, ysq + v), zero));
+      const VD z = hn::LoadU(dd, columns->z.data() + at + v);
+      // ring_edge: x = (cos_rho - z z0) xa, ysq = 1 - z^2 - x^2.
+      const VD xv = hn::Mul(hn::Sub(cr, hn::Mul(z, z0)), xa);
+      const VD ysq_v = hn::Sub(hn::Sub(one, hn::Mul(z, z)), hn::Mul(xv, xv));
+      hn::Store(xv, dd, x + v);
+      hn::Store(ysq_v, dd, ysq + v);
+      const VD s = hn::Sqrt(hn::Max(ysq_v, zero));
       const VD ax = hn::Abs(xv);
       // atan2(s, x) for s >= 0 from the arctangent of a ratio within [0, 1].
       const auto steep = hn::Lt(ax, s);
@@ -98,7 +98,7 @@ std::size_t DiscRanges(const RingEntry* rings, std::int64_t nside, double theta0
       VD a = hn::Atan(dd, hn::Div(num, hn::Max(den, tiny)));
       a = hn::IfThenElse(steep, hn::Sub(half_pi, a), a);
       const VD dphi = hn::IfThenElse(hn::Lt(xv, zero), hn::Sub(pi_v, a), a);
-      const VD t = hn::Load(dd, scale + v), sh = hn::Load(dd, shift + v);
+      const VD t = hn::LoadU(dd, columns->scale.data() + at + v), sh = hn::LoadU(dd, columns->shift.data() + at + v);
       const VD margin = hn::Add(hn::Mul(t, rel), abs_margin);
       const VD arg_lo = hn::Sub(hn::Mul(t, hn::Sub(phi_v, dphi)), sh);
       const VD arg_hi = hn::Sub(hn::Mul(t, hn::Add(phi_v, dphi)), sh);
@@ -133,14 +133,23 @@ namespace pisco::detail::simd {
 
 HWY_EXPORT(DiscRanges);
 
-std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
-                        double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone,
-                        double margin) {
+RingColumns::RingColumns(const std::vector<RingEntry>& rings)
+    : z(rings.size() + pad, 0.0), scale(rings.size() + pad, 0.0), shift(rings.size() + pad, 0.0) {
+  for (std::size_t i = 0; i < rings.size(); ++i) {
+    z[i] = rings[i].z;
+    scale[i] = ring_pixels_per_radian(rings[i]);
+    shift[i] = ring_shift(rings[i]);
+  }
+}
+
+std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, const RingColumns& columns, std::int64_t nside,
+                        double theta0, double phi0, double rho, double cos_rho, std::vector<std::uint32_t>& ranges,
+                        std::size_t* redone, double margin) {
   constexpr std::size_t table_size = sizeof(HWY_DISPATCH_TABLE(DiscRanges)) / sizeof(HWY_DISPATCH_TABLE(DiscRanges)[0]);
   if (kernel.index < table_size)
-    return HWY_DISPATCH_TABLE(DiscRanges)[kernel.index](rings, nside, theta0, phi0, rho, cos_rho, ranges, redone,
-                                                        margin);
-  return HWY_STATIC_DISPATCH(DiscRanges)(rings, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
+    return HWY_DISPATCH_TABLE(DiscRanges)[kernel.index](rings, &columns, nside, theta0, phi0, rho, cos_rho, ranges,
+                                                        redone, margin);
+  return HWY_STATIC_DISPATCH(DiscRanges)(rings, &columns, nside, theta0, phi0, rho, cos_rho, ranges, redone, margin);
 }
 
 }  // namespace pisco::detail::simd

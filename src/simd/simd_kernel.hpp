@@ -89,16 +89,26 @@ struct Kernel {
 // Each engine keeps its own choice: nothing process-wide changes.
 Kernel choose_kernel(const std::string& name);
 
+// The ring table's z, pixels per radian (ring_pixels_per_radian) and pixel-centre shift (ring_shift)
+// as arrays, entry r - 1 for ring r, padded past the last ring: the disc walk loads them a vector of
+// rings at a time.
+struct RingColumns {
+  static constexpr std::size_t pad = 16;
+  std::vector<double> z, scale, shift;
+  explicit RingColumns(const std::vector<RingEntry>& rings);
+};
+
 // Writes the [begin, end) pixel ranges of the disc of radius rho around (theta0, phi0) at the start of
 // `ranges` and returns how many numbers it wrote (two a range): exactly for_each_disc_range's (empty
-// ranges left out), the rings' arctangents taken in vectors. `ranges` is a buffer: grown when it may
-// be too short for the disc, never shrunk, its entries past the returned count left as they were.
+// ranges left out), the rings' arctangents taken in vectors. `columns` are `rings`' own (RingColumns).
+// `ranges` is a buffer: grown when it may be too short for the disc, never shrunk, its entries past
+// the returned count left as they were.
 // `redone`, when given, counts the rings redone with the reference's scalar arithmetic because a
 // bound fell within the vector arithmetic's margin of an integer: count / 2 pi x 1e-12 + `margin`
 // (tests widen it to send every ring through the scalar arithmetic).
-std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, std::int64_t nside, double theta0, double phi0,
-                        double rho, double cos_rho, std::vector<std::uint32_t>& ranges, std::size_t* redone = nullptr,
-                        double margin = 1e-9);
+std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, const RingColumns& columns, std::int64_t nside,
+                        double theta0, double phi0, double rho, double cos_rho, std::vector<std::uint32_t>& ranges,
+                        std::size_t* redone = nullptr, double margin = 1e-9);
 
 // Evaluates one sample with `kernel`.
 void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const SampleInput& in,
