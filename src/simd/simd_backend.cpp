@@ -50,9 +50,10 @@ DetectorTables detector_tables(const PreparedDetector& det, std::size_t index, b
   if (det.grid_n < 2 || nodes == 0)
     throw Error("simd: detector " + std::to_string(index) + " has a weight grid of " + std::to_string(det.grid_n) +
                 " nodes a side; the kernel needs at least 2");
-  if (nodes + std::size_t(det.grid_n) + 2 > std::size_t(std::numeric_limits<std::int32_t>::max()))
+  // The kernel addresses a record by its offset in floats, 4 (node + n) at most, in 32-bit lanes.
+  if (4 * (nodes + std::size_t(det.grid_n) + 2) > std::size_t(std::numeric_limits<std::int32_t>::max()))
     throw Error("simd: detector " + std::to_string(index) + "'s weight grid has " + std::to_string(nodes) +
-                " nodes, more than the kernel's 32-bit gather indices reach");
+                " nodes, more than the kernel's 32-bit record offsets reach (at most about 5.4e8)");
   const std::vector<float> w32 = float32_weights(det);
   DetectorTables t;
   bool polarized_uv = false;

@@ -5,7 +5,7 @@
 //
 // The per-pixel formulas are core/contribution-inl.hpp, included into each target's namespace with
 // T = F, a float32 vector with +, -, *, /: the reference's own arithmetic, lane by lane. Only what
-// cannot be written as a formula of T is vector code here: loads, gathers of the beam weights,
+// cannot be written as a formula of T is vector code here: loads, the beam weights' record lookups,
 // the interpolation's index arithmetic and masks, and the compensated sum.
 //
 // The pixels of a range are consecutive in RING order, so the sky is stored as structure of arrays
@@ -70,8 +70,8 @@ HWY_INLINE Vec3<F> broadcast(const detail::Vec3<double>& a) {
 // w_b(k), w_a(k + 1), w_b(k + 1)) for two columns a, b and a node k, as four vectors of its fields.
 // Each lane's record is one 16-byte load; the records of lanes j, j + 4, j + 8, ... fill one vector
 // block by block, and a 4 x 4 transpose within the blocks (two rounds of interleaves) puts every
-// field in lane order. On the x86 processors measured (docs/simd.md) a gather costs about two cycles
-// an element: the loads and shuffles here cost about a quarter of the gathers they replace.
+// field in lane order. On the x86 processors measured (BENCHMARKS.md, 2026-11-24) hardware gathers
+// cost about two cycles an element: the loads and shuffles here made the whole backend 1.5x faster.
 template <std::size_t N = hn::MaxLanes(DF())>
 HWY_INLINE void lookup_records(const float* table, VI node, F out[4]) {
   const DF df;
@@ -305,7 +305,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       g.y = F(s[8]);
     }
 
-    // The beam weights (interpolate_radial / interpolate_weights of the formulas, with gathers).
+    // The beam weights (interpolate_radial / interpolate_weights of the formulas, with record lookups).
     F w[4] = {F(zero), F(zero), F(zero), F(zero)};
     MF inside;
     if constexpr (Radial) {
