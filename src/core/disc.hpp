@@ -2,6 +2,8 @@
 // pointing, the same set as HEALPix C++ query_disc(..., inclusive = false), produced as one or two
 // contiguous index ranges per ring crossing the disc. Written once for the reference and the CUDA
 // kernels; shaders/disc.glsl mirrors it. Double precision throughout: the result must be exact.
+// Every product that feeds an addition is mul_rn (core/hd.hpp), rounded by itself on the device as
+// on the host.
 #pragma once
 
 #include <cmath>
@@ -35,16 +37,16 @@ PISCO_HD double wrap_phi(double phi) {
 PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
   const double fact2 = 4.0 / double(12 * nside * nside);
   const double fact1 = double(nside << 1) * fact2;
-  if (ring < nside) return 1.0 - double(ring * ring) * fact2;
+  if (ring < nside) return 1.0 - mul_rn(double(ring * ring), fact2);
   if (ring <= 3 * nside) return double(2 * nside - ring) * fact1;
   const std::int64_t r = 4 * nside - ring;
-  return double(r * r) * fact2 - 1.0;
+  return mul_rn(double(r * r), fact2) - 1.0;
 }
 
 // Index of the ring just north of z (0 when z is north of ring 1), HEALPix's ring_above.
 PISCO_HD std::int64_t ring_above(std::int64_t nside, double z) {
   const double az = z < 0 ? -z : z;
-  if (az <= 2.0 / 3.0) return std::int64_t(double(nside) * (2.0 - 1.5 * z));
+  if (az <= 2.0 / 3.0) return std::int64_t(double(nside) * (2.0 - mul_rn(1.5, z)));
   const std::int64_t iring = std::int64_t(double(nside) * sqrt(3.0 * (1.0 - az)));
   return (z > 0) ? iring : 4 * nside - iring - 1;
 }
@@ -82,8 +84,8 @@ PISCO_HD DiscRings disc_rings(std::int64_t nside, double theta0, double rho) {
 // half-width in longitude is then dphi = atan2(sqrt(ysq), x).
 PISCO_HD void ring_edge(const RingEntry& r, const DiscRings& d, double cos_rho, double& x, double& ysq) {
   const double z = r.z;
-  x = (cos_rho - z * d.z0) * d.xa;
-  ysq = 1.0 - z * z - x * x;
+  x = (cos_rho - mul_rn(z, d.z0)) * d.xa;
+  ysq = 1.0 - mul_rn(z, z) - mul_rn(x, x);
 }
 
 // A ring's pixels per radian of longitude, and the offset of its pixel centres in pixels.
@@ -96,7 +98,7 @@ PISCO_HD double ring_shift(const RingEntry& r) { return r.shifted ? 0.5 : 0.0; }
 // The argument whose floor is a bound of the ring's pixel indices: floor(arg(phi0 - dphi)) + 1 is the
 // first pixel, floor(arg(phi0 + dphi)) the last.
 PISCO_HD double ring_bound_arg(const RingEntry& r, double phi) {
-  return ring_pixels_per_radian(r) * phi - ring_shift(r);
+  return mul_rn(ring_pixels_per_radian(r), phi) - ring_shift(r);
 }
 
 // Emits ring r's pixels first ... last, indices taken modulo the ring (one range, or two where they
