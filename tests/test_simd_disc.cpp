@@ -15,6 +15,7 @@
 #include "pisco/error.hpp"
 #include "pisco/units.hpp"
 #include "simd/simd_kernel.hpp"
+#include "simd_targets.hpp"
 
 namespace {
 
@@ -36,12 +37,7 @@ std::vector<std::uint32_t> reference(const std::vector<detail::RingEntry>& rings
 // The instruction sets this machine runs (Highway's names), best first.
 std::vector<detail::simd::Kernel> kernels() {
   std::vector<detail::simd::Kernel> out;
-  for (const char* name : {"AVX3", "AVX2", "SSE4", "EMU128", "NEON", "SCALAR"}) {
-    try {
-      out.push_back(detail::simd::choose_kernel(name));
-    } catch (const pisco::Error&) {
-    }
-  }
+  for (const auto& named : pisco_test::simd_kernels()) out.push_back(named.second);
   if (out.empty()) out.push_back(detail::simd::choose_kernel("auto"));
   return out;
 }

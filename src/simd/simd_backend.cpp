@@ -8,7 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
+#include <initializer_list>
 #include <limits>
 #include <memory>
 #include <thread>
@@ -37,6 +37,24 @@ std::string requested_target(const std::string& device) {
   return t ? std::string(t) : std::string();
 }
 
+// Records of columns `cols` of a table of 4 values a node (w_I, w_Q, w_U, w_V): record k holds their
+// values at node k, then at node k + 1 (zero past the last node), the two ends of an interpolation
+// along r or x in one load (simd_kernel.hpp, KernelDetector).
+template <class T>
+std::vector<T> node_records(const std::vector<T>& table, std::initializer_list<std::size_t> cols) {
+  const std::size_t nodes = table.size() / 4, m = cols.size();
+  std::vector<T> out(2 * m * nodes, T(0));
+  for (std::size_t k = 0; k < nodes; ++k) {
+    std::size_t h = 0;
+    for (const std::size_t c : cols) {
+      out[2 * m * k + h] = table[4 * k + c];
+      if (k + 1 < nodes) out[2 * m * k + m + h] = table[4 * (k + 1) + c];
+      ++h;
+    }
+  }
+  return out;
+}
+
 // One detector's weights in the kernel's layout: float32 columns (float32_weights, the GPU
 // backends' rule) and the reference's float64 tables.
 struct DetectorTables {
@@ -59,27 +77,11 @@ DetectorTables detector_tables(const PreparedDetector& det, std::size_t index, b
   bool polarized_uv = false;
   for (std::size_t k = 0; k < nodes; ++k) polarized_uv = polarized_uv || w32[4 * k + 2] != 0.0f || w32[4 * k + 3] != 0.0f;
   const int columns = polarized_uv ? 4 : 2;
-  for (int c = 0; c < columns; c += 2) {
-    std::vector<float>& r = t.records[c / 2];
-    r.assign(4 * nodes, 0.0f);
-    for (std::size_t k = 0; k < nodes; ++k)
-      for (int h = 0; h < 2; ++h) {
-        r[4 * k + std::size_t(h)] = w32[4 * k + std::size_t(c + h)];
-        if (k + 1 < nodes) r[4 * k + 2 + std::size_t(h)] = w32[4 * (k + 1) + std::size_t(c + h)];
-      }
-  }
+  t.records[0] = node_records(w32, {0, 1});
+  if (columns == 4) t.records[1] = node_records(w32, {2, 3});
   if (float64_path) {
-    // (w(k), w(k + 1)) of one column of a float64 table of 4 values a node.
-    auto pairs = [nodes](const std::vector<double>& table, int c) {
-      std::vector<double> out(2 * nodes, 0.0);
-      for (std::size_t k = 0; k < nodes; ++k) {
-        out[2 * k] = table[4 * k + std::size_t(c)];
-        if (k + 1 < nodes) out[2 * k + 1] = table[4 * (k + 1) + std::size_t(c)];
-      }
-      return out;
-    };
-    for (int c = 0; c < 4; ++c) t.pairs64[c] = pairs(det.weights, c);
-    if (!det.norm_weights.empty()) t.pairs64[4] = pairs(det.norm_weights, 0);
+    for (std::size_t c = 0; c < 4; ++c) t.pairs64[c] = node_records(det.weights, {c});
+    if (!det.norm_weights.empty()) t.pairs64[4] = node_records(det.norm_weights, {0});
   }
   KernelDetector& v = t.view;
   for (int c = 0; c < 2; ++c) v.records[c] = t.records[c].empty() ? nullptr : t.records[c].data();

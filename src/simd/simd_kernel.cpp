@@ -66,6 +66,18 @@ HWY_INLINE Vec3<F> broadcast(const detail::Vec3<double>& a) {
   return {F(float(a.x)), F(float(a.y)), F(float(a.z))};
 }
 
+// Makes the compiler read `a` back from memory after it is stored: left to itself, GCC extracts the
+// offsets of a lookup from the vector one by one (vpextrd: two micro-ops each, and a lane-crossing
+// extract every four), slower than a store and a scalar load each.
+template <class T, std::size_t N>
+HWY_INLINE void from_memory(T (&a)[N]) {
+#if HWY_ARCH_X86 && (defined(__GNUC__) || defined(__clang__))
+  asm("" : "+m"(a));
+#else
+  (void)a;
+#endif
+}
+
 // Four weights of a node for every lane: the record at table + 4 node of each lane, (w_a(k),
 // w_b(k), w_a(k + 1), w_b(k + 1)) for two columns a, b and a node k, as four vectors of its fields.
 // Each lane's record is one 16-byte load; the records of lanes j, j + 4, j + 8, ... fill one vector
@@ -83,12 +95,7 @@ HWY_INLINE void lookup_records(const float* table, VI node, F out[4]) {
   static_assert(N == 4 || N == 8 || N == 16, "vectors of whole 16-byte blocks, at most four");
   HWY_ALIGN std::int32_t at[N];
   hn::Store(hn::ShiftLeft<2>(node), di, at);
-#if HWY_ARCH_X86 && (defined(__GNUC__) || defined(__clang__))
-  // Read the offsets back from memory: left to itself, GCC extracts them from the vector one by one
-  // (vpextrd: two micro-ops each, and a lane-crossing extract every four), slower than a store and
-  // sixteen scalar loads.
-  asm("" : "+m"(at));
-#endif
+  from_memory(at);
   const hn::Full128<float> d4;
   VF v[4];
   for (std::size_t j = 0; j < 4; ++j) {
@@ -124,9 +131,7 @@ HWY_INLINE void lookup_pairs(DD dd, const double* table, hn::Vec<hn::RebindToSig
   static_assert(H == 2 || H == 4 || H == 8, "vectors of whole 16-byte blocks, at most four");
   HWY_ALIGN std::int64_t at[H];
   hn::Store(off, hn::RebindToSigned<DD>(), at);
-#if HWY_ARCH_X86 && (defined(__GNUC__) || defined(__clang__))
-  asm("" : "+m"(at));  // as in lookup_records
-#endif
+  from_memory(at);
   const hn::Full128<double> d2;
   hn::Vec<DD> even, odd;
   if constexpr (H == 2) {
