@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "pisco/beam_files.hpp"
 #include "pisco/units.hpp"
 
 namespace pisco {
@@ -67,6 +68,20 @@ class Beamsor {
   // Omega~ is the pixel sum of B_TT within rho_max. grid_step 0 = the file's pixel size.
   static Beamsor read_healpix_fits(const std::filesystem::path& file, double rho_max,
                                    double grid_step = 0.0);
+  // Beams as teams hold them (docs/beams.md). Both describe the Stokes response (I_b, Q_b, U_b, V_b)
+  // of a detector whose polarization axis is the beam frame's x axis, Q_b and U_b in the frame's
+  // Ludwig-3 basis; the beamsor is stokes_mueller of them at every node, the frame turned by
+  // options.angle. Omega~ is the cap integral of I_b within rho_max.
+  // Harmonic coefficients, synthesized exactly (Wigner-d recursion in l) at every node's radius.
+  static Beamsor from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& options = {});
+  // A GRASP far field: I_b = |co|^2 + |cx|^2, Q_b = |co|^2 - |cx|^2, U_b = 2 Re(co cx*),
+  // V_b = 2 Im(co cx*) on the file's grid, interpolated onto the nodes (6-point Lagrange along each
+  // grid axis; trigonometric in phi for cuts).
+  static Beamsor from_grasp(const GraspBeam& beam, const FileBeamOptions& options = {});
+  // The Mueller matrix of a detector's Stokes response: row T = (I, 0, 0, 0), row Q = (0, Q, U, V),
+  // rows U and V those of the smallest rotation taking Q's axis onto (Q, U, V), times its length.
+  // For an in-phase cross-polar field this is (1 + k^2) R(atan k), the Gaussian builders' X(kappa).
+  static Mueller stokes_mueller(double i, double q, double u, double v);
   // Writes this beamsor as such a file at the given NSIDE (pixels beyond rho_max are zero). Only the
   // non-zero elements are written. Atomic (temporary name, then rename).
   void write_healpix_fits(const std::filesystem::path& file, int nside) const;

@@ -230,6 +230,30 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
                     options.rho_max, step, d.str(), smallest, radial);
 }
 
+Mueller Beamsor::stokes_mueller(double i, double q, double u, double v) {
+  Mueller m{};
+  m[0][0] = i;
+  const double p = std::sqrt(q * q + u * u + v * v);
+  if (!(p > 0.0)) return m;
+  // n = (a, b, c) = (q, u, v) / p; the rotation R = 1 + [k]x + [k]x^2 / (1 + a), k = e_Q x n, takes
+  // e_Q onto n; the Q, U, V block is p R^T (docs/beams.md, "From fields to a beamsor").
+  const double a = q / p, b = u / p, c = v / p;
+  double r[3][3];
+  if (1.0 + a > 1e-12) {
+    const double f = 1.0 / (1.0 + a);
+    r[0][0] = a;  r[0][1] = b;              r[0][2] = c;
+    r[1][0] = -b; r[1][1] = 1.0 - b * b * f; r[1][2] = -b * c * f;
+    r[2][0] = -c; r[2][1] = -b * c * f;      r[2][2] = 1.0 - c * c * f;
+  } else {  // purely cross-polar: a half turn about V
+    r[0][0] = -1; r[0][1] = 0;  r[0][2] = 0;
+    r[1][0] = 0;  r[1][1] = -1; r[1][2] = 0;
+    r[2][0] = 0;  r[2][1] = 0;  r[2][2] = 1;
+  }
+  for (int row = 0; row < 3; ++row)
+    for (int col = 0; col < 3; ++col) m[row + 1][col + 1] = p * r[row][col];
+  return m;
+}
+
 std::span<const double> Beamsor::element(int row, int col) const {
   return elements_.at(static_cast<std::size_t>(row * 4 + col));
 }
