@@ -627,6 +627,15 @@ std::string run_satellite_example(const fs::path& dir, const std::string& exampl
 // assets/examples/satellite.toml, whole: the README's figures.
 TEST_F(Cli, SatelliteExampleAsTheReadmeSays) { run_satellite_example(dir_, "satellite.toml"); }
 
+// assets/examples/grasp_beam.toml, whole: the README's figures; the GRASP beam is turned for the pair's
+// B detector (zeta -90 deg), and both detectors' beamsors are described in the log.
+TEST_F(Cli, GraspBeamExampleAsTheReadmeSays) {
+  const std::string output = run_satellite_example(dir_, "grasp_beam.toml");
+  EXPECT_NE(output.find("beam horn for zeta 0 deg: GRASP uv grid"), std::string::npos) << output;
+  EXPECT_NE(output.find("beam horn for zeta -90 deg: GRASP uv grid"), std::string::npos) << output;
+  EXPECT_NE(output.find("turned by -90 deg"), std::string::npos) << output;
+}
+
 // assets/examples/hwp_satellite.toml, whole: the README's figures, and its leakage figure as README.md
 // and docs/validation.md (H4) quote it, to two digits.
 TEST_F(Cli, HwpSatelliteExampleAsTheReadmeSays) {

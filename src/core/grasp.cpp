@@ -560,7 +560,7 @@ Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) 
   step = std::max(step, 2 * std::sin(rho_max) / (max_grid_nodes - 2));
   std::ostringstream d;
   d << "GRASP " << kind << " " << b.source;
-  if (b.frequency > 0) d << " at " << b.frequency;
+  if (b.frequency > 0) d << " (frequency " << b.frequency << ")";
   if (angle != 0.0) d << ", turned by " << angle / deg << " deg";
   d << ", rho_max " << rho_max / deg << " deg, grid step " << step / deg * 60 << " arcmin";
   return from_field(field, rho_max, step, d.str(), 0.0, false);

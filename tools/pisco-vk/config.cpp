@@ -219,7 +219,7 @@ SkyConfig read_sky(Table t) {
 BeamConfig read_beam(Table t, const std::string& name) {
   BeamConfig b;
   b.name = name;
-  b.type = t.choice("type", "gaussian", {"gaussian", "elliptical", "file"});
+  b.type = t.choice("type", "gaussian", {"gaussian", "elliptical", "file", "grasp", "blm"});
   b.options.rho_max = t.positive("rho_max_deg", 5.0) * deg;
   if (b.options.rho_max >= std::numbers::pi / 2) t.fail("rho_max_deg", "expected less than 90 deg");
   b.options.grid_step = t.number("grid_step_arcmin", 0.0) * arcmin;
@@ -247,9 +247,18 @@ BeamConfig read_beam(Table t, const std::string& name) {
     b.angle = t.number("angle_deg", 0.0) * deg;
   } else {
     b.file = t.input_file("file");
-    if (b.file.empty()) t.fail("file", "a beam of type \"file\" needs file = \"beamsor.fits\"");
+    if (b.file.empty())
+      t.fail("file", b.type == "grasp" ? "a beam of type \"grasp\" needs file = \"beam.grd\" (or a .cut file)"
+                     : b.type == "blm" ? "a beam of type \"blm\" needs file = \"beam_alm.fits\" (healpy.write_alm)"
+                                       : "a beam of type \"file\" needs file = \"beamsor.fits\"");
+    if (b.type == "grasp") {
+      const double set = t.number("set", 0.0);
+      if (!(set >= 0 && set <= 1e6 && set == std::floor(set)))
+        t.fail("set", "expected the number of one of the file's beams (1, 2, ...)");
+      b.set = static_cast<int>(set);
+    }
   }
-  if (b.type != "file") {
+  if (b.type == "gaussian" || b.type == "elliptical") {
     b.options.cross_polar = t.number("cross_polar", 0.0);
     b.options.cross_polar_pattern =
         t.choice("cross_polar_pattern", "uniform", {"uniform", "quadrupole"}) == "uniform"

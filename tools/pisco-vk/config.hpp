@@ -29,10 +29,13 @@ struct SkyConfig {
 
 struct BeamConfig {
   std::string name;
-  std::string type;              // gaussian, elliptical, file
+  std::string type;              // gaussian, elliptical, file, grasp, blm
   double fwhm = 0, fwhm_x = 0, fwhm_y = 0, angle = 0;  // radians
   pisco::BeamOptions options;
   std::filesystem::path file;
+  int set = 0;                   // grasp: the beam of the file (1-based; 0 = its only one)
+  // grasp and blm: the beam turns with each detector (its co-polar axis along the detector's zeta)
+  bool turns_with_detector() const { return type == "grasp" || type == "blm"; }
 };
 
 struct ScanConfig {

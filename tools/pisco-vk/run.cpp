@@ -78,10 +78,23 @@ pisco::Sky make_sky(const SkyConfig& s, const fs::path& assets) {
   return pisco::synthesize_sky(cls, s.nside, s.seed);
 }
 
-pisco::Beamsor make_beam(const BeamConfig& b, const fs::path& config) {
+// A beam of the simulation file; `angle` turns GRASP and b_lm beams (a detector's zeta).
+pisco::Beamsor make_beam(const BeamConfig& b, const fs::path& config, double angle = 0.0) {
   try {
     if (b.type == "gaussian") return pisco::Beamsor::gaussian(b.fwhm, b.options);
     if (b.type == "elliptical") return pisco::Beamsor::elliptical_gaussian(b.fwhm_x, b.fwhm_y, b.angle, b.options);
+    const pisco::FileBeamOptions fo{b.options.rho_max, b.options.grid_step, angle};
+    if (b.type == "blm") return pisco::Beamsor::from_harmonic(pisco::HarmonicBeam::read_fits(b.file), fo);
+    if (b.type == "grasp") {
+      const auto all = pisco::GraspBeam::read(b.file);
+      if (b.set == 0 && all.size() > 1)
+        throw pisco::Error(b.file.string() + " holds " + std::to_string(all.size()) +
+                           " beams (field sets or frequencies): choose one with set = 1.." + std::to_string(all.size()));
+      if (b.set > static_cast<int>(all.size()))
+        throw pisco::Error("set = " + std::to_string(b.set) + ", but " + b.file.string() + " holds " +
+                           std::to_string(all.size()) + " beam" + (all.size() > 1 ? "s" : ""));
+      return pisco::Beamsor::from_grasp(all[static_cast<std::size_t>(std::max(b.set, 1) - 1)], fo);
+    }
     return pisco::Beamsor::read_healpix_fits(b.file, b.options.rho_max, b.options.grid_step);
   } catch (const pisco::Error& e) {
     throw pisco::Error(config.string() + ": [beams." + b.name + "] " + e.what());
@@ -220,13 +233,43 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   say("sky: NSIDE %d, %s%s\n", sky.nside(), c.sky.file.empty() ? "synthesized from " : "",
       c.sky.file.empty() ? c.sky.cl_file.string().c_str() : c.sky.file.string().c_str());
   std::vector<pisco::Beamsor> beams;
+  // GRASP and b_lm beams turn with their detectors (docs/beams.md, "Which way a beam points"): one
+  // beamsor per beam and detector angle zeta, the detectors pointed at theirs.
+  std::vector<pisco::Detector> detectors = c.detectors;
+  std::vector<std::string> beam_names;  // the [beams] table of each beamsor
   cl.step([&] {
-    for (const auto& b : c.beams) {
-      beams.push_back(make_beam(b, c.source));
-      say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
+    for (std::size_t k = 0; k < c.beams.size(); ++k) {
+      const auto& b = c.beams[k];
+      if (!b.turns_with_detector()) {
+        beams.push_back(make_beam(b, c.source));
+        say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
+        beam_names.push_back(b.name);
+        for (std::size_t i = 0; i < detectors.size(); ++i)
+          if (c.detectors[i].beam == k) detectors[i].beam = beams.size() - 1;
+        continue;
+      }
+      std::vector<std::pair<double, std::size_t>> made;  // zeta -> beam index
+      for (std::size_t i = 0; i < detectors.size(); ++i) {
+        if (c.detectors[i].beam != k) continue;
+        const double zeta = c.detectors[i].zeta;
+        auto it = std::find_if(made.begin(), made.end(), [&](const auto& m) { return m.first == zeta; });
+        if (it == made.end()) {
+          beams.push_back(make_beam(b, c.source, zeta));
+          beam_names.push_back(b.name);
+          say("beam %s for zeta %g deg: %s\n", b.name.c_str(), zeta * 180 / std::numbers::pi,
+              beams.back().description().c_str());
+          made.emplace_back(zeta, beams.size() - 1);
+          it = made.end() - 1;
+        }
+        detectors[i].beam = it->second;
+      }
+      if (made.empty()) {  // checked, though no detector uses it
+        beams.push_back(make_beam(b, c.source));
+        beam_names.push_back(b.name);
+      }
     }
   });
-  pisco::FocalPlane fp(c.detectors);
+  pisco::FocalPlane fp(detectors);
   pisco::EngineOptions engine_options = c.engine.options;
   engine_options.unseen = c.sky.unseen;
   std::optional<pisco::Engine> engine_holder;
@@ -323,7 +366,7 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   if (c.output.tod) {
     std::string beam_desc;
     for (std::size_t i = 0; i < beams.size(); ++i)
-      beam_desc += (i ? "; " : "") + c.beams[i].name + ": " + beams[i].description();
+      beam_desc += (i ? "; " : "") + beam_names[i] + ": " + beams[i].description();
     const std::map<std::string, std::string> attributes{{"units", sky.units()},
                                                         {"nside", std::to_string(sky.nside())},
                                                         {"beam", beam_desc},
