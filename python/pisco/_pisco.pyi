@@ -116,6 +116,25 @@ class Beamsor:
     ) -> Beamsor:
         """fwhm_x along the direction `angle` (from theta' towards phi'), fwhm_y across it."""
     @staticmethod
+    def from_grasp(
+        path: str | os.PathLike[str],
+        rho_max: float = ...,
+        grid_step: float = 0.0,
+        set: int | None = None,
+        angle: float = 0.0,
+    ) -> Beamsor:
+        """A TICRA GRASP far field (.grd or .cut, ICOMP 3), its x axis at `angle` from theta'."""
+    @staticmethod
+    def from_blm(
+        blm: str | os.PathLike[str] | ArrayLike,
+        rho_max: float = ...,
+        grid_step: float = 0.0,
+        angle: float = 0.0,
+        lmax: int | None = None,
+        mmax: int | None = None,
+    ) -> Beamsor:
+        """Harmonic beam coefficients (healpy alm FITS file or (T[, E, B]) arrays), ducc0's convention."""
+    @staticmethod
     def from_field(
         field: Callable[[float, float], ArrayLike],
         rho_max: float,

@@ -3,6 +3,7 @@
 // framework adapters (pisco.toast, pisco.litebird).
 #include <array>
 #include <cmath>
+#include <complex>
 #include <cstdint>
 #include <filesystem>
 #include <numbers>
@@ -306,6 +307,77 @@ void bind_beamsor(nb::module_& m) {
           "on sigma (stored as a radial profile).")
       .def_static("read_fits", &Beamsor::read_healpix_fits, "path"_a, "rho_max"_a, "grid_step"_a = 0.0,
                   "Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...).")
+      .def_static(
+          "from_grasp",
+          [](const std::filesystem::path& path, double rho_max, double grid_step, std::optional<int> set, double angle) {
+            const auto all = pisco::GraspBeam::read(path);
+            if (!set && all.size() > 1)
+              throw pisco::Error(path.string() + " holds " + std::to_string(all.size()) +
+                                 " beams (field sets or frequencies): choose one with set = 1.." + std::to_string(all.size()));
+            const int k = set.value_or(1);
+            if (k < 1 || k > static_cast<int>(all.size()))
+              throw pisco::Error("set = " + std::to_string(k) + ", but " + path.string() + " holds " +
+                                 std::to_string(all.size()) + " beam(s)");
+            nb::gil_scoped_release release;
+            return Beamsor::from_grasp(all[static_cast<std::size_t>(k - 1)], {rho_max, grid_step, angle});
+          },
+          "path"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "set"_a = nb::none(), "angle"_a = 0.0,
+          "A TICRA GRASP far field (.grd grid or .cut cuts; ICOMP 3: linear co- and cross-polar fields):\n"
+          "I = |co|^2 + |cx|^2, Q = |co|^2 - |cx|^2, U = 2 Re(co cx*), V = 2 Im(co cx*) of a detector polarized\n"
+          "along the file's x axis, interpolated onto the grid (grid_step 0 = half the file's step). set: which\n"
+          "of the file's beams (1, 2, ...; needed when it holds several). angle: the file's x axis from theta'\n"
+          "towards phi' (a detector's zeta, so that a pair's B detector sees the optics turned by 90 deg).")
+      .def_static(
+          "from_blm",
+          [](nb::object blm, double rho_max, double grid_step, double angle, std::optional<int> lmax,
+             std::optional<int> mmax) {
+            pisco::HarmonicBeam beam;
+            nb::module_ os = nb::module_::import_("os");
+            if (nb::isinstance<nb::str>(blm) || nb::isinstance(blm, os.attr("PathLike"))) {
+              if (lmax || mmax) throw pisco::Error("from_blm: lmax and mmax come from the file; give them for arrays only");
+              beam = pisco::HarmonicBeam::read_fits(nb::cast<std::string>(os.attr("fspath")(blm)));
+            } else {
+              nb::module_ np = nb::module_::import_("numpy");
+              nb::object a = np.attr("ascontiguousarray")(np.attr("asarray")(blm, "dtype"_a = "complex128"));
+              const int ndim = nb::cast<int>(a.attr("ndim"));
+              if (ndim == 1) a = a.attr("reshape")(1, -1);
+              else if (ndim != 2) throw pisco::Error("from_blm: expected an array of shape (1, n) or (3, n) (T or T, E, B in healpy's layout)");
+              const auto rows = nb::cast<long>(a.attr("shape")[0]), n = nb::cast<long>(a.attr("shape")[1]);
+              if (rows != 1 && rows != 3)
+                throw pisco::Error("from_blm: expected 1 (T) or 3 (T, E, B) rows of coefficients, got " + std::to_string(rows));
+              const auto flat = nb::cast<ConstMatrix>(a.attr("view")("float64"));
+              // lmax and mmax: as given, or mmax = lmax (healpy's default layout) solved from n.
+              int l = lmax.value_or(-1), m = mmax.value_or(-1);
+              if (l < 0) {
+                if (m < 0) {
+                  const double x = (std::sqrt(1.0 + 8.0 * n) - 3) / 2;
+                  l = m = static_cast<int>(std::lround(x));
+                } else {
+                  l = static_cast<int>((n + static_cast<long>(m) * (m + 1) / 2) / (m + 1)) - 1;
+                }
+              }
+              if (m < 0) m = l;
+              beam.lmax = l;
+              beam.mmax = m;
+              beam.source = "(arrays)";
+              if (m >= 0 && m <= l && pisco::HarmonicBeam::size(l, m) != static_cast<std::size_t>(n))
+                throw pisco::Error("from_blm: " + std::to_string(n) + " coefficients a row do not make lmax " + std::to_string(l) +
+                                   ", mmax " + std::to_string(m) + " (which need " + std::to_string(pisco::HarmonicBeam::size(l, m)) + ")");
+              std::vector<std::complex<double>>* parts[3] = {&beam.t, &beam.e, &beam.b};
+              for (long r = 0; r < rows; ++r) {
+                parts[r]->resize(static_cast<std::size_t>(n));
+                for (long k = 0; k < n; ++k)
+                  (*parts[r])[static_cast<std::size_t>(k)] = {flat(r, 2 * k), flat(r, 2 * k + 1)};
+              }
+            }
+            nb::gil_scoped_release release;
+            return Beamsor::from_harmonic(beam, {rho_max, grid_step, angle});
+          },
+          "blm"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "angle"_a = 0.0, "lmax"_a = nb::none(), "mmax"_a = nb::none(),
+          "A harmonic beam b_lm, the beam axis at the north pole: a healpy alm FITS file (healpy.write_alm;\n"
+          "T or T, E, B) or an array of shape (n,), (1, n) or (3, n) in healpy's layout (lmax and mmax as given,\n"
+          "else mmax = lmax). In ducc0's totalconvolve convention (TOAST's and litebird_sim's), synthesized\n"
+          "exactly at every node; grid_step 0 = 0.6 / l_eff. angle: the beam frame's x axis from theta'.")
       .def("write_fits", &Beamsor::write_healpix_fits, "path"_a, "nside"_a,
            "Writes this beamsor as a HEALPix beamsor file at `nside`.")
       .def_prop_ro("rho_max", &Beamsor::rho_max)
