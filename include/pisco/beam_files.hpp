@@ -14,6 +14,17 @@
 
 namespace pisco {
 
+// Sidelobes at a cost that does not grow with the disc's area (docs/beams.md, "Sidelobes"): the beam
+// B splits into a main part B tau, summed on the sky's own pixels within rho_main, and an outer part
+// B (1 - tau), summed out to rho_max on a band-limited copy of the sky at a coarser NSIDE; tau is 1
+// within rho_main - taper and falls to 0 at rho_main as a half cosine. Both parts keep the whole
+// beam's Omega~, so their TODs add up to the whole beam's.
+struct SidelobeSplit {
+  double rho_main = 0.0;  // radians; 0: no split
+  double taper = 0.0;     // radians; 0: rho_main / 4
+  int nside = 0;          // the outer part's sky NSIDE; 0: from the outer part's band limit (band_limit)
+};
+
 // Where a file beam sits in the antenna basis and on which grid it is sampled.
 struct FileBeamOptions {
   double rho_max = 5 * deg;  // radians, in (0, pi/2)
@@ -22,6 +33,7 @@ struct FileBeamOptions {
   // beam) lies at this angle from theta' towards phi'; the whole beam turns with it. `pisco-vk run`
   // sets it to each detector's zeta, so a pair's two detectors see the same optics turned by 90 deg.
   double angle = 0.0;
+  SidelobeSplit split;
 };
 
 // Harmonic beam coefficients, the beam axis at the north pole, sigma = longitude: T, E and B in

@@ -6,6 +6,7 @@
 #include <array>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -36,6 +37,7 @@ struct BeamOptions {
   double cross_polar = 0.0;              // kappa: cross-polar / co-polar field amplitude ratio
   CrossPolarPattern cross_polar_pattern = CrossPolarPattern::uniform;
   Mueller mueller = identity_mueller();  // constant Mueller matrix applied after the beam
+  SidelobeSplit split;                   // a main and an outer part (beam_files.hpp); off by default
 };
 
 class Beamsor {
@@ -56,8 +58,11 @@ class Beamsor {
   // r = sin(rho), sampled radial_oversampling times finer than grid_step, so that its interpolation
   // is exactly invariant under rotations about the beam axis (an ideal round beam then leaks no
   // temperature into polarization: docs/validation.md, "C").
+  // With `split` (rho_main > 0), the beamsor returned is the main part, B tau within rho_main on
+  // the field's grid, and holds the outer part, B (1 - tau) out to rho_max (sidelobes()).
   static Beamsor from_field(const Field& field, double rho_max, double grid_step,
-                            std::string description, double feature_scale = 0.0, bool radial = false);
+                            std::string description, double feature_scale = 0.0, bool radial = false,
+                            const SidelobeSplit& split = {});
   static constexpr int radial_oversampling = 8;
   // The most grid nodes per axis any builder accepts (a 2D grid of 8192^2 nodes is 512 MiB per element).
   static constexpr int max_grid_nodes = 8192;
@@ -86,7 +91,15 @@ class Beamsor {
   // non-zero elements are written. Atomic (temporary name, then rename).
   void write_healpix_fits(const std::filesystem::path& file, int nside) const;
 
-  double rho_max() const noexcept { return rho_max_; }
+  double rho_max() const noexcept { return rho_max_; }  // a split beam's: its main part's rho_main
+  // A split beam's outer part (docs/beams.md, "Sidelobes"), nullptr for others: a beamsor out to the
+  // whole beam's rho_max, with the whole beam's Omega~, on a grid of step max(grid step, taper / 16).
+  const Beamsor* sidelobes() const noexcept { return outer_.get(); }
+  // The outer part's sky NSIDE as the split asked for it (0: let the engine choose from band_limit()).
+  int sidelobe_nside() const noexcept { return outer_nside_; }
+  // The outer part's band limit: the smallest l beyond which its mean radial profile's Legendre
+  // coefficients stay below 1e-4 of b_0 (l up to 4096); 0 for a beam that is not split.
+  int sidelobe_band_limit() const noexcept { return outer_lmax_; }
   bool is_radial() const noexcept { return radial_; }   // stored as a radial profile
   int grid_size() const noexcept { return n_; }          // nodes per axis (radial: along r)
   double grid_half_width() const noexcept { return a_; } // = sin(rho_max)
@@ -106,6 +119,8 @@ class Beamsor {
  private:
   Beamsor() = default;
   void sample(const Field& field);
+  static Beamsor split_field(const Field& field, double rho_max, double grid_step, std::string description,
+                             double feature_scale, bool radial, const SidelobeSplit& split);
 
   double rho_max_ = 0.0;
   bool radial_ = false;
@@ -115,6 +130,9 @@ class Beamsor {
   double omega_ = 0.0;
   std::string description_;
   std::array<std::vector<double>, 16> elements_;  // [row * 4 + col]
+  std::shared_ptr<const Beamsor> outer_;
+  int outer_nside_ = 0;
+  int outer_lmax_ = 0;
   friend class BeamsorAccess;
 };
 

@@ -95,8 +95,12 @@ class Engine {
   std::string backend_name() const;
   std::string device_name() const;
   const FocalPlane& focal_plane() const noexcept { return focal_plane_; }
-  // Mean number of sky pixels per sample over all convolve() calls so far.
+  // Mean number of sky pixels per sample over all convolve() calls so far (a split beam's main and
+  // outer parts together).
   double mean_disc_pixels() const noexcept;
+  // Beams split into a main part and sidelobes (Beamsor::sidelobes; docs/beams.md, "Sidelobes"): the
+  // NSIDE of the band-limited sky their outer parts are summed on; 0 when no beam is split.
+  int sidelobe_nside() const noexcept { return outer_nside_; }
 
   // Backends compiled into the library, with availability on this machine.
   static std::vector<BackendInfo> backends();
@@ -133,6 +137,13 @@ class Engine {
   std::vector<std::unique_ptr<Pending>> pending_;
   std::vector<std::uint32_t> masked_;  // UnseenPolicy::flag: the sky's UNSEEN pixels, ascending
   std::size_t unseen_pixels_ = 0;
+  // Split beams: their outer parts on the band-limited sky, through a backend of their own, run as
+  // each submission is made and added when it completes.
+  std::shared_ptr<const detail::EngineInputs> outer_inputs_;
+  std::unique_ptr<detail::Backend> outer_backend_;
+  std::vector<bool> split_;  // per detector
+  int outer_nside_ = 0;
+  std::uint64_t outer_ticket_ = 1;
 };
 
 }  // namespace pisco

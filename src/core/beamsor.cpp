@@ -9,6 +9,7 @@
 
 #include "core/text.hpp"
 #include "pisco/error.hpp"
+#include "pisco/spectra.hpp"
 
 namespace pisco {
 namespace {
@@ -164,10 +165,12 @@ void Beamsor::sample(const Field& field) {
 }
 
 Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step,
-                            std::string description, double feature_scale, bool radial) {
+                            std::string description, double feature_scale, bool radial,
+                            const SidelobeSplit& split) {
   check_rho_max(rho_max, "beam");
   if (!(std::isfinite(grid_step) && grid_step > 0.0))
     throw Error("beam: grid_step must be a positive finite angle, got " + degrees_text(grid_step));
+  if (split.rho_main != 0.0) return split_field(field, rho_max, grid_step, std::move(description), feature_scale, radial, split);
   Beamsor b;
   b.rho_max_ = rho_max;
   b.a_ = std::sin(rho_max);
@@ -194,6 +197,79 @@ Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step
   if (!(b.omega_ > 0.0 && std::isfinite(b.omega_)))
     throw Error("beam '" + b.description_ + "': the integral of B_TT over the cap is not positive");
   return b;
+}
+
+Beamsor Beamsor::split_field(const Field& field, double rho_max, double grid_step, std::string description,
+                             double feature_scale, bool radial, const SidelobeSplit& split) {
+  const double rho_main = split.rho_main;
+  if (!(std::isfinite(rho_main) && rho_main > 0.0 && rho_main < rho_max))
+    throw Error("beam: the sidelobe split's rho_main = " + degrees_text(rho_main) + " must lie in (0, rho_max = " +
+                degrees_text(rho_max) + ")");
+  const double taper = split.taper == 0.0 ? rho_main / 4 : split.taper;
+  if (!(std::isfinite(taper) && taper > 0.0 && taper <= rho_main))
+    throw Error("beam: the sidelobe split's taper = " + degrees_text(taper) + " must lie in (0, rho_main = " +
+                degrees_text(rho_main) + "]");
+  if (split.nside != 0 && !(split.nside > 0 && split.nside <= 8192 && (split.nside & (split.nside - 1)) == 0))
+    throw Error("beam: the sidelobe split's nside = " + std::to_string(split.nside) + " must be a power of two in [1, 8192]");
+  const double start = rho_main - taper;
+  // tau: 1 within rho_main - taper, a half cosine down to 0 at rho_main.
+  const auto tau = [=](double rho) {
+    if (rho <= start) return 1.0;
+    if (rho >= rho_main) return 0.0;
+    return 0.5 * (1.0 + std::cos(pi * (rho - start) / taper));
+  };
+  const auto scaled = [&field](double f, double rho, double sigma) {
+    Mueller m = field(rho, sigma);
+    for (auto& row : m)
+      for (double& e : row) e *= f;
+    return m;
+  };
+  const double feature = feature_scale > 0 ? feature_scale : grid_step * 4;
+  std::ostringstream d;
+  d << description << "; split at " << rho_main / deg << " deg (taper " << taper / deg << " deg)";
+  Beamsor main = from_field([&](double r, double s) { return scaled(tau(r), r, s); }, rho_main, grid_step, d.str(),
+                            feature_scale, radial);
+  const double outer_step = std::max(grid_step, taper / 16);
+  Beamsor outer;
+  try {
+    outer = from_field([&](double r, double s) { return scaled(1.0 - tau(r), r, s); }, rho_max, outer_step,
+                       "sidelobes of " + description, std::max(feature, outer_step * 4), radial);
+  } catch (const Error&) {
+    throw Error("beam '" + description + "': its outer part beyond " + degrees_text(start) +
+                " carries no power; split it at a larger rho_main or not at all");
+  }
+  // The whole beam's Omega~ for both parts.
+  const double omega = cap_integral([&](double r, double s) { return field(r, s)[0][0]; }, rho_max, feature);
+  if (!(omega > 0.0 && std::isfinite(omega)))
+    throw Error("beam '" + description + "': the integral of B_TT over the cap is not positive");
+  main.omega_ = omega;
+  outer.omega_ = omega;
+  // The outer part's band limit from its mean radial profile (T to T).
+  const int lcheck = 4096;
+  const int steps = 2 * std::max(512, static_cast<int>(std::ceil(rho_max / (outer_step / 4) / 2)));
+  const auto profile = [&](double rho) {
+    double sum = 0.0;
+    for (int k = 0; k < 32; ++k) sum += outer.at(std::sin(rho) * std::cos(2 * pi * k / 32), std::sin(rho) * std::sin(2 * pi * k / 32))[0][0];
+    return sum / 32;
+  };
+  int band = lcheck;
+  try {
+    const std::vector<double> bl = radial_beam_window(profile, rho_max, lcheck, steps);
+    band = 0;
+    for (int l = lcheck; l >= 0; --l)
+      if (std::abs(bl[static_cast<std::size_t>(l)]) > 1e-4) {
+        band = l;
+        break;
+      }
+  } catch (const Error&) {
+    band = lcheck;  // a profile without a positive mean: take the largest band
+  }
+  main.outer_ = std::make_shared<const Beamsor>(std::move(outer));
+  main.outer_nside_ = split.nside;
+  main.outer_lmax_ = std::max(band, 1);
+  main.description_ += "; sidelobes to " + std::to_string(rho_max / deg).substr(0, 6) + " deg, band limit l = " +
+                       std::to_string(main.outer_lmax_);
+  return main;
 }
 
 Beamsor Beamsor::gaussian(double fwhm, const BeamOptions& options) {
@@ -227,7 +303,7 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
                                            options.cross_polar_pattern == CrossPolarPattern::uniform);
   if (radial) d << " (radial profile every " << step / radial_oversampling / deg * 60 << " arcmin)";
   return from_field(gaussian_field(fwhm_x * to_sigma, fwhm_y * to_sigma, angle, options),
-                    options.rho_max, step, d.str(), smallest, radial);
+                    options.rho_max, step, d.str(), smallest, radial, options.split);
 }
 
 Mueller Beamsor::stokes_mueller(double i, double q, double u, double v) {

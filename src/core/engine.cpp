@@ -7,6 +7,7 @@
 #include "core/backend.hpp"
 #include "core/masked_sky.hpp"
 #include "core/prepared.hpp"
+#include "core/sidelobes.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/error.hpp"
 
@@ -73,6 +74,31 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   inputs_ = std::make_shared<const detail::EngineInputs>(
       detail::prepare_inputs(used, beams, focal_plane, options.normalization));
   backend_ = entry.create(inputs_, used, options);
+
+  // Split beams: their outer parts on a band-limited copy of the sky at a coarser NSIDE.
+  outer_nside_ = detail::sidelobe_nside(beams, sky.nside());
+  if (outer_nside_ == 0) return;
+  if (options.normalization != Normalization::integral)
+    throw Error("engine: beams split into a main part and sidelobes need the integral normalization; a per-sample "
+                "normalization would divide each part by its own sum");
+  if (options.unseen != UnseenPolicy::error && unseen_pixels_ > 0)
+    throw Error("engine: the sky has UNSEEN pixels, which a band-limited copy for the beams' sidelobes cannot hold; "
+                "fill the mask or do not split the beams");
+  int band = 0;
+  const Beamsor* placeholder = nullptr;
+  for (const Beamsor& b : beams)
+    if (b.sidelobes()) {
+      band = std::max(band, b.sidelobe_band_limit());
+      if (!placeholder) placeholder = b.sidelobes();
+    }
+  std::vector<Beamsor> outer;
+  for (const Beamsor& b : beams) outer.push_back(b.sidelobes() ? *b.sidelobes() : *placeholder);
+  split_.resize(focal_plane.size());
+  for (std::size_t d = 0; d < focal_plane.size(); ++d) split_[d] = beams.at(focal_plane[d].beam).sidelobes() != nullptr;
+  const Sky coarse = detail::band_limited_sky(sky, outer_nside_, std::min(band, 2 * outer_nside_));
+  outer_inputs_ = std::make_shared<const detail::EngineInputs>(
+      detail::prepare_inputs(coarse, outer, focal_plane, options.normalization));
+  outer_backend_ = entry.create(outer_inputs_, coarse, options);
 }
 
 Engine::~Engine() = default;
@@ -86,6 +112,9 @@ struct Engine::Pending {
   bool accumulate = false;
   std::vector<double> plate_angle;          // theta per sample
   std::array<std::vector<double>, 4> rows;  // s_T, s_Q, s_U, s_V
+  // A split beam's outer part: its TOD (or its rows), added when the submission completes.
+  std::vector<double> outer;
+  std::array<std::vector<double>, 4> outer_rows;
 };
 
 namespace {
@@ -123,6 +152,7 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   }
   detail::PointingInput input = input_of(boresight);
   std::uint64_t ticket = 0;
+  const bool split = !split_.empty() && split_[detector];
   try {
     if (det.plate == detail::PreparedDetector::Plate::detector) {
       // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
@@ -130,6 +160,15 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
         pending->rows[r].assign(tod.size(), 0.0);
         ticket = next_ticket_++;
         backend_->submit(det.rows[r], input, pending->rows[r], false, ticket);
+      }
+      if (split) {
+        std::uint64_t t = 0;
+        for (int r = 0; r < 4; ++r) {
+          pending->outer_rows[r].assign(tod.size(), 0.0);
+          t = outer_ticket_++;
+          outer_backend_->submit(det.rows[r], input, pending->outer_rows[r], false, t);
+        }
+        pixels_ += outer_backend_->wait(t);
       }
       pending->ticket = ticket;
       pending->detector = detector;
@@ -140,6 +179,16 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
       if (plate) input.plate_angle = pending->plate_angle;
       ticket = next_ticket_++;
       backend_->submit(detector, input, tod, accumulate, ticket);
+      if (split) {
+        pending->outer.assign(tod.size(), 0.0);
+        const std::uint64_t t = outer_ticket_++;
+        outer_backend_->submit(detector, input, pending->outer, false, t);
+        pixels_ += outer_backend_->wait(t);
+        pending->ticket = ticket;
+        pending->detector = detector;
+        pending->tod = tod;
+        pending_.push_back(std::move(pending));
+      }
     }
   } catch (const detail::SubmissionError& e) {
     throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what());
@@ -155,6 +204,13 @@ void Engine::finish_pending(std::uint64_t ticket) {
   std::size_t done = 0;
   for (; done < pending_.size() && pending_[done]->ticket <= ticket; ++done) {
     Pending& p = *pending_[done];
+    if (p.rows[0].empty()) {  // a split beam without a plate before the detector: add the outer part
+      for (std::size_t i = 0; i < p.tod.size(); ++i) p.tod[i] += p.outer[i];
+      continue;
+    }
+    if (!p.outer_rows[0].empty())
+      for (int r = 0; r < 4; ++r)
+        for (std::size_t i = 0; i < p.tod.size(); ++i) p.rows[r][i] += p.outer_rows[r][i];
     const detail::PreparedDetector& det = inputs_->detectors.at(p.detector);
     Mueller m0{};
     for (int i = 0; i < 4; ++i)

@@ -563,7 +563,7 @@ Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) 
   if (b.frequency > 0) d << " (frequency " << b.frequency << ")";
   if (angle != 0.0) d << ", turned by " << angle / deg << " deg";
   d << ", rho_max " << rho_max / deg << " deg, grid step " << step / deg * 60 << " arcmin";
-  return from_field(field, rho_max, step, d.str(), 0.0, false);
+  return from_field(field, rho_max, step, d.str(), 0.0, false, options.split);
 }
 
 }  // namespace pisco

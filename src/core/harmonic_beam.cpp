@@ -342,7 +342,7 @@ Beamsor Beamsor::from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& 
     << (beam.polarized() ? ", T E B" : ", T only") << ")";
   if (angle != 0.0) d << " turned by " << angle / deg << " deg";
   d << ", rho_max " << options.rho_max / deg << " deg, grid step " << step / deg * 60 << " arcmin";
-  return from_field(field, options.rho_max, step, d.str(), 0.0, harmonic_is_radial(beam));
+  return from_field(field, options.rho_max, step, d.str(), 0.0, harmonic_is_radial(beam), options.split);
 }
 
 }  // namespace pisco
