@@ -101,6 +101,7 @@ class Beamsor:
         cross_polar: float = 0.0,
         cross_polar_pattern: str = "uniform",
         mueller: ArrayLike | None = None,
+        sidelobes: float | tuple[float, ...] | None = None,
     ) -> Beamsor:
         """A circular Gaussian beam of full width at half maximum `fwhm`, summed out to rho_max (5 deg)."""
     @staticmethod
@@ -113,6 +114,7 @@ class Beamsor:
         cross_polar: float = 0.0,
         cross_polar_pattern: str = "uniform",
         mueller: ArrayLike | None = None,
+        sidelobes: float | tuple[float, ...] | None = None,
     ) -> Beamsor:
         """fwhm_x along the direction `angle` (from theta' towards phi'), fwhm_y across it."""
     @staticmethod
@@ -122,6 +124,7 @@ class Beamsor:
         grid_step: float = 0.0,
         set: int | None = None,
         angle: float = 0.0,
+        sidelobes: float | tuple[float, ...] | None = None,
     ) -> Beamsor:
         """A TICRA GRASP far field (.grd or .cut, ICOMP 3), its x axis at `angle` from theta'."""
     @staticmethod
@@ -132,6 +135,7 @@ class Beamsor:
         angle: float = 0.0,
         lmax: int | None = None,
         mmax: int | None = None,
+        sidelobes: float | tuple[float, ...] | None = None,
     ) -> Beamsor:
         """Harmonic beam coefficients (healpy alm FITS file or (T[, E, B]) arrays), ducc0's convention."""
     @staticmethod
@@ -142,12 +146,18 @@ class Beamsor:
         description: str = "python field",
         feature_scale: float = 0.0,
         radial: bool = False,
+        sidelobes: float | tuple[float, ...] | None = None,
     ) -> Beamsor:
         """Any beam: field(rho, sigma) returns the (unnormalized) 4x4 Mueller matrix."""
     @staticmethod
     def read_fits(path: str | os.PathLike[str], rho_max: float, grid_step: float = 0.0) -> Beamsor:
         """Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...)."""
     def write_fits(self, path: str | os.PathLike[str], nside: int) -> None: ...
+    @property
+    def sidelobes(self) -> Beamsor | None:
+        """A split beam's outer part (out to the whole beam's rho_max), else None."""
+    @property
+    def sidelobe_band_limit(self) -> int: ...
     @property
     def rho_max(self) -> float: ...
     @property
@@ -357,6 +367,8 @@ class Engine:
     def device(self) -> str: ...
     @property
     def mean_disc_pixels(self) -> float: ...
+    @property
+    def sidelobe_nside(self) -> int: ...
     @property
     def unseen_pixels(self) -> int:
         """The number of UNSEEN sky pixels taken as 0 (unseen='zero' or 'flag')."""

@@ -70,8 +70,31 @@ Mueller mueller_from(nb::handle obj) {
   return m;
 }
 
+// The `sidelobes` argument of the beam builders: None, rho_main, or (rho_main[, taper[, nside]]).
+pisco::SidelobeSplit split_from(nb::handle value) {
+  pisco::SidelobeSplit s;
+  if (value.is_none()) return s;
+  try {
+    if (nb::isinstance<nb::float_>(value) || nb::isinstance<nb::int_>(value)) {
+      s.rho_main = nb::cast<double>(value);
+      return s;
+    }
+    const auto items = nb::cast<std::vector<double>>(value);
+    if (items.empty() || items.size() > 3) throw nb::value_error("");
+    s.rho_main = items[0];
+    if (items.size() > 1) s.taper = items[1];
+    if (items.size() > 2) {
+      if (items[2] != std::floor(items[2]) || !(items[2] >= 0 && items[2] <= 8192)) throw nb::value_error("");
+      s.nside = static_cast<int>(items[2]);
+    }
+  } catch (const std::exception&) {
+    throw nb::value_error("sidelobes: expected None, rho_main (radians) or (rho_main, taper, nside)");
+  }
+  return s;
+}
+
 BeamOptions beam_options(double rho_max, double grid_step, double cross_polar, const std::string& pattern,
-                         nb::handle mueller) {
+                         nb::handle mueller, nb::handle sidelobes = nb::none()) {
   BeamOptions o;
   o.rho_max = rho_max;
   o.grid_step = grid_step;
@@ -83,6 +106,7 @@ BeamOptions beam_options(double rho_max, double grid_step, double cross_polar, c
   else
     throw nb::value_error(("cross_polar_pattern: expected 'uniform' or 'quadrupole', got '" + pattern + "'").c_str());
   if (!mueller.is_none()) o.mueller = mueller_from(mueller);
+  o.split = split_from(sidelobes);
   return o;
 }
 
@@ -271,37 +295,38 @@ void bind_beamsor(nb::module_& m) {
       .def_static(
           "gaussian",
           [](double fwhm, double rho_max, double grid_step, double cross_polar, const std::string& pattern,
-             nb::handle mueller) {
-            return Beamsor::gaussian(fwhm, beam_options(rho_max, grid_step, cross_polar, pattern, mueller));
+             nb::handle mueller, nb::handle sidelobes) {
+            return Beamsor::gaussian(fwhm, beam_options(rho_max, grid_step, cross_polar, pattern, mueller, sidelobes));
           },
           "fwhm"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "cross_polar"_a = 0.0,
-          "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(),
+          "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(), "sidelobes"_a = nb::none(),
           "A circular Gaussian beam of full width at half maximum `fwhm` (radians), summed out to rho_max.\n"
           "grid_step 0 = fwhm / 20. cross_polar: the cross-polar field ratio kappa ('uniform' or\n"
           "'quadrupole' pattern); mueller: a constant 4x4 Mueller matrix applied after the beam.")
       .def_static(
           "elliptical_gaussian",
           [](double fwhm_x, double fwhm_y, double angle, double rho_max, double grid_step, double cross_polar,
-             const std::string& pattern, nb::handle mueller) {
+             const std::string& pattern, nb::handle mueller, nb::handle sidelobes) {
             return Beamsor::elliptical_gaussian(fwhm_x, fwhm_y, angle,
-                                                beam_options(rho_max, grid_step, cross_polar, pattern, mueller));
+                                                beam_options(rho_max, grid_step, cross_polar, pattern, mueller, sidelobes));
           },
           "fwhm_x"_a, "fwhm_y"_a, "angle"_a = 0.0, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0,
-          "cross_polar"_a = 0.0, "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(),
+          "cross_polar"_a = 0.0, "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(), "sidelobes"_a = nb::none(),
           "An elliptical Gaussian: fwhm_x along the direction `angle` (from theta' towards phi', radians),\n"
           "fwhm_y across it.")
       .def_static(
           "from_field",
           [](nb::callable field, double rho_max, double grid_step, std::string description, double feature_scale,
-             bool radial) {
+             bool radial, nb::handle sidelobes) {
             const Beamsor::Field f = [&field](double rho, double sigma) {
               nb::object value = field(rho, sigma);
               return mueller_from(value);
             };
-            return Beamsor::from_field(f, rho_max, grid_step, std::move(description), feature_scale, radial);
+            return Beamsor::from_field(f, rho_max, grid_step, std::move(description), feature_scale, radial,
+                                       split_from(sidelobes));
           },
           "field"_a, "rho_max"_a, "grid_step"_a, "description"_a = "python field", "feature_scale"_a = 0.0,
-          "radial"_a = false,
+          "radial"_a = false, "sidelobes"_a = nb::none(),
           "Any beam: field(rho, sigma) returns the (unnormalized) 4x4 Mueller matrix at the antenna-basis\n"
           "direction (rho, sigma), sampled every grid_step out to rho_max. radial: the field does not depend\n"
           "on sigma (stored as a radial profile).")
@@ -309,7 +334,9 @@ void bind_beamsor(nb::module_& m) {
                   "Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...).")
       .def_static(
           "from_grasp",
-          [](const std::filesystem::path& path, double rho_max, double grid_step, std::optional<int> set, double angle) {
+          [](const std::filesystem::path& path, double rho_max, double grid_step, std::optional<int> set, double angle,
+             nb::handle sidelobes) {
+            const pisco::SidelobeSplit split = split_from(sidelobes);
             const auto all = pisco::GraspBeam::read(path);
             if (!set && all.size() > 1)
               throw pisco::Error(path.string() + " holds " + std::to_string(all.size()) +
@@ -319,9 +346,10 @@ void bind_beamsor(nb::module_& m) {
               throw pisco::Error("set = " + std::to_string(k) + ", but " + path.string() + " holds " +
                                  std::to_string(all.size()) + " beam(s)");
             nb::gil_scoped_release release;
-            return Beamsor::from_grasp(all[static_cast<std::size_t>(k - 1)], {rho_max, grid_step, angle});
+            return Beamsor::from_grasp(all[static_cast<std::size_t>(k - 1)], {rho_max, grid_step, angle, split});
           },
           "path"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "set"_a = nb::none(), "angle"_a = 0.0,
+          "sidelobes"_a = nb::none(),
           "A TICRA GRASP far field (.grd grid or .cut cuts; ICOMP 3: linear co- and cross-polar fields):\n"
           "I = |co|^2 + |cx|^2, Q = |co|^2 - |cx|^2, U = 2 Re(co cx*), V = 2 Im(co cx*) of a detector polarized\n"
           "along the file's x axis, interpolated onto the grid (grid_step 0 = half the file's step). set: which\n"
@@ -330,7 +358,8 @@ void bind_beamsor(nb::module_& m) {
       .def_static(
           "from_blm",
           [](nb::object blm, double rho_max, double grid_step, double angle, std::optional<int> lmax,
-             std::optional<int> mmax) {
+             std::optional<int> mmax, nb::handle sidelobes) {
+            const pisco::SidelobeSplit split = split_from(sidelobes);
             pisco::HarmonicBeam beam;
             nb::module_ os = nb::module_::import_("os");
             if (nb::isinstance<nb::str>(blm) || nb::isinstance(blm, os.attr("PathLike"))) {
@@ -371,16 +400,25 @@ void bind_beamsor(nb::module_& m) {
               }
             }
             nb::gil_scoped_release release;
-            return Beamsor::from_harmonic(beam, {rho_max, grid_step, angle});
+            return Beamsor::from_harmonic(beam, {rho_max, grid_step, angle, split});
           },
           "blm"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "angle"_a = 0.0, "lmax"_a = nb::none(), "mmax"_a = nb::none(),
+          "sidelobes"_a = nb::none(),
           "A harmonic beam b_lm, the beam axis at the north pole: a healpy alm FITS file (healpy.write_alm;\n"
           "T or T, E, B) or an array of shape (n,), (1, n) or (3, n) in healpy's layout (lmax and mmax as given,\n"
           "else mmax = lmax). In ducc0's totalconvolve convention (TOAST's and litebird_sim's), synthesized\n"
           "exactly at every node; grid_step 0 = 0.6 / l_eff. angle: the beam frame's x axis from theta'.")
       .def("write_fits", &Beamsor::write_healpix_fits, "path"_a, "nside"_a,
            "Writes this beamsor as a HEALPix beamsor file at `nside`.")
-      .def_prop_ro("rho_max", &Beamsor::rho_max)
+      .def_prop_ro("rho_max", &Beamsor::rho_max, "The disc's radius (a split beam's: its main part's).")
+      .def_prop_ro(
+          "sidelobes", [](const Beamsor& b) -> std::optional<Beamsor> {
+            if (!b.sidelobes()) return std::nullopt;
+            return *b.sidelobes();
+          },
+          "A split beam's outer part (a Beamsor out to the whole beam's rho_max), else None.")
+      .def_prop_ro("sidelobe_band_limit", &Beamsor::sidelobe_band_limit,
+                   "A split beam's outer part's band limit l (0 for a beam that is not split).")
       .def_prop_ro("is_radial", &Beamsor::is_radial)
       .def_prop_ro("grid_size", &Beamsor::grid_size)
       .def_prop_ro("grid_step", &Beamsor::grid_step)

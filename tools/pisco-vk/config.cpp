@@ -258,6 +258,28 @@ BeamConfig read_beam(Table t, const std::string& name) {
       b.set = static_cast<int>(set);
     }
   }
+  // Sidelobes (docs/beams.md, "Sidelobes"): a main part within sidelobe_split_deg on the sky's pixels, the
+  // rest on a band-limited coarser sky.
+  if (t.has("sidelobe_split_deg") || t.has("sidelobe_taper_deg") || t.has("sidelobe_nside")) {
+    if (b.type == "file")
+      t.fail(t.has("sidelobe_split_deg") ? "sidelobe_split_deg" : t.has("sidelobe_taper_deg") ? "sidelobe_taper_deg" : "sidelobe_nside",
+             "a HEALPix beamsor file (type \"file\") cannot be split; give the beam as grasp, blm, gaussian or elliptical");
+    if (!t.has("sidelobe_split_deg"))
+      t.fail(t.has("sidelobe_taper_deg") ? "sidelobe_taper_deg" : "sidelobe_nside",
+             "only with sidelobe_split_deg, the radius of the beam's main part");
+    b.options.split.rho_main = t.positive("sidelobe_split_deg", 1.0) * deg;
+    if (!(b.options.split.rho_main < b.options.rho_max))
+      t.fail("sidelobe_split_deg", "expected less than rho_max_deg = " + Table::format(b.options.rho_max / deg) +
+                                       ": the main part lies within the beam's disc");
+    b.options.split.taper = t.number("sidelobe_taper_deg", 0.0) * deg;
+    if (!(b.options.split.taper >= 0 && b.options.split.taper <= b.options.split.rho_main))
+      t.fail("sidelobe_taper_deg", "expected a width in [0, sidelobe_split_deg] (0: a quarter of it)");
+    const double nside = t.number("sidelobe_nside", 0.0);
+    const int n = static_cast<int>(nside);
+    if (!(nside >= 0 && nside <= 8192 && nside == n && (n & (n - 1)) == 0))
+      t.fail("sidelobe_nside", "expected a power of two up to 8192 (or 0: chosen from the sidelobes' band limit)");
+    b.options.split.nside = n;
+  }
   if (b.type == "gaussian" || b.type == "elliptical") {
     b.options.cross_polar = t.number("cross_polar", 0.0);
     b.options.cross_polar_pattern =

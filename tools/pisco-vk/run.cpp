@@ -83,7 +83,7 @@ pisco::Beamsor make_beam(const BeamConfig& b, const fs::path& config, double ang
   try {
     if (b.type == "gaussian") return pisco::Beamsor::gaussian(b.fwhm, b.options);
     if (b.type == "elliptical") return pisco::Beamsor::elliptical_gaussian(b.fwhm_x, b.fwhm_y, b.angle, b.options);
-    const pisco::FileBeamOptions fo{b.options.rho_max, b.options.grid_step, angle};
+    const pisco::FileBeamOptions fo{b.options.rho_max, b.options.grid_step, angle, b.options.split};
     if (b.type == "blm") return pisco::Beamsor::from_harmonic(pisco::HarmonicBeam::read_fits(b.file), fo);
     if (b.type == "grasp") {
       const auto all = pisco::GraspBeam::read(b.file);
@@ -431,6 +431,9 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     const double npix = 12.0 * double(sky.nside()) * double(sky.nside());
     for (std::size_t d = 0; d < ndet; ++d)
       disc[d] = std::max(1.0, 0.5 * (1 - std::cos(beams[fp[d].beam].rho_max())) * npix);
+    for (std::size_t d = 0; d < ndet; ++d)  // a split beam's outer part, on the coarser sky
+      if (const pisco::Beamsor* outer = beams[fp[d].beam].sidelobes())
+        disc[d] += 0.5 * (1 - std::cos(outer->rho_max())) * 12.0 * engine.sidelobe_nside() * engine.sidelobe_nside();
     double all = 0;
     for (std::size_t i = 0; i < njobs; ++i) {
       const Span j = job_at(i);
