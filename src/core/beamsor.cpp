@@ -229,7 +229,31 @@ Beamsor Beamsor::split_field(const Field& field, double rho_max, double grid_ste
   d << description << "; split at " << rho_main / deg << " deg (taper " << taper / deg << " deg)";
   Beamsor main = from_field([&](double r, double s) { return scaled(tau(r), r, s); }, rho_main, grid_step, d.str(),
                             feature_scale, radial);
-  const double outer_step = std::max(grid_step, taper / 16);
+  // The outer part's band limit, from its mean radial profile (T to T) on the field itself; it sets
+  // the outer grid's step (its features are no finer than the taper or pi / l_b): bilinear
+  // interpolation at taper / 8 or 0.5 / l_b, and a grid small enough to stay in cache.
+  const int lcheck = 4096;
+  const int steps = 2 * std::max(512, static_cast<int>(std::ceil(rho_max / (grid_step / 2) / 2)));
+  const auto profile = [&](double rho) {
+    double sum = 0.0;
+    for (int k = 0; k < 32; ++k) sum += field(rho, 2 * pi * k / 32)[0][0];
+    return (1.0 - tau(rho)) * sum / 32;
+  };
+  int band = lcheck;
+  try {
+    const std::vector<double> bl = radial_beam_window(profile, rho_max, lcheck, steps);
+    band = 0;
+    for (int l = lcheck; l >= 0; --l)
+      if (std::abs(bl[static_cast<std::size_t>(l)]) > 1e-4) {
+        band = l;
+        break;
+      }
+  } catch (const Error&) {
+    throw Error("beam '" + description + "': its outer part beyond " + degrees_text(start) +
+                " carries no power; split it at a larger rho_main or not at all");
+  }
+  band = std::max(band, 1);
+  const double outer_step = std::max(grid_step, std::min(taper / 8, 0.5 / band));
   Beamsor outer;
   try {
     outer = from_field([&](double r, double s) { return scaled(1.0 - tau(r), r, s); }, rho_max, outer_step,
@@ -244,29 +268,9 @@ Beamsor Beamsor::split_field(const Field& field, double rho_max, double grid_ste
     throw Error("beam '" + description + "': the integral of B_TT over the cap is not positive");
   main.omega_ = omega;
   outer.omega_ = omega;
-  // The outer part's band limit from its mean radial profile (T to T).
-  const int lcheck = 4096;
-  const int steps = 2 * std::max(512, static_cast<int>(std::ceil(rho_max / (outer_step / 4) / 2)));
-  const auto profile = [&](double rho) {
-    double sum = 0.0;
-    for (int k = 0; k < 32; ++k) sum += outer.at(std::sin(rho) * std::cos(2 * pi * k / 32), std::sin(rho) * std::sin(2 * pi * k / 32))[0][0];
-    return sum / 32;
-  };
-  int band = lcheck;
-  try {
-    const std::vector<double> bl = radial_beam_window(profile, rho_max, lcheck, steps);
-    band = 0;
-    for (int l = lcheck; l >= 0; --l)
-      if (std::abs(bl[static_cast<std::size_t>(l)]) > 1e-4) {
-        band = l;
-        break;
-      }
-  } catch (const Error&) {
-    band = lcheck;  // a profile without a positive mean: take the largest band
-  }
   main.outer_ = std::make_shared<const Beamsor>(std::move(outer));
   main.outer_nside_ = split.nside;
-  main.outer_lmax_ = std::max(band, 1);
+  main.outer_lmax_ = band;
   main.description_ += "; sidelobes to " + std::to_string(rho_max / deg).substr(0, 6) + " deg, band limit l = " +
                        std::to_string(main.outer_lmax_);
   return main;

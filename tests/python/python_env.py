@@ -36,6 +36,11 @@ PACKAGES = {
     "scikit-build-core": "scikit_build_core",
     "mpi4py": "mpi4py",
 }
+# Installed without their declared dependencies, which pin what the packages above need newer
+# (grasp2alm 0.1.2 asks for numpy < 2 and pytest < 9); what they import is installed above.
+WITHOUT_DEPENDENCIES = {
+    "grasp2alm==0.1.2": "grasp2alm",
+}
 REGISTRY = "https://pypi.org/simple/pip/"
 
 
@@ -76,7 +81,7 @@ def registry_reachable():
         return f"{REGISTRY} unreachable ({getattr(exc, 'reason', exc)})"
 
 
-def ensure_venv(venv, packages=PACKAGES, log=print):
+def ensure_venv(venv, packages=PACKAGES, log=print, no_deps=False):
     """Creates or completes the environment; raises Unavailable when it cannot."""
     missing = missing_modules(venv, packages.values())
     if not missing:
@@ -98,7 +103,7 @@ def ensure_venv(venv, packages=PACKAGES, log=print):
     env.pop("PIP_DEFAULT_TIMEOUT", None)
     log(f"installing {', '.join(names)} into {venv} from PyPI")
     pip = [python_of(venv), "-m", "pip", "install", "--quiet", "--timeout", "5", "--retries", "0",
-           "--only-binary=:all:"] + names
+           "--only-binary=:all:"] + (["--no-deps"] if no_deps else []) + names
     installed = subprocess.run(pip, capture_output=True, text=True, env=env)
     still = missing_modules(venv, packages.values())
     if installed.returncode != 0 or still:
@@ -113,7 +118,9 @@ def main():
         return 2
     venv = os.path.abspath(sys.argv[1])
     try:
-        ensure_venv(venv, log=lambda m: print(f"python-venv: {m}", flush=True))
+        log = lambda m: print(f"python-venv: {m}", flush=True)  # noqa: E731
+        ensure_venv(venv, log=log)
+        ensure_venv(venv, WITHOUT_DEPENDENCIES, log=log, no_deps=True)
     except Unavailable as exc:
         print(f"python-venv: {'SKIPPED' if exc.skip else 'FAILED'}: {exc}", flush=True)
         return SKIP if exc.skip else 1

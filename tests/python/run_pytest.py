@@ -35,6 +35,7 @@ def main():
     venv = os.path.join(build, "python-venv")
     try:
         test_venv.ensure_venv(venv, log=log)
+        test_venv.ensure_venv(venv, test_venv.WITHOUT_DEPENDENCIES, log=log, no_deps=True)
     except test_venv.Unavailable as exc:
         log(f"{'SKIPPED' if exc.skip else 'FAILED'}: {exc}")
         return test_venv.SKIP if exc.skip else 1
