@@ -17,6 +17,7 @@
 #include <utility>
 #include <vector>
 
+#include <fitsio.h>
 #include <hdf5.h>
 #include <toml++/toml.h>
 
@@ -405,6 +406,105 @@ TEST_F(Cli, ConfigErrors) {
   expect_error("run " + write("backend.toml", config() + "").string() + " --backend nosuch", "backend 'nosuch' is unknown");
   expect_error("run " + write("device.toml", config() + "").string() + " --backend vulkan --device nosuch",
                pisco_test::backend_unavailable("vulkan").empty() ? "no device named 'nosuch'" : "is not available");
+}
+
+// A Gaussian of `fwhm` polarized along x as the frameworks' b_lm (T, E, B; mmax 2), written in healpy's
+// alm FITS layout (INDEX = l^2 + l + m + 1, REAL, IMAG), with MAX-MPOL = `mmax_key`.
+void write_gaussian_blm(const fs::path& file, double fwhm, int lmax, long mmax_key = 2) {
+  const double s = fwhm / std::sqrt(8 * std::log(2.0)), pi = std::numbers::pi;
+  fitsfile* f = nullptr;
+  int status = 0;
+  fits_create_file(&f, file.c_str(), &status);
+  for (int c = 0; c < 3; ++c) {
+    const char* names[] = {"INDEX", "REAL", "IMAG"};
+    const char* forms[] = {"1J", "1D", "1D"};
+    fits_create_tbl(f, BINARY_TBL, 0, 3, const_cast<char**>(names), const_cast<char**>(forms), nullptr, "ALM", &status);
+    long lk = lmax;
+    fits_write_key(f, TLONG, "MAX-LPOL", &lk, nullptr, &status);
+    fits_write_key(f, TLONG, "MAX-MPOL", &mmax_key, nullptr, &status);
+    long row = 1;
+    for (int m = 0; m <= 2; ++m)
+      for (int l = m; l <= lmax; ++l, ++row) {
+        const double bl = std::exp(-0.5 * l * (l + 1) * s * s);
+        double re = 0, im = 0;
+        if (c == 0 && m == 0) re = std::sqrt((2 * l + 1) / (4 * pi)) * bl;
+        if (c > 0 && m == 2 && l >= 2) {
+          const double e = -std::sqrt(2.0) * std::sqrt((2 * l + 1) / (32 * pi)) * bl * std::exp(2 * s * s);
+          (c == 1 ? re : im) = e;  // B = i E
+        }
+        int index = l * l + l + m + 1;
+        fits_write_col(f, TINT, 1, row, 1, 1, &index, &status);
+        fits_write_col(f, TDOUBLE, 2, row, 1, 1, &re, &status);
+        fits_write_col(f, TDOUBLE, 3, row, 1, 1, &im, &status);
+      }
+  }
+  fits_close_file(f, &status);
+  ASSERT_EQ(status, 0);
+}
+
+double relative_rms(const std::vector<double>& got, const std::vector<double>& want) {
+  double e = 0, r = 0;
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    e += (got[i] - want[i]) * (got[i] - want[i]);
+    r += want[i] * want[i];
+  }
+  return std::sqrt(e / r);
+}
+
+// Beams from files through `pisco-vk run` (docs/beams.md): a b_lm file of a Gaussian gives the TOD of
+// the Gaussian beam (to the harmonic kernel's difference from exp(-rho^2 / 2 s^2), O(s^2)); a GRASP beam
+// split into a main part and sidelobes gives the unsplit beam's TOD; bad keys and files are one error.
+TEST_F(Cli, BeamFilesAndSplitBeams) {
+  write_gaussian_blm(dir_ / "gauss_blm.fits", 4.0 * pisco::deg, 400);
+  const std::string gauss = "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n";
+  const std::string blm = "[beams.main]\ntype = \"blm\"\nfile = \"gauss_blm.fits\"\nrho_max_deg = 8.0\n";
+  ASSERT_EQ(run("run " + write("g.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n", gauss)).string() + " -o " + (dir_ / "g").string()).status, 0);
+  const Result b = run("run " + write("b.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n", blm)).string() + " -o " + (dir_ / "b").string());
+  std::cout << b.output;
+  ASSERT_EQ(b.status, 0) << b.output;
+  EXPECT_NE(b.output.find("beam main for zeta -90 deg: harmonic beam"), std::string::npos) << b.output;
+  for (const char* det : {"pa", "pb"}) {
+    const double e = relative_rms(pisco::read_tod_signal(dir_ / "b" / "tod.h5", det), pisco::read_tod_signal(dir_ / "g" / "tod.h5", det));
+    std::cout << det << ": b_lm file vs Gaussian beam: relative RMS " << e << "\n";
+    EXPECT_LT(e, 1e-3) << det;
+  }
+
+  fs::copy_file(fs::path(PISCO_TEST_ASSETS_DIR) / "examples" / "grasp_beam.grd", dir_ / "horn.grd");
+  const std::string grasp = "[beams.main]\ntype = \"grasp\"\nfile = \"horn.grd\"\nrho_max_deg = 4.5\n";
+  const std::string sky = "[sky]\nnside = 64\nlmax = 128\nseed = 3\n";
+  ASSERT_EQ(run("run " + write("w.toml", config(sky, grasp)).string() + " -o " + (dir_ / "w").string()).status, 0);
+  const Result sp = run("run " + write("s.toml", config(sky, grasp + "sidelobe_split_deg = 4.0\n")).string() + " -o " + (dir_ / "s").string());
+  std::cout << sp.output;
+  ASSERT_EQ(sp.status, 0) << sp.output;
+  EXPECT_NE(sp.output.find("split at 4 deg"), std::string::npos) << sp.output;
+  for (const char* det : {"pa", "pb"}) {
+    const double e = relative_rms(pisco::read_tod_signal(dir_ / "s" / "tod.h5", det), pisco::read_tod_signal(dir_ / "w" / "tod.h5", det));
+    std::cout << det << ": split GRASP beam vs whole disc: relative RMS " << e << "\n";
+    // The outer part is cut at rho_max, so its band limit is the sky's own: both parts are summed on
+    // the sky's pixels, and what differs is the main part's grid (to 4 deg) against the whole beam's
+    // (to 4.5 deg): bilinear interpolation between other nodes, a few 1e-5.
+    EXPECT_LT(e, 1e-4) << det;
+  }
+
+  fs::remove_all(dir_ / "out");
+  expect_error("run " + write("set.toml", config(sky, grasp + "set = 3\n")).string(), "set = 3, but");
+  expect_error("run " + write("setkey.toml", config(sky, gauss + "set = 1\n")).string(), "unknown key 'set'");
+  expect_error("run " + write("nofile.toml", config(sky, "[beams.main]\ntype = \"blm\"\nfile = \"absent.fits\"\n")).string(),
+               "absent.fits");
+  write_gaussian_blm(dir_ / "bad_mmax.fits", 4.0 * pisco::deg, 40, 60);
+  expect_error("run " + write("mmax.toml", config(sky, "[beams.main]\ntype = \"blm\"\nfile = \"bad_mmax.fits\"\n")).string(),
+               "MAX-MPOL = 60 is above MAX-LPOL = 40");
+  expect_error("run " + write("far.toml", config(sky, "[beams.main]\ntype = \"grasp\"\nfile = \"horn.grd\"\nrho_max_deg = 8\n")).string(),
+               "is beyond it");
+  expect_error("run " + write("split.toml", config(sky, grasp + "sidelobe_split_deg = 6.0\n")).string(),
+               "sidelobe_split_deg: expected less than rho_max_deg");
+  expect_error("run " + write("nside.toml", config(sky, grasp + "sidelobe_nside = 64\n")).string(),
+               "only with sidelobe_split_deg");
+  expect_error("run " + write("pw2.toml", config(sky, grasp + "sidelobe_split_deg = 3.0\nsidelobe_nside = 48\n")).string(),
+               "sidelobe_nside: expected a power of two");
+  write("b.fits", "not read: the split is refused first");
+  expect_error("run " + write("fsplit.toml", config(sky, "[beams.main]\ntype = \"file\"\nfile = \"b.fits\"\nsidelobe_split_deg = 1\n")).string(),
+               "cannot be split");
 }
 
 // A device lost in the middle of a run (injected): one clear error, no output left half-written.
