@@ -19,6 +19,7 @@
 
 #include "pisco/beamsor.hpp"
 #include "pisco/error.hpp"
+#include "beam_file_writers.hpp"
 
 namespace {
 
@@ -62,34 +63,7 @@ HarmonicBeam random_beam(int lmax, int mmax, unsigned seed, double fwhm) {
   return b;
 }
 
-// healpy's alm FITS layout through CFITSIO: one table a component, INDEX = l^2 + l + m + 1.
-void write_alm_fits(const fs::path& file, const std::vector<const std::vector<cd>*>& parts, int lmax, int mmax,
-                    long mmax_key = -1) {
-  fs::remove(file);
-  fitsfile* f = nullptr;
-  int status = 0;
-  fits_create_file(&f, file.c_str(), &status);
-  for (const auto* part : parts) {
-    const char* names[] = {"INDEX", "REAL", "IMAG"};
-    const char* forms[] = {"1J", "1D", "1D"};
-    fits_create_tbl(f, BINARY_TBL, 0, 3, const_cast<char**>(names), const_cast<char**>(forms), nullptr, "ALM", &status);
-    long lk = lmax, mk = mmax_key >= 0 ? mmax_key : mmax;
-    fits_write_key(f, TLONG, "MAX-LPOL", &lk, nullptr, &status);
-    fits_write_key(f, TLONG, "MAX-MPOL", &mk, nullptr, &status);
-    long row = 1;
-    for (int m = 0; m <= mmax; ++m)
-      for (int l = m; l <= lmax; ++l, ++row) {
-        int index = l * l + l + m + 1;
-        const cd v = (*part)[HarmonicBeam::index(lmax, l, m)];
-        double re = v.real(), im = v.imag();
-        fits_write_col(f, TINT, 1, row, 1, 1, &index, &status);
-        fits_write_col(f, TDOUBLE, 2, row, 1, 1, &re, &status);
-        fits_write_col(f, TDOUBLE, 3, row, 1, 1, &im, &status);
-      }
-  }
-  fits_close_file(f, &status);
-  ASSERT_EQ(status, 0);
-}
+using pisco_test::write_alm_fits;
 
 template <typename F>
 std::string error_of(F&& f) {
@@ -178,22 +152,7 @@ TEST(HarmonicBeam, GaussianFileIsRadialAndMatchesTheGaussianBeam) {
   // The Gaussian the frameworks write (-sqrt 2 on E and B, B = i E at m = 2), read from a FITS file.
   const int lmax = 700;
   const double fwhm = 1.5 * deg, s = fwhm / std::sqrt(8 * std::log(2.0));
-  HarmonicBeam g;
-  g.lmax = lmax;
-  g.mmax = 2;
-  const std::size_t n = HarmonicBeam::size(lmax, 2);
-  g.t.assign(n, cd{});
-  g.e.assign(n, cd{});
-  g.b.assign(n, cd{});
-  for (int l = 0; l <= lmax; ++l) {
-    const double bl = std::exp(-0.5 * l * (l + 1) * s * s);
-    g.t[HarmonicBeam::index(lmax, l, 0)] = std::sqrt((2 * l + 1) / (4 * pi)) * bl;
-    if (l >= 2) {
-      const double e = -std::sqrt(2.0) * std::sqrt((2 * l + 1) / (32 * pi)) * bl * std::exp(2 * s * s);
-      g.e[HarmonicBeam::index(lmax, l, 2)] = e;
-      g.b[HarmonicBeam::index(lmax, l, 2)] = cd(0, e);
-    }
-  }
+  const HarmonicBeam g = pisco_test::gaussian_blm(fwhm, lmax);
   const fs::path file = scratch("gauss_blm.fits");
   write_alm_fits(file, {&g.t, &g.e, &g.b}, lmax, 2);
   const HarmonicBeam read = HarmonicBeam::read_fits(file);
@@ -274,23 +233,8 @@ struct Analytic {
 };
 
 void write_uv_grd(const fs::path& file, const Analytic& a, double half, int n, int nsets = 1) {
-  std::ofstream out(file);
-  out << "Analytic elliptical Gaussian\nVERSION: TICRA-EM-FIELD-V0.1\nFREQUENCIES [GHz]:\n";
-  for (int s = 0; s < nsets; ++s) out << " 100.0";
-  out << "\n++++\n1\n" << nsets << " 3 2 1\n";
-  for (int s = 0; s < nsets; ++s) out << "0 0\n";
-  out.precision(17);
-  for (int s = 0; s < nsets; ++s) {
-    out << -half << " " << -half << " " << half << " " << half << "\n" << n << " " << n << " 0\n";
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) {
-        const double u = -half + 2 * half * i / (n - 1), v = -half + 2 * half * j / (n - 1);
-        const double r = std::min(1.0, std::sqrt(u * u + v * v));
-        cd co, cx;
-        a.fields(std::asin(r), std::atan2(v, u), co, cx);
-        out << co.real() << " " << co.imag() << " " << cx.real() << " " << cx.imag() << "\n";
-      }
-  }
+  pisco_test::write_uv_grd(file, [&a](double rho, double sigma, cd& co, cd& cx) { a.fields(rho, sigma, co, cx); }, half, n,
+                           nsets);
 }
 
 double worst_element_difference(const Beamsor& a, const Beamsor& b) {

@@ -17,11 +17,11 @@
 #include <utility>
 #include <vector>
 
-#include <fitsio.h>
 #include <hdf5.h>
 #include <toml++/toml.h>
 
 #include "backend_fixtures.hpp"
+#include "beam_file_writers.hpp"
 #include "pisco/pisco.hpp"
 
 namespace {
@@ -408,38 +408,11 @@ TEST_F(Cli, ConfigErrors) {
                pisco_test::backend_unavailable("vulkan").empty() ? "no device named 'nosuch'" : "is not available");
 }
 
-// A Gaussian of `fwhm` polarized along x as the frameworks' b_lm (T, E, B; mmax 2), written in healpy's
-// alm FITS layout (INDEX = l^2 + l + m + 1, REAL, IMAG), with MAX-MPOL = `mmax_key`.
+// A Gaussian of `fwhm` polarized along x as the frameworks' b_lm, in healpy's alm FITS layout, with
+// MAX-MPOL = `mmax_key`.
 void write_gaussian_blm(const fs::path& file, double fwhm, int lmax, long mmax_key = 2) {
-  const double s = fwhm / std::sqrt(8 * std::log(2.0)), pi = std::numbers::pi;
-  fitsfile* f = nullptr;
-  int status = 0;
-  fits_create_file(&f, file.c_str(), &status);
-  for (int c = 0; c < 3; ++c) {
-    const char* names[] = {"INDEX", "REAL", "IMAG"};
-    const char* forms[] = {"1J", "1D", "1D"};
-    fits_create_tbl(f, BINARY_TBL, 0, 3, const_cast<char**>(names), const_cast<char**>(forms), nullptr, "ALM", &status);
-    long lk = lmax;
-    fits_write_key(f, TLONG, "MAX-LPOL", &lk, nullptr, &status);
-    fits_write_key(f, TLONG, "MAX-MPOL", &mmax_key, nullptr, &status);
-    long row = 1;
-    for (int m = 0; m <= 2; ++m)
-      for (int l = m; l <= lmax; ++l, ++row) {
-        const double bl = std::exp(-0.5 * l * (l + 1) * s * s);
-        double re = 0, im = 0;
-        if (c == 0 && m == 0) re = std::sqrt((2 * l + 1) / (4 * pi)) * bl;
-        if (c > 0 && m == 2 && l >= 2) {
-          const double e = -std::sqrt(2.0) * std::sqrt((2 * l + 1) / (32 * pi)) * bl * std::exp(2 * s * s);
-          (c == 1 ? re : im) = e;  // B = i E
-        }
-        int index = l * l + l + m + 1;
-        fits_write_col(f, TINT, 1, row, 1, 1, &index, &status);
-        fits_write_col(f, TDOUBLE, 2, row, 1, 1, &re, &status);
-        fits_write_col(f, TDOUBLE, 3, row, 1, 1, &im, &status);
-      }
-  }
-  fits_close_file(f, &status);
-  ASSERT_EQ(status, 0);
+  const pisco::HarmonicBeam g = pisco_test::gaussian_blm(fwhm, lmax);
+  pisco_test::write_alm_fits(file, {&g.t, &g.e, &g.b}, lmax, 2, mmax_key);
 }
 
 double relative_rms(const std::vector<double>& got, const std::vector<double>& want) {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "beam_file_writers.hpp"
 #include "cli_runner.hpp"
 #include "pisco/pisco.hpp"
 
@@ -78,6 +79,11 @@ std::string variant(const std::string& name) {
   if (name == "elliptical")
     return with_table(c, "[beams.main]", "type = \"elliptical\"\nfwhm_x_deg = 10\nfwhm_y_deg = 12\nangle_deg = 10\nrho_max_deg = 20\n");
   if (name == "file_beam") return with_table(c, "[beams.main]", "type = \"file\"\nfile = \"beam.fits\"\nrho_max_deg = 20\n");
+  if (name == "grasp_beam") return with_table(c, "[beams.main]", "type = \"grasp\"\nfile = \"beam.grd\"\nrho_max_deg = 20\nset = 1\n");
+  if (name == "blm_beam") return with_table(c, "[beams.main]", "type = \"blm\"\nfile = \"beam_alm.fits\"\nrho_max_deg = 20\n");
+  if (name == "split")
+    return with_table(c, "[beams.main]", "type = \"gaussian\"\nfwhm_deg = 10.0\nrho_max_deg = 20.0\n"
+                                         "sidelobe_split_deg = 12.0\nsidelobe_taper_deg = 3.0\nsidelobe_nside = 4\n");
   if (name == "detectors")
     return with_table(without_table(c, "[[focal_plane.pairs]]"), "[focal_plane]",
                       "[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"main\"\n");
@@ -169,6 +175,12 @@ std::vector<Key> keys() {
       {"elliptical", beam, "fwhm_y_deg", K::number, {"0", "-1"}},
       {"elliptical", beam, "angle_deg", K::number, {}},
       {"file_beam", beam, "file", K::path, {}},
+      {"grasp_beam", beam, "file", K::path, {}},
+      {"grasp_beam", beam, "set", K::integer, {"-1", "2", "1.5"}},
+      {"blm_beam", beam, "file", K::path, {}},
+      {"split", beam, "sidelobe_split_deg", K::number, {"0", "-1", "20", "30"}},
+      {"split", beam, "sidelobe_taper_deg", K::number, {"-1", "13"}},
+      {"split", beam, "sidelobe_nside", K::integer, {"3", "-2", "16384"}},
       {"base", pair, "name", K::string, {}},
       {"base", pair, "zeta_deg", K::number, {}},
       {"base", pair, "epsilon", K::number, {"-0.1", "1.1"}},
@@ -278,6 +290,17 @@ class Robustness : public ::testing::Test {
     pisco::BeamOptions o;
     o.rho_max = 20 * pisco::deg;
     pisco::Beamsor::gaussian(10 * pisco::deg, o).write_healpix_fits(dir_ / "beam.fits", 64);
+    // The same beam as a GRASP uv grid and as harmonic coefficients (docs/beams.md).
+    const double s10 = 10 * pisco::deg / std::sqrt(8 * std::log(2.0));
+    pisco_test::write_uv_grd(
+        dir_ / "beam.grd",
+        [s10](double rho, double, std::complex<double>& co, std::complex<double>& cx) {
+          co = std::exp(-rho * rho / (4 * s10 * s10));
+          cx = 0.0;
+        },
+        std::sin(25 * pisco::deg), 41);
+    const pisco::HarmonicBeam blm = pisco_test::gaussian_blm(10 * pisco::deg, 64);
+    pisco_test::write_alm_fits(dir_ / "beam_alm.fits", {&blm.t, &blm.e, &blm.b}, 64, 2);
     std::ofstream(dir_ / "fp.csv") << "name,zeta_deg,epsilon,gain,beam\nd1,0,0,1,main\nd2,90,0,1,main\n";
     std::vector<pisco::Quat> q;
     pisco::SatelliteScan sat;
@@ -350,7 +373,8 @@ int Robustness::cases_ = 0;
 
 // Every variant runs as it is: the failures below are the bad value's alone.
 TEST_F(Robustness, VariantsRun) {
-  for (const std::string v : {"base", "r", "point", "file_sky", "elliptical", "file_beam", "detectors", "pair_ab",
+  for (const std::string v : {"base", "r", "point", "file_sky", "elliptical", "file_beam", "grasp_beam", "blm_beam",
+                              "split", "detectors", "pair_ab",
                               "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file", "hwp",
                               "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file"}) {
     const fs::path cfg = write("variant.toml", variant(v));
@@ -542,6 +566,56 @@ TEST_F(Robustness, CorruptedFitsFiles) {
   }
   write("sky.fits", sky);
   write("beam.fits", beam);
+}
+
+// GRASP and harmonic beam files (docs/beams.md): truncated, with broken numbers, NaN fields, wrong
+// component counts, and random byte changes that may still read.
+TEST_F(Robustness, CorruptedBeamFiles) {
+  const std::string grd = read(dir_ / "beam.grd"), alm = read(dir_ / "beam_alm.fits");
+  const std::string grasp_cfg = variant("grasp_beam"), blm_cfg = variant("blm_beam");
+  // Line by line: the header lines, then cuts through the grid's rows.
+  std::vector<std::string> lines;
+  for (std::size_t at = 0; at < grd.size();) {
+    const std::size_t end = grd.find('\n', at);
+    lines.push_back(grd.substr(at, end - at));
+    at = end + 1;
+  }
+  auto joined_lines = [](const std::vector<std::string>& l) {
+    std::string t;
+    for (const auto& x : l) t += x + "\n";
+    return t;
+  };
+  for (std::size_t keep : {0ul, 2ul, 4ul, 5ul, 6ul, 7ul, 8ul, 9ul, 10ul, 11ul, 500ul, lines.size() - 1}) {
+    write("beam.grd", joined_lines(std::vector<std::string>(lines.begin(), lines.begin() + std::ptrdiff_t(keep))));
+    expect_clean_error("beam.grd cut after line " + std::to_string(keep), grasp_cfg, "beam.grd");
+  }
+  const std::vector<std::pair<std::size_t, std::string>> edits{
+      {5, "2"}, {5, "x"}, {6, "1 1 2 1"}, {6, "1 3 9 1"}, {6, "1 3 2 4"}, {6, "0 3 2 1"}, {8, "0 0 0 0"},
+      {9, "41 41 7"}, {9, "1 41 0"}, {9, "41 -3 0"}, {20, "nan 0 0 0"}, {20, "1 0 0"}, {20, "1 0 0 0 0"},
+      {20, "1e999 0 0 0"}, {20, "a b c d"}};
+  for (const auto& [line, text] : edits) {
+    auto l = lines;
+    l[line] = text;
+    write("beam.grd", joined_lines(l));
+    expect_clean_error("beam.grd line " + std::to_string(line + 1) + " = '" + text + "'", grasp_cfg, "beam.grd");
+  }
+  for (std::size_t cut : {std::size_t(0), std::size_t(100), std::size_t(2880), std::size_t(2880 + 500), alm.size() / 2}) {
+    write("beam_alm.fits", alm.substr(0, cut));
+    expect_clean_error("beam_alm.fits cut at " + std::to_string(cut), blm_cfg, "beam_alm.fits");
+  }
+  std::mt19937_64 rng(77);
+  for (int k = 0; k < 10; ++k) {
+    std::string g = grd;
+    for (int j = 0; j < 4; ++j) g[std::uniform_int_distribution<std::size_t>(0, g.size() - 1)(rng)] = char(rng());
+    write("beam.grd", g);
+    expect_no_crash("beam.grd with random bytes, draw " + std::to_string(k), grasp_cfg);
+    std::string a = alm;
+    for (int j = 0; j < 4; ++j) a[std::uniform_int_distribution<std::size_t>(0, a.size() - 1)(rng)] = char(rng());
+    write("beam_alm.fits", a);
+    expect_no_crash("beam_alm.fits with random bytes, draw " + std::to_string(k), blm_cfg);
+  }
+  write("beam.grd", grd);
+  write("beam_alm.fits", alm);
 }
 
 // HDF5 inputs (pointing files and TOAST focal planes): truncated, without their datasets, with bad
