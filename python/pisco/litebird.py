@@ -4,8 +4,8 @@
 (``litebird_sim.beam_convolution``): observations, a sky and beams (one for all, or a dict by detector
 or channel name), optional pointings and HWP, the TOD component to add into. Where litebird_sim takes
 the sky and beams as spherical harmonics for its 4 pi convolution (ducc0), this one takes HEALPix maps
-(``pisco.Sky`` or litebird_sim's ``HealpixMap``) and ``pisco.Beamsor`` beams and convolves in pixel
-space.
+(``pisco.Sky`` or litebird_sim's ``HealpixMap``) and ``pisco.Beamsor`` beams, or litebird_sim's own
+beam b_lm, and convolves in pixel space.
 
 Conventions, those of litebird_sim: the detector pointing ``(theta, phi, psi)`` comes from
 ``Observation.get_pointings`` (ecliptic, rotated to galactic when the sky is galactic, as litebird_sim
@@ -13,6 +13,13 @@ does); ``psi`` is the orientation of the beam's frame and the detector's polariz
 ``pol_angle_rad`` is measured in it, so that the TOD is ``I + eta (Q cos 2a + U sin 2a)`` with
 ``a = psi + pol_angle_rad`` and ``eta = pol_efficiency``, litebird_sim's ``scan_map`` equation. A
 ``Beamsor`` is oriented in that frame, as litebird_sim's beam a_lm are.
+
+Beams as litebird_sim's own function takes them: ``SphericalHarmonics`` b_lm (one for every detector, or
+a dict by detector or channel name, as ``generate_gauss_beam_alms`` makes; or the observation's
+``blms``). They are in the beam frame psi orients, the detector's polarization direction in them, ducc0's
+convention: a detector at ``pol_angle_rad`` gets ``Beamsor.from_blm(b_lm exp(i m pol_angle_rad),
+angle=pol_angle_rad)``, epsilon 0 and gain ``2 Omega~``, so that its TOD is litebird_sim's, ducc0's sum
+over the coefficients.
 
 Half-wave plates, as litebird_sim's MuellerConvolver takes them: the plate's angle per sample (from
 the HWP object, ``IdealHWP(ang_speed_radpsec, start_angle_rad)``, or the observation's own) is
@@ -25,6 +32,7 @@ import logging
 
 import numpy as np
 
+from ._blm import detector_beam, resize_blm
 from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, Sky
 
 __all__ = ["add_convolved_sky_to_observations"]
@@ -79,6 +87,25 @@ def _default_beam(obs, i, beam_rho_max):
     psi_ell = float(obs.psi_rad[i])
     return Beamsor.elliptical_gaussian(fwhm * np.sqrt(ellipticity), fwhm / np.sqrt(ellipticity), psi_ell,
                                        rho_max=rho_max)
+
+
+def _blm_beam(alms, name, zeta, rho_max, grid_step, convolution_params):
+    """The beamsor of detector `name` at `zeta` from litebird_sim's SphericalHarmonics b_lm, kept to m <=
+    convolution_params.mmax as litebird_sim keeps them."""
+    values = np.asarray(alms.values)
+    if values.ndim != 2 or values.shape[0] not in (1, 3):
+        raise ValueError(f"beams: the b_lm of detector {name} must be of one frequency, T or T, E, B (values of "
+                         f"shape (1 or 3, n)); got shape {values.shape}")
+    lmax = int(alms.lmax)
+    mmax = lmax if alms.mmax is None else int(alms.mmax)
+    if convolution_params is not None and convolution_params.mmax < mmax:
+        # litebird_sim resizes the beam to (lmax, mmax) of its parameters. Beyond lmax the beam meets no
+        # sky power in its harmonic sum: only m is cut here.
+        values = resize_blm(values, lmax, mmax, lmax, int(convolution_params.mmax))
+        mmax = int(convolution_params.mmax)
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"beams: the b_lm of detector {name} are not finite")
+    return detector_beam(values, lmax, mmax, zeta, rho_max, grid_step)
 
 
 def _hwp_angle(obs, hwp, pointings_dtype):
@@ -138,6 +165,9 @@ def add_convolved_sky_to_observations(
     device="auto",
     beam_rho_max=2.5,
     hwp_placement="aperture",
+    convolution_params=None,
+    beam_alms_rho_max=np.radians(5.0),
+    beam_alms_grid_step=0.0,
 ):
     """Adds the beam-convolved sky to the TOD of litebird_sim observations, in pixel space.
 
@@ -146,8 +176,13 @@ def add_convolved_sky_to_observations(
     observations : Observation or list of Observation
     sky : pisco.Sky, litebird_sim.HealpixMap, or a dict of them by detector or channel name
         HEALPix maps (I, Q, U[, V], COSMO convention); a HealpixMap's ``coordinates`` say its frame.
-    beams : pisco.Beamsor, a dict of them by detector or channel name, or None
-        None: a Gaussian of each detector's ``fwhm_arcmin`` (elliptical with ``ellipticity`` and
+    beams : pisco.Beamsor, litebird_sim.SphericalHarmonics, a dict of them by detector or channel name, or None
+        SphericalHarmonics: b_lm as litebird_sim's own function takes them (``beam_alms``, e.g. from
+        ``generate_gauss_beam_alms``), in the beam frame psi orients with the detector's polarization in
+        them; each detector gets them turned into its own Stokes basis (``pol_angle_rad``), epsilon 0
+        and gain 2 Omega~, so that the TOD is litebird_sim's. None: the first observation's ``blms``
+        where ``generate_gauss_beam_alms(..., store_in_observation=True)`` stored them (as litebird_sim
+        does), else a Gaussian of each detector's ``fwhm_arcmin`` (elliptical with ``ellipticity`` and
         ``psi_rad``), summed out to ``beam_rho_max`` FWHM.
     pointings : array (n_det, n_samples, 3), a list of them (one per observation), or None
         None: the observations' own (``pointing_matrix``, or ``get_pointings``).
@@ -172,6 +207,12 @@ def add_convolved_sky_to_observations(
     hwp_placement : str
         Where the plate sits: 'aperture' (skyward of the optics, the default) or 'detector' (between
         the optics and the detector; four times the cost).
+    convolution_params : litebird_sim.BeamConvolutionParameters or None
+        As litebird_sim's: b_lm beyond its ``mmax`` are left out, as litebird_sim leaves them out (its
+        other fields are its harmonic convolution's own).
+    beam_alms_rho_max, beam_alms_grid_step : float
+        Beams from b_lm are summed out to this radius (radians) and sampled with this step (radians; 0:
+        ``Beamsor.from_blm``'s default, 0.6 / l_eff, FWHM / 21 for a Gaussian).
     """
     import litebird_sim as lbs
     from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g
@@ -195,6 +236,17 @@ def add_convolved_sky_to_observations(
 
     if hwp_placement not in ("aperture", "detector"):
         raise ValueError(f"hwp_placement: expected 'aperture' or 'detector', got {hwp_placement!r}")
+    if beams is None and obs_list and getattr(obs_list[0], "blms", None) is not None:
+        beams = obs_list[0].blms  # litebird_sim's own fallback: the b_lm stored in the observation
+    made = {}  # (id of the caller's b_lm, zeta) -> (their owner, pisco.Beamsor)
+
+    def from_blm(alms, name, zeta):
+        key = (id(alms), zeta)
+        if key not in made:
+            made[key] = (alms, _blm_beam(alms, name, zeta, beam_alms_rho_max, beam_alms_grid_step,
+                                         convolution_params))
+        return made[key][1]
+
     for obs, ptg in zip(obs_list, ptg_list):
         hwp_angle = _hwp_angle(obs, hwp, pointings_dtype)
         if hwp_angle is not None and not np.all(np.isfinite(hwp_angle)):
@@ -215,23 +267,31 @@ def add_convolved_sky_to_observations(
                 frame = CoordinateSystem.Galactic
             beam_list, fp = [], FocalPlane()
             for i in members:
+                zeta = float(obs.pol_angle_rad[i])
                 b = det_beams[i] if det_beams[i] is not None else _default_beam(obs, i, beam_rho_max)
+                harmonic = isinstance(b, lbs.SphericalHarmonics)
+                if harmonic:
+                    b = from_blm(b, obs.name[i], zeta)
                 if not isinstance(b, Beamsor):
-                    raise TypeError(f"beams: expected pisco.Beamsor for detector {obs.name[i]}, got {type(b).__name__}")
+                    raise TypeError(f"beams: expected pisco.Beamsor or litebird_sim.SphericalHarmonics for detector "
+                                    f"{obs.name[i]}, got {type(b).__name__}")
                 found = next((k for k, x in enumerate(beam_list) if x is b), None)
                 if found is None:
                     beam_list.append(b)
                     found = len(beam_list) - 1
                 eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
                 epsilon = (1.0 - eta) / (1.0 + eta)
-                zeta = float(obs.pol_angle_rad[i])
+                gain = 2.0 / (1.0 + epsilon)
+                if harmonic:
+                    # litebird_sim's TOD is ducc0's sum over the b_lm, which carry the polarization
+                    # efficiency: the engine's is gain / (2 Omega~) times it at epsilon 0.
+                    epsilon, gain = 0.0, 2.0 * b.omega_tilde
                 plate = None
                 if hwp_angle is not None:
                     # The plate's angle is measured from the beam frame's x axis (psi), the detector's
                     # polarization axis lies at pol_angle_rad from it: theta = hwp_angle - pol_angle_rad.
                     plate = HalfWavePlate(_plate_mueller(obs, i, hwp), placement=hwp_placement, gamma=zeta)
-                fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=2.0 / (1.0 + epsilon), beam=found,
-                       hwp=plate)
+                fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=gain, beam=found, hwp=plate)
             with Engine(pisco_sky, beam_list, fp, backend=backend, device=device) as engine:
                 buffer = None
                 for k, i in enumerate(members):

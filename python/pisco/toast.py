@@ -7,10 +7,20 @@ docs/formats.md ("TOAST focal planes") says, so that the TOD is in TOAST's calib
 ``I + eta (Q cos 2a + U sin 2a)``, ``eta = (1 - pol_leakage) / (1 + pol_leakage)``, ``a`` the
 polarization angle of TOAST's detector quaternion, for a beam normalized to unit integral.
 
-Beams: one ``pisco.Beamsor`` for every detector (``beam``), one per detector name (``beams``), or,
-by default, a circular Gaussian of each detector's focal-plane ``fwhm`` summed out to
-``beam_rho_max`` FWHM. One engine is set up per focal plane and reused by every observation that
-shares it, until ``finalize()``.
+Beams: one ``pisco.Beamsor`` for every detector (``beam``), one per detector name (``beams``), the
+frameworks' own harmonic beams (``beam_file`` / ``beam_file_dict``: healpy alm FITS files of b_lm, as
+``SimTotalconvolve`` takes them), or, by default, a circular Gaussian of each detector's focal-plane
+``fwhm`` summed out to ``beam_rho_max`` FWHM. One engine is set up per focal plane and reused by every
+observation that shares it, until ``finalize()``.
+
+Beam files: each detector's b_lm are those ``SimTotalconvolve`` (``dxx=False``) reads for it, with
+the detector's polarization direction already in them, in the frame it hands ducc0 (psi - psi_pol +
+pi): the antenna frame ``quat R_z(-psi_pol)`` turned by 180 deg. The detector's beamsor is
+``Beamsor.from_blm(b_lm (-1)^m exp(i m psi_pol), angle=psi_pol)``: the pattern where the file has it,
+its Stokes parameters in the detector's basis. The detector is calibrated as ``SimTotalconvolve`` with
+``calibrate=True``: the file carries the polarization efficiency, so epsilon is 0, and the gain
+``2 Omega~ / (1 + pol_leakage)`` gives its TOD, ``(1/2) (2 / (1 + pol_leakage))`` times ducc0's sum
+over the coefficients.
 
 Half-wave plates: an observation holding the shared ``hwp_angle`` (the plate's angle per sample in
 the focal-plane frame, as ``SimSatellite`` and ``SimGround`` make it) puts a plate in front of every
@@ -18,6 +28,8 @@ detector: ideal, or the Mueller matrix ``hwp_mueller``, with each detector's ``g
 plane (TOAST's own plate angle origin, the one its ``StokesWeights`` use), so that an ideal plate gives
 TOAST's ``I + eta (Q cos 2b + U sin 2b)``, ``b = a + 2 (hwp_angle - gamma)``.
 """
+
+import os
 
 import numpy as np
 import traitlets
@@ -29,8 +41,9 @@ from toast.timing import function_timer
 from toast.traits import Bool, Dict, Float, Instance, Int, List, Unicode, Unit, trait_docs
 from toast.utils import Logger
 
+from ._blm import detector_beam, read_blm_file, resize_blm
 from ._focal_plane import focal_plane_from_toast
-from ._pisco import Beamsor, Engine, HalfWavePlate, Sky
+from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, Sky
 
 __all__ = ["PixelConvolve"]
 
@@ -92,6 +105,30 @@ class PixelConvolve(Operator):
         2.5, help="Without beam or beams: Gaussian beams of the focal plane's fwhm, summed out to this many FWHM"
     )
 
+    beam_file = Unicode(
+        None,
+        allow_none=True,
+        help="healpy alm FITS file of each detector's b_lm (SimTotalconvolve's beam_file: {detector} and {mc} "
+        "are replaced by the detector's name and mc)",
+    )
+
+    beam_file_dict = Dict({}, help="b_lm file by detector name, taking precedence over beam_file")
+
+    beam_file_rho_max = Float(np.radians(5.0), help="Beams from b_lm files are summed out to this radius (radians)")
+
+    beam_file_grid_step = Float(
+        0.0, help="Beams from b_lm files are sampled with this step (radians); 0: 0.6 / l_eff (FWHM / 21 for a "
+        "Gaussian), Beamsor.from_blm's"
+    )
+
+    beam_file_mmax = Int(-1, help="Beams from b_lm files keep m <= this (SimTotalconvolve's beammmax); -1: all")
+
+    normalize_beam = Bool(
+        False, help="Beams from b_lm files: scaled to b_00 = 1 / (2 sqrt(pi)), as SimTotalconvolve's normalize_beam"
+    )
+
+    mc = Int(None, allow_none=True, help="Monte Carlo index for the {mc} field of beam_file")
+
     boresight = Unicode(defaults.boresight_radec, help="Observation shared key for boresight quaternions")
 
     hwp_angle = Unicode(
@@ -132,6 +169,24 @@ class PixelConvolve(Operator):
             raise traitlets.TraitError("beam_rho_max must be positive")
         return proposal["value"]
 
+    @traitlets.validate("beam_file_rho_max")
+    def _check_beam_file_rho_max(self, proposal):
+        if not 0 < proposal["value"] < np.pi / 2:
+            raise traitlets.TraitError("beam_file_rho_max must lie in (0, pi / 2) radians")
+        return proposal["value"]
+
+    @traitlets.validate("beam_file_grid_step")
+    def _check_beam_file_grid_step(self, proposal):
+        if not proposal["value"] >= 0:
+            raise traitlets.TraitError("beam_file_grid_step cannot be negative")
+        return proposal["value"]
+
+    @traitlets.validate("mc")
+    def _check_mc(self, proposal):
+        if proposal["value"] is not None and proposal["value"] < 0:
+            raise traitlets.TraitError("mc cannot be negative")
+        return proposal["value"]
+
     @traitlets.validate("hwp_mueller")
     def _check_hwp_mueller(self, proposal):
         if len(proposal["value"]) == 0:
@@ -158,6 +213,8 @@ class PixelConvolve(Operator):
         super().__init__(**kwargs)
         self._engines = {}
         self._sky = None
+        self._blm_files = {}  # path -> (b_lm, lmax, mmax)
+        self._file_beams = {}  # (path, zeta, rho_max, grid_step, mmax, normalize) -> (beamsor, gain factor)
 
     def _get_sky(self):
         if self.sky is not None:
@@ -193,30 +250,113 @@ class PixelConvolve(Operator):
         beams = [Beamsor.gaussian(w, rho_max=min(self.beam_rho_max * w, np.radians(89.0))) for w in widths]
         return beams, [widths.index(fwhm[n]) for n in names]
 
+    def _beam_file_of(self, name):
+        """The b_lm file of detector `name`, picked as SimTotalconvolve picks it."""
+        if name in self.beam_file_dict:
+            return os.fspath(self.beam_file_dict[name])
+        if self.beam_file is None:
+            raise RuntimeError(f"PixelConvolve: detector {name} has no beam file: it is not in beam_file_dict "
+                               "and beam_file is not set")
+        try:
+            return self.beam_file.format(detector=name, mc=self.mc)
+        except (KeyError, IndexError, ValueError) as exc:
+            raise RuntimeError(f"PixelConvolve: beam_file '{self.beam_file}' for detector {name}: {exc!r} (the "
+                               "fields are {detector} and {mc})") from None
+
+    def _file_beam(self, name, path, zeta):
+        """(beamsor, gain factor) of detector `name` at `zeta` from the b_lm file `path`, cached."""
+        key = (path, zeta, self.beam_file_rho_max, self.beam_file_grid_step, self.beam_file_mmax, self.normalize_beam)
+        if key not in self._file_beams:
+            if path not in self._blm_files:
+                if not os.path.isfile(path):
+                    raise RuntimeError(f"PixelConvolve: detector {name}: the beam file {path} does not exist")
+                try:
+                    self._blm_files[path] = read_blm_file(path)
+                except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:
+                    raise RuntimeError(f"PixelConvolve: detector {name}: cannot read the beam file {path}: "
+                                       f"{exc}") from None
+            blm, lmax, mmax = self._blm_files[path]
+            if 0 <= self.beam_file_mmax < mmax:
+                blm = resize_blm(blm, lmax, mmax, lmax, self.beam_file_mmax)
+                mmax = self.beam_file_mmax
+            factor = 1.0
+            if self.normalize_beam:
+                b00 = blm[0, 0].real
+                if not b00 > 0:
+                    raise RuntimeError(f"PixelConvolve: detector {name}: normalize_beam, but b_00 of {path} is {b00}")
+                factor = 1.0 / (2 * np.sqrt(np.pi) * b00)
+            try:
+                # SimTotalconvolve gives ducc0 the angle psi - psi_pol + pi: its beam frame is the
+                # antenna frame (quat R_z(-psi_pol)) turned by 180 deg.
+                beam = detector_beam(blm, lmax, mmax, zeta, self.beam_file_rho_max, self.beam_file_grid_step,
+                                     half_turn=True)
+            except RuntimeError as exc:
+                raise RuntimeError(f"PixelConvolve: detector {name}: the beam file {path}: {exc}") from None
+            self._file_beams[key] = (beam, factor)
+        return self._file_beams[key]
+
+    def _with_file_beams(self, focalplane, fp):
+        """(beams, focal plane, {name: why it has no beam}): the engine's beams from each detector's b_lm
+        file, turned by its zeta, and the detectors of `fp` that have one, calibrated as SimTotalconvolve
+        calibrates (calibrate=True): epsilon 0 (the file carries the polarization efficiency), gain
+        2 Omega~ / (1 + pol_leakage). A detector without a file is left out, and fails only if convolved
+        (SimTotalconvolve needs files for the detectors it convolves only)."""
+        table = focalplane.detector_data
+        leakage = {str(n): 0.0 for n in table["name"]}
+        if "pol_leakage" in table.colnames:
+            leakage = {str(n): float(e) for n, e in zip(table["name"], table["pol_leakage"])}
+        beams, out, missing = [], FocalPlane(), {}
+        for d in fp.detectors:
+            try:
+                beam, factor = self._file_beam(d.name, self._beam_file_of(d.name), d.zeta)
+            except RuntimeError as exc:
+                missing[d.name] = str(exc)
+                continue
+            found = next((i for i, x in enumerate(beams) if x is beam), None)
+            if found is None:
+                beams.append(beam)
+                found = len(beams) - 1
+            d.beam = found
+            d.epsilon = 0.0
+            # SimTotalconvolve: (1/2) (2 / (1 + epsilon)) times ducc0's sum; the engine: gain / (2 Omega~) times it.
+            d.gain = 2.0 * beam.omega_tilde * factor / (1.0 + leakage[d.name])
+            out.add(d)
+        return beams, out, missing
+
     def _plate(self):
         """The plate model (its gamma set per detector from the focal plane)."""
         mueller = _mueller_matrix(self.hwp_mueller) if self.hwp_mueller else None
         return HalfWavePlate(mueller, placement=self.hwp_placement)
 
     def _engine_for(self, focalplane, plates):
-        """(engine, {name: detector index}) for a TOAST focal plane, with or without plates, set up on
-        first use."""
+        """(engine, {name: detector index}, {name: why it has no beam}) for a TOAST focal plane, with or
+        without plates, set up on first use."""
         # With plates, the plate model is part of the key: traits changed between calls take effect.
         model = (tuple(_mueller_matrix(self.hwp_mueller).ravel()) if self.hwp_mueller else None,
                  self.hwp_placement) if plates else None
         key = (id(focalplane), model)
         if key not in self._engines:
             names = [str(n) for n in focalplane.detector_data["name"]]
-            beams, index = self._beams_for(focalplane, names)
-            fp = focal_plane_from_toast(focalplane, beam=index, hwp=self._plate() if plates else None)
+            plate = self._plate() if plates else None
+            missing = {}
+            if self.beam_file is not None or len(self.beam_file_dict) > 0:
+                if self.beam is not None or len(self.beams) > 0:
+                    raise RuntimeError("PixelConvolve: give beam or beams, or beam_file / beam_file_dict, not both")
+                beams, fp, missing = self._with_file_beams(focalplane, focal_plane_from_toast(focalplane, hwp=plate))
+                if len(fp) == 0:
+                    raise RuntimeError(next(iter(missing.values())))
+                names = fp.names
+            else:
+                beams, index = self._beams_for(focalplane, names)
+                fp = focal_plane_from_toast(focalplane, beam=index, hwp=plate)
             engine = Engine(self._get_sky(), beams, fp, backend=self.backend, device=self.device)
             # The focal plane is held too, so that its id cannot be reused by another while cached.
-            self._engines[key] = (engine, {n: i for i, n in enumerate(names)}, focalplane)
+            self._engines[key] = (engine, {n: i for i, n in enumerate(names)}, missing, focalplane)
             log = Logger.get()
             log.debug(f"PixelConvolve: {len(names)} detectors on {engine.backend} ({engine.device})"
                       + (", with half-wave plates" if plates else ""))
-        engine, index, _ = self._engines[key]
-        return engine, index
+        engine, index, missing, _ = self._engines[key]
+        return engine, index, missing
 
     @function_timer
     def _exec(self, data, detectors=None, **kwargs):
@@ -237,7 +377,10 @@ class PixelConvolve(Operator):
                     scale = float((1.0 * scale_unit).to_value(out_units))
                 except u.UnitConversionError:
                     scale = 1.0
-            engine, index = self._engine_for(ob.telescope.focalplane, plates)
+            engine, index, missing = self._engine_for(ob.telescope.focalplane, plates)
+            for det in dets:
+                if det in missing:
+                    raise RuntimeError(missing[det])
             views = ob.view[self.view]
             for vw in range(len(views)):
                 quats = views.shared[self.boresight][vw]
@@ -267,9 +410,11 @@ class PixelConvolve(Operator):
                             out[:] += scale * tod
 
     def _finalize(self, data, **kwargs):
-        for engine, _, _ in self._engines.values():
+        for engine, *_ in self._engines.values():
             engine.close()
         self._engines = {}
+        self._blm_files = {}
+        self._file_beams = {}
 
     def _requires(self):
         req = {"shared": [self.boresight], "detdata": [], "intervals": []}

@@ -37,6 +37,27 @@ def gaussian_blm(lmax, fwhm, epsilon=0.0, sign=1.0):
     return blm
 
 
+def offset_elliptical_blm(lmax, mmax, fwhm, ellipticity, psi_ell, psi_pol=0.0, cross_polar_leakage=0.0,
+                          offset=0.0, offset_angle=0.0):
+    """An elliptical polarized Gaussian as litebird_sim's builder makes it (ducc0's convention: the
+    major axis at psi_ell and the polarization at psi_pol from the frame's x axis), its centre moved
+    `offset` off the pole (towards the direction `offset_angle`, by healpy's rotate_alm), kept to m <=
+    mmax: (3, n) b_lm. With an offset, every m holds coefficients, odd m included, so that a beam
+    turned by 180 deg is another beam. (ducc0's rotate_alm, healpy's conventions: a hundred times faster
+    than healpy's own at lmax 768.)"""
+    import ducc0
+    import healpy as hp
+    from litebird_sim.beam_synthesis import gauss_beam_to_alm
+
+    full = np.array(gauss_beam_to_alm(lmax=lmax, mmax=lmax if offset else mmax, fwhm_rad=fwhm,
+                                      ellipticity=ellipticity, psi_ell_rad=psi_ell, psi_pol_rad=psi_pol,
+                                      cross_polar_leakage=cross_polar_leakage).values, dtype=np.complex128)
+    if not offset:
+        return full
+    full = np.array([ducc0.sht.rotate_alm(row, lmax, -offset_angle, offset, offset_angle, nthreads=2) for row in full])
+    return np.array([hp.resize_alm(row, lmax, lmax, lmax, mmax) for row in full])
+
+
 def relative_rms(test, reference):
     test, reference = np.asarray(test), np.asarray(reference)
     return float(np.sqrt(np.mean((test - reference) ** 2) / np.mean(reference**2)))

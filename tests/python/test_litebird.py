@@ -11,7 +11,7 @@ import pytest
 import litebird_sim as lbs
 import pisco
 import pisco.litebird
-from conftest import relative_rms, smooth_sky_alm
+from conftest import offset_elliptical_blm, relative_rms, smooth_sky_alm
 
 FWHM_ARCMIN = 60.0
 POL_ANGLES_DEG = (0.0, 90.0, 22.5)
@@ -24,7 +24,11 @@ GENERIC = IDEAL + np.array([[0.0, 0.012, -0.008, 0.005],
 HWP_SPEED = 2 * np.pi * 46 / 60  # LiteBIRD's LFT plate, 46 rpm, in rad/s
 
 
-def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=None, mueller_hwp=None):
+def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=None, mueller_hwp=None, psi_deg=30.0):
+    """A litebird_sim observation of three detectors at POL_ANGLES_DEG; `ellipticity` and `psi_deg` (the
+    beams' major axes) for all, or one each."""
+    ellipticity = np.broadcast_to(ellipticity, len(POL_ANGLES_DEG))
+    psi_deg = np.broadcast_to(psi_deg, len(POL_ANGLES_DEG))
     sim = lbs.Simulation(start_time=0.0, duration_s=seconds, random_seed=1, base_path=str(tmp_path / "lbs"),
                          imo=lbs.Imo(flatfile_location=lbs.PTEP_IMO_LOCATION))
     sim.set_scanning_strategy(lbs.SpinningScanningStrategy(spin_sun_angle_rad=np.radians(45),
@@ -40,10 +44,10 @@ def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=
                                                                   np.radians(10.0 * k))))
         detectors.append(lbs.DetectorInfo(name=f"det{k}", channel="ch", sampling_rate_hz=10.0,
                                           fwhm_arcmin=FWHM_ARCMIN, pol_angle_rad=np.radians(angle), quat=quat,
-                                          ellipticity=ellipticity, psi_rad=np.radians(30.0),
+                                          ellipticity=float(ellipticity[k]), psi_rad=np.radians(psi_deg[k]),
                                           mueller_hwp=mueller_hwp))
     tods = [lbs.TodDescription(name=name, units=lbs.Units.K_CMB, dtype=dtype, description=name)
-            for name in ("tod", "pisco")]
+            for name in ("tod", "pisco", "tod2", "pisco2")]
     (obs,) = sim.create_observations(detectors=detectors, tods=tods)
     sim.prepare_pointings()
     return obs
@@ -80,6 +84,124 @@ def test_elliptical_beams_match_litebird_sim(tmp_path):
     print(f"elliptical beams (ellipticity 1.5, major axis at 30 deg), sky NSIDE 128: relative RMS {rms:.2e}")
     # The axis turned the other way gives 7e-2: the orientation convention is litebird_sim's.
     assert rms <= 2e-3
+
+
+def away_from_poles(obs, degrees=10.0):
+    """(detectors, samples) True where the detector's line of sight (galactic, as the sky) lies more than
+    `degrees` from the poles."""
+    from litebird_sim.coordinates import rotate_coordinates_e2g
+
+    pointings, _ = obs.get_pointings("all")
+    theta = np.array([rotate_coordinates_e2g(p)[:, 0] for p in pointings])
+    return np.abs(np.cos(theta)) < np.cos(np.radians(degrees))
+
+
+def test_beam_alms_match_litebird_sim(tmp_path):
+    """litebird_sim's own beams, as its add_convolved_sky_to_observations takes them, through it and
+    through pisco.litebird, as a dict by detector name: generate_gauss_beam_alms's for det0 and det1
+    (elliptical, each with its ellipticity, major axis and polarization angle; mmax 12), and for det2
+    (pol_angle_rad 22.5 deg) an elliptical beam with cross-polar leakage polarized along its frame's x
+    axis, its centre 0.3 deg off the axis so that odd m hold coefficients too."""
+    nside, lmax = 256, 512
+    lmax_beam, mmax = 768, 12
+    obs = observation(tmp_path, ellipticity=(1.5, 1.3, 1.6), psi_deg=(30.0, -20.0, 75.0))
+    alm = smooth_sky_alm(lmax, seed=5, smoothing_fwhm=np.radians(0.5))
+    sky_alm = lbs.SphericalHarmonics(values=alm, lmax=lmax, coordinates=lbs.CoordinateSystem.Galactic)
+    sky = lbs.HealpixMap(values=hp.alm2map(alm, nside, lmax=lmax, pol=True), nside=nside,
+                         coordinates=lbs.CoordinateSystem.Galactic)
+    params = lbs.BeamConvolutionParameters(lmax=lmax, mmax=mmax, single_precision=False, epsilon=1e-8)
+    blms = lbs.generate_gauss_beam_alms(obs, lmax=lmax_beam, mmax=mmax)
+    blms["det2"] = lbs.SphericalHarmonics(values=offset_elliptical_blm(
+        lmax_beam, mmax, np.radians(FWHM_ARCMIN / 60.0), 1.5, np.radians(25.0), psi_pol=0.0, cross_polar_leakage=0.02,
+        offset=np.radians(0.3), offset_angle=np.radians(40.0)), lmax=lmax_beam, mmax=mmax)
+    lbs.add_convolved_sky_to_observations(obs, sky_alm, blms, convolution_params=params, nthreads=2)
+    # Sampled at FWHM / 40 (the default step, FWHM / 21, leaves 3e-4), out to 3 deg (5 sigma of the
+    # major axis beyond the offset).
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, blms, component="pisco", backend="cpu",
+                                                     convolution_params=params, beam_alms_rho_max=np.radians(3.0),
+                                                     beam_alms_grid_step=np.radians(FWHM_ARCMIN / 60.0) / 40)
+    away = away_from_poles(obs)
+    rms = relative_rms(obs.pisco, obs.tod)
+    per_detector = [relative_rms(obs.pisco[i], obs.tod[i]) for i in range(len(POL_ANGLES_DEG))]
+    print(f"pisco.litebird vs litebird_sim with its beam_alms (lmax {lmax_beam}, mmax {mmax}; det2 0.3 deg off axis): "
+          f"{obs.tod.shape[0]} detectors x {obs.tod.shape[1]} samples, sky NSIDE {nside} (lmax {lmax}): relative RMS "
+          f"{rms:.2e} (per detector {', '.join(f'{r:.2e}' for r in per_detector)}); {np.count_nonzero(~away)} samples "
+          f"within 10 deg of the poles")
+    if np.all(away):
+        assert rms <= 3e-4
+    else:
+        far = relative_rms(obs.pisco[away], obs.tod[away])
+        print(f"  beyond 10 deg of the poles: {far:.2e}; within: {relative_rms(obs.pisco[~away], obs.tod[~away]):.2e}")
+        assert far <= 3e-4
+
+
+def test_beam_alms_arguments(tmp_path):
+    """The b_lm stored in the observation (beams None, as litebird_sim falls back to them), mmax cut by
+    convolution_params, the gain 2 Omega~ at epsilon 0, and what is refused."""
+    obs = observation(tmp_path, ellipticity=1.4, seconds=20.0)
+    sky = pisco.Sky.from_maps(hp.alm2map(smooth_sky_alm(128, seed=2, smoothing_fwhm=np.radians(2.0)), 64,
+                                         lmax=128, pol=True))
+    galactic = lbs.CoordinateSystem.Galactic
+    blms = lbs.generate_gauss_beam_alms(obs, lmax=256, mmax=6, store_in_observation=True)
+    small = dict(component="pisco", backend="cpu", coordinates=galactic, beam_alms_rho_max=np.radians(3.0))
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, blms, **small)
+    given = obs.pisco.copy()
+    obs.pisco[:] = 0
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, **small)
+    assert np.array_equal(obs.pisco, given)
+    # Each detector: from_blm(b_lm exp(i m pol_angle_rad), angle=pol_angle_rad), epsilon 0, gain 2 Omega~.
+    m = np.concatenate([np.full(256 - k + 1, k) for k in range(7)])
+    pointings, _ = obs.get_pointings("all")
+    from litebird_sim.coordinates import rotate_coordinates_e2g
+
+    for k, name in enumerate(obs.name):
+        zeta = float(obs.pol_angle_rad[k])
+        beam = pisco.Beamsor.from_blm(blms[name].values * np.exp(1j * m * zeta), rho_max=np.radians(3.0), angle=zeta,
+                                      lmax=256, mmax=6)
+        fp = pisco.FocalPlane()
+        fp.add(name, zeta=zeta, gain=2 * beam.omega_tilde)
+        p = rotate_coordinates_e2g(pointings[k])
+        with pisco.Engine(sky, beam, fp, backend="cpu") as engine:
+            tod = engine.convolve(0, *(np.ascontiguousarray(p[:, c]) for c in range(3)))
+        assert np.array_equal(tod, given[k])
+    # convolution_params cuts m as litebird_sim does.
+    params = lbs.BeamConvolutionParameters(lmax=128, mmax=2)
+    obs.pisco[:] = 0
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, blms, convolution_params=params, **small)
+    cut = obs.pisco.copy()
+    assert relative_rms(cut, given) > 1e-6
+    obs.pisco[:] = 0
+    two = {n: lbs.SphericalHarmonics(values=b.resize_alm(256, 2).values, lmax=256, mmax=2) for n, b in blms.items()}
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, two, **small)
+    assert np.array_equal(obs.pisco, cut)
+    # One SphericalHarmonics for all detectors, or a dict by channel: the same. The detectors'
+    # pol_angle_rad does not turn it (litebird_sim's b_lm hold the polarization): their TOD differ by
+    # their offsets only.
+    one = blms["det1"]
+    obs.pisco[:] = 0
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, one, **small)
+    single = obs.pisco.copy()
+    obs.pisco[:] = 0
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, {"ch": one}, **small)
+    assert np.array_equal(obs.pisco, single)
+    # det0 (pol_angle_rad 0) seen by a detector at det1's angle with the beam turned for it: the same TOD
+    # (to the beams' sampling: each is synthesized on its own grid).
+    zeta1 = float(obs.pol_angle_rad[1])
+    assert zeta1 != 0.0
+    beam = pisco.Beamsor.from_blm(one.values * np.exp(1j * m * zeta1), rho_max=np.radians(3.0), angle=zeta1, lmax=256,
+                                  mmax=6)
+    fp = pisco.FocalPlane()
+    fp.add("at_zeta1", zeta=zeta1, gain=2 * beam.omega_tilde)
+    p = rotate_coordinates_e2g(pointings[0])
+    with pisco.Engine(sky, beam, fp, backend="cpu") as engine:
+        assert relative_rms(engine.convolve(0, *(np.ascontiguousarray(p[:, c]) for c in range(3))), single[0]) < 1e-6
+    with pytest.raises(ValueError, match="keys do not match"):
+        pisco.litebird.add_convolved_sky_to_observations(obs, sky, {"other": blms["det0"]}, **small)
+    bad = lbs.SphericalHarmonics(values=np.full((3, blms["det0"].values.shape[1]), np.nan, complex), lmax=256, mmax=6)
+    with pytest.raises(ValueError, match="b_lm of detector det0 are not finite"):
+        pisco.litebird.add_convolved_sky_to_observations(obs, sky, bad, **small)
+    with pytest.raises(TypeError, match="expected pisco.Beamsor or litebird_sim.SphericalHarmonics"):
+        pisco.litebird.add_convolved_sky_to_observations(obs, sky, "beam.fits", **small)
 
 
 def test_arguments_in_litebird_sims_shape(tmp_path):

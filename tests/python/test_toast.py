@@ -5,6 +5,7 @@ SimTotalconvolve's); in a TOAST pipeline with TOAST's binned map-maker; the foca
 views, units and plate options."""
 
 import os
+import time
 from datetime import datetime, timedelta, timezone
 
 os.environ.setdefault("TOAST_LOGLEVEL", "WARNING")
@@ -24,7 +25,7 @@ from toast.schedule_sim_satellite import create_satellite_schedule  # noqa: E402
 
 import pisco  # noqa: E402
 import pisco.toast  # noqa: E402
-from conftest import gaussian_blm, relative_rms, smooth_sky_alm  # noqa: E402
+from conftest import gaussian_blm, offset_elliptical_blm, relative_rms, smooth_sky_alm  # noqa: E402
 
 FWHM = np.radians(1.0)
 EPSILON = 0.05
@@ -118,28 +119,32 @@ class TotalconvolveForCurrentDucc0(toast.ops.SimTotalconvolve):
         return result
 
 
-def toast_totalconvolve(data, fp, alm, lmax, tmp_path, det_data, hwp_angle=None):
-    """TOAST's own beam convolution of the sky `alm` with the Gaussian beam, into `det_data`."""
+def toast_totalconvolve(data, fp, alm, lmax, tmp_path, det_data, hwp_angle=None, beam_files=None, beammmax=2,
+                        detectors=None):
+    """TOAST's own beam convolution of the sky `alm` into `det_data`: with the Gaussian beam, or with the
+    b_lm files `beam_files` (detector name -> path; `beammmax` at least their mmax); all detectors, or
+    `detectors`."""
     sky_file = str(tmp_path / "sky_alm.fits")
     hp.write_alm(sky_file, alm, lmax=lmax, overwrite=True)
     # psi_pol: the polarization direction in the beam frame. TOAST's SimTotalconvolve reads it from the
     # column `pol_angle` (while testing for `psi_pol`): give it that column. The beam of a B detector,
     # in its beam frame, is polarized at 90 deg (TOAST's own test beams flip Q for B detectors).
     fp.detector_data["pol_angle"] = fp.detector_data["psi_pol"]
-    beam_files = {}
-    for name, psi_pol in zip(fp.detector_data["name"], fp.detector_data["psi_pol"]):
-        angle = float(u.Quantity(psi_pol).to_value(u.deg))
-        assert angle in (0.0, 90.0)
-        path = str(tmp_path / f"beam_{int(angle)}.fits")
-        if not os.path.exists(path):
-            hp.write_alm(path, gaussian_blm(lmax, FWHM, EPSILON, sign=1.0 if angle == 0 else -1.0), lmax=lmax,
-                         mmax_in=2, overwrite=True)
-        beam_files[str(name)] = path
+    if beam_files is None:
+        beam_files = {}
+        for name, psi_pol in zip(fp.detector_data["name"], fp.detector_data["psi_pol"]):
+            angle = float(u.Quantity(psi_pol).to_value(u.deg))
+            assert angle in (0.0, 90.0)
+            path = str(tmp_path / f"beam_{int(angle)}.fits")
+            if not os.path.exists(path):
+                hp.write_alm(path, gaussian_blm(lmax, FWHM, EPSILON, sign=1.0 if angle == 0 else -1.0), lmax=lmax,
+                             mmax_in=2, overwrite=True)
+            beam_files[str(name)] = path
     op = TotalconvolveForCurrentDucc0(
         comm=None, detector_pointing=toast.ops.PointingDetectorSimple(quats="tc_quats"), sky_file=sky_file,
         beam_file_dict=beam_files, sky_file_dict={}, dxx=False, det_data=det_data, fwhm=0 * u.rad, lmax=lmax,
-        beammmax=2, epsilon=1e-7, hwp_angle=hwp_angle)
-    op.apply(data)
+        beammmax=beammmax, epsilon=1e-7, hwp_angle=hwp_angle)
+    op.apply(data, detectors=detectors)
 
 
 def test_pixel_convolve_matches_toast_total_convolution(tmp_path):
@@ -165,6 +170,155 @@ def test_pixel_convolve_matches_toast_total_convolution(tmp_path):
     pol = relative_rms(ours[0::2] - ours[1::2], reference[0::2] - reference[1::2])
     print(f"pair differences (polarization): relative RMS {pol:.2e}")
     assert pol <= 1e-3
+
+
+def test_beam_files_match_toast_total_convolution(tmp_path):
+    """The same b_lm files (an elliptical polarized beam with cross-polar leakage, its centre 0.3 deg off
+    the axis so that odd m hold coefficients too, mmax 12; polarized at psi_pol in the beam frame: 0 for
+    A detectors, 90 deg for B) through TOAST's SimTotalconvolve (calibrate=True) and PixelConvolve's
+    beam_file_dict, on four of the hexagon's detectors (the pairs of the centre pixel and of an outer one)
+    with pol_leakage 0.05."""
+    from toast import qarray as qa
+
+    nside, lmax = 256, 512
+    lmax_beam, mmax = 768, 12
+    fp = focalplane()
+    data = satellite_data(fp)
+    alm = smooth_sky_alm(lmax, seed=3, smoothing_fwhm=np.radians(0.5))
+    sky = pisco.Sky.from_maps(hp.alm2map(alm, nside, lmax=lmax, pol=True), units="K")
+    # One beam, polarized along its frame's x axis; a B detector's file holds it polarized along y
+    # (E and B negated: the polarization turned by 90 deg in the same pattern).
+    blm = offset_elliptical_blm(lmax_beam, mmax, FWHM, 1.5, np.radians(25.0), psi_pol=0.0,
+                                cross_polar_leakage=0.02, offset=np.radians(0.3), offset_angle=np.radians(40.0))
+    odd = np.concatenate([np.full(lmax_beam - m + 1, m % 2 == 1) for m in range(mmax + 1)])
+    assert np.max(np.abs(blm[0, odd])) > 0.1 * np.max(np.abs(blm[0]))
+    beam_files = {}
+    for name, psi_pol in zip(fp.detector_data["name"], fp.detector_data["psi_pol"]):
+        angle = float(u.Quantity(psi_pol).to_value(u.deg))
+        assert angle in (0.0, 90.0)
+        path = str(tmp_path / f"beam_{'A' if angle == 0.0 else 'B'}.fits")
+        if not os.path.exists(path):
+            flip = np.array([1.0, -1.0, -1.0])[:, None] if angle == 90.0 else 1.0
+            hp.write_alm(path, blm * flip, lmax=lmax_beam, mmax_in=mmax, overwrite=True)
+        beam_files[str(name)] = path
+    assert sorted(set(beam_files.values())) == [str(tmp_path / "beam_A.fits"), str(tmp_path / "beam_B.fits")]
+    ob = data.obs[0]
+    dets = list(ob.local_detectors[0:2]) + list(ob.local_detectors[6:8])
+    assert [d[-5] for d in dets] == ["A", "B", "A", "B"]
+    toast_totalconvolve(data, fp, alm, lmax, tmp_path, "totalconvolve", beam_files=beam_files, beammmax=mmax,
+                        detectors=dets)
+    # Sampled at FWHM / 40 (the default step, FWHM / 21 for a Gaussian, leaves 3e-4: below), out to 3 deg
+    # (5 sigma of the major axis beyond the offset).
+    op = pisco.toast.PixelConvolve(sky=sky, det_data="pisco", backend="cpu", beam_file_dict=beam_files,
+                                   beam_file_grid_step=FWHM / 40, beam_file_rho_max=np.radians(3.0))
+    start = time.perf_counter()
+    op.exec(data, detectors=dets)
+    assert len(op._file_beams) == 2  # one beamsor per (file, zeta)
+    op.finalize(data)
+    seconds = time.perf_counter() - start
+    reference = np.array([ob.detdata["totalconvolve"][d] for d in dets])
+    ours = np.array([ob.detdata["pisco"][d] for d in dets])
+    toast.ops.PointingDetectorSimple(quats="pole_quats").apply(data)
+    theta = np.array([qa.to_iso_angles(ob.detdata["pole_quats"][d])[0] for d in dets])
+    away = np.abs(np.cos(theta)) < np.cos(np.radians(10.0))
+    rms = relative_rms(ours, reference)
+    worst = max(relative_rms(ours[i], reference[i]) for i in range(len(dets)))
+    pol = relative_rms(ours[0::2] - ours[1::2], reference[0::2] - reference[1::2])
+    print(f"PixelConvolve(beam_file_dict) vs TOAST SimTotalconvolve, the same b_lm files (ellipticity 1.5, 0.3 deg "
+          f"off axis, cross-polar 0.02, lmax {lmax_beam}, mmax {mmax}), grid step FWHM / 40, rho_max 3 deg: "
+          f"{len(dets)} detectors x "
+          f"{ours.shape[1]} samples, sky NSIDE {nside} (lmax {lmax}): relative RMS {rms:.2e} (worst detector "
+          f"{worst:.2e}; pair differences {pol:.2e}); {np.count_nonzero(~away)} samples within 10 deg of the poles; "
+          f"{seconds:.1f} s")
+    if np.all(away):
+        assert rms <= 3e-4
+    else:
+        far = relative_rms(ours[away], reference[away])
+        print(f"  beyond 10 deg of the poles: {far:.2e}; within: {relative_rms(ours[~away], reference[~away]):.2e}")
+        assert far <= 3e-4
+    assert pol <= 1e-3
+    # The default grid step and rho_max (5 deg), one detector.
+    pisco.toast.PixelConvolve(sky=sky, det_data="pisco_default", backend="cpu", beam_file_dict=beam_files).apply(
+        data, detectors=dets[2:3])
+    default = relative_rms(ob.detdata["pisco_default"][dets[2]], reference[2])
+    print(f"  the default grid step (FWHM / 21) and rho_max, detector {dets[2]}: relative RMS {default:.2e} (at "
+          f"FWHM / 40: {relative_rms(ours[2], reference[2]):.2e})")
+    assert default <= 5e-4
+    # The beam turned by 180 deg (b_lm (-1)^m: the frame SimTotalconvolve hands ducc0, psi - psi_pol + pi,
+    # taken as PISCO-VK's antenna frame) misses; the dict takes precedence over the pattern.
+    sign = np.concatenate([np.full(lmax_beam - m + 1, (-1.0) ** m) for m in range(mmax + 1)])
+    turned = {dets[2]: str(tmp_path / "turned.fits")}
+    b = np.array([hp.read_alm(beam_files[dets[2]], hdu=h) for h in (1, 2, 3)])
+    hp.write_alm(turned[dets[2]], b * sign, lmax=lmax_beam, mmax_in=mmax, overwrite=True)
+    pisco.toast.PixelConvolve(sky=sky, det_data="pisco_turned", backend="cpu", beam_file="/nowhere/{detector}",
+                              beam_file_dict=turned).apply(data, detectors=dets[2:3])
+    wrong = relative_rms(ob.detdata["pisco_turned"][dets[2]], reference[2])
+    print(f"  the beam turned by 180 deg, detector {dets[2]}: relative RMS {wrong:.2e}")
+    assert wrong > 0.05
+
+
+def test_beam_file_errors_and_calibration(tmp_path):
+    """A detector without a file or with a missing file fails, naming both; normalize_beam and
+    beam_file_mmax as SimTotalconvolve's normalize_beam and beammmax; the gain is 2 Omega~ /
+    (1 + pol_leakage) with epsilon 0."""
+    lmax, mmax = 256, 4
+    fp = focalplane(n_pix=1)
+    data = satellite_data(fp, seconds=20.0)
+    ob = data.obs[0]
+    dets = list(ob.local_detectors)
+    sky = pisco.Sky.from_maps(hp.alm2map(smooth_sky_alm(128, 1, np.radians(2)), 64, lmax=128, pol=True))
+    blm = offset_elliptical_blm(lmax, mmax, np.radians(2.0), 1.3, 0.4, psi_pol=0.0)
+    path = str(tmp_path / "beam.fits")
+    hp.write_alm(path, blm, lmax=lmax, mmax_in=mmax, overwrite=True)
+    with pytest.raises(RuntimeError, match=f"detector {dets[1]} has no beam file"):
+        pisco.toast.PixelConvolve(sky=sky, backend="cpu", beam_file_dict={dets[0]: path}).apply(data)
+    # A detector without a file is fine while it is not convolved.
+    pisco.toast.PixelConvolve(sky=sky, backend="cpu", det_data="one", beam_file_dict={dets[0]: path}).apply(
+        data, detectors=[dets[0]])
+    missing = str(tmp_path / "nothing_{detector}.fits")
+    with pytest.raises(RuntimeError, match=f"detector {dets[0]}: the beam file .*nothing_{dets[0]}.fits does not "
+                                           "exist"):
+        pisco.toast.PixelConvolve(sky=sky, backend="cpu", beam_file=missing).apply(data)
+    with pytest.raises(RuntimeError, match="not both"):
+        pisco.toast.PixelConvolve(sky=sky, backend="cpu", beam_file=path,
+                                  beam=pisco.Beamsor.gaussian(FWHM)).apply(data)
+    with pytest.raises(Exception, match="mc cannot be negative"):
+        pisco.toast.PixelConvolve(sky=sky, beam_file=path, mc=-1)
+    # The file pattern, as SimTotalconvolve's beam_file takes it: {detector} and {mc}.
+    for d in dets:
+        hp.write_alm(str(tmp_path / f"beam_{d}_7.fits"), blm, lmax=lmax, mmax_in=mmax, overwrite=True)
+    pisco.toast.PixelConvolve(sky=sky, backend="cpu", det_data="pattern",
+                              beam_file=str(tmp_path / "beam_{detector}_{mc}.fits"), mc=7).apply(data)
+    pisco.toast.PixelConvolve(sky=sky, backend="cpu", det_data="dict",
+                              beam_file_dict={d: path for d in dets}).apply(data)
+    for d in dets:
+        assert np.any(ob.detdata["pattern"][d] != 0)
+        assert np.array_equal(ob.detdata["pattern"][d], ob.detdata["dict"][d])
+    # The engine's detectors: epsilon 0, gain 2 Omega~ / (1 + pol_leakage); normalize_beam scales it by
+    # 1 / (2 sqrt(pi) b_00), beam_file_mmax keeps m <= 2.
+    quats = np.ascontiguousarray(ob.shared["boresight_radec"].data)
+    runs = {}
+    for key, traits in (("plain", {}), ("normalized", dict(normalize_beam=True)), ("m2", dict(beam_file_mmax=2))):
+        op = pisco.toast.PixelConvolve(sky=sky, backend="cpu", det_data=key, beam_file=path, **traits)
+        op.apply(data)
+        engine, index, _ = op._engine_for(ob.telescope.focalplane, False)
+        for d in dets:
+            det = engine.focal_plane[index[d]]
+            beam, factor = next(v for k, v in op._file_beams.items() if k[1] == det.zeta)
+            assert det.epsilon == 0.0
+            assert det.gain == pytest.approx(2 * beam.omega_tilde * factor / (1 + EPSILON), rel=1e-15)
+        runs[key] = np.array([ob.detdata[key][d] for d in dets])
+        op.finalize(data)
+    b00 = blm[0, 0].real
+    assert np.allclose(runs["normalized"], runs["plain"] / (2 * np.sqrt(np.pi) * b00), rtol=1e-12, atol=0)
+    assert relative_rms(runs["m2"], runs["plain"]) > 1e-6
+    m2 = pisco.toast.PixelConvolve(sky=sky, backend="cpu", det_data="m2_file", beam_file_dict={
+        d: str(tmp_path / "beam_m2.fits") for d in dets})
+    hp.write_alm(str(tmp_path / "beam_m2.fits"), np.array([hp.resize_alm(b, lmax, mmax, lmax, 2) for b in blm]),
+                 lmax=lmax, mmax_in=2, overwrite=True)
+    m2.apply(data)
+    assert np.allclose(np.array([ob.detdata["m2_file"][d] for d in dets]), runs["m2"], rtol=1e-12,
+                       atol=1e-12 * np.max(np.abs(runs["m2"])))
 
 
 def toast_plate_reference(data, alm, lmax):
