@@ -75,6 +75,30 @@ def main():
         print(f"{name:<16} {rho:7.1f} {engine.sidelobe_nside or '-':>11} {pixels:13.0f} {best:8.3f} "
               f"{pixels * a.samples / best:9.2e} {best / base:7.2f}", flush=True)
         engine.close()
+    ducc0_peer(a, theta, phi, psi)
+
+
+def ducc0_peer(a, theta, phi, psi):
+    """The same samples through ducc0's totalconvolve (where installed): a sky of lmax 3 NSIDE - 1 and a
+    beam of kmax 4 (the ring's cross-polar term has m = 2), whose cost does not depend on its extent."""
+    try:
+        import ducc0
+    except ImportError:
+        print("ducc0 not installed: no peer figure")
+        return
+    lmax, kmax = 3 * a.nside - 1, 4
+    rng = np.random.default_rng(2)
+    size = (lmax + 1) * (lmax + 2) // 2
+    sky = rng.normal(size=(3, size)) + 1j * rng.normal(size=(3, size))
+    sky[:, : lmax + 1] = sky[:, : lmax + 1].real
+    blm = np.full((3, (kmax + 1) * (lmax + 1) - kmax * (kmax + 1) // 2), 1e-3, dtype=np.complex128)
+    t0 = time.perf_counter()
+    interp = ducc0.totalconvolve.Interpolator(sky, blm, False, lmax, kmax, epsilon=1e-5, nthreads=2)
+    t1 = time.perf_counter()
+    interp.interpol(np.stack([theta, phi, psi], axis=1))
+    t2 = time.perf_counter()
+    print(f"ducc0 {ducc0.__version__} totalconvolve (lmax {lmax}, kmax {kmax}, epsilon 1e-5, 2 threads): "
+          f"set-up {t1 - t0:.2f} s, {len(theta)} samples {t2 - t1:.3f} s")
 
 
 if __name__ == "__main__":
