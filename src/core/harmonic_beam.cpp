@@ -11,11 +11,13 @@
 #include <fitsio.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <map>
 #include <mutex>
 #include <numbers>
 #include <sstream>
+#include <thread>
 #include <unordered_map>
 
 #include "core/fits_table.hpp"
@@ -322,6 +324,42 @@ Beamsor Beamsor::from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& 
   // Rings by radius, computed once: the nodes' radii repeat eightfold, the quadrature's per panel node.
   auto cache = std::make_shared<std::map<double, Ring>>();
   auto mutex = std::make_shared<std::mutex>();
+  // The main grid's node radii, laid out as Beamsor::from_field lays them out, synthesized ahead on
+  // all hardware threads (a radius the layout misses is synthesized when first asked for).
+  {
+    const bool radial = harmonic_is_radial(beam);
+    const double rho_grid = options.split.rho_main > 0 ? options.split.rho_main : options.rho_max;
+    const double a = std::sin(rho_grid);
+    std::vector<double> keys;
+    if (radial) {
+      const double h = step / radial_oversampling;
+      const int n = std::max(3, static_cast<int>(std::ceil(a / h)) + 2);
+      for (int i = 0; i < n; ++i) keys.push_back(std::asin(std::min(1.0, i * h)));
+    } else if (std::ceil(2.0 * a / step) + 1.0 <= max_grid_nodes) {
+      const int n = std::max(3, static_cast<int>(std::ceil(2.0 * a / step) + 1.0));
+      const double h = 2.0 * a / (n - 1);
+      // One octant: the grid is symmetric about the axis, and mirrored nodes' radii round to one key.
+      for (int j = 0; j <= (n - 1) / 2 + 1 && j < n; ++j)
+        for (int i = 0; i <= j; ++i) {
+          const double x = -a + i * h, y = -a + j * h;
+          keys.push_back(std::asin(std::min(1.0, std::sqrt(x * x + y * y))));
+        }
+    }
+    for (double& k : keys) k = std::round(k * 1e12) / 1e12;
+    std::sort(keys.begin(), keys.end());
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    std::vector<Ring> rings(keys.size());
+    std::atomic<std::size_t> next{0};
+    const auto work = [&] {
+      for (std::size_t k; (k = next.fetch_add(1)) < keys.size();) rings[k] = synthesis.ring(keys[k]);
+    };
+    const unsigned threads = std::max(1u, std::min(std::thread::hardware_concurrency(), 64u));
+    std::vector<std::thread> pool;
+    for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
+    work();
+    for (auto& t : pool) t.join();
+    for (std::size_t k = 0; k < keys.size(); ++k) cache->emplace(keys[k], std::move(rings[k]));
+  }
   const int mmax = beam.mmax;
   const double angle = options.angle;
   const Field field = [=, &synthesis](double rho, double sigma) {
