@@ -49,8 +49,12 @@ def main():
     env.setdefault("TOAST_LOGLEVEL", "WARNING")
     env.setdefault("OMP_NUM_THREADS", "2")
     env["PISCO_TEST_BUILD"] = build
+    # A temporary directory of the suite's own: suites run in parallel, and pytest's shared numbered
+    # directories are pruned by whichever session starts next.
+    basetemp = os.path.join(build, "pytest-tmp", os.path.splitext(os.path.basename(os.path.normpath(args.test)))[0])
+    os.makedirs(os.path.dirname(basetemp), exist_ok=True)
     command = [test_venv.python_of(venv), "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rs",
-               args.test] + args.pytest_args
+               "--basetemp", basetemp, args.test] + args.pytest_args
     done = subprocess.run(command, env=env, cwd=build)
     if done.returncode == 5:
         log("FAILED: pytest collected no test")
