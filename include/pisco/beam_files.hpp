@@ -69,9 +69,9 @@ struct HarmonicBeam {
 struct GraspBeam {
   enum class Grid {
     uv,                     // IGRID 1: x = u = sin(theta) cos(phi), y = v = sin(theta) sin(phi)
-    elevation_over_azimuth, // IGRID 4: x = az, y = el (degrees)
-    elevation_and_azimuth,  // IGRID 5: x = az, y = el (degrees)
-    azimuth_over_elevation, // IGRID 6: x = az, y = el (degrees)
+    elevation_over_azimuth, // IGRID 4: x = az, y = el (degrees): u = -sin(az) cos(el), v = sin(el)
+    elevation_and_azimuth,  // IGRID 5: x = az, y = el (degrees): az = -theta cos(phi), el = theta sin(phi)
+    azimuth_over_elevation, // IGRID 6: x = az, y = el (degrees): u = -sin(az), v = cos(az) sin(el)
     theta_phi,              // IGRID 7: x = phi, y = theta (degrees)
     cuts,                   // a .cut file: x = phi of each cut, y = theta along it (radians)
   };

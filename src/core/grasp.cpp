@@ -169,11 +169,14 @@ std::vector<GraspBeam> read_grid(const fs::path& file) {
   GraspBeam::Grid grid;
   switch (igrid) {
     case 1: grid = GraspBeam::Grid::uv; break;
+    case 4: grid = GraspBeam::Grid::elevation_over_azimuth; break;
     case 5: grid = GraspBeam::Grid::elevation_and_azimuth; break;
+    case 6: grid = GraspBeam::Grid::azimuth_over_elevation; break;
     case 7: grid = GraspBeam::Grid::theta_phi; break;
     default:
       in.fail("IGRID = " + std::to_string(igrid) +
-              ": expected 1 (uv grid), 5 (elevation and azimuth) or 7 (theta-phi grid); export the beam from GRASP on one of these");
+              ": expected 1 (uv grid), 4 (elevation over azimuth), 5 (elevation and azimuth), 6 (azimuth over "
+              "elevation) or 7 (theta-phi grid); export the beam from GRASP on one of these");
   }
   std::vector<std::pair<double, double>> centre;
   for (int s = 0; s < nset; ++s) {
@@ -487,7 +490,7 @@ Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) 
   double file_step = 0.0;
   double reach = 0.0;  // how far from the axis the file's samples reach (radians)
   std::string kind;
-  if (b.grid == GraspBeam::Grid::uv || b.grid == GraspBeam::Grid::elevation_and_azimuth) {
+  if (b.grid != GraspBeam::Grid::theta_phi && b.grid != GraspBeam::Grid::cuts) {
     auto g = std::make_shared<RegularStokes>();
     g->nx = b.nx;
     g->ny = b.ny;
@@ -497,26 +500,32 @@ Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) 
     g->dy = (b.ye - b.ys) / (b.ny - 1);
     g->s.resize(b.co.size());
     for (std::size_t k = 0; k < b.co.size(); ++k) g->s[k] = stokes_of(b.co[k], b.cx[k]);
-    const bool uv = b.grid == GraspBeam::Grid::uv;
+    const GraspBeam::Grid type = b.grid;
+    const bool uv = type == GraspBeam::Grid::uv;
     file_step = std::min(std::abs(g->dx), std::abs(g->dy));
     const double half = std::min({std::abs(b.xs), std::abs(b.xe), std::abs(b.ys), std::abs(b.ye)});
     if (b.xs * b.xe > 0 || b.ys * b.ye > 0)
       throw Error(b.source + ": the grid does not contain the beam axis (u = v = 0); expected a grid about the beam's axis");
     reach = uv ? std::asin(std::min(1.0, half)) : half;
-    kind = uv ? "uv grid" : "elevation-and-azimuth grid";
-    field = [g, uv, angle](double rho, double sigma) {
+    kind = uv ? "uv grid"
+           : type == GraspBeam::Grid::elevation_and_azimuth ? "elevation-and-azimuth grid"
+           : type == GraspBeam::Grid::elevation_over_azimuth ? "elevation-over-azimuth grid"
+                                                              : "azimuth-over-elevation grid";
+    field = [g, type, angle](double rho, double sigma) {
       const double s = sigma - angle;
+      // The direction (u, v, w) = (sin(theta) cos(phi), sin(theta) sin(phi), cos(theta)) in each grid's
+      // coordinates, all with az = -u and el = v to first order about the axis (docs/beams.md).
+      const double u = std::sin(rho) * std::cos(s), v = std::sin(rho) * std::sin(s), w = std::cos(rho);
       double x, y;
-      if (uv) {
-        x = std::sin(rho) * std::cos(s);
-        y = std::sin(rho) * std::sin(s);
-      } else {  // az = -theta cos(phi), el = theta sin(phi)
-        x = -rho * std::cos(s);
-        y = rho * std::sin(s);
+      switch (type) {
+        case GraspBeam::Grid::uv: x = u; y = v; break;
+        case GraspBeam::Grid::elevation_and_azimuth: x = -rho * std::cos(s); y = rho * std::sin(s); break;
+        case GraspBeam::Grid::elevation_over_azimuth: x = -std::atan2(u, w); y = std::asin(std::clamp(v, -1.0, 1.0)); break;
+        default: x = -std::asin(std::clamp(u, -1.0, 1.0)); y = std::atan2(v, w); break;  // azimuth over elevation
       }
       if (!g->inside(x, y)) return Mueller{};
-      const Stokes v = g->at(x, y);
-      return stokes_mueller(v[0], v[1], v[2], v[3]);
+      const Stokes st = g->at(x, y);
+      return stokes_mueller(st[0], st[1], st[2], st[3]);
     };
   } else {
     std::vector<double> phis, thetas;
