@@ -323,6 +323,11 @@ class Robustness : public ::testing::Test {
     std::ofstream(p, std::ios::binary) << text;
     return p;
   }
+  // `text` with four bytes replaced by random ones, drawn from `rng`.
+  static std::string with_random_bytes(std::string text, std::mt19937_64& rng) {
+    for (int j = 0; j < 4; ++j) text[std::uniform_int_distribution<std::size_t>(0, text.size() - 1)(rng)] = char(rng());
+    return text;
+  }
   static std::string read(const fs::path& p) {
     std::ifstream in(p, std::ios::binary);
     std::stringstream ss;
@@ -555,13 +560,9 @@ TEST_F(Robustness, CorruptedFitsFiles) {
   // Random byte changes in the headers and the data: read or refused, never a crash.
   std::mt19937_64 rng(2024);
   for (int k = 0; k < 12; ++k) {
-    std::string s = sky;
-    for (int j = 0; j < 4; ++j) s[std::uniform_int_distribution<std::size_t>(0, s.size() - 1)(rng)] = char(rng());
-    write("sky.fits", s);
+    write("sky.fits", with_random_bytes(sky, rng));
     expect_no_crash("sky.fits with random bytes, draw " + std::to_string(k), sky_cfg);
-    std::string b = beam;
-    for (int j = 0; j < 4; ++j) b[std::uniform_int_distribution<std::size_t>(0, b.size() - 1)(rng)] = char(rng());
-    write("beam.fits", b);
+    write("beam.fits", with_random_bytes(beam, rng));
     expect_no_crash("beam.fits with random bytes, draw " + std::to_string(k), beam_cfg);
   }
   write("sky.fits", sky);
@@ -605,13 +606,9 @@ TEST_F(Robustness, CorruptedBeamFiles) {
   }
   std::mt19937_64 rng(77);
   for (int k = 0; k < 10; ++k) {
-    std::string g = grd;
-    for (int j = 0; j < 4; ++j) g[std::uniform_int_distribution<std::size_t>(0, g.size() - 1)(rng)] = char(rng());
-    write("beam.grd", g);
+    write("beam.grd", with_random_bytes(grd, rng));
     expect_no_crash("beam.grd with random bytes, draw " + std::to_string(k), grasp_cfg);
-    std::string a = alm;
-    for (int j = 0; j < 4; ++j) a[std::uniform_int_distribution<std::size_t>(0, a.size() - 1)(rng)] = char(rng());
-    write("beam_alm.fits", a);
+    write("beam_alm.fits", with_random_bytes(alm, rng));
     expect_no_crash("beam_alm.fits with random bytes, draw " + std::to_string(k), blm_cfg);
   }
   write("beam.grd", grd);
