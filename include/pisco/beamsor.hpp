@@ -63,7 +63,7 @@ class Beamsor {
   static Beamsor from_field(const Field& field, double rho_max, double grid_step,
                             std::string description, double feature_scale = 0.0, bool radial = false,
                             const SidelobeSplit& split = {});
-  static constexpr int radial_oversampling = 8;
+  static constexpr int radial_oversampling = 64;
   // The most grid nodes per axis any builder accepts (a 2D grid of 8192^2 nodes is 512 MiB per element).
   static constexpr int max_grid_nodes = 8192;
 

@@ -21,6 +21,12 @@ enum class Normalization {
   per_sample,  // divide each sample by its own discrete sum of Omega_pix B_TT / Omega~
 };
 
+// Samples whose disc reaches near a HEALPix pole (docs/physics.md, "The poles"):
+enum class Poles {
+  rotated,  // summed on a copy of the sky turned by 90 deg, where they lie on its equator (default)
+  plain,    // summed on the sky's own pixels like every other sample
+};
+
 struct EngineOptions {
   std::string backend = "cpu";  // "cpu", "simd", "vulkan", "cuda" or "auto" (the fastest backend compiled in and present)
   std::string device = "auto";  // vulkan/cuda: device index, or part of its name; "auto" prefers a discrete GPU;
@@ -36,6 +42,10 @@ struct EngineOptions {
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
   // hold one.
   UnseenPolicy unseen = UnseenPolicy::error;
+  // The polar copy is made once, when the engine is made: three spherical harmonic transforms per
+  // iteration of HEALPix's map2alm and one alm rotation at band limit 2 NSIDE, and the backend holds a
+  // second sky. A masked sky (UNSEEN pixels) has no band-limited copy: its polar samples stay plain.
+  Poles poles = Poles::rotated;
 };
 
 struct BackendInfo {
@@ -101,6 +111,10 @@ class Engine {
   // Beams split into a main part and sidelobes (Beamsor::sidelobes; docs/beams.md, "Sidelobes"): the
   // NSIDE of the band-limited sky their outer parts are summed on; 0 when no beam is split.
   int sidelobe_nside() const noexcept { return outer_nside_; }
+  // Whether samples near the poles are summed on the sky's polar copy (EngineOptions::poles), and how
+  // many submitted so far were.
+  bool polar_copy() const noexcept { return polar_backend_ != nullptr; }
+  std::uint64_t polar_samples() const noexcept { return polar_samples_; }
 
   // Backends compiled into the library, with availability on this machine.
   static std::vector<BackendInfo> backends();
@@ -144,6 +158,12 @@ class Engine {
   std::vector<bool> split_;  // per detector
   int outer_nside_ = 0;
   std::uint64_t outer_ticket_ = 1;
+  // Samples near the poles: their pointing turned onto the polar copy's equator and summed there,
+  // run as each submission is made and written over the main backend's when it completes.
+  std::shared_ptr<const detail::EngineInputs> polar_inputs_;
+  std::unique_ptr<detail::Backend> polar_backend_;
+  std::vector<double> polar_cut_, offset_angle_;  // per prepared detector (row detectors included)
+  std::uint64_t polar_ticket_ = 1, polar_samples_ = 0;
 };
 
 }  // namespace pisco

@@ -6,6 +6,7 @@
 
 #include "core/backend.hpp"
 #include "core/masked_sky.hpp"
+#include "core/poles.hpp"
 #include "core/prepared.hpp"
 #include "core/sidelobes.hpp"
 #include "pisco/hwp.hpp"
@@ -70,10 +71,31 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   const detail::BackendEntry& entry = detail::choose_backend(options.backend);
   // A masked sky: the backends get a copy with its UNSEEN pixels 0, for the set-up only (masked_sky.hpp).
   std::optional<Sky> zeroed;
-  const Sky& used = detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_);
+  // The backends get a copy with the rings where the polar caps meet the belt weighted (poles.hpp),
+  // for the set-up only.
+  Sky weighted = detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_);
+  zeroed.reset();
+  detail::weigh_cap_boundaries(weighted);
   inputs_ = std::make_shared<const detail::EngineInputs>(
-      detail::prepare_inputs(used, beams, focal_plane, options.normalization));
-  backend_ = entry.create(inputs_, used, options);
+      detail::prepare_inputs(weighted, beams, focal_plane, options.normalization));
+  backend_ = entry.create(inputs_, weighted, options);
+
+  // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator.
+  if (options.poles == Poles::rotated && unseen_pixels_ == 0) {
+    bool any = false;
+    for (const detail::PreparedDetector& d : inputs_->detectors) {
+      polar_cut_.push_back(detail::polar_cut(d.rho_max, sky.nside()));
+      const double z = d.offset.active ? d.offset.matrix.ez.z : 1.0;
+      offset_angle_.push_back(std::acos(std::clamp(z, -1.0, 1.0)) + 1e-9);
+      any = any || polar_cut_.back() > 0.0;
+    }
+    if (any) {
+      const Sky polar = detail::polar_sky(sky);
+      polar_inputs_ = std::make_shared<const detail::EngineInputs>(
+          detail::prepare_inputs(polar, beams, focal_plane, options.normalization));
+      polar_backend_ = entry.create(polar_inputs_, polar, options);
+    }
+  }
 
   // Split beams: their outer parts on a band-limited copy of the sky at a coarser NSIDE.
   outer_nside_ = detail::sidelobe_nside(beams, sky.nside());
@@ -95,7 +117,8 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   for (const Beamsor& b : beams) outer.push_back(b.sidelobes() ? *b.sidelobes() : *placeholder);
   split_.resize(focal_plane.size());
   for (std::size_t d = 0; d < focal_plane.size(); ++d) split_[d] = beams.at(focal_plane[d].beam).sidelobes() != nullptr;
-  const Sky coarse = detail::band_limited_sky(sky, outer_nside_, std::min(band, 2 * outer_nside_));
+  Sky coarse = detail::band_limited_sky(sky, outer_nside_, std::min(band, 2 * outer_nside_));
+  detail::weigh_cap_boundaries(coarse);
   outer_inputs_ = std::make_shared<const detail::EngineInputs>(
       detail::prepare_inputs(coarse, outer, focal_plane, options.normalization));
   outer_backend_ = entry.create(outer_inputs_, coarse, options);
@@ -115,6 +138,11 @@ struct Engine::Pending {
   // A split beam's outer part: its TOD (or its rows), added when the submission completes.
   std::vector<double> outer;
   std::array<std::vector<double>, 4> outer_rows;
+  // Samples near the poles: their TOD (or rows) from the polar copy, and with `accumulate` what tod
+  // held before, written over the main backend's when the submission completes.
+  detail::PolarSamples polar;
+  std::vector<double> polar_tod, polar_base;
+  std::array<std::vector<double>, 4> polar_rows;
 };
 
 namespace {
@@ -151,8 +179,11 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
     }
   }
   detail::PointingInput input = input_of(boresight);
+  if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = pending->plate_angle;
   std::uint64_t ticket = 0;
   const bool split = !split_.empty() && split_[detector];
+  const bool polar = polar_backend_ && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
+                                                                  polar_cut_.at(detector), pending->polar);
   try {
     if (det.plate == detail::PreparedDetector::Plate::detector) {
       // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
@@ -170,13 +201,27 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
         }
         pixels_ += outer_backend_->wait(t);
       }
+      if (polar) {
+        std::uint64_t t = 0;
+        const detail::PointingInput turned = pending->polar.input();
+        for (int r = 0; r < 4; ++r) {
+          pending->polar_rows[r].assign(turned.size(), 0.0);
+          t = polar_ticket_++;
+          polar_backend_->submit(det.rows[r], turned, pending->polar_rows[r], false, t);
+        }
+        polar_backend_->wait(t);
+      }
       pending->ticket = ticket;
       pending->detector = detector;
       pending->tod = tod;
       pending->accumulate = accumulate;
       pending_.push_back(std::move(pending));
     } else {
-      if (plate) input.plate_angle = pending->plate_angle;
+      if (polar && accumulate) {
+        pending->polar_base.resize(pending->polar.index.size());
+        for (std::size_t k = 0; k < pending->polar.index.size(); ++k)
+          pending->polar_base[k] = tod[pending->polar.index[k]];
+      }
       ticket = next_ticket_++;
       backend_->submit(detector, input, tod, accumulate, ticket);
       if (split) {
@@ -184,12 +229,22 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
         const std::uint64_t t = outer_ticket_++;
         outer_backend_->submit(detector, input, pending->outer, false, t);
         pixels_ += outer_backend_->wait(t);
+      }
+      if (polar) {
+        pending->polar_tod.assign(pending->polar.index.size(), 0.0);
+        const std::uint64_t t = polar_ticket_++;
+        polar_backend_->submit(detector, pending->polar.input(), pending->polar_tod, false, t);
+        polar_backend_->wait(t);
+      }
+      if (split || polar) {
         pending->ticket = ticket;
         pending->detector = detector;
         pending->tod = tod;
+        pending->accumulate = accumulate;
         pending_.push_back(std::move(pending));
       }
     }
+    if (polar) polar_samples_ += pending_.back()->polar.index.size();
   } catch (const detail::SubmissionError& e) {
     throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what());
   } catch (const Error& e) {
@@ -204,10 +259,16 @@ void Engine::finish_pending(std::uint64_t ticket) {
   std::size_t done = 0;
   for (; done < pending_.size() && pending_[done]->ticket <= ticket; ++done) {
     Pending& p = *pending_[done];
-    if (p.rows[0].empty()) {  // a split beam without a plate before the detector: add the outer part
-      for (std::size_t i = 0; i < p.tod.size(); ++i) p.tod[i] += p.outer[i];
+    const std::vector<std::size_t>& polar = p.polar.index;
+    if (p.rows[0].empty()) {  // no plate before the detector: the polar samples, then a split beam's outer part
+      for (std::size_t k = 0; k < polar.size(); ++k)
+        p.tod[polar[k]] = (p.accumulate ? p.polar_base[k] : 0.0) + p.polar_tod[k];
+      if (!p.outer.empty())
+        for (std::size_t i = 0; i < p.tod.size(); ++i) p.tod[i] += p.outer[i];
       continue;
     }
+    for (std::size_t k = 0; k < polar.size(); ++k)
+      for (int r = 0; r < 4; ++r) p.rows[r][polar[k]] = p.polar_rows[r][k];
     if (!p.outer_rows[0].empty())
       for (int r = 0; r < 4; ++r)
         for (std::size_t i = 0; i < p.tod.size(); ++i) p.rows[r][i] += p.outer_rows[r][i];

@@ -1,0 +1,116 @@
+// Samples near the HEALPix poles on a turned copy of the sky (docs/physics.md, "The poles").
+#include "core/poles.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include <alm.h>
+#include <alm_healpix_tools.h>
+#include <alm_powspec_tools.h>
+#include <healpix_map.h>
+#include <xcomplex.h>
+
+#include "pisco/error.hpp"
+
+namespace pisco::detail {
+
+void weigh_cap_boundaries(Sky& sky) {
+  const std::size_t n = static_cast<std::size_t>(sky.nside());
+  const double w = 1.0 - 1.0 / (12.0 * double(n));
+  for (const std::size_t first : {2 * n * (n - 1), 2 * n * (n - 1) + 8 * n * n})
+    for (auto map : {sky.I(), sky.Q(), sky.U(), sky.V()})
+      for (std::size_t p = first; p < first + 4 * n; ++p) map[p] *= w;
+}
+
+int polar_band_limit(int nside) { return nside == 1 ? 2 : 2 * nside; }
+
+Sky polar_sky(const Sky& sky, int iterations) {
+  const int nside = sky.nside(), lmax = polar_band_limit(nside);
+  auto map_of = [&](std::span<const double> v) {
+    Healpix_Map<double> m(nside, RING, SET_NSIDE);
+    std::copy(v.begin(), v.end(), &m[0]);
+    return m;
+  };
+  try {
+    Alm<xcomplex<double>> t(lmax, lmax), e(lmax, lmax), b(lmax, lmax);
+    const auto mt = map_of(sky.I()), mq = map_of(sky.Q()), mu = map_of(sky.U());
+    map2alm_pol_iter(mt, mq, mu, t, e, b, iterations);
+    // S'(R p) = S(p) for R = 90 deg about y: HEALPix's Euler angles (psi, theta, phi) = (0, pi/2, 0).
+    rotate_alm(t, e, b, 0.0, std::numbers::pi / 2, 0.0);
+    Healpix_Map<double> ot(nside, RING, SET_NSIDE), oq(nside, RING, SET_NSIDE), ou(nside, RING, SET_NSIDE);
+    alm2map_pol(t, e, b, ot, oq, ou);
+    Sky out(nside, sky.units());
+    std::copy(&ot[0], &ot[0] + ot.Npix(), out.I().begin());
+    std::copy(&oq[0], &oq[0] + oq.Npix(), out.Q().begin());
+    std::copy(&ou[0], &ou[0] + ou.Npix(), out.U().begin());
+    if (std::any_of(sky.V().begin(), sky.V().end(), [](double x) { return x != 0.0; })) {
+      Alm<xcomplex<double>> v(lmax, lmax);
+      map2alm_iter(map_of(sky.V()), v, iterations);
+      rotate_alm(v, 0.0, std::numbers::pi / 2, 0.0);
+      Healpix_Map<double> ov(nside, RING, SET_NSIDE);
+      alm2map(v, ov);
+      std::copy(&ov[0], &ov[0] + ov.Npix(), out.V().begin());
+    }
+    weigh_cap_boundaries(out);
+    return out;
+  } catch (const PlanckError& err) {
+    throw Error(std::string("the sky's polar copy: HEALPix: ") + err.what());
+  }
+}
+
+double polar_cut(double rho_max, int nside) {
+  const double pixel = std::sqrt(std::numbers::pi / 3.0) / nside;
+  const double cut = rho_max + 4.0 * pixel;
+  return cut < 44.0 * std::numbers::pi / 180.0 ? cut : 0.0;
+}
+
+PointingInput PolarSamples::input() const {
+  PointingInput in;
+  in.quaternions = true;
+  in.quats = QuatPointingView{quats};
+  in.plate_angle = plate_angle;
+  return in;
+}
+
+namespace {
+Q4 q4(const Quat& q) { return {q.x, q.y, q.z, q.w}; }
+Quat quat(const Q4& q) { return {q.x, q.y, q.z, q.w}; }
+// The z component of q z^ q*.
+double line_of_sight_z(const Q4& q) {
+  const double s = 2.0 / (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+  return 1.0 - s * (q.x * q.x + q.y * q.y);
+}
+}  // namespace
+
+bool find_polar_samples(const PointingInput& in, const DetectorOffset& offset, double offset_angle, double cut,
+                        PolarSamples& out) {
+  out.index.clear();
+  out.quats.clear();
+  out.plate_angle.clear();
+  if (cut <= 0.0) return false;
+  const double cos_cut = std::cos(cut);
+  // A boresight farther than cut + offset_angle from both poles cannot carry the detector within cut.
+  const double wide = cut + offset_angle;
+  const double cos_wide = wide < std::numbers::pi / 2 ? std::cos(wide) : -1.0;
+  const std::size_t n = in.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    Q4 b;
+    if (in.quaternions) {
+      b = q4(in.quats.quats[i]);
+      if (std::abs(line_of_sight_z(b)) <= cos_wide) continue;
+    } else {
+      const double theta = in.angles.theta[i];
+      if (std::abs(std::cos(theta)) <= cos_wide) continue;
+      b = q4(quat_from_pointing(theta, in.angles.phi[i], in.angles.psi[i]));
+    }
+    const double z = offset.active ? line_of_sight_z(quat_mul(b, offset.quat)) : line_of_sight_z(b);
+    if (std::abs(z) <= cos_cut) continue;
+    out.index.push_back(i);
+    out.quats.push_back(quat(quat_mul(polar_rotation, b)));
+    if (!in.plate_angle.empty()) out.plate_angle.push_back(in.plate_angle[i]);
+  }
+  return !out.index.empty();
+}
+
+}  // namespace pisco::detail

@@ -1,0 +1,60 @@
+// Where the equal-weight pixel sum is not enough (docs/physics.md, "The quadrature"). Over HEALPix
+// rings the pixel sum is a trapezoidal rule in the ring index, exact to rounding for smooth beams
+// except at two kinds of places:
+// - the poles, where its end term, a third of a pixel's weight times the integrand at the pole, is
+//   1e-2 of the TOD for a beam centred on one. Such samples are summed instead on a copy of the sky
+//   turned by 90 deg about y, where they lie on the equator, with their pointing turned the same way.
+//   For a sky band-limited to 2 NSIDE the copy is exact.
+// - the two rings where the polar caps meet the equatorial belt (z = +-2/3), where the rings' spacing
+//   changes its law: the rule's slope jumps there, and Euler-Maclaurin's term for the jump is
+//   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE).
+#pragma once
+
+#include <cstddef>
+#include <span>
+#include <vector>
+
+#include "core/backend.hpp"
+#include "core/frame.hpp"
+#include "pisco/quaternion.hpp"
+#include "pisco/sky.hpp"
+
+namespace pisco::detail {
+
+// Multiplies the pixels of rings NSIDE and 3 NSIDE (all four Stokes maps) by 1 - 1/(12 NSIDE).
+void weigh_cap_boundaries(Sky& sky);
+
+// The rotation R that takes the sky to its polar copy: 90 deg about y, (x, y, z) -> (z, y, -x). The
+// poles land on the equator at phi = 0 and pi; the old equator's points (+-1, 0, 0) become the poles.
+inline constexpr Q4 polar_rotation{0.0, 0.70710678118654752440, 0.0, 0.70710678118654752440};
+
+// The band limit of the polar copy: 2 NSIDE (3 NSIDE - 1 for NSIDE 1), the limit up to which HEALPix's
+// iterated map2alm recovers a band-limited sky.
+int polar_band_limit(int nside);
+
+// The sky seen through R: S'(R p) = S(p), I, Q, U (as T, E, B) and V (spin 0) through HEALPix C++'s
+// map2alm (`iterations` Jacobi iterations) up to polar_band_limit, rotate_alm and alm2map.
+Sky polar_sky(const Sky& sky, int iterations = 5);
+
+// The angle from a pole within which a detector's samples go to the polar copy: its disc radius plus
+// four pixel sizes, so that no ring within four of the pole meets the disc of a sample left on the
+// sky. 0 (never) when that reaches 44 deg: a disc that large would reach the copy's own poles.
+double polar_cut(double rho_max, int nside);
+
+// The samples of one submission within `cut` of a pole (the detector's line of sight, its offset
+// applied), and their pointing turned by R as boresight quaternions: q' = R q_boresight, so that the
+// detector's q' q_offset = R q. Plate angles follow their samples.
+struct PolarSamples {
+  std::vector<std::size_t> index;
+  std::vector<Quat> quats;
+  std::vector<double> plate_angle;
+  PointingInput input() const;
+};
+
+// Fills `out` (cleared first); returns false when no sample is near a pole. `offset_angle` bounds the
+// detector's distance from the boresight (0 on it), so that most samples are passed over without
+// composing their rotation.
+bool find_polar_samples(const PointingInput& in, const DetectorOffset& offset, double offset_angle, double cut,
+                        PolarSamples& out);
+
+}  // namespace pisco::detail
