@@ -114,7 +114,7 @@ struct Scene {
 
 TEST(Engine, ReferenceEqualsBruteForce) {
   Scene s;
-  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2});
+  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2, .quadrature = pisco::Quadrature::plain});
   double worst = 0, rms = 0;
   for (std::size_t det = 0; det < s.fp.size(); ++det) {
     std::vector<double> tod(s.ptg.size(), NAN);
@@ -163,8 +163,9 @@ TEST(Engine, NormalizationModes) {
   pisco::Pointing ptg;
   for (int i = 0; i < 50; ++i) ptg.push_back(0.02 + i * 0.06, i * 0.37, i * 0.11);
   std::vector<double> integral(ptg.size()), per_sample(ptg.size());
-  pisco::Engine(sky, beams, fp).convolve(0, ptg, integral);
-  pisco::Engine(sky, beams, fp, {.normalization = pisco::Normalization::per_sample}).convolve(0, ptg, per_sample);
+  pisco::Engine(sky, beams, fp, {.quadrature = pisco::Quadrature::plain}).convolve(0, ptg, integral);
+  pisco::Engine(sky, beams, fp, {.normalization = pisco::Normalization::per_sample, .quadrature = pisco::Quadrature::plain})
+      .convolve(0, ptg, per_sample);
   const double expected = 1.7 / 2 * 1.1;
   double worst = 0;
   for (std::size_t i = 0; i < ptg.size(); ++i) {

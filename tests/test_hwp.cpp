@@ -180,7 +180,7 @@ TEST(Hwp, GenericPlateMatchesBruteForceInBothPlacements) {
                                    0.3 * double(beam)};
       fp.add(d);
     }
-  pisco::Engine engine(sky, beams, fp, {.backend = "cpu", .threads = 2});
+  pisco::Engine engine(sky, beams, fp, {.backend = "cpu", .threads = 2, .quadrature = pisco::Quadrature::plain});
   const pisco::Pointing p = random_pointing(60, 9);
   std::vector<double> h(p.size());
   for (std::size_t i = 0; i < h.size(); ++i) h[i] = 0.37 * double(i);

@@ -170,6 +170,7 @@ TEST(KernelOnHost, MatchesTheReferenceAndQueryDisc) {
         }
         const pisco::FocalPlane fp(dets);
         pisco::EngineOptions o;
+        o.quadrature = pisco::Quadrature::plain;  // the kernel itself, against the plain reference
         o.normalization = norm;
         pisco::Engine cpu(s.sky, s.beams, fp, o);
         pisco::Engine cpu_plain(plain.sky, plain.beams, fp, o);  // the anisotropies' scale

@@ -155,7 +155,7 @@ TEST(Unseen, FlagsAreQueryDiscAgainstTheMask) {
   }
   EXPECT_GT(flagged_total, 300u);
   // Without UNSEEN pixels, or another policy, nothing is flagged.
-  pisco::Engine plain(pisco_test::cmb_like_sky(nside, 5), bs, fp, {.unseen = pisco::UnseenPolicy::flag});
+  pisco::Engine plain(pisco_test::cmb_like_sky(nside, 5), bs, fp, {.unseen = pisco::UnseenPolicy::flag, .quadrature = pisco::Quadrature::plain});
   std::vector<std::uint8_t> f(b.size(), 7);
   EXPECT_EQ(plain.flag_samples(0, b.view(), f), 0u);
   EXPECT_EQ(std::count(f.begin(), f.end(), 0), std::ptrdiff_t(f.size()));
@@ -170,9 +170,9 @@ void check_unflagged_independent_of_mask(const std::string& backend, double tole
   pisco::FocalPlane fp;
   fp.add_pair("p", 0, 0, 0);
   const auto bs = beams();
-  pisco::EngineOptions o{.backend = backend, .unseen = pisco::UnseenPolicy::flag};
+  pisco::EngineOptions o{.backend = backend, .unseen = pisco::UnseenPolicy::flag, .quadrature = pisco::Quadrature::plain};
   pisco::Engine masked(masked_sky(mask, pisco::unseen), bs, fp, o);
-  pisco::Engine bright(masked_sky(mask, 1e3), bs, fp, {.backend = backend});
+  pisco::Engine bright(masked_sky(mask, 1e3), bs, fp, {.backend = backend, .quadrature = pisco::Quadrature::plain});
   const pisco::Pointing b = pointings();
   std::vector<double> t0(b.size()), t1(b.size());
   std::vector<std::uint8_t> flags(b.size());
@@ -207,8 +207,8 @@ TEST(Unseen, ZeroPolicyEqualsTheZeroedSky) {
   const auto bs = beams();
   pisco::Sky zeroed = masked_sky(mask, pisco::unseen);
   zeroed.zero_unseen();
-  pisco::Engine a(masked_sky(mask, pisco::unseen), bs, fp, {.unseen = pisco::UnseenPolicy::zero});
-  pisco::Engine b(zeroed, bs, fp);
+  pisco::Engine a(masked_sky(mask, pisco::unseen), bs, fp, {.unseen = pisco::UnseenPolicy::zero, .quadrature = pisco::Quadrature::plain});
+  pisco::Engine b(zeroed, bs, fp, {.quadrature = pisco::Quadrature::plain});
   EXPECT_EQ(a.unseen_pixels(), mask.size());
   const pisco::Pointing p = pointings();
   std::vector<double> ta(p.size()), tb(p.size());

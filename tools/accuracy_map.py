@@ -9,8 +9,8 @@ sample: the truncated Gaussian's transfer functions (Legendre for T, d^l_22 for 
 co-polar axis of Ludwig's third definition is parallel transport along each great circle from the
 axis) applied to the a_lm and evaluated at the samples by ducc0's synthesis_general. Errors are
 relative to the TOD's RMS: the worst per colatitude (from the nearer pole) and the RMS of the random
-samples, for each backend present, with the engine's polar copy (poles="rotated") and without it
-(poles="plain").
+samples, for each backend present, with the engine's corrections (quadrature="corrected") and without
+them (quadrature="plain").
 
 Prints a table; with --out writes accuracy.md (the table), accuracy.json and accuracy.png. With
 --check, exits 1 unless every case with >= 6 pixels per FWHM and a band limit <= 2 NSIDE, on the
@@ -148,8 +148,8 @@ def run(args):
             scale = np.sqrt(np.mean((ref - ref.mean()) ** 2))
             beam = pisco.Beamsor.gaussian(fwhm, rho_max=rho_max)
             for backend in args.backends:
-                for poles in ("rotated", "plain"):
-                    with pisco.Engine(sky, beam, fp, backend=backend, poles=poles) as engine:
+                for poles in ("corrected", "plain"):
+                    with pisco.Engine(sky, beam, fp, backend=backend, quadrature=poles) as engine:
                         d = engine.convolve(0, theta, phi, psi)
                     e = np.abs(d - ref) / scale
                     worst = e[:fixed].reshape(len(COLATITUDES), 2 * PER_COLATITUDE).max(1)
@@ -185,7 +185,7 @@ def figure(rows, path, nside):
         for r in rows:
             if r["band"] != band or r["backend"] != backend:
                 continue
-            style = "-o" if r["poles"] == "rotated" else ":x"
+            style = "-o" if r["poles"] == "corrected" else ":x"
             ax.loglog(x, np.maximum(r["worst"], 1e-9), style, label=f"{r['per_fwhm']:g} px/FWHM, {r['poles']}")
         ax.axhline(1e-4, color="k", lw=0.5)
         ax.set_title(f"band limit {rows[[r['band'] for r in rows].index(band)]['lmax']} ({band:g} NSIDE), {backend}")
@@ -219,7 +219,7 @@ def main():
             f.write(table(rows, args.nside))
         figure(rows, os.path.join(args.out, "accuracy.png"), args.nside)
     if args.check:
-        bad = [r for r in rows if r["poles"] == "rotated" and r["per_fwhm"] >= 6 and r["lmax"] <= 2 * args.nside
+        bad = [r for r in rows if r["poles"] == "corrected" and r["per_fwhm"] >= 6 and r["lmax"] <= 2 * args.nside
                and (max(r["worst"]) > 1e-4 or r["rms"] > 2e-5)]
         plain_pole = [r for r in rows if r["poles"] == "plain" and r["per_fwhm"] >= 6 and r["worst"][0] <= 1e-3]
         for r in bad:

@@ -21,10 +21,13 @@ enum class Normalization {
   per_sample,  // divide each sample by its own discrete sum of Omega_pix B_TT / Omega~
 };
 
-// Samples whose disc reaches near a HEALPix pole (docs/physics.md, "The poles"):
-enum class Poles {
-  rotated,  // summed on a copy of the sky turned by 90 deg, where they lie on its equator (default)
-  plain,    // summed on the sky's own pixels like every other sample
+// The sum over pixels (docs/physics.md, "The quadrature"):
+enum class Quadrature {
+  // corrected where the equal-weight sum is not exact (the default): samples whose disc reaches near
+  // a HEALPix pole summed on a copy of the sky turned by 90 deg, where they lie on its equator, and
+  // the rings where the polar caps meet the belt weighted by 1 - 1/(12 NSIDE)
+  corrected,
+  plain,  // the equal-weight pixel sum everywhere (the paper's)
 };
 
 struct EngineOptions {
@@ -42,10 +45,10 @@ struct EngineOptions {
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
   // hold one.
   UnseenPolicy unseen = UnseenPolicy::error;
-  // The polar copy is made once, when the engine is made: three spherical harmonic transforms per
+  // The polar copy is made once, when the engine is made: two spherical harmonic transforms per
   // iteration of HEALPix's map2alm and one alm rotation at band limit 2 NSIDE, and the backend holds a
   // second sky. A masked sky (UNSEEN pixels) has no band-limited copy: its polar samples stay plain.
-  Poles poles = Poles::rotated;
+  Quadrature quadrature = Quadrature::corrected;
 };
 
 struct BackendInfo {
@@ -111,7 +114,7 @@ class Engine {
   // Beams split into a main part and sidelobes (Beamsor::sidelobes; docs/beams.md, "Sidelobes"): the
   // NSIDE of the band-limited sky their outer parts are summed on; 0 when no beam is split.
   int sidelobe_nside() const noexcept { return outer_nside_; }
-  // Whether samples near the poles are summed on the sky's polar copy (EngineOptions::poles), and how
+  // Whether samples near the poles are summed on the sky's polar copy (EngineOptions::quadrature), and how
   // many submitted so far were.
   bool polar_copy() const noexcept { return polar_backend_ != nullptr; }
   std::uint64_t polar_samples() const noexcept { return polar_samples_; }

@@ -316,6 +316,7 @@ class Engine:
         threads: int = 0,
         arithmetic: str = "auto",
         unseen: UnseenPolicy = "error",
+        quadrature: Literal["corrected", "plain"] = "corrected",
     ) -> None: ...
     def convolve(
         self,

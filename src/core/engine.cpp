@@ -75,13 +75,13 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   // for the set-up only.
   Sky weighted = detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_);
   zeroed.reset();
-  detail::weigh_cap_boundaries(weighted);
+  if (options.quadrature == Quadrature::corrected) detail::weigh_cap_boundaries(weighted);
   inputs_ = std::make_shared<const detail::EngineInputs>(
       detail::prepare_inputs(weighted, beams, focal_plane, options.normalization));
   backend_ = entry.create(inputs_, weighted, options);
 
   // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator.
-  if (options.poles == Poles::rotated && unseen_pixels_ == 0) {
+  if (options.quadrature == Quadrature::corrected && unseen_pixels_ == 0) {
     bool any = false;
     for (const detail::PreparedDetector& d : inputs_->detectors) {
       polar_cut_.push_back(detail::polar_cut(d.rho_max, sky.nside()));
@@ -118,7 +118,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   split_.resize(focal_plane.size());
   for (std::size_t d = 0; d < focal_plane.size(); ++d) split_[d] = beams.at(focal_plane[d].beam).sidelobes() != nullptr;
   Sky coarse = detail::band_limited_sky(sky, outer_nside_, std::min(band, 2 * outer_nside_));
-  detail::weigh_cap_boundaries(coarse);
+  if (options.quadrature == Quadrature::corrected) detail::weigh_cap_boundaries(coarse);
   outer_inputs_ = std::make_shared<const detail::EngineInputs>(
       detail::prepare_inputs(coarse, outer, focal_plane, options.normalization));
   outer_backend_ = entry.create(outer_inputs_, coarse, options);

@@ -7,7 +7,8 @@
 //   For a sky band-limited to 2 NSIDE the copy is exact.
 // - the two rings where the polar caps meet the equatorial belt (z = +-2/3), where the rings' spacing
 //   changes its law: the rule's slope jumps there, and Euler-Maclaurin's term for the jump is
-//   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE).
+//   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE), all
+//   but the monopole the float32 backends sum apart.
 #pragma once
 
 #include <cstddef>
@@ -21,7 +22,8 @@
 
 namespace pisco::detail {
 
-// Multiplies the pixels of rings NSIDE and 3 NSIDE (all four Stokes maps) by 1 - 1/(12 NSIDE).
+// Multiplies the pixels of rings NSIDE and 3 NSIDE (all four Stokes maps, I less the monopole of
+// float32_monopole) by 1 - 1/(12 NSIDE).
 void weigh_cap_boundaries(Sky& sky);
 
 // The rotation R that takes the sky to its polar copy: 90 deg about y, (x, y, z) -> (z, y, -x). The

@@ -47,11 +47,11 @@ UnseenPolicy unseen_policy_from(const std::string& name) {
   throw nb::value_error(("unseen: expected 'error', 'zero' or 'flag', got '" + name + "'").c_str());
 }
 
-// The `poles` argument (Engine): how samples near the HEALPix poles are summed.
-Poles poles_from(const std::string& name) {
-  if (name == "rotated") return Poles::rotated;
-  if (name == "plain") return Poles::plain;
-  throw nb::value_error(("poles: expected 'rotated' or 'plain', got '" + name + "'").c_str());
+// The `quadrature` argument (Engine): the sum over pixels, corrected or plain.
+Quadrature quadrature_from(const std::string& name) {
+  if (name == "corrected") return Quadrature::corrected;
+  if (name == "plain") return Quadrature::plain;
+  throw nb::value_error(("quadrature: expected 'corrected' or 'plain', got '" + name + "'").c_str());
 }
 
 namespace {
@@ -159,7 +159,7 @@ class PyEngine {
  public:
   PyEngine(const Sky& sky, nb::handle beams, const FocalPlane& focal_plane, const std::string& backend,
            const std::string& device, std::size_t chunk_samples, const std::string& normalization,
-           unsigned threads, const std::string& arithmetic, const std::string& unseen, const std::string& poles) {
+           unsigned threads, const std::string& arithmetic, const std::string& unseen, const std::string& quadrature) {
     std::vector<Beamsor> beam_list;
     if (nb::isinstance<Beamsor>(beams)) {
       beam_list.push_back(nb::cast<Beamsor>(beams));
@@ -178,7 +178,7 @@ class PyEngine {
     options.threads = threads;
     options.arithmetic = arithmetic;
     options.unseen = unseen_policy_from(unseen);
-    options.poles = poles_from(poles);
+    options.quadrature = quadrature_from(quadrature);
     for (const auto& d : focal_plane.detectors()) names_.push_back(d.name);
     nb::gil_scoped_release release;
     engine_ = std::make_unique<Engine>(sky, beam_list, focal_plane, options);
@@ -369,7 +369,7 @@ void bind_engine(nb::module_& m) {
                        "then chunks of pointing become TOD.\n\n"
                        "Engine(sky, beams, focal_plane, backend='auto', device='auto', chunk_samples=0,\n"
                        "       normalization='integral', threads=0, arithmetic='auto', unseen='error',\n"
-                       "       poles='rotated')\n\n"
+                       "       quadrature='corrected')\n\n"
                        "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'vulkan',\n"
                        "'cuda' or 'auto' (the best present: pisco.devices()). device: an index or part of a name.\n"
                        "arithmetic (vulkan): 'auto', 'float64' or 'float-float', the kernel's float64 work; 'auto'\n"
@@ -377,14 +377,15 @@ void bind_engine(nb::module_& m) {
                        "unseen: the sky's UNSEEN pixels (a masked map): 'error' (the default: pisco.Error naming\n"
                        "their number and the first), 'zero' (taken as 0), or 'flag' (taken as 0, and\n"
                        "flag_samples() tells which samples' discs hold one).\n"
-                       "poles: 'rotated' (the default: samples near the HEALPix poles are summed on a copy of the sky\n"
-                       "turned by 90 deg, exact for skies band-limited to 2 NSIDE) or 'plain' (on the sky itself).\n"
+                       "quadrature: 'corrected' (the default: samples near the HEALPix poles are summed on a copy of\n"
+                       "the sky turned by 90 deg, exact for skies band-limited to 2 NSIDE, and the rings where the\n"
+                       "polar caps meet the belt weighted) or 'plain' (the equal-weight pixel sum everywhere).\n"
                        "Usable as a context manager; close() frees the device's memory.")
       .def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, std::size_t,
                     const std::string&, unsigned, const std::string&, const std::string&, const std::string&>(),
            "sky"_a, "beams"_a, "focal_plane"_a, "backend"_a = "auto", "device"_a = "auto", "chunk_samples"_a = 0,
            "normalization"_a = "integral", "threads"_a = 0, "arithmetic"_a = "auto", "unseen"_a = "error",
-           "poles"_a = "rotated")
+           "quadrature"_a = "corrected")
       .def("convolve", &PyEngine::convolve, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
            "accumulate"_a = false, "hwp_angle"_a = nb::none(),

@@ -565,8 +565,9 @@ EngineConfig read_engine(Table t) {
   e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
                                 ? pisco::Normalization::integral
                                 : pisco::Normalization::per_sample;
-  e.options.poles = t.choice("poles", "rotated", {"rotated", "plain"}) == "rotated" ? pisco::Poles::rotated
-                                                                                    : pisco::Poles::plain;
+  e.options.quadrature = t.choice("quadrature", "corrected", {"corrected", "plain"}) == "corrected"
+                             ? pisco::Quadrature::corrected
+                             : pisco::Quadrature::plain;
   const unsigned max_threads = pisco::Engine::max_threads();
   e.options.threads = static_cast<unsigned>(t.integer_in(
       "threads", 0, 0, max_threads,
