@@ -431,10 +431,10 @@ def test_masked_sky_policies():
     zeroed = pisco.Sky.from_maps(np.array([masked.I, masked.Q, masked.U]), units="uK_CMB")
     assert zeroed.zero_unseen() == len(mask) and zeroed.unseen_pixels().size == 0
     assert zeroed.I[3000] == 0.0 and zeroed.Q[5000] == 0.0 and zeroed.I[5000] == sky.I[5000]
-    with pisco.Engine(masked, beam, fp, backend="cpu", unseen="zero") as zero, \
-            pisco.Engine(zeroed, beam, fp, backend="cpu") as reference, \
-            pisco.Engine(masked, beam, fp, backend="cpu", unseen="flag") as flag, \
-            pisco.Engine(sky, beam, fp, backend="cpu", unseen="flag") as unmasked:
+    with pisco.Engine(masked, beam, fp, backend="cpu", unseen="zero", quadrature="plain") as zero, \
+            pisco.Engine(zeroed, beam, fp, backend="cpu", quadrature="plain") as reference, \
+            pisco.Engine(masked, beam, fp, backend="cpu", unseen="flag", quadrature="plain") as flag, \
+            pisco.Engine(sky, beam, fp, backend="cpu", unseen="flag", quadrature="plain") as unmasked:
         assert (zero.unseen_pixels, flag.unseen_pixels, unmasked.unseen_pixels) == (len(mask), len(mask), 0)
         for det in range(len(fp)):
             tod = zero.convolve(det, theta, phi, psi)
@@ -454,8 +454,8 @@ def test_flags_are_the_discs_holding_a_masked_pixel():
     sky, masked, beam, fp, (theta, phi, psi) = masked_setup()
     centres = unit_vectors(*ring_pixel_centres(NSIDE_MASKED, MASK_I + MASK_Q))
     bore = np.array([pisco.quat_from_pointing(t, p, s) for t, p, s in zip(theta, phi, psi)])
-    with pisco.Engine(masked, beam, fp, backend="cpu", unseen="flag") as flag, \
-            pisco.Engine(sky, beam, fp, backend="cpu") as unmasked:
+    with pisco.Engine(masked, beam, fp, backend="cpu", unseen="flag", quadrature="plain") as flag, \
+            pisco.Engine(sky, beam, fp, backend="cpu", quadrature="plain") as unmasked:
         for det in range(len(fp)):
             flags = flag.flag_samples(det, theta, phi, psi)
             assert flags.dtype == np.bool_ and flags.shape == theta.shape
