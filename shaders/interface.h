@@ -55,6 +55,7 @@ layout(push_constant) uniform PushConstants {
   PISCO_F64 monopole;        // I0, subtracted from the float32 sky and added back in float64
   PISCO_F64 grid_a;          // half-width of the beam grid (= sin rho_max)
   PISCO_F64 grid_inv_step;   // 1 / node spacing
+  PISCO_F64 ring_weight;     // the monopole's weight on rings NSIDE and 3 NSIDE (src/core/poles.hpp)
   PISCO_F64 offset_quat[4];  // the detector's offset from the boresight (x, y, z, w)
   float grid_a32;
   float grid_inv_step32;
@@ -70,7 +71,7 @@ layout(push_constant) uniform PushConstants {
   uint plate_offset64;    // PLATE: the first texel of the plate's M0 (8 texels, 16 float64 row by row)
 #ifdef __cplusplus
 };
-static_assert(sizeof(PushConstants) == 120, "push constants must match the GLSL block");
+static_assert(sizeof(PushConstants) == 128, "push constants must match the GLSL block");
 }  // namespace pisco::detail::vk
 #else
 } pc;

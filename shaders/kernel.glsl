@@ -60,6 +60,14 @@ PISCO_FN mat4 plate_matrix(vec4 r0, vec4 r1, vec4 r2, vec4 r3, float c, float s)
   return transpose(rot) * m0 * rot;
 }
 
+// Whether pixel p lies on ring NSIDE or 3 NSIDE, where the polar caps meet the belt: the monopole's
+// weight sum counts it with pc.ring_weight (src/core/poles.hpp).
+PISCO_FN bool on_cap_boundary(uint p) {
+  const uint n = pc.nside;
+  const uint north = 2u * n * (n - 1u), south = north + 8u * n * n;
+  return p - north < 4u * n || p - south < 4u * n;
+}
+
 // The pixels [b0, b0 + l0) then [b1, b1 + l1), in one loop.
 PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_INOUT(Sums) acc) {
   const uint jump = b1 - (b0 + l0);  // from the end of the first range to the start of the second
@@ -99,6 +107,7 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
     acc.sum = t;
     if (FLOAT64) {
       const Stencil64 st = stencil64(smp.g, x64, y64);
+      const bool ring = on_cap_boundary(p);
 #if PISCO_FF
       for (int q = 0; q < st.m; ++q) {
         if (PLATE) {
@@ -106,12 +115,14 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
           plate_weight64(st.k[q], wi, wq, wu, wv, wn);
           const vec2 w0 = ff_add(ff_add(ff_mul(wi, smp.m0[0]), ff_mul(wq, smp.m0[1])),
                                  ff_add(ff_mul(wu, smp.m0[2]), ff_mul(wv, smp.m0[3])));
-          acc.s0 = ff_add(acc.s0, ff_mul(st.c[q], w0));
+          const vec2 c0 = ff_mul(st.c[q], w0);
+          acc.s0 = ff_add(acc.s0, ring ? ff_mul(pc.ring_weight, c0) : c0);
           acc.n0 = ff_add(acc.n0, ff_mul(st.c[q], wn));
         } else {
           vec2 wi, wn;
           weight64(st.k[q], wi, wn);
-          acc.s0 = ff_add(acc.s0, ff_mul(st.c[q], wi));
+          const vec2 c0 = ff_mul(st.c[q], wi);
+          acc.s0 = ff_add(acc.s0, ring ? ff_mul(pc.ring_weight, c0) : c0);
           acc.n0 = ff_add(acc.n0, ff_mul(st.c[q], wn));
         }
       }
@@ -123,12 +134,12 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
           w64 += st.c[q] * plate_weight64(st.k[q]);
           n64 += st.c[q] * plate_norm_at(st.k[q]);
         }
-        acc.s0 += dot(w64, smp.m0);
+        acc.s0 += ring ? pc.ring_weight * dot(w64, smp.m0) : dot(w64, smp.m0);
         acc.n0 += n64;
       } else {
         dvec2 w64 = dvec2(0.0lf);
         for (int q = 0; q < st.m; ++q) w64 += st.c[q] * weight64(st.k[q]);
-        acc.s0 += w64.x;
+        acc.s0 += ring ? pc.ring_weight * w64.x : w64.x;
         acc.n0 += w64.y;
       }
 #endif

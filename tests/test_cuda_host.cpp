@@ -97,9 +97,10 @@ struct HostDevice {
     const double i0 = pisco::detail::float32_monopole(maps);
     monopole = i0 != 0.0;
     per_sample = in.normalization == pisco::Normalization::per_sample;
-    pixels = pc::pixel_records(maps, i0);
+    const pisco::detail::CapBoundary boundary = pisco::detail::cap_boundary(maps.nside(), in.quadrature);
+    pixels = pc::pixel_records(maps, i0, boundary);
     vectors = pc::pixel_vectors(maps);
-    sky = {pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0};
+    sky = pc::kernel_sky(pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0, boundary);
     for (const auto& d : in.detectors) {
       weights.push_back(pc::float_weights(d));
       exact.push_back(pc::exact_weights(d));

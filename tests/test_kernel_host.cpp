@@ -97,7 +97,7 @@ void load_sky(const pisco::Sky& sky, const pisco::detail::PreparedSky& prepared,
   std::vector<double> xyz(3 * sky.npix());
   vectors.get(0, sky.npix(), xyz.data(), 2);
   std::vector<float> records(8 * sky.npix()), lo(4 * sky.npix());
-  vk::pack_sky(sky, mode.monopole, 0, sky.npix(), xyz.data(), records.data());
+  vk::pack_sky(sky, mode, 0, sky.npix(), xyz.data(), records.data());
   vk::pack_sky_lo(sky.npix(), xyz.data(), lo.data());
   glsl::sky = texels(records);
   glsl::sky_lo = texels(lo);

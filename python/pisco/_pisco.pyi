@@ -367,6 +367,10 @@ class Engine:
     @property
     def device(self) -> str: ...
     @property
+    def polar_samples(self) -> int:
+        """Samples summed so far on the sky's polar copy (quadrature='corrected')."""
+
+    @property
     def mean_disc_pixels(self) -> float: ...
     @property
     def sidelobe_nside(self) -> int: ...

@@ -64,6 +64,15 @@ const BackendEntry& choose_backend(const std::string& name) {
 }  // namespace
 }  // namespace detail
 
+namespace {
+std::shared_ptr<const detail::EngineInputs> prepared(const Sky& sky, const std::vector<Beamsor>& beams,
+                                                     const FocalPlane& focal_plane, const EngineOptions& options) {
+  detail::EngineInputs in = detail::prepare_inputs(sky, beams, focal_plane, options.normalization);
+  in.quadrature = options.quadrature;
+  return std::make_shared<const detail::EngineInputs>(std::move(in));
+}
+}  // namespace
+
 Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
                const EngineOptions& options)
     : focal_plane_(focal_plane) {
@@ -76,8 +85,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   Sky weighted = detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_);
   zeroed.reset();
   if (options.quadrature == Quadrature::corrected) detail::weigh_cap_boundaries(weighted);
-  inputs_ = std::make_shared<const detail::EngineInputs>(
-      detail::prepare_inputs(weighted, beams, focal_plane, options.normalization));
+  inputs_ = prepared(weighted, beams, focal_plane, options);
   backend_ = entry.create(inputs_, weighted, options);
 
   // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator.
@@ -91,8 +99,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
     }
     if (any) {
       const Sky polar = detail::polar_sky(sky);
-      polar_inputs_ = std::make_shared<const detail::EngineInputs>(
-          detail::prepare_inputs(polar, beams, focal_plane, options.normalization));
+      polar_inputs_ = prepared(polar, beams, focal_plane, options);
       polar_backend_ = entry.create(polar_inputs_, polar, options);
     }
   }
@@ -119,8 +126,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   for (std::size_t d = 0; d < focal_plane.size(); ++d) split_[d] = beams.at(focal_plane[d].beam).sidelobes() != nullptr;
   Sky coarse = detail::band_limited_sky(sky, outer_nside_, std::min(band, 2 * outer_nside_));
   if (options.quadrature == Quadrature::corrected) detail::weigh_cap_boundaries(coarse);
-  outer_inputs_ = std::make_shared<const detail::EngineInputs>(
-      detail::prepare_inputs(coarse, outer, focal_plane, options.normalization));
+  outer_inputs_ = prepared(coarse, outer, focal_plane, options);
   outer_backend_ = entry.create(outer_inputs_, coarse, options);
 }
 

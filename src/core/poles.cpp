@@ -11,25 +11,25 @@
 #include <healpix_map.h>
 #include <xcomplex.h>
 
-#include "core/prepared.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail {
 
+CapBoundary cap_boundary(int nside, Quadrature quadrature) {
+  const std::uint32_t n = static_cast<std::uint32_t>(nside);
+  CapBoundary b;
+  b.north = 2 * n * (n - 1);
+  b.south = b.north + 8 * n * n;
+  b.count = 4 * n;
+  b.weight = quadrature == Quadrature::corrected ? 1.0 - 1.0 / (12.0 * double(n)) : 1.0;
+  return b;
+}
+
 void weigh_cap_boundaries(Sky& sky) {
-  const std::size_t n = static_cast<std::size_t>(sky.nside());
-  const double w = 1.0 - 1.0 / (12.0 * double(n));
-  // The monopole I0 the float32 backends take out (prepared.hpp) is left as it is: weighted, it would
-  // put -I0 / (12 NSIDE) on those rings, which the float32 weights' own rounding (1e-6 relative)
-  // turns into 1e-4 of micro-kelvin anisotropies.
-  const double i0 = float32_monopole(sky);
-  for (const std::size_t first : {2 * n * (n - 1), 2 * n * (n - 1) + 8 * n * n})
-    for (std::size_t p = first; p < first + 4 * n; ++p) {
-      sky.I()[p] = i0 + w * (sky.I()[p] - i0);
-      sky.Q()[p] *= w;
-      sky.U()[p] *= w;
-      sky.V()[p] *= w;
-    }
+  const CapBoundary b = cap_boundary(sky.nside(), Quadrature::corrected);
+  for (const std::size_t first : {std::size_t(b.north), std::size_t(b.south)})
+    for (auto map : {sky.I(), sky.Q(), sky.U(), sky.V()})
+      for (std::size_t p = first; p < first + b.count; ++p) map[p] *= b.weight;
 }
 
 int polar_band_limit(int nside) { return nside == 1 ? 2 : 2 * nside; }

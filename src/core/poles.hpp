@@ -7,23 +7,38 @@
 //   For a sky band-limited to 2 NSIDE the copy is exact.
 // - the two rings where the polar caps meet the equatorial belt (z = +-2/3), where the rings' spacing
 //   changes its law: the rule's slope jumps there, and Euler-Maclaurin's term for the jump is
-//   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE), all
-//   but the monopole the float32 backends sum apart.
+//   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE).
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <span>
 #include <vector>
 
 #include "core/backend.hpp"
 #include "core/frame.hpp"
+#include "pisco/engine.hpp"
 #include "pisco/quaternion.hpp"
 #include "pisco/sky.hpp"
 
 namespace pisco::detail {
 
-// Multiplies the pixels of rings NSIDE and 3 NSIDE (all four Stokes maps, I less the monopole of
-// float32_monopole) by 1 - 1/(12 NSIDE).
+// The rings NSIDE and 3 NSIDE as pixel ranges [north, north + count), [south, south + count), and
+// their weight: 1 - 1/(12 NSIDE) with Quadrature::corrected, 1 with plain. The float32 backends, which
+// take the monopole I0 out of the sky (prepared.hpp), take weight x I0 out of those pixels and add
+// I0 sum_k weight(k) w_I(k) back in float64, so that the monopole is weighted too without putting
+// -I0 / (12 NSIDE) into float32 (whose weights' own rounding would turn it into 1e-4 of
+// micro-kelvin anisotropies).
+struct CapBoundary {
+  std::uint32_t north = 0, south = 0, count = 0;
+  double weight = 1.0;
+  double at(std::size_t pixel) const {
+    return pixel - north < count || pixel - south < count ? weight : 1.0;
+  }
+};
+CapBoundary cap_boundary(int nside, Quadrature quadrature);
+
+// Multiplies the pixels of rings NSIDE and 3 NSIDE (all four Stokes maps) by 1 - 1/(12 NSIDE).
 void weigh_cap_boundaries(Sky& sky);
 
 // The rotation R that takes the sky to its polar copy: 90 deg about y, (x, y, z) -> (z, y, -x). The

@@ -71,6 +71,7 @@ struct EngineInputs {
   PreparedSky sky;
   std::vector<PreparedDetector> detectors;
   Normalization normalization = Normalization::integral;
+  Quadrature quadrature = Quadrature::plain;  // the engine sets its own (core/poles.hpp)
 };
 
 PreparedSky prepare_sky(const Sky& sky);

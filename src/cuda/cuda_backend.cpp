@@ -52,10 +52,11 @@ class CudaBackend final : public Backend {
     const bool exact = monopole_term_ || per_sample_;
 
     // Each host table lives only until its upload.
-    pixels_ = upload(pixel_records(maps, monopole));
+    const CapBoundary boundary = cap_boundary(maps.nside(), in_->quadrature);
+    pixels_ = upload(pixel_records(maps, monopole, boundary));
     if (exact) vectors_ = upload(pixel_vectors(maps));
     rings_ = upload(sky.rings);
-    sky_ = {pixels_.data(), vectors_.data(), rings_.data(), sky.nside, monopole};
+    sky_ = kernel_sky(pixels_.data(), vectors_.data(), rings_.data(), sky.nside, monopole, boundary);
 
     for (const PreparedDetector& d : in_->detectors) {
       DetectorData data;

@@ -6,7 +6,12 @@
 
 namespace pisco::detail::cuda {
 
-std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole) {
+KernelSky kernel_sky(const PixelRecord* pixels, const double* vectors, const RingEntry* rings, int nside,
+                     double monopole, const CapBoundary& boundary) {
+  return {pixels, vectors, rings, nside, monopole, boundary.north, boundary.south, boundary.count, boundary.weight};
+}
+
+std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole, const CapBoundary& boundary) {
   const std::size_t npix = sky.npix();
   std::vector<PixelRecord> out(npix);
   const PixelVectors vectors(sky.nside());
@@ -17,7 +22,7 @@ std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole) {
     vectors.get(first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
     for (std::size_t j = 0; j < n; ++j) {
       const std::size_t i = first + j;
-      out[i] = {float(xyz[3 * j]), float(xyz[3 * j + 1]), float(xyz[3 * j + 2]), float(sky.I()[i] - monopole),
+      out[i] = {float(xyz[3 * j]), float(xyz[3 * j + 1]), float(xyz[3 * j + 2]), float(sky.I()[i] - monopole * boundary.at(i)),
                 float(sky.Q()[i]),  float(sky.U()[i]),      float(sky.V()[i]),      0.0f};
     }
   }

@@ -43,7 +43,11 @@ struct KernelSky {
   const double* vectors;  // 4 doubles per pixel (kx, ky, kz, 0); only for the float64 sums
   const RingEntry* rings;
   std::int64_t nside;
-  double monopole;        // I0, removed from PixelRecord::i
+  double monopole;        // I0, removed from PixelRecord::i (times ring_weight on the two rings below)
+  // The rings where the polar caps meet the belt, [ring_north, + ring_count) and [ring_south,
+  // + ring_count), and the monopole's weight on them (core/poles.hpp).
+  std::uint32_t ring_north, ring_south, ring_count;
+  double ring_weight;
 };
 
 struct KernelDetector {
@@ -162,15 +166,18 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
       else
         interpolate_weights(det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
       if constexpr (Monopole) {
+        const double ring =
+            p - sky.ring_north < sky.ring_count || p - sky.ring_south < sky.ring_count ? sky.ring_weight : 1.0;
         if constexpr (Plate) {
           double wp[4];  // (w_Q, w_U, w_V, 0)
           if constexpr (Radial)
             interpolate_radial(det.plate_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wp);
           else
             interpolate_weights(det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wp);
-          acc.monopole += w[0] * plate->col0[0] + wp[0] * plate->col0[1] + wp[1] * plate->col0[2] + wp[2] * plate->col0[3];
+          acc.monopole += ring * (w[0] * plate->col0[0] + wp[0] * plate->col0[1] + wp[1] * plate->col0[2] +
+                                  wp[2] * plate->col0[3]);
         } else {
-          acc.monopole += w[0];
+          acc.monopole += ring * w[0];
         }
       }
       if constexpr (PerSample) acc.norm += w[1];

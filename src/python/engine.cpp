@@ -301,6 +301,7 @@ class PyEngine {
   std::string backend_name() { return locked([](Engine& e) { return e.backend_name(); }); }
   std::string device_name() { return locked([](Engine& e) { return e.device_name(); }); }
   double mean_disc_pixels() { return locked([](Engine& e) { return e.mean_disc_pixels(); }); }
+  std::uint64_t polar_samples() { return locked([](Engine& e) { return e.polar_samples(); }); }
   int sidelobe_nside() { return locked([](Engine& e) { return e.sidelobe_nside(); }); }
   std::size_t unseen_pixels() { return locked([](Engine& e) { return e.unseen_pixels(); }); }
   FocalPlane focal_plane() { return locked([](Engine& e) { return e.focal_plane(); }); }
@@ -418,6 +419,9 @@ void bind_engine(nb::module_& m) {
       .def_prop_ro("device", &PyEngine::device_name, "The device in use.")
       .def_prop_ro("sidelobe_nside", &PyEngine::sidelobe_nside,
                    "The NSIDE of the band-limited sky the split beams' outer parts are summed on (0: no split beam).")
+      .def_prop_ro("polar_samples", &PyEngine::polar_samples,
+                   "Samples summed so far on the sky's polar copy (quadrature='corrected': those whose disc\n"
+                   "reaches near a HEALPix pole).")
       .def_prop_ro("mean_disc_pixels", &PyEngine::mean_disc_pixels,
                    "Mean number of sky pixels summed per sample so far.")
       .def_prop_ro("unseen_pixels", &PyEngine::unseen_pixels,

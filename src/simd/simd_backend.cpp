@@ -106,6 +106,7 @@ class SimdBackend final : public Backend {
         kernel_(simd::choose_kernel(requested_target(options.device))),
         ring_columns_(in_->sky.rings) {
     monopole_ = float32_monopole(sky);
+    boundary_ = cap_boundary(sky.nside(), in_->quadrature);
     per_sample_ = in_->normalization == Normalization::per_sample;
     exact_ = monopole_ != 0.0 || per_sample_;
     pack_sky(sky);
@@ -151,7 +152,7 @@ class SimdBackend final : public Backend {
         kx_[p] = float(xyz[3 * j]);
         ky_[p] = float(xyz[3 * j + 1]);
         kz_[p] = float(xyz[3 * j + 2]);
-        i_[p] = float(sky.I()[p] - monopole_);
+        i_[p] = float(sky.I()[p] - monopole_ * boundary_.at(p));
         q_[p] = float(sky.Q()[p]);
         u_[p] = float(sky.U()[p]);
         v_[p] = float(sky.V()[p]);
@@ -164,7 +165,8 @@ class SimdBackend final : public Backend {
         }
     }
     sky_ = {kx_.data(), ky_.data(), kz_.data(), i_.data(), q_.data(), u_.data(), v_.data(),
-            exact_ ? vx_.data() : nullptr, exact_ ? vy_.data() : nullptr, exact_ ? vz_.data() : nullptr, monopole_};
+            exact_ ? vx_.data() : nullptr, exact_ ? vy_.data() : nullptr, exact_ ? vz_.data() : nullptr, monopole_,
+            boundary_};
   }
 
   // Samples [begin, end) of one chunk; returns the number of pixels evaluated. The frame and the
@@ -204,6 +206,7 @@ class SimdBackend final : public Backend {
   simd::Kernel kernel_;
   simd::RingColumns ring_columns_;
   double monopole_ = 0.0;
+  CapBoundary boundary_;
   bool per_sample_ = false, exact_ = false;
   std::vector<float> kx_, ky_, kz_, i_, q_, u_, v_;
   std::vector<double> vx_, vy_, vz_;  // float64 path only

@@ -200,7 +200,8 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
         detail::interpolate_radial(det.weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
       else
         detail::interpolate_weights(det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
-      if (in.monopole) monopole += Plate ? w[0] * col0[0] + w[1] * col0[1] + w[2] * col0[2] + w[3] * col0[3] : w[0];
+      if (in.monopole)
+        monopole += sky.boundary.at(p + l) * (Plate ? w[0] * col0[0] + w[1] * col0[1] + w[2] * col0[2] + w[3] * col0[3] : w[0]);
       if (in.per_sample) {
         double wn[4];
         if (Radial)
@@ -284,6 +285,9 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
           w = hn::Mul(w, mcol[0]);
           for (int a = 1; a < 4; ++a) w = hn::Add(w, hn::Mul(column(det.pairs64[a]), mcol[a]));
         }
+        // Pixels [p, p + count) lie in one ring: its weight, where the caps meet the belt.
+        const double ring = sky.boundary.at(p);
+        if (ring != 1.0) w = hn::Mul(w, hn::Set(dd, ring));
         mono_acc = hn::Add(mono_acc, hn::IfThenElseZero(inside, w));
       }
       if (in.per_sample) norm_acc = hn::Add(norm_acc, hn::IfThenElseZero(inside, column(det.pairs64[4])));

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "core/poles.hpp"
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
 
@@ -37,6 +38,9 @@ struct KernelSky {
   const double* vy;
   const double* vz;
   double monopole;        // I0
+  // The rings where the polar caps meet the belt and their weight (core/poles.hpp): the monopole's
+  // weight sum counts their pixels with it.
+  detail::CapBoundary boundary;
 };
 
 // A detector's weights: the float32 table (float32_weights) as records of two columns, columns 0

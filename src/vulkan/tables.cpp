@@ -60,17 +60,18 @@ KernelMode kernel_mode(const EngineInputs& in, const Sky& sky, bool ff) {
   m.monopole = float32_monopole(sky);
   m.per_sample = in.normalization == Normalization::per_sample;
   m.float64 = m.monopole != 0.0 || m.per_sample;
+  m.boundary = cap_boundary(sky.nside(), in.quadrature);
   return m;
 }
 
-void pack_sky(const Sky& sky, double monopole, std::size_t first, std::size_t n, const double* xyz, float* out) {
+void pack_sky(const Sky& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out) {
   for (std::size_t j = 0; j < n; ++j) {
     const std::size_t p = first + j;
     float* rec = out + 8 * j;
     rec[0] = float(xyz[3 * j]);
     rec[1] = float(xyz[3 * j + 1]);
     rec[2] = float(xyz[3 * j + 2]);
-    rec[3] = float(sky.I()[p] - monopole);
+    rec[3] = float(sky.I()[p] - mode.monopole * mode.boundary.at(p));
     rec[4] = float(sky.Q()[p]);
     rec[5] = float(sky.U()[p]);
     rec[6] = float(sky.V()[p]);
@@ -147,6 +148,7 @@ PushConstants push_constants(const EngineInputs& in, const Grids& grids, const K
   push.rho_max = det.rho_max;
   push.cos_rho_max = det.cos_rho_max;
   push.monopole = mode.monopole;
+  push.ring_weight = mode.boundary.weight;
   push.grid_a = det.grid_a;
   push.grid_inv_step = det.grid_inv_step;
   push.offset_quat[0] = det.offset.quat.x;
@@ -165,7 +167,7 @@ PushConstants push_constants(const EngineInputs& in, const Grids& grids, const K
   push.flags = (mode.per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) | (quaternions || mode.ff ? PISCO_FLAG_QUATERNION : 0u) |
                (det.offset.active ? PISCO_FLAG_OFFSET : 0u);
   if (mode.ff)
-    for (double* x : {&push.rho_max, &push.cos_rho_max, &push.monopole, &push.grid_a, &push.grid_inv_step,
+    for (double* x : {&push.rho_max, &push.cos_rho_max, &push.monopole, &push.ring_weight, &push.grid_a, &push.grid_inv_step,
                       &push.offset_quat[0], &push.offset_quat[1], &push.offset_quat[2], &push.offset_quat[3]})
       *x = ff_bits(*x);
   return push;

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/poles.hpp"
 #include "core/backend.hpp"
 #include "core/prepared.hpp"
 #include "interface.h"
@@ -34,13 +35,14 @@ struct KernelMode {
   bool ff = false;        // every float64 number as a float-float pair (the convolve_ff kernel)
   double monopole = 0.0;  // I0, taken out of the float32 sky (docs/vulkan.md, "Precision")
   bool per_sample = false;
+  CapBoundary boundary;   // the rings where the caps meet the belt (core/poles.hpp)
   // The kernel needs the float64 pixel vectors (sky_lo): on the float64 path, and always in float-float.
   bool vectors64() const { return float64 || ff; }
 };
 KernelMode kernel_mode(const EngineInputs& in, const Sky& sky, bool ff);
 
 // Pixels [first, first + n): 8 floats each (kx, ky, kz, I - I0, Q, U, V, 0), from their unit vectors xyz.
-void pack_sky(const Sky& sky, double monopole, std::size_t first, std::size_t n, const double* xyz, float* out);
+void pack_sky(const Sky& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out);
 // 4 floats a pixel: k - float(k), 0.
 void pack_sky_lo(std::size_t n, const double* xyz, float* out);
 // One texel a ring: z (two words), first pixel, count | shifted << 31.

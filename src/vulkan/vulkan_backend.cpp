@@ -144,7 +144,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
       [&](std::size_t first, std::size_t n, void* dst) {
         xyz.resize(3 * n);
         vectors.get(first, n, xyz.data(), threads);
-        vk::pack_sky(sky_maps, mode_.monopole, first, n, xyz.data(), static_cast<float*>(dst));
+        vk::pack_sky(sky_maps, mode_, first, n, xyz.data(), static_cast<float*>(dst));
       },
       "the sky");
   sky_lo_ = upload_records(

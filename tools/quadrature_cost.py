@@ -1,0 +1,64 @@
+#!/usr/bin/env python3
+"""What the corrected quadrature costs (docs/physics.md, "The quadrature"; BENCHMARKS.md).
+
+For each NSIDE: a band-limited random sky (lmax 2 NSIDE), a 6-pixel-per-FWHM Gaussian beam (rho_max 2.5
+FWHM), one detector; the engine made with quadrature="plain" and with "corrected" (the polar copy: map2alm
+with 5 iterations, rotate_alm, alm2map, and a second sky in the backend), then the same N random
+pointings over the sphere through each (the fraction near the poles that a uniform scan has). Prints the
+set-up and convolution times, their ratios, the samples on the polar copy and the sky memory of each,
+measured in one run.
+
+Run with the Python package built in build/ (scripts/run-tests.sh builds it into build/python):
+    PYTHONPATH=build/python build/python-venv/bin/python tools/quadrature_cost.py [--backend simd] [--nside 256 512]
+"""
+
+import argparse
+import math
+import time
+
+import healpy as hp
+import numpy as np
+
+import pisco
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--backend", default="simd")
+    ap.add_argument("--nside", type=int, nargs="+", default=[256, 512, 1024])
+    ap.add_argument("--samples", type=int, default=200_000)
+    args = ap.parse_args()
+    rng = np.random.default_rng(1)
+    fp = pisco.FocalPlane()
+    fp.add("d")
+    theta = np.arccos(1 - 2 * rng.random(args.samples))
+    phi = 2 * math.pi * rng.random(args.samples)
+    psi = 2 * math.pi * rng.random(args.samples)
+    print(f"backend {args.backend}, {args.samples:,} random pointings, 6 pixels per FWHM, rho_max 2.5 FWHM")
+    print("| NSIDE | quadrature | set-up | convolution | total | polar samples | sky bytes per pixel |")
+    print("|---|---|---|---|---|---|---|")
+    for nside in args.nside:
+        lmax = 2 * nside
+        cl = 1.0 / (1.0 + (np.arange(lmax + 1) / 30.0) ** 2)
+        maps = hp.synfast([cl, 0.3 * cl, 0.1 * cl, 0 * cl], nside, lmax=lmax, new=True)
+        sky = pisco.Sky.from_maps(np.ascontiguousarray(maps))
+        fwhm = 6 * math.sqrt(math.pi / 3) / nside
+        beam = pisco.Beamsor.gaussian(fwhm, rho_max=2.5 * fwhm)
+        times = {}
+        for quadrature in ("plain", "corrected"):
+            t0 = time.perf_counter()
+            with pisco.Engine(sky, beam, fp, backend=args.backend, quadrature=quadrature) as engine:
+                t1 = time.perf_counter()
+                engine.convolve(0, theta, phi, psi)
+                t2 = time.perf_counter()
+                polar = engine.polar_samples
+            times[quadrature] = (t1 - t0, t2 - t1)
+            per_pixel = 32 * (2 if quadrature == "corrected" else 1)
+            print(f"| {nside} | {quadrature} | {t1 - t0:.2f} s | {t2 - t1:.2f} s | {t2 - t0:.2f} s | {polar:,} | "
+                  f"{per_pixel} |", flush=True)
+        (sp, cp), (sc, cc) = times["plain"], times["corrected"]
+        print(f"|  | corrected / plain | {sc / sp:.2f} | {cc / cp:.2f} | {(sc + cc) / (sp + cp):.2f} |  |  |")
+
+
+if __name__ == "__main__":
+    main()
