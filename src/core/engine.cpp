@@ -65,10 +65,17 @@ const BackendEntry& choose_backend(const std::string& name) {
 }  // namespace detail
 
 namespace {
+// The cap-boundary weights (core/poles.hpp) with the integral normalization only: a per-sample
+// normalization divides each sample by its own discrete beam sum, in which the boundary rings' term
+// cancels for a uniform sky, as that normalization promises (gain exactly 1).
+bool weighs_cap_boundaries(const EngineOptions& options) {
+  return options.quadrature == Quadrature::corrected && options.normalization == Normalization::integral;
+}
+
 std::shared_ptr<const detail::EngineInputs> prepared(const Sky& sky, const std::vector<Beamsor>& beams,
                                                      const FocalPlane& focal_plane, const EngineOptions& options) {
   detail::EngineInputs in = detail::prepare_inputs(sky, beams, focal_plane, options.normalization);
-  in.quadrature = options.quadrature;
+  in.quadrature = weighs_cap_boundaries(options) ? Quadrature::corrected : Quadrature::plain;
   return std::make_shared<const detail::EngineInputs>(std::move(in));
 }
 }  // namespace
@@ -84,7 +91,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   // for the set-up only.
   Sky weighted = detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_);
   zeroed.reset();
-  if (options.quadrature == Quadrature::corrected) detail::weigh_cap_boundaries(weighted);
+  if (weighs_cap_boundaries(options)) detail::weigh_cap_boundaries(weighted);
   inputs_ = prepared(weighted, beams, focal_plane, options);
   backend_ = entry.create(inputs_, weighted, options);
 
@@ -98,7 +105,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
       any = any || polar_cut_.back() > 0.0;
     }
     if (any) {
-      const Sky polar = detail::polar_sky(sky);
+      const Sky polar = detail::polar_sky(sky, weighs_cap_boundaries(options));
       polar_inputs_ = prepared(polar, beams, focal_plane, options);
       polar_backend_ = entry.create(polar_inputs_, polar, options);
     }
@@ -125,7 +132,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   split_.resize(focal_plane.size());
   for (std::size_t d = 0; d < focal_plane.size(); ++d) split_[d] = beams.at(focal_plane[d].beam).sidelobes() != nullptr;
   Sky coarse = detail::band_limited_sky(sky, outer_nside_, std::min(band, 2 * outer_nside_));
-  if (options.quadrature == Quadrature::corrected) detail::weigh_cap_boundaries(coarse);
+  if (weighs_cap_boundaries(options)) detail::weigh_cap_boundaries(coarse);
   outer_inputs_ = prepared(coarse, outer, focal_plane, options);
   outer_backend_ = entry.create(outer_inputs_, coarse, options);
 }

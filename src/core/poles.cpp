@@ -34,7 +34,7 @@ void weigh_cap_boundaries(Sky& sky) {
 
 int polar_band_limit(int nside) { return nside == 1 ? 2 : 2 * nside; }
 
-Sky polar_sky(const Sky& sky, int iterations) {
+Sky polar_sky(const Sky& sky, bool weigh_boundaries, int iterations) {
   const int nside = sky.nside(), lmax = polar_band_limit(nside);
   auto map_of = [&](std::span<const double> v) {
     Healpix_Map<double> m(nside, RING, SET_NSIDE);
@@ -61,7 +61,7 @@ Sky polar_sky(const Sky& sky, int iterations) {
       alm2map(v, ov);
       std::copy(&ov[0], &ov[0] + ov.Npix(), out.V().begin());
     }
-    weigh_cap_boundaries(out);
+    if (weigh_boundaries) weigh_cap_boundaries(out);
     return out;
   } catch (const PlanckError& err) {
     throw Error(std::string("the sky's polar copy: HEALPix: ") + err.what());
