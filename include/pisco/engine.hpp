@@ -45,9 +45,10 @@ struct EngineOptions {
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
   // hold one.
   UnseenPolicy unseen = UnseenPolicy::error;
-  // The polar copy is made once, when the engine is made: two spherical harmonic transforms per
-  // iteration of HEALPix's map2alm and one alm rotation at band limit 2 NSIDE, and the backend holds a
-  // second sky. A masked sky (UNSEEN pixels) has no band-limited copy: its polar samples stay plain.
+  // The polar copy is made once, when a submission first has a sample near a pole (until then the
+  // engine keeps a copy of the sky): HEALPix's map2alm with 3 iterations and one alm rotation at band
+  // limit 2 NSIDE (7 s at NSIDE 512 on two cores, 55 s at 1024), and the backend holds a second sky.
+  // A masked sky (UNSEEN pixels) has no band-limited copy: its polar samples stay plain.
   Quadrature quadrature = Quadrature::corrected;
 };
 
@@ -63,6 +64,7 @@ struct BackendInfo {
 
 namespace detail {
 class Backend;
+struct BackendEntry;
 struct EngineInputs;
 }  // namespace detail
 
@@ -116,7 +118,7 @@ class Engine {
   int sidelobe_nside() const noexcept { return outer_nside_; }
   // Whether samples near the poles are summed on the sky's polar copy (EngineOptions::quadrature), and how
   // many submitted so far were.
-  bool polar_copy() const noexcept { return polar_backend_ != nullptr; }
+  bool polar_copy() const noexcept { return polar_backend_ != nullptr || polar_source_ != nullptr; }
   std::uint64_t polar_samples() const noexcept { return polar_samples_; }
 
   // Backends compiled into the library, with availability on this machine.
@@ -163,7 +165,10 @@ class Engine {
   std::uint64_t outer_ticket_ = 1;
   // Samples near the poles: their pointing turned onto the polar copy's equator and summed there,
   // run as each submission is made and written over the main backend's when it completes.
-  std::shared_ptr<const detail::EngineInputs> polar_inputs_;
+  // The copy is made from polar_source_ (then released) by the backend entry_ when first needed.
+  std::unique_ptr<Sky> polar_source_;
+  const detail::BackendEntry* entry_ = nullptr;
+  EngineOptions options_;
   std::unique_ptr<detail::Backend> polar_backend_;
   std::vector<double> polar_cut_, offset_angle_;  // per prepared detector (row detectors included)
   std::uint64_t polar_ticket_ = 1, polar_samples_ = 0;

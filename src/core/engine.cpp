@@ -104,10 +104,13 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
       offset_angle_.push_back(std::acos(std::clamp(z, -1.0, 1.0)) + 1e-9);
       any = any || polar_cut_.back() > 0.0;
     }
+    // Made when a submission first has such a sample (a ground scan far from the poles never pays
+    // for it): until then the engine keeps a copy of the sky, and how to make the backend. The
+    // detectors and the ring table are the main backend's.
     if (any) {
-      const Sky polar = detail::polar_sky(sky, weighs_cap_boundaries(options));
-      polar_inputs_ = prepared(polar, beams, focal_plane, options);
-      polar_backend_ = entry.create(polar_inputs_, polar, options);
+      polar_source_ = std::make_unique<Sky>(sky);
+      entry_ = &entry;
+      options_ = options;
     }
   }
 
@@ -195,8 +198,13 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = pending->plate_angle;
   std::uint64_t ticket = 0;
   const bool split = !split_.empty() && split_[detector];
-  const bool polar = polar_backend_ && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
-                                                                  polar_cut_.at(detector), pending->polar);
+  const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
+                                                                polar_cut_.at(detector), pending->polar);
+  if (polar && !polar_backend_) {
+    const Sky copy = detail::polar_sky(*polar_source_, weighs_cap_boundaries(options_));
+    polar_backend_ = entry_->create(inputs_, copy, options_);
+    polar_source_.reset();
+  }
   try {
     if (det.plate == detail::PreparedDetector::Plate::detector) {
       // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
