@@ -2,11 +2,12 @@
 """What the corrected quadrature costs (docs/physics.md, "The quadrature"; BENCHMARKS.md).
 
 For each NSIDE: a band-limited random sky (lmax 2 NSIDE), a 6-pixel-per-FWHM Gaussian beam (rho_max 2.5
-FWHM), one detector; the engine made with quadrature="plain" and with "corrected" (the polar copy: map2alm
-with 5 iterations, rotate_alm, alm2map, and a second sky in the backend), then the same N random
-pointings over the sphere through each (the fraction near the poles that a uniform scan has). Prints the
-set-up and convolution times, their ratios, the samples on the polar copy and the sky memory of each,
-measured in one run.
+FWHM), one detector; the engine made with quadrature="plain" and with "corrected", then the same N random
+pointings over the sphere through each (the fraction near the poles that a uniform scan has). The
+corrected engine makes its polar copy (map2alm with ring weights and 3 iterations, rotate_alm, alm2map,
+and a second sky in the backend) during the first convolution that needs it: its convolution time
+includes it. Prints the set-up and convolution times, their ratios, the samples on the polar copy and
+the sky memory of each, measured in one run.
 
 Run with the Python package built in build/ (scripts/run-tests.sh builds it into build/python):
     PYTHONPATH=build/python build/python-venv/bin/python tools/quadrature_cost.py [--backend simd] [--nside 256 512]
@@ -35,7 +36,7 @@ def main():
     phi = 2 * math.pi * rng.random(args.samples)
     psi = 2 * math.pi * rng.random(args.samples)
     print(f"backend {args.backend}, {args.samples:,} random pointings, 6 pixels per FWHM, rho_max 2.5 FWHM")
-    print("| NSIDE | quadrature | set-up | convolution | total | polar samples | sky bytes per pixel |")
+    print("| NSIDE | quadrature | engine made | convolution (polar copy made) | total | polar samples | sky bytes per pixel |")
     print("|---|---|---|---|---|---|---|")
     for nside in args.nside:
         lmax = 2 * nside
