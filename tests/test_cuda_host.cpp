@@ -11,6 +11,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "core/poles.hpp"
 #include "core/prepared.hpp"
 #include "cuda/chunk.hpp"
 #include "cuda/device_choice.hpp"
@@ -100,7 +101,7 @@ struct HostDevice {
     const pisco::detail::CapBoundary boundary = pisco::detail::cap_boundary(maps.nside(), in.quadrature);
     pixels = pc::pixel_records(maps, i0, boundary);
     vectors = pc::pixel_vectors(maps);
-    sky = pc::kernel_sky(pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0, boundary);
+    sky = {pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0, boundary};
     for (const auto& d : in.detectors) {
       weights.push_back(pc::float_weights(d));
       exact.push_back(pc::exact_weights(d));

@@ -1,17 +1,14 @@
-// Samples near the HEALPix poles on a turned copy of the sky (docs/physics.md, "The poles").
+// Samples near the HEALPix poles on a turned copy of the sky, and the cap-boundary rings
+// (docs/physics.md, "The quadrature").
 #include "core/poles.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 
-#include <alm.h>
-#include <alm_healpix_tools.h>
 #include <alm_powspec_tools.h>
-#include <healpix_data_io.h>
-#include <healpix_map.h>
-#include <xcomplex.h>
 
+#include "core/sky_alm.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail {
@@ -36,42 +33,12 @@ void weigh_cap_boundaries(Sky& sky) {
 int polar_band_limit(int nside) { return nside == 1 ? 2 : 2 * nside; }
 
 Sky polar_sky(const Sky& sky, bool weigh_boundaries, int iterations) {
-  const int nside = sky.nside(), lmax = polar_band_limit(nside);
-  auto map_of = [&](std::span<const double> v) {
-    Healpix_Map<double> m(nside, RING, SET_NSIDE);
-    std::copy(v.begin(), v.end(), &m[0]);
-    return m;
-  };
   try {
-    // HEALPix's ring weights (healpy-data) make each iteration about 20 times more accurate: 3 of them
-    // recover a sky band-limited to 2 NSIDE to 2e-7 of its largest a_lm, as 5 without them do.
-    arr<double> weight;
-    try {
-      read_weight_ring(PISCO_HEALPY_DATA_DIR, nside, weight);
-      for (tsize i = 0; i < weight.size(); ++i) weight[i] += 1.0;  // the files hold w - 1
-    } catch (const PlanckError&) {
-      weight.alloc(static_cast<tsize>(2 * nside));
-      weight.fill(1.0);
-    }
-    Alm<xcomplex<double>> t(lmax, lmax), e(lmax, lmax), b(lmax, lmax);
-    const auto mt = map_of(sky.I()), mq = map_of(sky.Q()), mu = map_of(sky.U());
-    map2alm_pol_iter(mt, mq, mu, t, e, b, iterations, weight);
+    SkyAlm a = sky_alm(sky, polar_band_limit(sky.nside()), iterations, true);
     // S'(R p) = S(p) for R = 90 deg about y: HEALPix's Euler angles (psi, theta, phi) = (0, pi/2, 0).
-    rotate_alm(t, e, b, 0.0, std::numbers::pi / 2, 0.0);
-    Healpix_Map<double> ot(nside, RING, SET_NSIDE), oq(nside, RING, SET_NSIDE), ou(nside, RING, SET_NSIDE);
-    alm2map_pol(t, e, b, ot, oq, ou);
-    Sky out(nside, sky.units());
-    std::copy(&ot[0], &ot[0] + ot.Npix(), out.I().begin());
-    std::copy(&oq[0], &oq[0] + oq.Npix(), out.Q().begin());
-    std::copy(&ou[0], &ou[0] + ou.Npix(), out.U().begin());
-    if (std::any_of(sky.V().begin(), sky.V().end(), [](double x) { return x != 0.0; })) {
-      Alm<xcomplex<double>> v(lmax, lmax);
-      map2alm_iter(map_of(sky.V()), v, iterations, weight);
-      rotate_alm(v, 0.0, std::numbers::pi / 2, 0.0);
-      Healpix_Map<double> ov(nside, RING, SET_NSIDE);
-      alm2map(v, ov);
-      std::copy(&ov[0], &ov[0] + ov.Npix(), out.V().begin());
-    }
+    rotate_alm(a.t, a.e, a.b, 0.0, std::numbers::pi / 2, 0.0);
+    if (a.has_v) rotate_alm(a.v, 0.0, std::numbers::pi / 2, 0.0);
+    Sky out = sky_from_alm(a, sky.nside(), sky.units());
     if (weigh_boundaries) weigh_cap_boundaries(out);
     return out;
   } catch (const PlanckError& err) {

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/backend.hpp"
+#include "core/cap_boundary.hpp"
 #include "core/frame.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/quaternion.hpp"
@@ -23,19 +24,7 @@
 
 namespace pisco::detail {
 
-// The rings NSIDE and 3 NSIDE as pixel ranges [north, north + count), [south, south + count), and
-// their weight: 1 - 1/(12 NSIDE) with Quadrature::corrected, 1 with plain. The float32 backends, which
-// take the monopole I0 out of the sky (prepared.hpp), take weight x I0 out of those pixels and add
-// I0 sum_k weight(k) w_I(k) back in float64, so that the monopole is weighted too without putting
-// -I0 / (12 NSIDE) into float32 (whose weights' own rounding would turn it into 1e-4 of
-// micro-kelvin anisotropies).
-struct CapBoundary {
-  std::uint32_t north = 0, south = 0, count = 0;
-  double weight = 1.0;
-  double at(std::size_t pixel) const {
-    return pixel - north < count || pixel - south < count ? weight : 1.0;
-  }
-};
+// The cap-boundary rings of `nside` (cap_boundary.hpp) with the weight of `quadrature`.
 CapBoundary cap_boundary(int nside, Quadrature quadrature);
 
 // Multiplies the pixels of rings NSIDE and 3 NSIDE (all four Stokes maps) by 1 - 1/(12 NSIDE).

@@ -6,11 +6,8 @@
 #include <cmath>
 #include <numbers>
 
-#include <alm.h>
-#include <alm_healpix_tools.h>
-#include <healpix_map.h>
-#include <xcomplex.h>
 
+#include "core/sky_alm.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail {
@@ -37,17 +34,8 @@ Sky band_limited_sky(const Sky& sky, int nside, int l_pass) {
   if (nside == sky.nside()) return sky;
   const int l_stop = std::min(2 * nside, 3 * sky.nside() - 1);
   const int lmax = l_stop;
-  auto map_of = [&](std::span<const double> v, int n) {
-    Healpix_Map<double> m(n, RING, SET_NSIDE);
-    std::copy(v.begin(), v.end(), &m[0]);
-    return m;
-  };
   try {
-    Alm<xcomplex<double>> t(lmax, lmax), e(lmax, lmax), b(lmax, lmax), v(lmax, lmax);
-    const auto mt = map_of(sky.I(), sky.nside()), mq = map_of(sky.Q(), sky.nside()), mu = map_of(sky.U(), sky.nside());
-    map2alm_pol_iter(mt, mq, mu, t, e, b, 3);
-    const bool has_v = std::any_of(sky.V().begin(), sky.V().end(), [](double x) { return x != 0.0; });
-    if (has_v) map2alm_iter(map_of(sky.V(), sky.nside()), v, 3);
+    SkyAlm a = sky_alm(sky, lmax, 3, false);
     std::vector<double> window(static_cast<std::size_t>(lmax) + 1, 0.0);
     for (int l = 0; l <= lmax; ++l) {
       if (l <= l_pass) window[static_cast<std::size_t>(l)] = 1.0;
@@ -56,23 +44,12 @@ Sky band_limited_sky(const Sky& sky, int nside, int l_pass) {
     for (int m = 0; m <= lmax; ++m)
       for (int l = m; l <= lmax; ++l) {
         const double w = window[static_cast<std::size_t>(l)];
-        t(l, m) *= w;
-        e(l, m) *= w;
-        b(l, m) *= w;
-        v(l, m) *= w;
+        a.t(l, m) *= w;
+        a.e(l, m) *= w;
+        a.b(l, m) *= w;
+        a.v(l, m) *= w;
       }
-    Healpix_Map<double> ot(nside, RING, SET_NSIDE), oq(nside, RING, SET_NSIDE), ou(nside, RING, SET_NSIDE);
-    alm2map_pol(t, e, b, ot, oq, ou);
-    Sky out(nside, sky.units());
-    std::copy(&ot[0], &ot[0] + ot.Npix(), out.I().begin());
-    std::copy(&oq[0], &oq[0] + oq.Npix(), out.Q().begin());
-    std::copy(&ou[0], &ou[0] + ou.Npix(), out.U().begin());
-    if (has_v) {
-      Healpix_Map<double> ov(nside, RING, SET_NSIDE);
-      alm2map(v, ov);
-      std::copy(&ov[0], &ov[0] + ov.Npix(), out.V().begin());
-    }
-    return out;
+    return sky_from_alm(a, nside, sky.units());
   } catch (const PlanckError& err) {
     throw Error(std::string("the sidelobes' band-limited sky: HEALPix: ") + err.what());
   }

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <memory>
 
+#include "core/poles.hpp"
 #include "core/backend.hpp"
 #include "core/streaming.hpp"
 #include "cuda/buffer.hpp"
@@ -56,7 +57,7 @@ class CudaBackend final : public Backend {
     pixels_ = upload(pixel_records(maps, monopole, boundary));
     if (exact) vectors_ = upload(pixel_vectors(maps));
     rings_ = upload(sky.rings);
-    sky_ = kernel_sky(pixels_.data(), vectors_.data(), rings_.data(), sky.nside, monopole, boundary);
+    sky_ = {pixels_.data(), vectors_.data(), rings_.data(), sky.nside, monopole, boundary};
 
     for (const PreparedDetector& d : in_->detectors) {
       DetectorData data;

@@ -6,11 +6,6 @@
 
 namespace pisco::detail::cuda {
 
-KernelSky kernel_sky(const PixelRecord* pixels, const double* vectors, const RingEntry* rings, int nside,
-                     double monopole, const CapBoundary& boundary) {
-  return {pixels, vectors, rings, nside, monopole, boundary.north, boundary.south, boundary.count, boundary.weight};
-}
-
 std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole, const CapBoundary& boundary) {
   const std::size_t npix = sky.npix();
   std::vector<PixelRecord> out(npix);

@@ -5,7 +5,6 @@
 
 #include <vector>
 
-#include "core/poles.hpp"
 #include "core/prepared.hpp"
 #include "cuda/sample.hpp"
 
@@ -13,11 +12,8 @@ namespace pisco::detail::cuda {
 
 
 // One record per pixel, I - monopole in float32.
-// The sky's pixels with monopole x boundary.at(p) taken out of I (core/poles.hpp).
+// The sky's pixels with monopole x boundary.at(p) taken out of I (core/cap_boundary.hpp).
 std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole, const CapBoundary& boundary = {});
-// The kernel's view of the sky: the tables' device (or host) pointers and the monopole's rings.
-KernelSky kernel_sky(const PixelRecord* pixels, const double* vectors, const RingEntry* rings, int nside,
-                     double monopole, const CapBoundary& boundary);
 
 // 4 doubles per pixel (kx, ky, kz, 0), the unit vectors of the reference.
 std::vector<double> pixel_vectors(const Sky& sky);

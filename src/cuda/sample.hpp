@@ -20,6 +20,7 @@
 
 #include <cstdint>
 
+#include "core/cap_boundary.hpp"
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
 #include "core/frame.hpp"
@@ -43,11 +44,8 @@ struct KernelSky {
   const double* vectors;  // 4 doubles per pixel (kx, ky, kz, 0); only for the float64 sums
   const RingEntry* rings;
   std::int64_t nside;
-  double monopole;        // I0, removed from PixelRecord::i (times ring_weight on the two rings below)
-  // The rings where the polar caps meet the belt, [ring_north, + ring_count) and [ring_south,
-  // + ring_count), and the monopole's weight on them (core/poles.hpp).
-  std::uint32_t ring_north, ring_south, ring_count;
-  double ring_weight;
+  double monopole;        // I0, removed from PixelRecord::i (times boundary.at(p))
+  CapBoundary boundary;   // the rings where the polar caps meet the belt: the monopole's weight there
 };
 
 struct KernelDetector {
@@ -166,8 +164,7 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
       else
         interpolate_weights(det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
       if constexpr (Monopole) {
-        const double ring =
-            p - sky.ring_north < sky.ring_count || p - sky.ring_south < sky.ring_count ? sky.ring_weight : 1.0;
+        const double ring = sky.boundary.at(p);
         if constexpr (Plate) {
           double wp[4];  // (w_Q, w_U, w_V, 0)
           if constexpr (Radial)

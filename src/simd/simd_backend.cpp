@@ -14,6 +14,7 @@
 #include <thread>
 #include <utility>
 
+#include "core/poles.hpp"
 #include "core/backend.hpp"
 #include "core/disc.hpp"
 #include "core/frame.hpp"

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "core/poles.hpp"
+#include "core/cap_boundary.hpp"
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
 
@@ -38,7 +38,7 @@ struct KernelSky {
   const double* vy;
   const double* vz;
   double monopole;        // I0
-  // The rings where the polar caps meet the belt and their weight (core/poles.hpp): the monopole's
+  // The rings where the polar caps meet the belt and their weight (core/cap_boundary.hpp): the monopole's
   // weight sum counts their pixels with it.
   detail::CapBoundary boundary;
 };

@@ -5,6 +5,7 @@
 #include <numbers>
 
 #include "core/disc.hpp"
+#include "core/poles.hpp"
 #include "pisco/quaternion.hpp"
 
 namespace pisco::detail::vk {

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/poles.hpp"
+#include "core/cap_boundary.hpp"
 #include "core/backend.hpp"
 #include "core/prepared.hpp"
 #include "interface.h"
@@ -35,7 +35,7 @@ struct KernelMode {
   bool ff = false;        // every float64 number as a float-float pair (the convolve_ff kernel)
   double monopole = 0.0;  // I0, taken out of the float32 sky (docs/vulkan.md, "Precision")
   bool per_sample = false;
-  CapBoundary boundary;   // the rings where the caps meet the belt (core/poles.hpp)
+  CapBoundary boundary;   // the rings where the caps meet the belt (core/cap_boundary.hpp)
   // The kernel needs the float64 pixel vectors (sky_lo): on the float64 path, and always in float-float.
   bool vectors64() const { return float64 || ff; }
 };
