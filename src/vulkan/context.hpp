@@ -18,7 +18,7 @@ namespace pisco::detail::vk {
 
 class Instance {
  public:
-  // The process's instance, created on first use. Throws pisco::Error when no Vulkan loader exists
+  // The process's instance, created on first use and kept until the process ends. Throws pisco::Error when no Vulkan loader exists
   // or the validation layer is asked for and missing.
   static std::shared_ptr<Instance> get();
   ~Instance();
