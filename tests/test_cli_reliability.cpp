@@ -5,6 +5,9 @@
 
 #include <cmath>
 #include <csignal>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <filesystem>
 #include <fstream>
 #include <numeric>
@@ -49,6 +52,12 @@ class Reliability : public ::testing::Test {
                      const std::string& engine = "") {
     return sky + "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n" + fp + scan +
            "[engine]\nbackend = \"cpu\"\n" + engine + "[output]\n" + extra;
+  }
+  // A run of a few seconds that writes its TOD as it goes (for signals mid-run).
+  std::string long_config() {
+    return config("[sky]\nnside = 64\nlmax = 128\nseed = 3\n", "[scan]\ntype = \"pixel_centres\"\nnside = 128\n",
+                  "plots = false\n", "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n",
+                  "chunk_samples = 20000\n");
   }
   // A stand-in for tools/pisco_plot.py, under a data directory of its own (PISCO_DATA_DIR).
   fs::path fake_plotter(const std::string& python) {
@@ -198,15 +207,14 @@ TEST_F(Reliability, FullDiskOnASmallFileSystem) {
   EXPECT_GE(failures, 10);
 }
 
-// SIGINT, SIGTERM and SIGHUP in the middle of a convolution end the run within a second or so, with
-// status 128 + signal and no file left (the TOD temporary included).
+// Every signal that ends a process by default and can be caught, in the middle of a convolution,
+// ends the run within a second or so with status 128 + signal, one line, no file left (the TOD
+// temporary included) and no directory: the run made its output directory, and takes it back.
+// SIGPIPE and SIGXFSZ come here by kill(); the tests below cause them as the kernel does.
 TEST_F(Reliability, StopSignalsEndTheRunAndRemoveTemporaries) {
-  const fs::path cfg = write("long.toml", config("[sky]\nnside = 64\nlmax = 128\nseed = 3\n",
-                                                 "[scan]\ntype = \"pixel_centres\"\nnside = 128\n", "plots = false\n",
-                                                 "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n",
-                                                 "chunk_samples = 20000\n"));
-  for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
-    const fs::path out = dir_ / ("out-" + std::to_string(sig));
+  const fs::path cfg = write("long.toml", long_config());
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, SIGUSR2, SIGALRM, SIGPIPE, SIGXFSZ}) {
+    const fs::path out = dir_ / ("out-" + std::to_string(sig)) / "run";
     auto p = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()});
     bool sent = false;
     std::chrono::steady_clock::time_point sent_at;
@@ -221,11 +229,102 @@ TEST_F(Reliability, StopSignalsEndTheRunAndRemoveTemporaries) {
     std::cout << strsignal(sig) << ": " << r.describe() << " " << took << " s after the signal; "
               << r.output.substr(r.output.rfind("pisco-vk:")) ;
     ASSERT_TRUE(sent) << "the run ended before its TOD temporary appeared:\n" << r.output;
-    EXPECT_TRUE(r.exited && r.status == 128 + sig) << r.describe();
+    EXPECT_TRUE(r.exited && r.status == 128 + sig) << strsignal(sig) << ": " << r.describe();
     EXPECT_LT(took, 3.0);
-    EXPECT_TRUE(files_under(out).empty()) << "left: " << joined(files_under(out));
+    EXPECT_FALSE(fs::exists(out.parent_path())) << "left: " << joined(files_under(out));
     EXPECT_TRUE(contains(r.output, "stopped by SIG")) << r.output;
   }
+}
+
+// nohup: a SIGHUP ignored by the parent stays ignored (the run goes on), while SIGTERM still stops it.
+TEST_F(Reliability, AnIgnoredHangupStaysIgnored) {
+  const fs::path cfg = write("long.toml", long_config());
+  const fs::path out = dir_ / "out";
+  struct sigaction ignore{}, old{};
+  ignore.sa_handler = SIG_IGN;
+  ::sigaction(SIGHUP, &ignore, &old);  // inherited through posix_spawn, as nohup leaves it
+  auto p = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()});
+  ::sigaction(SIGHUP, &old, nullptr);
+  int phase = 0;
+  std::chrono::steady_clock::time_point hup_at;
+  const CliResult r = pisco_test::finish_cli(p, 120, [&](const std::string&) {
+    if (phase == 0 && !temporaries_under(out).empty()) {
+      ::kill(p.pid, SIGHUP);
+      hup_at = std::chrono::steady_clock::now();
+      phase = 1;
+    } else if (phase == 1 && std::chrono::steady_clock::now() - hup_at > std::chrono::milliseconds(500)) {
+      ::kill(p.pid, SIGTERM);  // still running half a second after the hangup
+      phase = 2;
+    }
+  });
+  EXPECT_EQ(phase, 2) << "the run ended " << (phase == 1 ? "after SIGHUP" : "before its TOD temporary appeared") << ":\n"
+                      << r.output;
+  EXPECT_TRUE(r.exited && r.status == 128 + SIGTERM) << r.describe() << "\n" << r.output;
+  EXPECT_FALSE(contains(r.output, "SIGHUP")) << r.output;
+}
+
+// The file size limit (ulimit -f): the write that crosses it raises SIGXFSZ in the writing thread,
+// which ends the run as any stop signal does.
+TEST_F(Reliability, TheFileSizeLimitEndsTheRunCleanly) {
+  const fs::path cfg = write("long.toml", long_config());
+  const fs::path out = dir_ / "out";
+  rlimit old{};
+  ::getrlimit(RLIMIT_FSIZE, &old);
+  rlimit limit = old;
+  limit.rlim_cur = 200000;  // bytes: within the TOD file
+  ::setrlimit(RLIMIT_FSIZE, &limit);
+  auto p = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()});
+  ::setrlimit(RLIMIT_FSIZE, &old);
+  const CliResult r = pisco_test::finish_cli(p, 120);
+  EXPECT_TRUE(r.exited && r.status == 128 + SIGXFSZ) << r.describe() << "\n" << r.output;
+  EXPECT_TRUE(contains(r.output, "stopped by SIGXFSZ (the file size limit)")) << r.output;
+  EXPECT_FALSE(fs::exists(out)) << "left: " << joined(files_under(out));
+}
+
+// A closed standard error (the reader of a pipe gone): the first message written raises SIGPIPE,
+// which ends the run (status 141) without a file left.
+TEST_F(Reliability, AClosedPipeEndsTheRunCleanly) {
+  const fs::path cfg = write("long.toml", long_config());
+  const fs::path out = dir_ / "out";
+  auto p = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()});
+  ::close(p.out);  // nobody reads stdout and stderr any more
+  p.out = -1;
+  int status = 0;
+  const auto start = std::chrono::steady_clock::now();
+  while (::waitpid(p.pid, &status, WNOHANG) == 0 && std::chrono::steady_clock::now() - start < std::chrono::seconds(60))
+    ::usleep(20000);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 128 + SIGPIPE)
+      << "status " << status << (WIFSIGNALED(status) ? std::string(", killed by ") + strsignal(WTERMSIG(status)) : "");
+  EXPECT_FALSE(fs::exists(out)) << "left: " << joined(files_under(out));
+}
+
+// One run per output directory: a second run into it is refused, naming the first's process, and
+// leaves the first's files alone; a temporary file of a killed run is removed by the next run there.
+TEST_F(Reliability, OneRunPerDirectoryAndStaleTemporariesRemoved) {
+  const fs::path cfg = write("long.toml", long_config());
+  const fs::path out = dir_ / "out";
+  auto first = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()});
+  bool tried = false;
+  CliResult second;
+  const CliResult r = pisco_test::finish_cli(first, 120, [&](const std::string&) {
+    if (tried || temporaries_under(out).empty()) return;
+    second = run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {}, 60);
+    tried = true;
+    ::kill(first.pid, SIGKILL);  // as a crash or the OOM killer would: the temporary stays
+  });
+  ASSERT_TRUE(tried) << r.output;
+  EXPECT_TRUE(second.exited && second.status == 2 && second.error_lines() == 1 &&
+              contains(second.error_line(), "another pisco-vk run (process " + std::to_string(first.pid) + ")"))
+      << second.describe() << "\n" << second.output;
+  const auto stale = temporaries_under(out);
+  ASSERT_FALSE(stale.empty()) << "the killed run left no temporary file";
+  // The next run takes the lock the kernel released, and removes what the killed run left.
+  const CliResult third = run_cli({"run", "-q", "--no-plots", cfg.string(), "-o", out.string()}, {}, 120);
+  EXPECT_TRUE(third.exited && third.status == 0) << third.describe() << "\n" << third.output;
+  EXPECT_TRUE(contains(third.output, "a temporary file left by process " + std::to_string(first.pid) + ", which has ended"))
+      << third.output;
+  EXPECT_TRUE(temporaries_under(out).empty()) << joined(temporaries_under(out));
+  EXPECT_FALSE(fs::exists(out / ".pisco-vk.lock"));
 }
 
 // A stop signal while the plotting tool runs reaches it: it removes its temporary PNG, and pisco-vk

@@ -96,6 +96,9 @@ std::string variant(const std::string& name) {
     return with_table(c, "[scan]", "type = \"ces\"\nsample_rate_hz = 2\nduration_hours = 0.02\naz_throw_deg = 40\nnside = 8\n");
   if (name == "satellite")
     return with_table(c, "[scan]", "type = \"satellite\"\nsample_rate_hz = 2\nduration_hours = 0.05\nnside = 8\n");
+  if (name == "ces_rotating")  // the boresight turned through several angles
+    return with_table(c, "[scan]", "type = \"ces\"\nsample_rate_hz = 2\nduration_hours = 0.02\naz_throw_deg = 40\n"
+                                   "nside = 8\nboresight_deg = [-45, 0, 45]\nboresight_period_hours = 0.01\n");
   if (name == "scan_file") return with_table(c, "[scan]", "type = \"file\"\nfile = \"bore.h5\"\n");
   // Half-wave plates: a rotating plate (the scan has no time: the table gives the rate), one by
   // frequency, a stepped one, a Mueller matrix of its own, detectors of their own with plates, and the
@@ -108,6 +111,7 @@ std::string variant(const std::string& name) {
     return c + "[hwp]\nmodel = \"mueller\"\nmueller = [1, 0.01, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1]\n"
                "rpm = 10\nsample_rate_hz = 2\n";
   if (name == "hwp_detectors") return variant("detectors") + plate;
+  if (name == "hwp_ces") return variant("ces") + "[hwp]\nrpm = 10\n";  // the scan's own sample rate
   if (name == "hwp_file") return with_table(c, "[scan]", "type = \"file\"\nfile = \"bore_hwp.h5\"\n") + "[hwp]\n";
   ADD_FAILURE() << "no variant " << name;
   return c;
@@ -218,19 +222,22 @@ std::vector<Key> keys() {
       {"ces", scan, "elevation_deg", K::number, {"0", "90", "-10"}},
       {"ces", scan, "az_centre_deg", K::number, {}},
       {"ces", scan, "az_throw_deg", K::number, {"-1"}},
-      {"ces", scan, "az_speed_deg_s", K::number, {"0", "-1"}},
+      {"ces", scan, "az_speed_deg_s", K::number, {"0", "-1", "1e300"}},
       {"ces", scan, "sample_rate_hz", K::number, {"0", "-1"}},
-      {"ces", scan, "start", K::string, {"\"yesterday\"", "\"2019-13-01T00:00:00Z\"", "\"2019-06-01T25:00:00Z\""}},
+      {"ces", scan, "start", K::string, {"\"yesterday\"", "\"2019-13-01T00:00:00Z\"", "\"2019-06-01T25:00:00Z\"",
+                                         "\"99999999999-01-01T00:00:00Z\"", "\"2019-06-01T00:00:nanZ\"",
+                                         "\"2019-06-01T-1:00:00Z\""}},
       {"ces", scan, "duration_hours", K::number, {"0", "-1", "1e12", "1e-9"}},
       {"ces", scan, "boresight_deg", K::numbers, {}},
-      {"ces", scan, "boresight_period_hours", K::number, {"0", "-1"}},
+      {"ces", scan, "boresight_period_hours", K::number, {"0", "-1", "1.7e308"}},
+      {"ces_rotating", scan, "boresight_period_hours", K::number, {"1e-12"}},
       {"ces", scan, "nside", K::integer, {"0", "6"}},
       {"satellite", scan, "spin_sun_angle_deg", K::number, {"-1", "181"}},
       {"satellite", scan, "spin_boresight_angle_deg", K::number, {"0", "180", "-5"}},
-      {"satellite", scan, "precession_period_min", K::number, {"0", "-1"}},
-      {"satellite", scan, "spin_period_min", K::number, {"0", "-1"}},
+      {"satellite", scan, "precession_period_min", K::number, {"0", "-1", "1.7e308", "1e-12"}},
+      {"satellite", scan, "spin_period_min", K::number, {"0", "-1", "1.7e308", "1e-9"}},
       {"satellite", scan, "sample_rate_hz", K::number, {"0", "-1"}},
-      {"satellite", scan, "start_time_s", K::number, {}},
+      {"satellite", scan, "start_time_s", K::number, {"1e20", "-1e20"}},
       {"satellite", scan, "precession_phase_deg", K::number, {}},
       {"satellite", scan, "spin_phase_deg", K::number, {}},
       {"satellite", scan, "frame", K::choice, {}},
@@ -240,13 +247,16 @@ std::vector<Key> keys() {
       {"hwp_mueller", hwp, "mueller", K::numbers, {"[1, 0, 0]", "[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1, 0]"}},
       {"hwp", hwp, "placement", K::choice, {}},
       {"hwp", hwp, "mapmaker", K::choice, {}},
-      {"hwp", hwp, "rpm", K::number, {}},
-      {"hwp_frequency", hwp, "frequency_hz", K::number, {}},
+      {"hwp", hwp, "rpm", K::number, {"1e300", "-1e300", "1e10"}},
+      {"hwp_frequency", hwp, "frequency_hz", K::number, {"1e300", "5"}},
+      {"hwp_ces", hwp, "rpm", K::number, {"1e300"}},
+      {"hwp_ces", hwp, "start_time_s", K::number, {"1e300", "1e20"}},
       {"hwp", hwp, "phase_deg", K::number, {}},
       {"hwp_steps", hwp, "steps_deg", K::numbers, {}},
-      {"hwp_steps", hwp, "step_seconds", K::number, {"0", "-1"}},
+      {"hwp_steps", hwp, "step_seconds", K::number, {"0", "-1", "1e-9", "1e-300"}},
       {"hwp", hwp, "sample_rate_hz", K::number, {"0", "-2"}},
-      {"hwp", hwp, "start_time_s", K::number, {}},
+      {"hwp", hwp, "start_time_s", K::number, {"1e20"}},
+      {"hwp_steps", hwp, "start_time_s", K::number, {"1e283"}},
       {"hwp", pair, "hwp", K::boolean, {}},
       {"hwp", pair, "hwp_gamma_deg", K::number, {}},
       {"hwp", pair, "hwp_mueller", K::numbers, {"[1, 0, 0, 0]"}},
@@ -342,7 +352,9 @@ class Robustness : public ::testing::Test {
     const fs::path out = dir_ / "out";
     fs::remove_all(out);
     const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {}, 60);
-    const auto left = pisco_test::files_under(out);
+    auto left = pisco_test::files_under(out);
+    // The directory the run made is gone again, with its lock file.
+    if (fs::exists(out)) left.push_back(out.filename().string() + "/ (the directory itself)");
     const bool ok = r.exited && r.status == 2 && r.error_lines() == 1 && left.empty() &&
                     (needle.empty() || contains(r.error_line(), needle));
     ++cases_;
@@ -381,7 +393,8 @@ TEST_F(Robustness, VariantsRun) {
   for (const std::string v : {"base", "r", "point", "file_sky", "elliptical", "file_beam", "grasp_beam", "blm_beam",
                               "split", "detectors", "pair_ab",
                               "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file", "hwp",
-                              "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file"}) {
+                              "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file", "ces_rotating",
+                              "hwp_ces"}) {
     const fs::path cfg = write("variant.toml", variant(v));
     const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "variant-out").string()}, {}, 60);
     EXPECT_TRUE(r.exited && r.status == 0) << v << ": " << r.describe() << "\n" << r.output << "\n" << variant(v);
@@ -505,6 +518,44 @@ TEST_F(Robustness, MalformedFocalPlaneTables) {
     write("fp.toml", text);
     expect_clean_error("fp.toml: " + text.substr(0, 30), toml_cfg, needle);
   }
+}
+
+// Messages that name what is wrong: a misspelt key as unknown (with the nearest known key) even where
+// the key it stands for is required, control characters from a file escaped, a byte-order mark
+// skipped, a focal-plane table without beams where there are several, an empty -o.
+TEST_F(Robustness, MessagesNameWhatIsWrong) {
+  const std::string c = base_config;
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {with_table(c, "[sky]", "nsid = 8\nlmax = 16\n"), "[sky] unknown key 'nsid' (did you mean 'nside'?)"},
+      {with_table(c, "[beams.main]", "type = \"gaussian\"\nfwhm = 10.0\nrho_max_deg = 20.0\n"),
+       "[beams.main] unknown key 'fwhm' (did you mean 'fwhm_deg'?)"},
+      {with_table(c, "[beams.main]", "type = \"gaussian\"\nfwhm_deg = 10.0\nrho_max_dg = 20.0\n"),
+       "unknown key 'rho_max_dg' (did you mean 'rho_max_deg'?)"},
+      {without_table(c, "[scan]") + "[scna]\ntype = \"pixel_centres\"\n", "unknown key 'scna' (did you mean 'scan'?)"},
+      {with_key(c, "[output]", "plots_x", "false"), "unknown key 'plots_x' (did you mean 'plots'?)"},
+      {with_key(c, "[output]", "colour", "1"), "[output] unknown key 'colour'"},
+  };
+  for (const auto& [text, needle] : cases) expect_clean_error(needle, text, needle);
+
+  // A control character from a file: shown as \x1B, never written raw to the terminal.
+  const std::string fp_cfg = variant("fp_file");
+  write("fp.csv", "name\x1b[31m,beam\nd,main\n");
+  expect_clean_error("an escape sequence in a CSV header", fp_cfg, "unknown column 'name\\x1B[31m'");
+  // Several beams, no beam column: an error, not every detector on the first beam.
+  write("fp.csv", "name,zeta_deg\nd1,0\nd2,90\n");
+  expect_clean_error("no beam column with two beams",
+                     fp_cfg + "[beams.side]\ntype = \"gaussian\"\nfwhm_deg = 8.0\nrho_max_deg = 16.0\n",
+                     "the header needs a 'beam' column: the configuration defines 2 beams");
+  // A byte-order mark (spreadsheets write one): read as the header's first column.
+  write("fp.csv", "\xEF\xBB\xBFname,zeta_deg,beam\nd1,0,main\nd2,90,main\n");
+  const fs::path cfg = write("bom.toml", fp_cfg);
+  const CliResult bom = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "bom-out").string()}, {}, 60);
+  EXPECT_TRUE(bom.exited && bom.status == 0) << bom.describe() << "\n" << bom.output;
+  // -o "": an error, not the configuration's directory.
+  const CliResult empty = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", ""}, {}, 60);
+  EXPECT_TRUE(empty.exited && empty.status == 2 && empty.error_lines() == 1 &&
+              contains(empty.error_line(), "-o/--output: expected a directory name, got an empty string"))
+      << empty.describe() << "\n" << empty.output;
 }
 
 // FITS inputs (sky maps and beamsor files): truncated, with broken headers, NaN and UNSEEN pixels,

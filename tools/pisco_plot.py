@@ -150,8 +150,12 @@ def main():
     parser.add_argument("--dpi", type=int, default=100)
     parser.add_argument("--no-gnomview", action="store_true")
     args = parser.parse_args()
-    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(s, on_signal)
+    # The signals that would end the process: its temporary file removed first. One ignored when the
+    # plot started (nohup) stays ignored.
+    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2,
+              signal.SIGALRM):
+        if signal.getsignal(s) != signal.SIG_IGN:
+            signal.signal(s, on_signal)
     try:
         import matplotlib
         matplotlib.use("Agg")

@@ -52,7 +52,11 @@ struct HwpAngleStream {
   // Throws pisco::Error naming the field (non-finite values, sample_rate <= 0, stepped without angles
   // or with step_seconds <= 0).
   void check() const;
-  // Angles of samples [first, first + count) into out (resized), each computed from its own time.
+  // check(), and what float64 carries over `samples` samples (docs/formats.md, "Times, rates and
+  // angles"): sample times, the rotation's angle, the step count. Throws pisco::Error naming the field.
+  void check(std::size_t samples) const;
+  // Angles of samples [first, first + count) into out (resized), each computed from its own time;
+  // check(first + count) first.
   void generate(std::size_t first, std::size_t count, std::vector<double>& out) const;
 };
 

@@ -5,6 +5,7 @@
 
 #include "core/prepared.hpp"
 #include "pisco/error.hpp"
+#include "pisco/time_ranges.hpp"
 #include "pisco/scan.hpp"
 
 namespace pisco {
@@ -29,6 +30,20 @@ void CesScan::check() const {
   require(!boresight_angles.empty(), "boresight_angles must not be empty");
   for (double b : boresight_angles) require(std::isfinite(b), "boresight_angles must be finite");
   require(boresight_period > 0 && std::isfinite(boresight_period), "boresight_period must be positive");
+  // What float64 carries over the run (docs/formats.md, "Times, rates and angles"): the sample times
+  // (Unix), the azimuth (from the run's start), the Earth's rotation (from Unix times) and the count
+  // of boresight periods.
+  const double duration = double(samples) / sample_rate;
+  const std::string times = sample_time_problem(start_unix, double(samples), sample_rate);
+  require(times.empty(), "start, sample_rate and samples: " + times);
+  const std::string az = turning_problem(az_speed, duration, sample_rate);
+  require(az.empty(), "az_speed: " + az);
+  const std::string earth = turning_problem(7.2921159e-5, std::abs(start_unix) + duration, sample_rate);
+  require(earth.empty(), "the Earth's rotation: " + earth);
+  if (boresight_angles.size() > 1) {
+    const std::string steps = stepping_problem(boresight_period, duration, sample_rate);
+    require(steps.empty(), "boresight_period: " + steps);
+  }
 }
 
 double CesScan::azimuth(std::size_t i) const {
@@ -69,8 +84,11 @@ void CesScan::generate(std::size_t first, std::size_t count, Pointing& out) cons
     const double zx = cl * std::cos(lst), zy = cl * std::sin(lst), zz = sl;
     const double up_theta = zx * ct * cp + zy * ct * sp - zz * st;  // Z . theta^
     const double up_phi = -zx * sp + zy * cp;                       // Z . phi^
-    const std::size_t day = static_cast<std::size_t>(std::floor(double(i) / sample_rate / boresight_period));
-    const double boresight = boresight_angles[day % boresight_angles.size()];
+    // check() keeps the count of boresight periods below 2^52, so the conversion is exact.
+    const double day = std::floor(double(i) / sample_rate / boresight_period);
+    const double boresight =
+        boresight_angles.size() == 1 ? boresight_angles[0]
+                                     : boresight_angles[static_cast<std::size_t>(day) % boresight_angles.size()];
     out.push_back(theta, phi, std::atan2(up_phi, up_theta) + boresight);
   }
 }

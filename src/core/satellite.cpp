@@ -1,10 +1,13 @@
 // Scans of a spinning, precessing satellite (litebird_sim's SpinningScanningStrategy, TOAST 3's
 // SimSatellite): include/pisco/scan.hpp documents the geometry and the orientation.
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <string>
+#include <utility>
 
 #include "pisco/error.hpp"
+#include "pisco/time_ranges.hpp"
 #include "pisco/scan.hpp"
 #include "pisco/units.hpp"
 
@@ -71,6 +74,15 @@ void SatelliteScan::check() const {
   require(std::isfinite(year) && year > 0, "year", "must be positive");
   require(frame == Frame::ecliptic || frame == Frame::equatorial || frame == Frame::galactic, "frame",
           "must be ecliptic, equatorial or galactic");
+  // What float64 carries over the run (docs/formats.md, "Times, rates and angles").
+  const std::string times = sample_time_problem(start_time, double(samples), sample_rate);
+  require(times.empty(), "start_time, sample_rate and samples:", times);
+  const double t_max = std::max(std::abs(start_time), std::abs(time(samples)));
+  for (const auto& [field, period] : {std::pair<const char*, double>{"spin_period", spin_period},
+                                      {"precession_period", precession_period}, {"year", year}}) {
+    const std::string why = turning_problem(2 * pi / period, t_max, sample_rate);
+    require(why.empty(), field, why);
+  }
 }
 
 double SatelliteScan::time(std::size_t i) const { return start_time + double(i) / sample_rate; }

@@ -1,13 +1,16 @@
 #include "config.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <numbers>
 #include <set>
 #include <sstream>
 
 #include <toml++/toml.h>
 
+#include "pisco/time_ranges.hpp"
 #include "pisco/units.hpp"
 
 namespace pisco_cli {
@@ -17,6 +20,33 @@ namespace fs = std::filesystem;
 using pisco::deg;
 constexpr double arcmin = deg / 60;
 
+// Levenshtein distance: insertions, deletions and substitutions, one each.
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// Whether an unknown key looks like a misspelling of a known one: a few edits apart (a third of the
+// longer name, at least 2), or the one a prefix of the other (fwhm for fwhm_deg).
+bool resembles(const std::string& unknown, const std::string& known) {
+  if (unknown.empty() || known.empty()) return false;
+  const std::size_t longer = std::max(unknown.size(), known.size());
+  if (edit_distance(unknown, known) <= std::max<std::size_t>(2, longer / 3)) return true;
+  const std::string& shorter = unknown.size() < known.size() ? unknown : known;
+  const std::string& other = unknown.size() < known.size() ? known : unknown;
+  return shorter.size() >= 3 && other.compare(0, shorter.size(), shorter) == 0;
+}
+
 // A TOML table with the context for error messages; finish() rejects keys nobody asked for, so a
 // misspelt key is an error rather than a silently ignored setting.
 class Table {
@@ -24,6 +54,18 @@ class Table {
   Table(const toml::table& t, std::string where, const fs::path& file) : t_(t), where_(std::move(where)), file_(file) {}
 
   [[noreturn]] void fail(const std::string& key, const std::string& what) const {
+    // A misspelt key leaves the key it stands for absent (missing, or at a default that the error may
+    // be about): an unknown key of this table close to an absent one it asked for is the error.
+    std::set<std::string> absent{key};
+    for (const auto& u : used_) absent.insert(u);
+    for (const auto& [k, v] : t_) {
+      const std::string name(k.str());
+      if (used_.count(name) || name == key) continue;
+      for (const auto& a : absent)
+        if (!t_.contains(a) && resembles(name, a))
+          throw pisco::Error(file_.string() + ": [" + where_ + "] unknown key '" + name + "' (did you mean '" + a +
+                             "'?)");
+    }
     throw pisco::Error(file_.string() + ": [" + where_ + "] " + key + ": " + what);
   }
   bool has(const std::string& key) const { return t_.contains(key); }
@@ -52,8 +94,18 @@ class Table {
   }
   double positive(const std::string& key, double fallback) {
     const double v = number(key, fallback);
-    if (!(v > 0) || !std::isfinite(v)) fail(key, "expected a positive number, got " + std::to_string(v));
+    if (!(v > 0) || !std::isfinite(v)) fail(key, "expected a positive number, got " + format(v));
     return v;
+  }
+  // A positive number times `scale` (a unit: 60 for minutes), which must stay finite.
+  double positive(const std::string& key, double fallback, double scale) {
+    const double v = positive(key, fallback);
+    if (!std::isfinite(v * scale)) fail(key, "expected at most " + format(std::numeric_limits<double>::max() / scale) + ", got " + format(v));
+    return v * scale;
+  }
+  // An error of the table as a whole (a library check of several keys together).
+  [[noreturn]] void fail_table(const std::string& what) const {
+    throw pisco::Error(file_.string() + ": [" + where_ + "] " + what);
   }
   std::int64_t integer(const std::string& key, std::int64_t fallback) {
     used_.insert(key);
@@ -148,9 +200,20 @@ class Table {
     return p;
   }
   void finish() const {
-    for (const auto& [k, v] : t_)
-      if (!used_.count(std::string(k.str())))
-        throw pisco::Error(file_.string() + ": [" + where_ + "] unknown key '" + std::string(k.str()) + "'");
+    for (const auto& [k, v] : t_) {
+      const std::string name(k.str());
+      if (used_.count(name)) continue;
+      // The keys this table's reader asked for are the ones it knows: the nearest is suggested.
+      std::string nearest;
+      std::size_t best = std::string::npos;
+      for (const auto& known : used_)
+        if (const std::size_t d = edit_distance(name, known); d < best && resembles(name, known)) {
+          best = d;
+          nearest = known;
+        }
+      throw pisco::Error(file_.string() + ": [" + where_ + "] unknown key '" + name + "'" +
+                         (nearest.empty() ? std::string() : " (did you mean '" + nearest + "'?)"));
+    }
   }
   const std::string& where() const { return where_; }
 
@@ -275,8 +338,8 @@ BeamConfig read_beam(Table t, const std::string& name) {
     if (!(b.options.split.taper >= 0 && b.options.split.taper <= b.options.split.rho_main))
       t.fail("sidelobe_taper_deg", "expected a width in [0, sidelobe_split_deg] (0: a quarter of it)");
     const double nside = t.number("sidelobe_nside", 0.0);
-    const int n = static_cast<int>(nside);
-    if (!(nside >= 0 && nside <= 8192 && nside == n && (n & (n - 1)) == 0))
+    const int n = nside >= 0 && nside <= 8192 ? static_cast<int>(nside) : -1;  // converted only within range
+    if (!(n >= 0 && nside == n && (n & (n - 1)) == 0))
       t.fail("sidelobe_nside", "expected a power of two up to 8192 (or 0: chosen from the sidelobes' band limit)");
     b.options.split.nside = n;
   }
@@ -445,8 +508,9 @@ double parse_utc(Table& t, const std::string& key, const std::string& text) {
   int y, mo, d, h, mi;
   double sec;
   char z = 0;
-  if (std::sscanf(text.c_str(), "%d-%d-%dT%d:%d:%lf%c", &y, &mo, &d, &h, &mi, &sec, &z) != 7 || z != 'Z' || mo < 1 ||
-      mo > 12 || d < 1 || d > 31 || h > 23 || mi > 59 || sec >= 61)
+  // Field widths keep every integer within int; the seconds must be a number in [0, 61).
+  if (std::sscanf(text.c_str(), "%4d-%2d-%2dT%2d:%2d:%lf%c", &y, &mo, &d, &h, &mi, &sec, &z) != 7 || z != 'Z' || mo < 1 ||
+      mo > 12 || d < 1 || d > 31 || h < 0 || h > 23 || mi < 0 || mi > 59 || !(sec >= 0 && sec < 61))
     t.fail(key, "expected a UTC time like \"2019-06-01T00:00:00Z\", got \"" + text + "\"");
   // Days from civil (proleptic Gregorian), Howard Hinnant's algorithm.
   y -= mo <= 2;
@@ -476,8 +540,8 @@ void read_satellite(Table& t, ScanConfig& s) {
   };
   c.spin_sun_angle = angle("spin_sun_angle_deg", 45.0, false);
   c.spin_boresight_angle = angle("spin_boresight_angle_deg", 50.0, true);
-  c.precession_period = t.positive("precession_period_min", 192.348) * 60;
-  c.spin_period = t.positive("spin_period_min", 20.0) * 60;
+  c.precession_period = t.positive("precession_period_min", 192.348, 60);
+  c.spin_period = t.positive("spin_period_min", 20.0, 60);
   c.sample_rate = t.positive("sample_rate_hz", 19.0);
   c.start_time = finite("start_time_s", 0.0);
   c.precession_phase = finite("precession_phase_deg", 0.0) * deg;
@@ -492,10 +556,17 @@ void read_satellite(Table& t, ScanConfig& s) {
   if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
   c.samples = static_cast<std::size_t>(samples);
   s.nside = t.nside("nside", 64);  // the maps' default NSIDE
+  // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
+  if (auto why = pisco::sample_time_problem(c.start_time, samples, c.sample_rate); !why.empty()) t.fail("start_time_s", why);
+  const double t_max = std::max(std::abs(c.start_time), std::abs(c.time(c.samples)));
+  if (auto why = pisco::turning_problem(2 * std::numbers::pi / c.spin_period, t_max, c.sample_rate); !why.empty())
+    t.fail("spin_period_min", why);
+  if (auto why = pisco::turning_problem(2 * std::numbers::pi / c.precession_period, t_max, c.sample_rate); !why.empty())
+    t.fail("precession_period_min", why);
   try {
     c.check();
   } catch (const pisco::Error& e) {
-    t.fail("type", e.what());
+    t.fail_table(e.what());
   }
 }
 
@@ -523,12 +594,19 @@ ScanConfig read_scan(Table t) {
     c.samples = static_cast<std::size_t>(samples);
     c.boresight_angles.clear();
     for (double b : t.numbers("boresight_deg", {0.0})) c.boresight_angles.push_back(b * deg);
-    c.boresight_period = t.positive("boresight_period_hours", 24.0) * 3600;
+    c.boresight_period = t.positive("boresight_period_hours", 24.0, 3600);
     s.nside = t.nside("nside", 128);  // the maps' default NSIDE
+    // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
+    const double duration = samples / c.sample_rate;
+    if (auto why = pisco::sample_time_problem(c.start_unix, samples, c.sample_rate); !why.empty()) t.fail("start", why);
+    if (auto why = pisco::turning_problem(c.az_speed, duration, c.sample_rate); !why.empty()) t.fail("az_speed_deg_s", why);
+    if (c.boresight_angles.size() > 1)
+      if (auto why = pisco::stepping_problem(c.boresight_period, duration, c.sample_rate); !why.empty())
+        t.fail("boresight_period_hours", why);
     try {
       c.check();
     } catch (const pisco::Error& e) {
-      t.fail("type", e.what());
+      t.fail_table(e.what());
     }
   } else if (s.type == "satellite") {
     read_satellite(t, s);
@@ -666,6 +744,8 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
   std::map<std::string, int> line_of;  // each detector's line
   while (std::getline(in, line)) {
     ++lineno;
+    // Spreadsheets save CSV with a UTF-8 byte-order mark first.
+    if (lineno == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);
     if (line.find_first_not_of(" \t\r") == std::string::npos || line[line.find_first_not_of(" \t")] == '#') continue;
     const auto f = split(line);
     const std::string where = file.string() + ":" + std::to_string(lineno) + ": ";
@@ -679,6 +759,9 @@ std::vector<pisco::Detector> load_focal_plane(const fs::path& file, const std::v
                              "hwp_gamma_deg");
       if (std::find(header.begin(), header.end(), "name") == header.end())
         throw pisco::Error(where + "the header needs a 'name' column");
+      if (beams.size() > 1 && std::find(header.begin(), header.end(), "beam") == header.end())
+        throw pisco::Error(where + "the header needs a 'beam' column: the configuration defines " +
+                           std::to_string(beams.size()) + " beams, and each detector must name one");
       continue;
     }
     if (f.size() != header.size())
@@ -775,6 +858,7 @@ HwpConfig read_hwp(Table t, const ScanConfig& scan) {
   if (!std::isfinite(h.stream.start_time)) t.fail("start_time_s", "expected a finite number of seconds");
   if (rotating) {
     h.stream.kind = pisco::HwpAngleStream::Kind::continuous;
+    h.rate_key = t.has("rpm") ? "rpm" : "frequency_hz";
     h.stream.frequency_hz = t.has("rpm") ? t.number("rpm", 0.0) / 60.0 : t.number("frequency_hz", 0.0);
     if (!std::isfinite(h.stream.frequency_hz)) t.fail(t.has("rpm") ? "rpm" : "frequency_hz", "expected a finite number");
   } else if (stepped) {
@@ -880,6 +964,24 @@ SimulationConfig load_config(const fs::path& file) {
   assign_plates(c, file);
   t.finish();
   return c;
+}
+
+void check_hwp_times(const SimulationConfig& c, std::size_t samples) {
+  if (!c.hwp.enabled || c.hwp.angles_from_file) return;
+  const pisco::HwpAngleStream& a = c.hwp.stream;
+  auto fail = [&](const std::string& key, const std::string& why) {
+    throw pisco::Error(c.source.string() + ": [hwp] " + key + ": " + why + " (over the run's " + std::to_string(samples) +
+                       " samples)");
+  };
+  if (auto why = pisco::sample_time_problem(a.start_time, double(samples), a.sample_rate); !why.empty())
+    fail("start_time_s", why);
+  const double t_max = std::max(std::abs(a.start_time), std::abs(a.start_time + double(samples) / a.sample_rate));
+  if (a.kind == pisco::HwpAngleStream::Kind::continuous) {
+    if (auto why = pisco::turning_problem(2 * std::numbers::pi * a.frequency_hz, t_max, a.sample_rate); !why.empty())
+      fail(c.hwp.rate_key, why);
+  } else if (auto why = pisco::stepping_problem(a.step_seconds, t_max, a.sample_rate); !why.empty()) {
+    fail("step_seconds", why);
+  }
 }
 
 }  // namespace pisco_cli

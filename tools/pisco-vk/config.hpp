@@ -58,6 +58,7 @@ struct HwpConfig {
   pisco::HwpAngleStream stream;          // continuous or stepped; sample_rate from the scan or the table
   bool angles_from_file = false;         // the pointing file's per-sample `hwp_angle`
   bool ideal_mapmaker = false;           // bin the maps with an ideal plate's model (mapmaker = "ideal")
+  std::string rate_key;                  // the key that gave the rotation: rpm or frequency_hz
 };
 
 // A detector's own plate settings from its focal-plane row (keys hwp, hwp_gamma_deg, hwp_mueller).
@@ -112,5 +113,9 @@ SimulationConfig load_config(const std::filesystem::path& file);
 std::vector<pisco::Detector> load_focal_plane(const std::filesystem::path& file,
                                               const std::vector<BeamConfig>& beams,
                                               std::vector<DetectorHwp>* hwp = nullptr);
+
+// What float64 carries over a run of `samples` samples with the [hwp] plate's angle stream
+// (docs/formats.md, "Times, rates and angles"): throws pisco::Error naming the file and [hwp] key.
+void check_hwp_times(const SimulationConfig& c, std::size_t samples);
 
 }  // namespace pisco_cli

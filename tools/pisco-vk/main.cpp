@@ -98,10 +98,28 @@ int devices() {
   return 0;
 }
 
+// An error's text as one printable line: control characters that came from a file or an argument
+// (a newline, an escape sequence) are shown as \xNN rather than acted on by the terminal.
+std::string printable(const char* text) {
+  std::string out;
+  for (const char* p = text; *p; ++p) {
+    const auto c = static_cast<unsigned char>(*p);
+    if (c < 0x20 || c == 0x7f) {
+      char code[5];
+      std::snprintf(code, sizeof code, "\\x%02X", c);
+      out += code;
+    } else {
+      out += char(c);
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
-int main(int argc, char** argv) {
-  // SIGINT, SIGTERM, SIGHUP: stop at once, no temporary file left, status 128 + signal (signals.hpp).
+static int main_body(int argc, char** argv) {
+  // The stop signals (SIGINT, SIGTERM, SIGHUP, ...): stop at once, no temporary file left, status
+  // 128 + signal (signals.hpp).
   pisco_cli::handle_stop_signals();
   // HDF5's exit-time clean-up is not needed (every file is closed or abandoned by then), and after a
   // full disk HDF5 1.10's can crash or loop on its own state (docs/formats.md, "Errors and partial
@@ -171,6 +189,8 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("validate")) return validate(vo, data_dir());
     const fs::path data = data_dir();
     const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
+    if (run->count("--output") > 0 && output_dir.empty())
+      throw pisco::Error("-o/--output: expected a directory name, got an empty string");
     pisco_cli::SimulationConfig config;
     cluster.step([&] { config = pisco_cli::load_config(config_file); });
     if (!output_dir.empty()) config.output.dir = output_dir;
@@ -182,25 +202,34 @@ int main(int argc, char** argv) {
     options.data_dir = data;
     return pisco_cli::run_simulation(config, options);
   } catch (const pisco_cli::AgreedError& e) {
+    pisco_cli::wait_for_stop();  // an error caused by a stop signal (a write cut off): the signal's status
     // Every rank has it (a single process: always): said once.
-    if (cluster.leader()) std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
+    if (cluster.leader()) std::fprintf(stderr, "pisco-vk: error: %s\n", printable(e.what()).c_str());
     std::fflush(stderr);
     cluster.finalize();
     return 2;
   } catch (const pisco::Error& e) {
+    pisco_cli::wait_for_stop();
     if (cluster.parallel()) {
       // One rank's error outside the collective steps: the others cannot be told, and are ended.
-      std::fprintf(stderr, "pisco-vk: error: rank %d: %s\n", cluster.rank(), e.what());
+      std::fprintf(stderr, "pisco-vk: error: rank %d: %s\n", cluster.rank(), printable(e.what()).c_str());
       cluster.abort(2);
     }
-    std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
+    std::fprintf(stderr, "pisco-vk: error: %s\n", printable(e.what()).c_str());
     return 2;
   } catch (const std::exception& e) {
+    pisco_cli::wait_for_stop();
     if (cluster.parallel()) {
-      std::fprintf(stderr, "pisco-vk: error: rank %d: %s\n", cluster.rank(), e.what());
+      std::fprintf(stderr, "pisco-vk: error: rank %d: %s\n", cluster.rank(), printable(e.what()).c_str());
       cluster.abort(3);
     }
-    std::fprintf(stderr, "pisco-vk: error: %s\n", e.what());
+    std::fprintf(stderr, "pisco-vk: error: %s\n", printable(e.what()).c_str());
     return 3;
   }
+}
+
+int main(int argc, char** argv) {
+  const int status = main_body(argc, argv);
+  pisco_cli::wait_for_stop();  // a stop signal came: the watcher ends the process with 128 + signal
+  return status;
 }

@@ -7,6 +7,10 @@ namespace pisco_cli {
 
 std::string human_seconds(double s) {
   char buf[32];
+  if (!(s < 1e7)) {  // beyond 115 days (or not a number): no hours and minutes, and no overflowing int
+    std::snprintf(buf, sizeof buf, "%.3g s", s);
+    return buf;
+  }
   if (s < 60) std::snprintf(buf, sizeof buf, "%.1f s", s);
   else if (s < 3600) std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
   else std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) % 3600) / 60);

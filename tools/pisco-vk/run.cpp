@@ -20,6 +20,7 @@
 
 #include "cluster.hpp"
 #include "progress.hpp"
+#include "output_dir.hpp"
 #include "signals.hpp"
 
 namespace pisco_cli {
@@ -38,8 +39,9 @@ std::vector<double> read_bb_template(const fs::path& file, int lmax) {
     if (line.empty() || line[0] == '#') continue;
     std::istringstream ss(line);
     double l, dl;
-    if (!(ss >> l >> dl) || !std::isfinite(dl) || l < 0)
+    if (!(ss >> l >> dl) || !std::isfinite(dl) || !(l >= 0))
       throw pisco::Error(file.string() + ":" + std::to_string(lineno) + ": expected 'l D_l^BB'");
+    if (l > lmax) continue;  // also keeps the conversion below within int
     const int il = static_cast<int>(l);
     if (il >= 2 && il <= lmax) cl[il] = 2 * std::numbers::pi * dl / (l * (l + 1));
   }
@@ -227,6 +229,12 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   };
   say("pisco-vk %s: %s\n", pisco::version, c.source.empty() ? "built-in defaults" : c.source.string().c_str());
 
+  // Made and locked first, so that a second run into it stops before its set-up; removed again if the
+  // run fails before writing there.
+  std::optional<OutputDirectory> out_dir;
+  cl.step([&] {
+    out_dir.emplace(c.output.dir, cl.leader(), [](const std::string& m) { std::fprintf(stderr, "%s\n", m.c_str()); });
+  });
   std::optional<pisco::Sky> sky_holder;
   cl.step([&] { sky_holder.emplace(make_sky(c.sky, ro.data_dir / "assets")); });
   const pisco::Sky& sky = *sky_holder;
@@ -346,6 +354,7 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
       boresight.emplace(c.scan, c.hwp);
       samples_per_detector = boresight->size();
     }
+    check_hwp_times(c, samples_per_detector);
   });
   const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
   const int maps_nside = c.output.maps_nside > 0 ? c.output.maps_nside
@@ -357,8 +366,6 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
     if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
       throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
                          std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
-    if (std::error_code ec; !fs::create_directories(c.output.dir, ec) && ec)
-      throw pisco::Error(c.output.dir.string() + ": cannot create the output directory (" + ec.message() + ")");
     if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
   });
   std::optional<pisco::TodWriter> tod_file;
@@ -643,12 +650,17 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
       }
       if (solved == 0) {
         const auto hit = std::count_if(maps.hits.begin(), maps.hits.end(), [](std::uint32_t h) { return h > 0; });
-        nothing_solved = "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) +
-                         " NSIDE " + std::to_string(maps_nside) + " pixels are hit" +
-                         (flagging ? " by unflagged samples" : "") + ", none with rcond >= " +
-                         [](double v) { char b[32]; std::snprintf(b, sizeof b, "%g", v); return std::string(b); }(c.output.rcond_min) +
-                         " (each pixel needs three or more polarization angles); maps.fits is all UNSEEN, and no "
-                         "spectra or plots were made";
+        const std::string outcome = "; maps.fits is all UNSEEN, and no spectra or plots were made";
+        if (hit == 0)
+          nothing_solved = std::string("the maps solve no pixel: ") +
+                           (flagging ? "every sample is flagged" : "no sample reached the maps") + outcome;
+        else
+          nothing_solved = "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) +
+                           " NSIDE " + std::to_string(maps_nside) + " pixels are hit" +
+                           (flagging ? " by unflagged samples" : "") + ", none with rcond >= " +
+                           [](double v) { char b[32]; std::snprintf(b, sizeof b, "%g", v); return std::string(b); }(c.output.rcond_min) +
+                           " (each pixel needs three or more polarization angles: one detector or pair without a "
+                           "half-wave plate or a boresight rotation cannot tell Q from U)" + outcome;
       }
 
       if (c.output.spectra && nothing_solved.empty()) {
@@ -689,6 +701,7 @@ int run_simulation(const SimulationConfig& c, const RunOptions& ro) {
   });
   nothing_solved = cl.broadcast(nothing_solved);
 
+  out_dir->keep();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!quiet) {
     std::printf("summary: %llu samples, %.1f pixels per disc, %.3g pixel evaluations/s, %.3g samples/s\n",
