@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
-# The sanitizer build: the library, the command line and the unit, cli, robustness and simd tests built with
-# AddressSanitizer and UndefinedBehaviorSanitizer in <repo>/build-asan, and those tests run there, so
-# that a memory error, a leak or undefined behaviour fails the test it happens in. Called by .ci/run
-# after scripts/run-tests.sh (which sets the machine up); extra arguments go to both ctest runs.
+# The sanitizer build: the library, the command line, the Python module and the unit, cli, robustness
+# and simd tests built with AddressSanitizer and UndefinedBehaviorSanitizer (float-to-integer overflow
+# included) in <repo>/build-asan, and those tests run there, so that a memory error, a leak or
+# undefined behaviour fails the test it happens in; then the python.api tests against the sanitized
+# module (its runtime preloaded into Python), and the MPI build's tests sanitized
+# (scripts/run-mpi-tests.sh with PISCO_SANITIZE=1, in <repo>/build-mpi-asan). Called by .ci/run after
+# scripts/run-tests.sh (which sets the machine up and makes the Python tests' environment); extra
+# arguments go to the first two ctest runs.
 #
 # - The cuda backend is left out: nvcc's device code cannot be sanitized (its host side is the same
 #   as the other backends'). The vulkan backend is in, on lavapipe.
@@ -18,13 +22,22 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="$root/build-asan"
-flags="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer"
+flags="-fsanitize=address,undefined,float-cast-overflow -fno-sanitize-recover=undefined,float-cast-overflow"
+flags="$flags -fno-omit-frame-pointer"
+venv="$root/build/python-venv"
+python_flags=(-DPISCO_BUILD_PYTHON=OFF)
+if [ -x "$venv/bin/python" ]; then
+  python_flags=(-DPISCO_BUILD_PYTHON=ON "-DPython_EXECUTABLE=$venv/bin/python")
+  # The Python tests run in BUILD/python-venv: this tree shares build/'s (frameworks and all).
+  mkdir -p "$build"
+  [ -e "$build/python-venv" ] || ln -s "$venv" "$build/python-venv"
+fi
 if ! log="$(cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
               -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1" \
               -DCMAKE_CXX_FLAGS="$flags" -DCMAKE_C_FLAGS="$flags" \
               -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined" \
               -DCMAKE_SHARED_LINKER_FLAGS="-fsanitize=address,undefined" \
-              -DPISCO_WITH_CUDA=OFF 2>&1)"; then
+              -DPISCO_WITH_CUDA=OFF "${python_flags[@]}" 2>&1)"; then
   printf '%s\n' "$log" >&2
   echo "run-sanitizers: configuring $build failed" >&2
   exit 1
@@ -44,3 +57,15 @@ ASAN_OPTIONS="detect_leaks=0:$asan" ctest "${tests[@]}" "$@"
 echo "run-sanitizers: leaks (no Vulkan driver)"
 ASAN_OPTIONS="detect_leaks=1:$asan" \
   VK_DRIVER_FILES=/nonexistent.json VK_ICD_FILENAMES=/nonexistent.json ctest "${tests[@]}" "$@"
+if [ -x "$venv/bin/python" ]; then
+  # Python itself is not sanitized: the module's runtimes are preloaded so that they come first, and
+  # leaks are not checked (the interpreter keeps its objects until exit).
+  echo "run-sanitizers: the Python module (python.api)"
+  preload="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libubsan.so)"
+  LD_PRELOAD="$preload" ASAN_OPTIONS="detect_leaks=0:$asan:verify_asan_link_order=0" \
+    ctest --test-dir "$build" --output-on-failure -R '^python\.api$'
+else
+  echo "run-sanitizers: the Python module left out ($venv/bin/python not found: run scripts/run-tests.sh first)"
+fi
+echo "run-sanitizers: the MPI build's tests (build-mpi-asan)"
+PISCO_SANITIZE=1 "$root/scripts/run-mpi-tests.sh"

@@ -9,7 +9,7 @@ pisco.litebird.add_convolved_sky_to_observations adds the beam-convolved sky int
 binned map-maker makes I, Q, U maps, compared with the input sky smoothed by the beam, and drawn
 into a PNG.
 
-Needs: the pisco package (pip install . at the repository root), litebird_sim, healpy, matplotlib.
+Needs: the pisco package (README.md, "Python": pip install . into a virtual environment), litebird_sim, healpy, matplotlib.
 Run:   python examples/python/litebird_sim_pipeline.py [--hours 4] [--backend auto] [--out pisco-litebird-example]
 """
 

@@ -6,7 +6,7 @@ spinning, precessing satellite; pisco.toast.PixelConvolve writes each detector's
 into the observation's `signal`; TOAST's own binned map-maker makes I, Q, U maps, compared with the
 input sky smoothed by the beam, and drawn into a PNG.
 
-Needs: the pisco package (pip install . at the repository root), toast, healpy, matplotlib.
+Needs: the pisco package (README.md, "Python": pip install . into a virtual environment), toast, healpy, matplotlib.
 Run:   python examples/python/toast_pipeline.py [--hours 4] [--backend auto] [--out pisco-toast-example]
 """
 

@@ -13,7 +13,10 @@ Runs with the system Python (standard library only):
    ``import pisco`` must come from the environment's site-packages, ``pisco.devices()`` must list the
    vulkan backend as available, and a small sky convolved by the installed package's cpu, simd (where
    built) and vulkan backends must agree with one another (relative RMS below 1e-5, the float32
-   backends' bar) and be non-trivial.
+   backends' bar) and be non-trivial;
+4. ``pip install -r examples/python/requirements.txt`` and each script of examples/python/ with its
+   defaults, from a scratch directory, exactly as README.md's "Python" section runs them: each must
+   end well and draw its map.
 
 Usage: run_pip_install.py --build BUILD_DIR --source SOURCE_DIR
 """
@@ -111,6 +114,28 @@ def main():
     if checked.returncode != 0:
         log(f"FAILED: the installed package:\n{checked.stderr.strip()[-3000:]}")
         return 1
+
+    # The examples, as README.md's "Python" runs them: their requirements into the same environment,
+    # then each script with its defaults, from a scratch directory.
+    requirements = os.path.join(args.source, "examples", "python", "requirements.txt")
+    log(f"pip install -r {requirements}")
+    deps = subprocess.run([python, "-m", "pip", "install", "--quiet", "--timeout", "5", "--retries", "0",
+                           "-r", requirements], capture_output=True, text=True, env=env)
+    if deps.returncode != 0:
+        log(f"FAILED: pip install -r exited with {deps.returncode}:\n{(deps.stdout + deps.stderr).strip()[-3000:]}")
+        return 1
+    for script, out in (("toast_pipeline.py", "pisco-toast-example"),
+                        ("litebird_sim_pipeline.py", "pisco-litebird-example")):
+        with tempfile.TemporaryDirectory(prefix="pisco-example-") as scratch:
+            t0 = time.perf_counter()
+            ran = subprocess.run([python, os.path.join(args.source, "examples", "python", script)], cwd=scratch,
+                                 capture_output=True, text=True, env=env, timeout=600)
+            png = os.path.join(scratch, out, "binned_map.png")
+            if ran.returncode != 0 or not os.path.exists(png) or os.path.getsize(png) < 10000:
+                log(f"FAILED: examples/python/{script} (exit {ran.returncode}, {png} "
+                    f"{'missing' if not os.path.exists(png) else 'written'}):\n{(ran.stdout + ran.stderr).strip()[-3000:]}")
+                return 1
+            log(f"examples/python/{script}: {ran.stdout.strip().splitlines()[-1]} ({time.perf_counter() - t0:.0f} s)")
     return 0
 
 
