@@ -117,10 +117,12 @@ inline Scene backend_scene(int nside, double monopole = 0.0) {
   return s;
 }
 
-// A generic half-wave plate: the ideal one with all 16 entries perturbed (M_QI, M_UV, ... non-zero).
+// A generic half-wave plate: the ideal one with all 16 entries perturbed (M_QI, M_UV, ... non-zero),
+// with a 2% loss in M_II so that it stays a passive element (docs/physics.md, "Physical bounds on
+// Mueller matrices").
 inline pisco::Mueller generic_plate() {
   pisco::Mueller m0 = pisco::ideal_hwp_mueller();
-  const double leak[4][4] = {{0.0, 0.012, -0.008, 0.005},
+  const double leak[4][4] = {{-0.02, 0.012, -0.008, 0.005},
                              {0.021, -0.03, 0.017, -0.011},
                              {-0.015, 0.009, 0.025, 0.04},
                              {0.007, -0.02, 0.033, 0.02}};

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -22,6 +23,7 @@
 
 #include "backend_fixtures.hpp"
 #include "beam_file_writers.hpp"
+#include "map_file_writers.hpp"
 #include "pisco/pisco.hpp"
 
 namespace {
@@ -489,50 +491,18 @@ TEST_F(Cli, LostDeviceLeavesNoOutput) {
   ::unsetenv("PISCO_VK_TEST_FAULT");
 }
 
-TEST_F(Cli, InputFileErrors) {
-  expect_error("run " + write("sky.toml", config("[sky]\nfile = \"missing.fits\"\n")).string(), "missing.fits");
-  // A map with a NaN pixel.
-  pisco::Sky nan_sky(16);
-  nan_sky.Q()[77] = std::numeric_limits<double>::quiet_NaN();
-  nan_sky.write_fits(dir_ / "nan.fits");
-  expect_error("run " + write("nan.toml", config("[sky]\nfile = \"nan.fits\"\n")).string(), "pixel 77");
-  // A focal-plane table with a malformed number.
-  write("fp.csv", "name,zeta_deg,beam\nd1,abc,main\n");
-  expect_error("run " + write("fp.toml", config("[sky]\nnside = 32\n", "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n",
-                                                "[focal_plane]\nfile = \"fp.csv\"\n")).string(),
-               "fp.csv:2: column 'zeta_deg': expected a number");
-  // Pointing files: a NaN sample and a theta outside [0, pi], each named by its index.
-  pisco::FocalPlane fp;
-  fp.add({"d1", 0, 0, 1, 0});
-  for (const auto& [name, theta] : {std::pair{"nanptg.h5", std::numeric_limits<double>::quiet_NaN()}, {"theta.h5", 4.0}}) {
-    pisco::Pointing p;
-    for (int i = 0; i < 20; ++i) p.push_back(i == 7 ? theta : 1.0, 0.1 * i, 0.0);
-    // Written through the TOD writer's pointing datasets, the same layout the reader takes.
-    pisco::TodWriter w(dir_ / name, fp, p.size(), pisco::TodPrecision::float64, true, {});
-    const std::vector<double> zeros(p.size(), 0.0);
-    const pisco::PointingView v = p.view();
-    w.write(0, 0, zeros, &v);
-    w.commit();
-  }
-  const std::string det = "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d1\"\nbeam = \"main\"\n";
-  const std::string beam = "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n";
-  expect_error("run " + write("p1.toml", config("[sky]\nnside = 32\n", beam, det, "[scan]\ntype = \"file\"\nfile = \"nanptg.h5\"\n")).string(),
-               "sample 7");
-  expect_error("run " + write("p2.toml", config("[sky]\nnside = 32\n", beam, det, "[scan]\ntype = \"file\"\nfile = \"theta.h5\"\n")).string(),
-               "sample 7");
-}
-
-
 // A pointing file of per-detector groups (docs/formats.md, "Pointing files"): groups[k].second samples
-// of theta, phi, psi in the group named groups[k].first.
-void write_detector_pointing(const fs::path& file, const std::vector<std::pair<std::string, std::size_t>>& groups) {
+// of theta, phi, psi in the group named groups[k].first; theta of sample `odd` is `odd_theta` (a value
+// the reader must refuse) when odd is below the count.
+void write_detector_pointing(const fs::path& file, const std::vector<std::pair<std::string, std::size_t>>& groups,
+                             std::size_t odd = SIZE_MAX, double odd_theta = 0.0) {
   const hid_t f = H5Fcreate(file.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
   ASSERT_GE(f, 0) << file;
   for (const auto& [name, n] : groups) {
     const hid_t g = H5Gcreate2(f, name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
     std::vector<double> v[3];
     for (std::size_t i = 0; i < n; ++i) {
-      v[0].push_back(0.5 + 0.01 * double(i));  // theta
+      v[0].push_back(i == odd ? odd_theta : 0.5 + 0.01 * double(i));  // theta
       v[1].push_back(0.1 * double(i));         // phi
       v[2].push_back(0.0);                     // psi
     }
@@ -548,6 +518,30 @@ void write_detector_pointing(const fs::path& file, const std::vector<std::pair<s
     H5Gclose(g);
   }
   H5Fclose(f);
+}
+
+TEST_F(Cli, InputFileErrors) {
+  expect_error("run " + write("sky.toml", config("[sky]\nfile = \"missing.fits\"\n")).string(), "missing.fits");
+  // A map with a NaN pixel.
+  pisco::Sky nan_sky(16);
+  nan_sky.Q()[77] = std::numeric_limits<double>::quiet_NaN();
+  pisco_test::write_unchecked_sky(nan_sky, dir_ / "nan.fits");  // the library's writers refuse it
+  expect_error("run " + write("nan.toml", config("[sky]\nfile = \"nan.fits\"\n")).string(), "pixel 77");
+  // A focal-plane table with a malformed number.
+  write("fp.csv", "name,zeta_deg,beam\nd1,abc,main\n");
+  expect_error("run " + write("fp.toml", config("[sky]\nnside = 32\n", "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n",
+                                                "[focal_plane]\nfile = \"fp.csv\"\n")).string(),
+               "fp.csv:2: column 'zeta_deg': expected a number");
+  // Pointing files: a NaN sample and a theta outside [0, pi], each named by its index. Written by hand
+  // (the TOD writer refuses a NaN), in the layout the reader takes.
+  for (const auto& [name, theta] : {std::pair{"nanptg.h5", std::numeric_limits<double>::quiet_NaN()}, {"theta.h5", 4.0}})
+    write_detector_pointing(dir_ / name, {{"d1", 20}}, 7, theta);
+  const std::string det = "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d1\"\nbeam = \"main\"\n";
+  const std::string beam = "[beams.main]\nfwhm_deg = 4\nrho_max_deg = 8\n";
+  expect_error("run " + write("p1.toml", config("[sky]\nnside = 32\n", beam, det, "[scan]\ntype = \"file\"\nfile = \"nanptg.h5\"\n")).string(),
+               "sample 7");
+  expect_error("run " + write("p2.toml", config("[sky]\nnside = 32\n", beam, det, "[scan]\ntype = \"file\"\nfile = \"theta.h5\"\n")).string(),
+               "sample 7");
 }
 
 // Per-detector pointing files whose detectors have different sample counts: one error naming the file,

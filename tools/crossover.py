@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402
 
 LMAXES = (383, 767, 1535)
 BEAMS = {"round": 2, "elliptical": 8, "asymmetric": 20}  # ducc0's kmax for each
-GENERIC_PLATE = np.diag([1.0, 1.0, -1.0, -1.0]) + np.array([[0.0, 0.012, -0.008, 0.005],
+GENERIC_PLATE = np.diag([1.0, 1.0, -1.0, -1.0]) + np.array([[-0.02, 0.012, -0.008, 0.005],
                                                            [0.021, -0.03, 0.017, -0.011],
                                                            [-0.015, 0.009, 0.025, 0.04],
                                                            [0.007, -0.02, 0.033, 0.02]])

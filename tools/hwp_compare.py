@@ -98,7 +98,9 @@ import h5py
 import healpy as hp
 import numpy as np
 
-GENERIC_LEAK = np.array([[0.0, 0.012, -0.008, 0.005],
+# All 16 entries perturbed, a 2% loss in M_II keeping the plate passive (docs/physics.md, "Physical
+# bounds on Mueller matrices").
+GENERIC_LEAK = np.array([[-0.02, 0.012, -0.008, 0.005],
                          [0.021, -0.03, 0.017, -0.011],
                          [-0.015, 0.009, 0.025, 0.04],
                          [0.007, -0.02, 0.033, 0.02]])

@@ -22,6 +22,23 @@ namespace pisco {
 using Mueller = std::array<std::array<double, 4>, 4>;
 Mueller identity_mueller();
 
+// Physical bounds on Mueller matrices (docs/physics.md, "Physical bounds on Mueller matrices"),
+// held to a relative tolerance: measured or fitted matrices carry errors of about 1%; beyond that a
+// matrix is a mistake (a typo, a wrong unit or scale, a transposed table).
+inline constexpr double mueller_tolerance = 0.01;
+enum class MuellerBounds {
+  finite,    // every entry finite
+  // finite, M00 > 0 and every |Mij| <= (1 + tol) M00: a Mueller matrix up to a positive scale (a
+  // beam's constant matrix, BeamOptions::mueller)
+  relative,
+  // relative, and no more light out than in: M00 + |(M01, M02, M03)| <= 1 + tol (the transmission of
+  // the most transmitted fully polarized input) and |(M10, M20, M30)| <= (1 + tol) M00 (unpolarized
+  // light leaves at most fully polarized): a passive element such as a half-wave plate
+  passive,
+};
+// Throws pisco::Error beginning with `what`, naming the entry or the bound broken and its value.
+void check_mueller(const Mueller& m, const std::string& what, MuellerBounds bounds);
+
 // Angular pattern of an in-phase cross-polar far field E_cx = kappa(sigma) E_co.
 enum class CrossPolarPattern {
   uniform,     // kappa constant: the detector's polarization axis is rotated by atan(kappa)
@@ -36,7 +53,9 @@ struct BeamOptions {
   double grid_step = 0.0;                // radians; 0 = 1/20 of the smallest FWHM
   double cross_polar = 0.0;              // kappa: cross-polar / co-polar field amplitude ratio
   CrossPolarPattern cross_polar_pattern = CrossPolarPattern::uniform;
-  Mueller mueller = identity_mueller();  // constant Mueller matrix applied after the beam
+  // Constant Mueller matrix applied after the beam: finite, M00 > 0, every |Mij| <= (1 + 1%) M00
+  // (MuellerBounds::relative).
+  Mueller mueller = identity_mueller();
   SidelobeSplit split;                   // a main and an outer part (beam_files.hpp); off by default
 };
 
@@ -60,12 +79,21 @@ class Beamsor {
   // temperature into polarization: docs/validation.md, "C").
   // With `split` (rho_main > 0), the beamsor returned is the main part, B tau within rho_main on
   // the field's grid, and holds the outer part, B (1 - tau) out to rho_max (sidelobes()).
+  // Every builder checks the sampled field (docs/physics.md, "Physical bounds on Mueller matrices"):
+  // every node's entries finite, the peak B_TT positive, and no entry anywhere above
+  // (1 + mueller_tolerance) times the peak B_TT; pisco::Error names the beam, the entry and the node.
   static Beamsor from_field(const Field& field, double rho_max, double grid_step,
                             std::string description, double feature_scale = 0.0, bool radial = false,
                             const SidelobeSplit& split = {});
   static constexpr int radial_oversampling = 64;
   // The most grid nodes per axis any builder accepts (a 2D grid of 8192^2 nodes is 512 MiB per element).
   static constexpr int max_grid_nodes = 8192;
+  // The most nodes of a radial profile: radial_oversampling per grid step over half the 2D grid's
+  // width (a grid step the 2D limit accepts never needs more).
+  static constexpr int max_radial_nodes = max_grid_nodes / 2 * radial_oversampling + 2;
+  // The nodes of a radial profile every grid_step / radial_oversampling out to sin(rho_max) (and two
+  // beyond); throws pisco::Error beginning with `who` when there would be more than max_radial_nodes.
+  static int radial_nodes(double rho_max, double grid_step, const std::string& who);
 
   // The paper's HEALPix beamsor files: a FITS binary table of up to 16 HEALPix maps with columns
   // named B_TT, B_QT, ... (B_XY = row Y, column X; absent columns are zero), beam axis at the north

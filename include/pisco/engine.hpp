@@ -84,7 +84,8 @@ class Engine {
   // (as a framework operator adds a signal into its detector data). A detector with a half-wave plate
   // (Detector::hwp) needs `hwp_angle`, the plate's angle per sample in the focal-plane frame
   // (radians, TOAST's `hwp_angle`); others must be given none. Throws pisco::Error on a bad sample
-  // (naming the detector and the sample's index).
+  // (naming the detector and the sample's index), and on a TOD sample that is not finite once complete
+  // (float64 overflowed: the error names the detector, the sample and the value).
   void convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate = false,
                 std::span<const double> hwp_angle = {});
   void convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
@@ -103,7 +104,8 @@ class Engine {
   std::uint64_t submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
                        bool accumulate = false, std::span<const double> hwp_angle = {});
   // Waits for submission `ticket` and every earlier one; without a ticket, for all. Rethrows the
-  // error of a failed submission.
+  // error of a failed submission, or of a TOD sample that is not finite (every submission waited for
+  // is complete all the same: a later wait() does not report it again).
   void wait(std::uint64_t ticket);
   void wait();
 
@@ -145,8 +147,9 @@ class Engine {
   void finish_pending(std::uint64_t ticket);
 
   // Work the engine itself completes when a submission is done (plates between the optics and the
-  // detector: the combination of their row detectors).
+  // detector: the combination of their row detectors), and the check that its TOD is finite.
   struct Pending;
+  void complete(Pending& p);
 
   FocalPlane focal_plane_;
   std::shared_ptr<const detail::EngineInputs> inputs_;

@@ -53,6 +53,13 @@ class FocalPlane {
   std::vector<Detector> detectors_;
 };
 
+// The checks every engine makes of its focal plane, so that the command line, Python and C++ callers
+// get the same errors: throws pisco::Error naming the detector for an empty or repeated name, a gain
+// that is not positive and finite, epsilon outside [0, 1], a zeta that is not finite, an offset whose
+// norm differs from 1 by more than unit_quat_tolerance, a beam index not below `beams`, or a half-wave
+// plate that HalfWavePlate::check refuses (docs/physics.md, "Physical bounds on Mueller matrices").
+void check_focal_plane(const FocalPlane& focal_plane, std::size_t beams);
+
 // A TOAST 3 focal plane file, as toast.instrument.Focalplane.save_hdf5 writes it (docs/formats.md,
 // "TOAST focal planes"): the compound dataset `focalplane`, one row per detector, with the units of its
 // columns in `focalplane.__table_column_meta__`. Each row becomes a Detector: name; epsilon =

@@ -37,7 +37,9 @@ struct MapColumn {
 };
 
 // Writes full-sky RING maps as one HEALPix FITS binary table (the layout of Sky::write_fits, with
-// POLCCONV = 'COSMO'), under a temporary name then renamed. Throws pisco::Error naming the file.
+// POLCCONV = 'COSMO'), under a temporary name then renamed. Throws pisco::Error naming the file, and
+// before writing anything on a value that is not finite, naming the column and the pixel (UNSEEN is
+// finite, and written).
 void write_healpix_map(const std::filesystem::path& file, int nside, const std::vector<MapColumn>& columns,
                        const std::string& units);
 

@@ -14,6 +14,9 @@ namespace pisco {
 struct Quat {
   double x = 0.0, y = 0.0, z = 0.0, w = 1.0;  // identity by default
 };
+// How far from 1 the norm of a quaternion taken as a rotation may be (offsets, boresight quaternions):
+// rounding, never a mistake. Beyond it the quaternion is refused, not normalized.
+inline constexpr double unit_quat_tolerance = 1e-6;
 static_assert(sizeof(Quat) == 4 * sizeof(double), "a Quat is four packed doubles (x, y, z, w)");
 
 // Hamilton product: the rotation b, then a.

@@ -58,4 +58,8 @@ Spectra deconvolve_windows(const Spectra& spectra, std::span<const double> beam_
 // D_l = l (l + 1) C_l / 2 pi.
 std::vector<double> to_dl(std::span<const double> cl);
 
+// For the writers of spectra: throws pisco::Error "<where>: <spectrum> at l = <l> is <value>; ..." on
+// the first value of l in [lmin, lmax] that is not finite (lmax -1: the spectra's own lmax).
+void check_finite(const Spectra& spectra, const std::string& where, int lmin = 0, int lmax = -1);
+
 }  // namespace pisco

@@ -98,7 +98,9 @@ class TodWriter {
   // each sample's response to I, Q, U, pisco::stokes_weights) go to the `weights` dataset (samples, 3).
   // Throws pisco::Error on a detector index beyond the focal plane, a range beyond
   // samples_per_detector, a missing or mis-sized pointing chunk, flags or weights, after commit(), or
-  // when the disk is full (the write that meets it names its samples).
+  // when the disk is full (the write that meets it names its samples); and, before writing anything,
+  // on a signal, pointing or weight value that is not finite or a signal beyond float32's range in a
+  // float32 file (naming the file, the detector and the sample).
   void write(std::size_t detector, std::size_t offset, std::span<const double> signal,
              const PointingView* pointing = nullptr, std::span<const std::uint8_t> flags = {},
              std::span<const double> weights = {});

@@ -115,7 +115,10 @@ def focal_plane_from_columns(columns, beam=None, hwp=None):
     for i, name in enumerate(names):
         d = Detector(name, zeta=float(zeta[i]), epsilon=float(epsilon[i]), gain=float(gain[i]), beam=beams[i])
         if quats is not None:
-            d.offset = quats[i]
+            try:
+                d.offset = quats[i]
+            except ValueError as e:  # not a unit quaternion: named by its row
+                raise ValueError(f"columns: 'quat' row {i} (detector {name}): {e}") from None
         elif xi_eta_gamma is not None:
             d.set_offset(*(float(v) for v in xi_eta_gamma[i]))
         if hwp is not None:

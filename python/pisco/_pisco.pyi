@@ -13,6 +13,12 @@ UnseenPolicy = Literal["error", "zero", "flag"]
 __version__: str
 deg: float
 unseen: float
+# How far from 1 the norm of a rotation quaternion may be: offsets and boresight quaternions further
+# from unit norm raise ValueError (within it, the rounding is normalized away).
+unit_quat_tolerance: float
+# The relative tolerance of the physical bounds on Mueller matrices (docs/physics.md, "Physical bounds
+# on Mueller matrices"): a plate's M0 and a beam's constant matrix beyond them raise ValueError.
+mueller_tolerance: float
 
 class Error(RuntimeError):
     """An error of the C++ library (pisco::Error), carrying its message."""
@@ -185,10 +191,13 @@ class HalfWavePlate:
     angle h the plate is R(-theta) M0 R(theta), theta = h - gamma.
     """
 
-    def __init__(self, mueller: ArrayLike | None = None, placement: str = "aperture", gamma: float = 0.0) -> None: ...
+    def __init__(self, mueller: ArrayLike | None = None, placement: str = "aperture", gamma: float = 0.0) -> None:
+        """ValueError naming `mueller` for a matrix that is not finite or not a passive element's: M00 <= 0,
+        more light out than in (M00 + |(M01, M02, M03)| > 1 + mueller_tolerance), or unpolarized light
+        polarized beyond 1 + mueller_tolerance."""
     @property
     def mueller(self) -> Float64Array:
-        """M0 (a read-only copy; assign a new (4, 4) array to change it)."""
+        """M0 (a read-only copy; assign a new (4, 4) array to change it: checked as in __init__)."""
     @mueller.setter
     def mueller(self, value: ArrayLike, /) -> None: ...
     @property
@@ -224,6 +233,7 @@ class Detector:
     epsilon: float
     gain: float
     beam: int
+    """The index of the detector's beam in the engine's beams; a negative one raises ValueError."""
     def __init__(
         self,
         name: str,
@@ -236,7 +246,8 @@ class Detector:
     ) -> None: ...
     @property
     def offset(self) -> Float64Array:
-        """The rotation from the boresight's antenna basis to the detector's, (x, y, z, w)."""
+        """The rotation from the boresight's antenna basis to the detector's, (x, y, z, w): a unit
+        quaternion to within unit_quat_tolerance (else ValueError naming `offset` and the norm)."""
     @offset.setter
     def offset(self, value: ArrayLike, /) -> None: ...
     @property

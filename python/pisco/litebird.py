@@ -145,6 +145,10 @@ def _plate_mueller(obs, i, hwp):
         m = np.asarray(m, dtype=np.float64)
         if not np.all(np.isfinite(m)):
             raise ValueError(f"detector {name}: mueller_hwp is not finite")
+        try:  # a passive element's bounds (docs/physics.md, "Physical bounds on Mueller matrices")
+            HalfWavePlate(m)
+        except ValueError as exc:
+            raise ValueError(f"detector {name}: mueller_hwp: {str(exc).removeprefix('mueller: ')}") from None
         return m
     plate = hwp if hwp is not None else getattr(obs, "hwp", None)
     if plate is None or isinstance(plate, lbs.IdealHWP):

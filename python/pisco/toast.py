@@ -69,7 +69,12 @@ def _mueller_matrix(value):
         raise ValueError(f"hwp_mueller: expected 16 numbers (row by row) or a 4x4 matrix, got shape {m.shape}")
     if not np.all(np.isfinite(m)):
         raise ValueError("hwp_mueller: the Mueller matrix must be finite")
-    return m.reshape(4, 4)
+    m = m.reshape(4, 4)
+    try:  # a passive element's bounds (docs/physics.md, "Physical bounds on Mueller matrices")
+        HalfWavePlate(m)
+    except ValueError as exc:
+        raise ValueError(f"hwp_mueller: {str(exc).removeprefix('mueller: ')}") from None
+    return m
 
 
 def _astropy_unit(units):

@@ -112,6 +112,49 @@ Mueller identity_mueller() {
   return m;
 }
 
+// docs/physics.md, "Physical bounds on Mueller matrices".
+void check_mueller(const Mueller& m, const std::string& what, MuellerBounds bounds) {
+  using detail::number_text;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j)
+      if (!std::isfinite(m[i][j]))
+        throw Error(what + ": Mueller entry [" + std::to_string(i) + "][" + std::to_string(j) + "] is " +
+                    number_text(m[i][j]) + " (expected 16 finite numbers, row by row)");
+  if (bounds == MuellerBounds::finite) return;
+  const double tol = mueller_tolerance;
+  const double m00 = m[0][0];
+  if (!(m00 > 0.0))
+    throw Error(what + ": M00 = " + number_text(m00) +
+                " (T to T) is not positive; a Mueller matrix passes unpolarized light with a positive intensity");
+  if (bounds == MuellerBounds::passive) {
+    const double out = m00 + std::hypot(m[0][1], m[0][2], m[0][3]);
+    if (!(out <= 1.0 + tol))
+      throw Error(what + ": transmits up to " + number_text(out) + " times the light (M00 + |(M01, M02, M03)| = " +
+                  number_text(out) + "), at most " + number_text(1.0 + tol) + " for a passive element");
+    const double polarized = std::hypot(m[1][0], m[2][0], m[3][0]);
+    if (!(polarized <= (1.0 + tol) * m00))
+      throw Error(what + ": polarizes unpolarized light to a degree of " + number_text(polarized / m00) +
+                  " (|(M10, M20, M30)| / M00), at most " + number_text(1.0 + tol) +
+                  " (light is at most fully polarized)");
+  }
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j)
+      if (!(std::abs(m[i][j]) <= (1.0 + tol) * m00))
+        throw Error(what + ": |M" + std::to_string(i) + std::to_string(j) + "| = " + number_text(std::abs(m[i][j])) +
+                    " exceeds (1 + " + number_text(tol) + ") M00 = " + number_text((1.0 + tol) * m00) +
+                    "; no entry of a Mueller matrix exceeds its T-to-T entry M00");
+}
+
+int Beamsor::radial_nodes(double rho_max, double grid_step, const std::string& who) {
+  // Nodes at r = i * step up to a little beyond a, so every r <= a has two neighbours.
+  const double nodes = std::ceil(std::sin(rho_max) / (grid_step / radial_oversampling)) + 2.0;
+  if (!(nodes <= max_radial_nodes))
+    throw Error(who + ": grid_step = " + degrees_text(grid_step) + " needs " + detail::number_text(nodes) +
+                " radial profile nodes for rho_max = " + degrees_text(rho_max) + "; at most " +
+                std::to_string(max_radial_nodes) + " are allowed: choose a larger grid_step");
+  return std::max(3, static_cast<int>(nodes));
+}
+
 double cap_integral(const std::function<double(double, double)>& f, double rho_max,
                     double feature_scale, int sigma_points) {
   static const GaussLegendre gl(16);
@@ -134,6 +177,61 @@ double cap_integral(const std::function<double(double, double)>& f, double rho_m
   return total;
 }
 
+namespace {
+
+// The node k of a beamsor's grid, for messages: its index and direction.
+std::string node_text(std::size_t k, bool radial, int n, double a, double step) {
+  if (radial)
+    return "radial node " + std::to_string(k) + " (rho = " + degrees_text(std::asin(std::min(1.0, k * step))) + ")";
+  const std::size_t i = k % static_cast<std::size_t>(n), j = k / static_cast<std::size_t>(n);
+  const double x = -a + i * step, y = -a + j * step;
+  return "node (" + std::to_string(i) + ", " + std::to_string(j) + ") (rho = " +
+         degrees_text(std::asin(std::min(1.0, std::sqrt(x * x + y * y)))) + ", sigma = " +
+         degrees_text(std::atan2(y, x)) + ")";
+}
+
+// The sampled field's physical bounds (docs/physics.md, "Physical bounds on Mueller matrices"):
+// every entry finite, and none above (1 + tol) times the peak B_TT, which must be positive. A B_TT
+// zero everywhere is left to the builders, which say so.
+void check_field(const std::array<std::vector<double>, 16>& values, const std::string& description, bool radial,
+                 int n, double a, double step) {
+  static constexpr char stokes[] = "TQUV";
+  // The paper's B_XY is row Y, column X.
+  const auto entry = [](int e) {
+    return std::string("B_") + stokes[e % 4] + stokes[e / 4] + " (row " + std::to_string(e / 4) + ", column " +
+           std::to_string(e % 4) + ")";
+  };
+  for (int e = 0; e < 16; ++e)
+    for (std::size_t k = 0; k < values[e].size(); ++k)
+      if (!std::isfinite(values[e][k]))
+        throw Error("beam '" + description + "': " + entry(e) + " is " + detail::number_text(values[e][k]) + " at " +
+                    node_text(k, radial, n, a, step) + "; a beam's Mueller field must be finite");
+  const auto& tt = values[0];
+  if (std::all_of(tt.begin(), tt.end(), [](double v) { return v == 0.0; })) return;
+  const double peak = *std::max_element(tt.begin(), tt.end());
+  if (!(peak > 0.0))
+    throw Error("beam '" + description + "': B_TT is nowhere positive (its largest value is " +
+                detail::number_text(peak) + "); a beam's peak T-to-T response must be positive");
+  // The largest entry, reported where it lies.
+  int worst_e = 0;
+  std::size_t worst_k = 0;
+  double worst = 0.0;
+  for (int e = 0; e < 16; ++e)
+    for (std::size_t k = 0; k < values[e].size(); ++k)
+      if (std::abs(values[e][k]) > worst) {
+        worst = std::abs(values[e][k]);
+        worst_e = e;
+        worst_k = k;
+      }
+  if (!(worst <= (1.0 + mueller_tolerance) * peak))
+    throw Error("beam '" + description + "': " + entry(worst_e) + " = " + detail::number_text(values[worst_e][worst_k]) +
+                " at " + node_text(worst_k, radial, n, a, step) + " exceeds the beam's peak B_TT = " +
+                detail::number_text(peak) + " by more than " + detail::number_text(100 * mueller_tolerance) +
+                "%; no entry of a beam's Mueller field exceeds its peak T-to-T response");
+}
+
+}  // namespace
+
 void Beamsor::sample(const Field& field) {
   std::array<std::vector<double>, 16> values;
   if (radial_) {
@@ -142,6 +240,7 @@ void Beamsor::sample(const Field& field) {
       const Mueller m = field(std::asin(std::min(1.0, i * step_)), 0.0);
       for (int e = 0; e < 16; ++e) values[e][static_cast<std::size_t>(i)] = m[e / 4][e % 4];
     }
+    check_field(values, description_, true, n_, a_, step_);
     for (int e = 0; e < 16; ++e) {
       const bool zero = std::all_of(values[e].begin(), values[e].end(), [](double v) { return v == 0.0; });
       elements_[e] = zero ? std::vector<double>{} : std::move(values[e]);
@@ -158,6 +257,7 @@ void Beamsor::sample(const Field& field) {
       for (int e = 0; e < 16; ++e) values[e][static_cast<std::size_t>(j) * n_ + i] = m[e / 4][e % 4];
     }
   }
+  check_field(values, description_, false, n_, a_, step_);
   for (int e = 0; e < 16; ++e) {
     const bool zero = std::all_of(values[e].begin(), values[e].end(), [](double v) { return v == 0.0; });
     elements_[e] = zero ? std::vector<double>{} : std::move(values[e]);
@@ -181,10 +281,8 @@ Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step
                 std::to_string(max_grid_nodes) + " are allowed");
   b.radial_ = radial;
   if (radial) {
-    // Nodes at r = i * step up to a little beyond a, so every r <= a has two neighbours.
-    const double step = grid_step / radial_oversampling;
-    b.n_ = std::max(3, static_cast<int>(std::ceil(b.a_ / step)) + 2);
-    b.step_ = step;
+    b.n_ = radial_nodes(rho_max, grid_step, "beam");
+    b.step_ = grid_step / radial_oversampling;
   } else {
     b.n_ = std::max(3, static_cast<int>(nodes));
     b.step_ = 2.0 * b.a_ / (b.n_ - 1);
@@ -289,6 +387,7 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
   check_fwhm(fwhm_y, options.rho_max, "fwhm_y");
   if (!std::isfinite(angle)) throw Error("beam: angle must be finite");
   if (!std::isfinite(options.cross_polar)) throw Error("beam: cross_polar must be finite");
+  check_mueller(options.mueller, "beam: the constant Mueller matrix (mueller)", MuellerBounds::relative);
   const double to_sigma = 1.0 / std::sqrt(8.0 * std::log(2.0));
   const double smallest = std::min(fwhm_x, fwhm_y);
   const double step = options.grid_step > 0 ? options.grid_step : smallest / 20.0;

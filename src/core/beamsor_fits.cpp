@@ -260,10 +260,10 @@ Beamsor Beamsor::read_healpix_fits(const std::filesystem::path& file, double rho
     b.n_ = grid_nodes(file, b.a_, grid_step > 0 ? grid_step : pixel_size, rho_max);
     b.step_ = 2.0 * b.a_ / (b.n_ - 1);
     b.omega_ = pixel_sum_omega(file, maps, rho_max);
-    b.sample(interpolating_field(maps));
-    if (!b.has_element(0, 0)) fail(file, "B_TT is zero everywhere on the beam grid");
     b.description_ = "HEALPix beamsor file " + file.filename().string() + " (NSIDE " +
                      std::to_string(maps.nside) + ")";
+    b.sample(interpolating_field(maps));
+    if (!b.has_element(0, 0)) fail(file, "B_TT is zero everywhere on the beam grid");
     return b;
   } catch (...) {
     rethrow_naming(file);

@@ -9,6 +9,7 @@
 #include "core/poles.hpp"
 #include "core/prepared.hpp"
 #include "core/sidelobes.hpp"
+#include "core/text.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/error.hpp"
 
@@ -84,6 +85,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
                const EngineOptions& options)
     : focal_plane_(focal_plane) {
   detail::check_engine_options(options);
+  check_focal_plane(focal_plane, beams.size());  // before the sky's set-up, which takes time
   const detail::BackendEntry& entry = detail::choose_backend(options.backend);
   // A masked sky: the backends get a copy with its UNSEEN pixels 0, for the set-up only (masked_sky.hpp).
   std::optional<Sky> zeroed;
@@ -184,6 +186,11 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
                 " plate angles (hwp_angle), got " + std::to_string(hwp_angle.size()));
   if (!plate && !hwp_angle.empty())
     throw Error("convolve: detector '" + name + "' has no half-wave plate, but plate angles (hwp_angle) were given");
+  if (accumulate)
+    for (std::size_t i = 0; i < tod.size(); ++i)
+      if (!std::isfinite(tod[i]))
+        throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
+                    " at sample " + std::to_string(i) + "; the TOD added to must be finite");
   auto pending = std::make_unique<Pending>();
   if (plate) {
     pending->plate_angle.resize(tod.size());
@@ -257,13 +264,12 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
         polar_backend_->submit(detector, pending->polar.input(), pending->polar_tod, false, t);
         polar_backend_->wait(t);
       }
-      if (split || polar) {
-        pending->ticket = ticket;
-        pending->detector = detector;
-        pending->tod = tod;
-        pending->accumulate = accumulate;
-        pending_.push_back(std::move(pending));
-      }
+      // Every submission is completed, or at least checked, by finish_pending().
+      pending->ticket = ticket;
+      pending->detector = detector;
+      pending->tod = tod;
+      pending->accumulate = accumulate;
+      pending_.push_back(std::move(pending));
     }
     if (polar) polar_samples_ += pending_.back()->polar.index.size();
   } catch (const detail::SubmissionError& e) {
@@ -275,36 +281,60 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   return ticket;
 }
 
-// The plates between the optics and the detector whose rows are done: d = D(0) M(theta) s.
+// The submissions done by `ticket`: their TOD completed (the polar samples, a split beam's outer
+// part, the plates between the optics and the detector, d = D(0) M(theta) s), then checked finite.
+// Every one of them is completed and dropped before the first non-finite value found is reported, so
+// that the engine holds no half-finished work after the error.
 void Engine::finish_pending(std::uint64_t ticket) {
   std::size_t done = 0;
+  std::string problem;
   for (; done < pending_.size() && pending_[done]->ticket <= ticket; ++done) {
     Pending& p = *pending_[done];
-    const std::vector<std::size_t>& polar = p.polar.index;
-    if (p.rows[0].empty()) {  // no plate before the detector: the polar samples, then a split beam's outer part
-      for (std::size_t k = 0; k < polar.size(); ++k)
-        p.tod[polar[k]] = (p.accumulate ? p.polar_base[k] : 0.0) + p.polar_tod[k];
-      if (!p.outer.empty())
-        for (std::size_t i = 0; i < p.tod.size(); ++i) p.tod[i] += p.outer[i];
-      continue;
-    }
-    for (std::size_t k = 0; k < polar.size(); ++k)
-      for (int r = 0; r < 4; ++r) p.rows[r][polar[k]] = p.polar_rows[r][k];
-    if (!p.outer_rows[0].empty())
-      for (int r = 0; r < 4; ++r)
-        for (std::size_t i = 0; i < p.tod.size(); ++i) p.rows[r][i] += p.outer_rows[r][i];
-    const detail::PreparedDetector& det = inputs_->detectors.at(p.detector);
-    Mueller m0{};
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) m0[i][j] = det.plate_mueller[i][j];
-    for (std::size_t i = 0; i < p.tod.size(); ++i) {
-      const Mueller m = rotated_mueller(m0, p.plate_angle[i]);
-      double d = 0.0;
-      for (int b = 0; b < 4; ++b) d += (det.d0[0] * m[0][b] + det.d0[1] * m[1][b]) * p.rows[b][i];
-      p.tod[i] = p.accumulate ? p.tod[i] + d : d;
-    }
+    complete(p);
+    if (!problem.empty()) continue;
+    // One pass over the chunk: the arithmetic overflowed somewhere in the sum (every input was finite).
+    for (std::size_t i = 0; i < p.tod.size(); ++i)
+      if (!std::isfinite(p.tod[i])) {
+        const std::string& name = focal_plane_[p.detector].name;
+        // The cpu backend sums in float64; the others sum the pixels in float32 (docs/simd.md).
+        const bool wide = backend_->name() == "cpu";
+        problem = "convolving detector '" + name + "': sample " + std::to_string(i) + " of the TOD is " +
+                  detail::number_text(p.tod[i]) + ": the convolution overflowed " + (wide ? "float64" : "float32") +
+                  "; the sky, the detector's gain or the beam's or half-wave plate's Mueller entries are too large "
+                  "for " + (wide ? "float64 (their products exceed 1.8e308)" :
+                                   "the " + backend_->name() + " backend's float32 sums (beyond 3.4e38)") +
+                  (p.accumulate ? ", or so is the TOD accumulated into" : "");
+        break;
+      }
   }
   pending_.erase(pending_.begin(), pending_.begin() + std::ptrdiff_t(done));
+  if (!problem.empty()) throw Error(problem);
+}
+
+void Engine::complete(Pending& p) {
+  const std::vector<std::size_t>& polar = p.polar.index;
+  if (p.rows[0].empty()) {  // no plate before the detector: the polar samples, then a split beam's outer part
+    for (std::size_t k = 0; k < polar.size(); ++k)
+      p.tod[polar[k]] = (p.accumulate ? p.polar_base[k] : 0.0) + p.polar_tod[k];
+    if (!p.outer.empty())
+      for (std::size_t i = 0; i < p.tod.size(); ++i) p.tod[i] += p.outer[i];
+    return;
+  }
+  for (std::size_t k = 0; k < polar.size(); ++k)
+    for (int r = 0; r < 4; ++r) p.rows[r][polar[k]] = p.polar_rows[r][k];
+  if (!p.outer_rows[0].empty())
+    for (int r = 0; r < 4; ++r)
+      for (std::size_t i = 0; i < p.tod.size(); ++i) p.rows[r][i] += p.outer_rows[r][i];
+  const detail::PreparedDetector& det = inputs_->detectors.at(p.detector);
+  Mueller m0{};
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) m0[i][j] = det.plate_mueller[i][j];
+  for (std::size_t i = 0; i < p.tod.size(); ++i) {
+    const Mueller m = rotated_mueller(m0, p.plate_angle[i]);
+    double d = 0.0;
+    for (int b = 0; b < 4; ++b) d += (det.d0[0] * m[0][b] + det.d0[1] * m[1][b]) * p.rows[b][i];
+    p.tod[i] = p.accumulate ? p.tod[i] + d : d;
+  }
 }
 
 std::uint64_t Engine::submit(std::size_t detector, const PointingView& boresight, std::span<double> tod,

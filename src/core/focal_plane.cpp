@@ -1,6 +1,11 @@
 #include "pisco/focal_plane.hpp"
 
+#include <cmath>
 #include <numbers>
+#include <unordered_map>
+
+#include "core/text.hpp"
+#include "pisco/error.hpp"
 
 namespace pisco {
 
@@ -25,6 +30,37 @@ std::size_t FocalPlane::add_pair(const std::string& name, double zeta, std::size
   const std::size_t first = add(a);
   add(b);
   return first;
+}
+
+void check_focal_plane(const FocalPlane& focal_plane, std::size_t beams) {
+  using detail::number_text;
+  if (focal_plane.size() == 0) throw Error("focal plane: no detectors");
+  std::unordered_map<std::string, std::size_t> seen;
+  for (std::size_t i = 0; i < focal_plane.size(); ++i) {
+    const Detector& d = focal_plane[i];
+    if (d.name.empty())
+      throw Error("focal plane: detector " + std::to_string(i) + " has an empty name (expected unique names)");
+    const auto [it, added] = seen.emplace(d.name, i);
+    if (!added)
+      throw Error("focal plane: detectors " + std::to_string(it->second) + " and " + std::to_string(i) +
+                  " are both named '" + d.name + "' (expected unique detector names)");
+    const std::string who = "detector '" + d.name + "'";
+    if (!(std::isfinite(d.gain) && d.gain > 0.0))
+      throw Error(who + ": gain = " + number_text(d.gain) + " (its responsivity) must be positive and finite");
+    if (!(d.epsilon >= 0.0 && d.epsilon <= 1.0))
+      throw Error(who + ": epsilon = " + number_text(d.epsilon) + " (cross-polar leakage) is outside [0, 1]");
+    if (!std::isfinite(d.zeta)) throw Error(who + ": zeta = " + number_text(d.zeta) + " is not finite");
+    const Quat& o = d.offset;
+    const double n = norm(o);
+    if (!(std::abs(n - 1.0) <= unit_quat_tolerance))
+      throw Error(who + ": the offset quaternion (" + number_text(o.x, 12) + ", " + number_text(o.y, 12) + ", " +
+                  number_text(o.z, 12) + ", " + number_text(o.w, 12) + ") has norm " + number_text(n, 12) +
+                  "; a rotation is a unit quaternion (x, y, z, w), to within " + number_text(unit_quat_tolerance));
+    if (d.beam >= beams)
+      throw Error(who + ": beam index " + std::to_string(d.beam) + " but only " + std::to_string(beams) +
+                  " beamsors were given");
+    if (d.hwp) d.hwp->check(who);
+  }
 }
 
 }  // namespace pisco

@@ -310,8 +310,14 @@ Stokes stokes_of(cd co, cd cx) {
   return {std::norm(co) + std::norm(cx), std::norm(co) - std::norm(cx), 2 * x.real(), 2 * x.imag()};
 }
 
-// Lagrange weights of the `points` nodes first, first + 1, ... at position t (in node units).
-int lagrange(double t, int n, int points, double* w) {
+// Lagrange weights of the `points` nodes first, first + 1, ... at position t (in node units), on a
+// line of n nodes of the file `source`.
+int lagrange(double t, int n, int points, double* w, const std::string& source) {
+  // Callers ask within the nodes (t in [0, n - 1], to rounding); anything else, a NaN included, is a
+  // bug that must not reach the cast to int.
+  if (!(t >= -1.0 && t <= n))
+    throw Error(source + ": interpolation at node position " + detail::number_text(t) + " outside the file's " +
+                std::to_string(n) + " nodes along an axis (expected 0 to " + std::to_string(n - 1) + ")");
   int first = static_cast<int>(std::floor(t)) - (points / 2 - 1);
   first = std::clamp(first, 0, n - points);
   for (int a = 0; a < points; ++a) {
@@ -325,6 +331,7 @@ int lagrange(double t, int n, int points, double* w) {
 
 // A regular grid of Stokes values in (x, y), x fastest: 6-point Lagrange along each axis.
 struct RegularStokes {
+  std::string source;
   int nx = 0, ny = 0;
   double xs = 0, ys = 0, dx = 0, dy = 0;
   std::vector<Stokes> s;
@@ -335,8 +342,8 @@ struct RegularStokes {
   Stokes at(double x, double y) const {
     const int px = std::min(6, nx), py = std::min(6, ny);
     double wx[6], wy[6];
-    const int i0 = lagrange((x - xs) / dx, nx, px, wx);
-    const int j0 = lagrange((y - ys) / dy, ny, py, wy);
+    const int i0 = lagrange((x - xs) / dx, nx, px, wx, source);
+    const int j0 = lagrange((y - ys) / dy, ny, py, wy, source);
     Stokes out{};
     for (int b = 0; b < py; ++b)
       for (int a = 0; a < px; ++a) {
@@ -352,6 +359,7 @@ struct RegularStokes {
 // 6-point Lagrange in theta (continued through the axis onto the opposite half-line), then
 // trigonometric interpolation in phi.
 struct PolarStokes {
+  std::string source;
   int nphi = 0, ntheta = 0;
   double phi0 = 0, dtheta = 0;
   std::vector<Stokes> s;  // [k * ntheta + j]
@@ -362,7 +370,7 @@ struct PolarStokes {
     const int lo = through ? -(ntheta - 1) : 0;
     const int points = std::min(6, ntheta - lo);
     double w[6];
-    const int first = lagrange(theta / dtheta - lo, ntheta - lo, points, w) + lo;
+    const int first = lagrange(theta / dtheta - lo, ntheta - lo, points, w, source) + lo;
     std::vector<Stokes> line(static_cast<std::size_t>(nphi));
     for (int k = 0; k < nphi; ++k) {
       Stokes v{};
@@ -414,6 +422,14 @@ PolarStokes polar_of(const GraspBeam& b, const std::vector<double>& phis, const 
     for (int t = 0; t < nt; ++t) {
       const double theta = thetas[static_cast<std::size_t>(t)];
       const double jf = std::abs(theta) / dtheta;
+      // A grid through the axis reaches at most nt - 1 steps from it: anything further (or a NaN) is
+      // refused before the cast to int.
+      if (!(jf <= nt))
+        fail("theta = " + std::to_string(theta * 180 / pi) + " deg lies " + detail::number_text(jf) +
+             " steps of " + std::to_string(dtheta * 180 / pi) + " deg from the beam axis, beyond the " +
+             std::to_string(nt) + " samples of a cut; expected theta samples on a grid through the beam axis");
+      if (!std::isfinite(phis[i]))
+        fail("phi = " + detail::number_text(phis[i] * 180 / pi) + " deg is not finite");
       const int j = static_cast<int>(std::lround(jf));
       if (std::abs(jf - j) > 1e-6)
         fail("theta = " + std::to_string(theta * 180 / pi) + " deg is not a multiple of the step " +
@@ -442,6 +458,7 @@ PolarStokes polar_of(const GraspBeam& b, const std::vector<double>& phis, const 
       fail("the cuts' phi (with theta < 0 as phi + 180 deg) are not evenly spaced around the beam axis: " + std::to_string(n) +
            " half-lines, expected a step of " + std::to_string(360.0 / n) + " deg");
   PolarStokes p;
+  p.source = b.source;
   p.nphi = n;
   p.ntheta = jmax + 1;
   p.phi0 = lines[0];
@@ -453,7 +470,12 @@ PolarStokes polar_of(const GraspBeam& b, const std::vector<double>& phis, const 
       axis = s.s;
       continue;
     }
-    const int k = static_cast<int>(std::lround(std::remainder(s.phi - p.phi0, 2 * pi) / (2 * pi / n) + n)) % n;
+    // In [n/2, 3n/2] for a finite phi (checked above): a bound before the cast to int.
+    const double kf = std::remainder(s.phi - p.phi0, 2 * pi) / (2 * pi / n) + n;
+    if (!(kf >= 0.0 && kf <= 2.0 * n))
+      fail("phi = " + detail::number_text(s.phi * 180 / pi) + " deg falls on half-line " + detail::number_text(kf) +
+           " of " + std::to_string(n));
+    const int k = static_cast<int>(std::lround(kf)) % n;
     p.s[static_cast<std::size_t>(k) * p.ntheta + s.j] = s.s;
   }
   if (std::isnan(axis[0])) fail("no sample on the beam axis (theta = 0); expected cuts through the axis");
@@ -492,6 +514,7 @@ Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) 
   std::string kind;
   if (b.grid != GraspBeam::Grid::theta_phi && b.grid != GraspBeam::Grid::cuts) {
     auto g = std::make_shared<RegularStokes>();
+    g->source = b.source;
     g->nx = b.nx;
     g->ny = b.ny;
     g->xs = b.xs;

@@ -331,11 +331,13 @@ Beamsor Beamsor::from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& 
     const double rho_grid = options.split.rho_main > 0 ? options.split.rho_main : options.rho_max;
     const double a = std::sin(rho_grid);
     std::vector<double> keys;
-    if (radial) {
+    // With a rho_max or grid_step that from_field refuses nothing is synthesized ahead: from_field says why.
+    const bool valid = rho_grid > 0 && rho_grid < std::numbers::pi / 2 && std::isfinite(step) && step > 0;
+    if (valid && radial) {
       const double h = step / radial_oversampling;
-      const int n = std::max(3, static_cast<int>(std::ceil(a / h)) + 2);
+      const int n = radial_nodes(rho_grid, step, "harmonic beam " + beam.source);
       for (int i = 0; i < n; ++i) keys.push_back(std::asin(std::min(1.0, i * h)));
-    } else if (std::ceil(2.0 * a / step) + 1.0 <= max_grid_nodes) {
+    } else if (valid && std::ceil(2.0 * a / step) + 1.0 <= max_grid_nodes) {
       const int n = std::max(3, static_cast<int>(std::ceil(2.0 * a / step) + 1.0));
       const double h = 2.0 * a / (n - 1);
       // One octant: the grid is symmetric about the axis, and mirrored nodes' radii round to one key.

@@ -21,12 +21,9 @@ HalfWavePlate HalfWavePlate::ideal(double gamma, HwpPlacement placement) {
   return {ideal_hwp_mueller(), placement, gamma};
 }
 
+// A passive element's bounds (docs/physics.md, "Physical bounds on Mueller matrices").
 void HalfWavePlate::check(const std::string& where) const {
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j)
-      if (!std::isfinite(mueller[i][j]))
-        throw Error(where + ": half-wave plate Mueller element [" + std::to_string(i) + "][" + std::to_string(j) +
-                    "] is not finite (expected 16 finite numbers, row by row)");
+  check_mueller(mueller, where + ": half-wave plate", MuellerBounds::passive);
   if (!std::isfinite(gamma)) throw Error(where + ": half-wave plate gamma is not finite");
 }
 

@@ -109,18 +109,11 @@ std::vector<double> reference_pixels(const Sky& sky, unsigned threads) {
   return pixels;
 }
 
+// The detector as check_focal_plane() has accepted it.
 PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double pixel_area,
                                   Normalization normalization) {
-  if (!std::isfinite(d.zeta) || !std::isfinite(d.epsilon) || !std::isfinite(d.gain))
-    throw Error("detector '" + d.name + "': zeta, epsilon and gain must be finite");
-  if (d.epsilon < 0.0 || d.epsilon > 1.0)
-    throw Error("detector '" + d.name + "': epsilon = " + std::to_string(d.epsilon) +
-                " (cross-polar leakage) is outside [0, 1]");
   PreparedDetector p;
   const Quat& o = d.offset;
-  if (!std::isfinite(norm(o)) || std::abs(norm(o) - 1.0) > 1e-6)
-    throw Error("detector '" + d.name + "': the offset quaternion (" + std::to_string(o.x) + ", " + std::to_string(o.y) +
-                ", " + std::to_string(o.z) + ", " + std::to_string(o.w) + ") is not a unit quaternion (x, y, z, w)");
   p.offset = make_offset({o.x, o.y, o.z, o.w});  // rotation_matrix() is exact for any norm
   p.cos_zeta = std::cos(d.zeta);
   p.sin_zeta = std::sin(d.zeta);
@@ -153,7 +146,6 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
   p.d0[0] = d.gain / 2 * (1 + d.epsilon);
   p.d0[1] = d.gain / 2 * (1 - d.epsilon);
   if (d.hwp) {
-    d.hwp->check("detector '" + d.name + "'");
     p.plate = d.hwp->placement == HwpPlacement::aperture ? PreparedDetector::Plate::aperture
                                                           : PreparedDetector::Plate::detector;
     for (int i = 0; i < 4; ++i)
@@ -179,14 +171,11 @@ PreparedDetector prepare_row_detector(const Detector& d, const Beamsor& beam, do
 
 EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
                             const FocalPlane& focal_plane, Normalization normalization) {
-  if (focal_plane.size() == 0) throw Error("focal plane: no detectors");
+  check_focal_plane(focal_plane, beams.size());
   EngineInputs in;
   in.normalization = normalization;
   in.sky = prepare_sky(sky);
   for (const Detector& d : focal_plane.detectors()) {
-    if (d.beam >= beams.size())
-      throw Error("detector '" + d.name + "': beam index " + std::to_string(d.beam) +
-                  " but only " + std::to_string(beams.size()) + " beamsors were given");
     in.detectors.push_back(prepare_detector(d, beams[d.beam], in.sky.pixel_area, normalization));
     in.detectors.back().owner = in.detectors.size() - 1;
   }

@@ -18,6 +18,7 @@
 #include <healpix_base.h>
 
 #include "core/fits_table.hpp"
+#include "core/text.hpp"
 #include "pisco/sky.hpp"
 #include "pisco/healpix_map.hpp"
 
@@ -231,6 +232,13 @@ void write_healpix_map(const std::filesystem::path& file, int nside, const std::
     if (c.values.size() != static_cast<std::size_t>(12LL * nside * nside))
       fail(file, "column " + c.name + " has " + std::to_string(c.values.size()) + " values; expected 12 NSIDE^2 = " +
                      std::to_string(12LL * nside * nside));
+  // Every value finite (UNSEEN, -1.6375e30, is), checked before anything is written.
+  for (const auto& c : columns)
+    for (std::size_t p = 0; p < c.values.size(); ++p)
+      if (!std::isfinite(c.values[p]))
+        fail(file, "column " + c.name + ": pixel " + std::to_string(p) + " is " + detail::number_text(c.values[p]) +
+                       "; a map holds finite values (UNSEEN, " + detail::number_text(unseen) +
+                       ", marks a pixel without data)");
   detail::write_atomically(file, [&](const fs::path& temporary) {
     FitsFile f = FitsFile::create(temporary, file);
     write_map_table(f, nside, columns, units);

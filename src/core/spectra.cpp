@@ -19,6 +19,7 @@
 #include <powspec.h>
 #include <xcomplex.h>
 
+#include "core/text.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
 
@@ -360,6 +361,22 @@ std::vector<double> to_dl(std::span<const double> cl) {
   std::vector<double> dl(cl.size());
   for (std::size_t l = 0; l < cl.size(); ++l) dl[l] = double(l) * double(l + 1) * cl[l] / two_pi;
   return dl;
+}
+
+void check_finite(const Spectra& spectra, const std::string& where, int lmin, int lmax) {
+  const std::pair<const char*, const std::vector<double>*> all[6] = {
+      {"TT", &spectra.TT}, {"EE", &spectra.EE}, {"BB", &spectra.BB},
+      {"TE", &spectra.TE}, {"EB", &spectra.EB}, {"TB", &spectra.TB}};
+  for (const auto& [name, values] : all) {
+    const long long last = lmax < 0 ? static_cast<long long>(values->size()) - 1
+                                    : std::min<long long>(lmax, static_cast<long long>(values->size()) - 1);
+    for (long long l = std::max(lmin, 0); l <= last; ++l)
+      if (!std::isfinite((*values)[static_cast<std::size_t>(l)]))
+        throw Error(where + ": " + name + " at l = " + std::to_string(l) + " is " +
+                    detail::number_text((*values)[static_cast<std::size_t>(l)]) +
+                    "; spectra are written finite (the maps they come from, or a beam or pixel window divided "
+                    "out near zero, are not)");
+  }
 }
 
 }  // namespace pisco

@@ -15,4 +15,12 @@ inline std::string degrees_text(double radians) {
   return s.str();
 }
 
+// A number in six significant digits ("1e+200", "0.0153"), or as many as asked for.
+inline std::string number_text(double value, int digits = 6) {
+  std::ostringstream s;
+  s.precision(digits);
+  s << value;
+  return s.str();
+}
+
 }  // namespace pisco::detail

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <map>
@@ -11,6 +12,7 @@
 #include <system_error>
 
 #include "core/output_file.hpp"
+#include "core/text.hpp"
 
 #include "io/hdf5.hpp"
 #include "pisco/quaternion.hpp"
@@ -394,6 +396,29 @@ void TodWriter::write(std::size_t detector, std::size_t offset, std::span<const 
   if (!s.with_weights && !weights.empty())
     throw Error(where + ": detector " + in_quotes(name) + ": weights given, but the file is written without weights");
   if (count == 0) return;
+  // Every value finite, and a float32 file's signal within float32's range (beyond it the conversion
+  // would store inf): checked before anything is written.
+  const auto refuse = [&](const char* dataset, std::size_t i, double v, const std::string& why) {
+    throw Error(where + ": detector " + in_quotes(name) + ": " + dataset + " of sample " + std::to_string(offset + i) +
+                " is " + detail::number_text(v) + why);
+  };
+  const bool narrow = s.precision == TodPrecision::float32;
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!std::isfinite(signal[i])) refuse("the signal", i, signal[i], "; a TOD file holds finite values only");
+    if (narrow && std::isinf(static_cast<float>(signal[i])))
+      refuse("the signal", i, signal[i],
+             ", beyond float32's range (3.4e38) of this file's float32 signal; write it as float64");
+  }
+  if (s.with_pointing) {
+    const std::span<const double> angles[3] = {pointing->theta, pointing->phi, pointing->psi};
+    const char* names[3] = {"theta", "phi", "psi"};
+    for (int k = 0; k < 3; ++k)
+      for (std::size_t i = 0; i < count; ++i)
+        if (!std::isfinite(angles[k][i])) refuse(names[k], i, angles[k][i], "; a TOD file holds finite values only");
+  }
+  for (std::size_t i = 0; i < weights.size(); ++i)
+    if (!std::isfinite(weights[i]))
+      refuse("a weight", i / 3, weights[i], "; a TOD file holds finite values only");
 
   // The chunks this write allocates, in every dataset it writes to: those it touches that no earlier
   // write did.

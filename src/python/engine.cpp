@@ -3,11 +3,13 @@
 // One Python Engine may be used from several threads: its calls are serialized by its own mutex,
 // taken after the GIL is released, so that other engines (and any other Python code) run meanwhile.
 // close() waits for the calls in progress and frees the device's memory; later calls raise.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <new>
 #include <numbers>
 #include <optional>
 #include <span>
@@ -21,6 +23,7 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include "args.hpp"
 #include "arrays.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
@@ -148,9 +151,9 @@ std::string check_values(const PointingArgs& p) {
   for (std::size_t i = 0; i < p.size; ++i) {
     const double n = std::sqrt(q[4 * i] * q[4 * i] + q[4 * i + 1] * q[4 * i + 1] + q[4 * i + 2] * q[4 * i + 2] +
                                q[4 * i + 3] * q[4 * i + 3]);
-    if (std::abs(n - 1.0) > 1e-6)
+    if (!(std::abs(n - 1.0) <= unit_quat_tolerance))
       return "boresight_quats[" + std::to_string(i) + "] has norm " + format_double(n) +
-             "; rotations must be unit quaternions (to 1e-6)";
+             "; rotations must be unit quaternions (to " + short_text(unit_quat_tolerance) + ")";
   }
   return {};
 }
@@ -158,8 +161,8 @@ std::string check_values(const PointingArgs& p) {
 class PyEngine {
  public:
   PyEngine(const Sky& sky, nb::handle beams, const FocalPlane& focal_plane, const std::string& backend,
-           const std::string& device, std::size_t chunk_samples, const std::string& normalization,
-           unsigned threads, const std::string& arithmetic, const std::string& unseen, const std::string& quadrature) {
+           const std::string& device, long long chunk_samples, const std::string& normalization,
+           long long threads, const std::string& arithmetic, const std::string& unseen, const std::string& quadrature) {
     std::vector<Beamsor> beam_list;
     if (nb::isinstance<Beamsor>(beams)) {
       beam_list.push_back(nb::cast<Beamsor>(beams));
@@ -173,15 +176,34 @@ class PyEngine {
     EngineOptions options;
     options.backend = backend;
     options.device = device;
-    options.chunk_samples = chunk_samples;
+    options.chunk_samples = unsigned_arg<std::size_t>(chunk_samples, "chunk_samples");
     options.normalization = normalization_from(normalization);
-    options.threads = threads;
+    options.threads = unsigned_arg<unsigned>(threads, "threads");
     options.arithmetic = arithmetic;
     options.unseen = unseen_policy_from(unseen);
     options.quadrature = quadrature_from(quadrature);
     for (const auto& d : focal_plane.detectors()) names_.push_back(d.name);
-    nb::gil_scoped_release release;
-    engine_ = std::make_unique<Engine>(sky, beam_list, focal_plane, options);
+    bool out_of_memory = false;
+    {
+      nb::gil_scoped_release release;
+      try {
+        engine_ = std::make_unique<Engine>(sky, beam_list, focal_plane, options);
+      } catch (const std::bad_alloc&) {
+        out_of_memory = true;
+      }
+    }
+    if (out_of_memory) {
+      std::size_t nodes = 0;
+      for (const Beamsor& b : beam_list)
+        nodes = std::max(nodes, b.is_radial() ? std::size_t(b.grid_size())
+                                              : std::size_t(b.grid_size()) * std::size_t(b.grid_size()));
+      raise_memory_error("pisco.Engine: memory ran out while setting up for a sky of NSIDE " +
+                         std::to_string(sky.nside()) + " (" + std::to_string(sky.npix()) +
+                         " pixels; the engine keeps copies of its I, Q, U, V maps, " +
+                         bytes_text(32.0 * double(sky.npix())) + " each), " + std::to_string(beam_list.size()) +
+                         " beam(s) of up to " + std::to_string(nodes) + " grid nodes and " +
+                         std::to_string(focal_plane.size()) + " detector(s)");
+    }
   }
 
   ~PyEngine() {
@@ -202,6 +224,7 @@ class PyEngine {
     nb::object result = output(out, p.size, accumulate);
     Vector tod = vector(result, "out");
     std::string problem;
+    bool out_of_memory = false;
     {
       nb::gil_scoped_release release;
       problem = check_values(p);
@@ -209,13 +232,18 @@ class PyEngine {
       if (problem.empty()) {
         std::lock_guard lock(mutex_);
         Engine& e = open();
-        if (p.theta)
-          e.convolve(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h));
-        else
-          e.convolve(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+        try {
+          if (p.theta)
+            e.convolve(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h));
+          else
+            e.convolve(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+        } catch (const std::bad_alloc&) {
+          out_of_memory = true;
+        }
       }
     }
     if (!problem.empty()) throw nb::value_error(problem.c_str());
+    if (out_of_memory) raise_memory_error(chunk_memory("convolve", d, p.size));
     return result;
   }
 
@@ -229,6 +257,7 @@ class PyEngine {
     Vector tod = vector(out, "out");
     std::string problem;
     std::uint64_t ticket = 0;
+    bool out_of_memory = false;
     {
       nb::gil_scoped_release release;
       problem = check_values(p);
@@ -237,11 +266,16 @@ class PyEngine {
         std::lock_guard lock(mutex_);
         Engine& e = open();
         // The plate's angles, like the pointing, are read before submit() returns.
-        ticket = p.theta ? e.submit(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h))
-                         : e.submit(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+        try {
+          ticket = p.theta ? e.submit(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h))
+                           : e.submit(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+        } catch (const std::bad_alloc&) {
+          out_of_memory = true;
+        }
       }
     }
     if (!problem.empty()) throw nb::value_error(problem.c_str());
+    if (out_of_memory) raise_memory_error(chunk_memory("submit", d, p.size));
     in_flight_[ticket] = nb::borrow(out);  // kept alive until wait() has written it
     return ticket;
   }
@@ -272,20 +306,36 @@ class PyEngine {
     return result;
   }
 
-  void wait(std::optional<std::uint64_t> ticket) {
-    {
+  void wait(std::optional<long long> ticket_arg) {
+    std::optional<std::uint64_t> ticket;
+    if (ticket_arg) ticket = unsigned_arg<std::uint64_t>(*ticket_arg, "ticket");
+    // The submissions waited for are done even when one of them failed (a non-finite TOD sample):
+    // their arrays are released either way.
+    const auto release_arrays = [&] {
+      if (ticket)
+        in_flight_.erase(in_flight_.begin(), in_flight_.upper_bound(*ticket));
+      else
+        in_flight_.clear();
+    };
+    bool out_of_memory = false;
+    try {
       nb::gil_scoped_release release;
       std::lock_guard lock(mutex_);
       Engine& e = open();
-      if (ticket)
-        e.wait(*ticket);
-      else
-        e.wait();
+      try {
+        if (ticket)
+          e.wait(*ticket);
+        else
+          e.wait();
+      } catch (const std::bad_alloc&) {
+        out_of_memory = true;
+      }
+    } catch (const pisco::Error&) {
+      release_arrays();
+      throw;
     }
-    if (ticket)
-      in_flight_.erase(in_flight_.begin(), in_flight_.upper_bound(*ticket));
-    else
-      in_flight_.clear();
+    release_arrays();
+    if (out_of_memory) raise_memory_error("Engine.wait: memory ran out completing the submissions");
   }
 
   void close() {
@@ -336,6 +386,11 @@ class PyEngine {
     return static_cast<std::size_t>(i);
   }
 
+  std::string chunk_memory(const char* call, std::size_t detector, std::size_t samples) const {
+    return "Engine." + std::string(call) + ": memory ran out for a chunk of " + std::to_string(samples) +
+           " samples of detector '" + names_[detector] + "'; give shorter chunks";
+  }
+
   static void check_output_size(nb::handle out, std::size_t n) {
     check_array(out, "out", 1, 0, true);
     const auto len = nb::cast<std::size_t>(nb::cast<nb::tuple>(out.attr("shape"))[0]);
@@ -382,8 +437,8 @@ void bind_engine(nb::module_& m) {
                        "the sky turned by 90 deg, exact for skies band-limited to 2 NSIDE, and the rings where the\n"
                        "polar caps meet the belt weighted) or 'plain' (the equal-weight pixel sum everywhere).\n"
                        "Usable as a context manager; close() frees the device's memory.")
-      .def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, std::size_t,
-                    const std::string&, unsigned, const std::string&, const std::string&, const std::string&>(),
+      .def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, long long,
+                    const std::string&, long long, const std::string&, const std::string&, const std::string&>(),
            "sky"_a, "beams"_a, "focal_plane"_a, "backend"_a = "auto", "device"_a = "auto", "chunk_samples"_a = 0,
            "normalization"_a = "integral", "threads"_a = 0, "arithmetic"_a = "auto", "unseen"_a = "error",
            "quadrature"_a = "corrected")

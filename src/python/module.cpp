@@ -5,6 +5,7 @@
 #include <cmath>
 #include <complex>
 #include <cstdint>
+#include <new>
 #include <filesystem>
 #include <numbers>
 #include <optional>
@@ -21,6 +22,7 @@
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
+#include "args.hpp"
 #include "arrays.hpp"
 #include "pisco/pisco.hpp"
 
@@ -43,14 +45,27 @@ nb::ndarray<nb::numpy, double, nb::shape<4>> quat_array(const Quat& q) {
   return nb::ndarray<nb::numpy, double, nb::shape<4>>(data, {4}, owner);
 }
 
+// A rotation (x, y, z, w): unit to within pisco.unit_quat_tolerance, the rounding normalized away; a
+// quaternion further from unit norm is a mistake, refused (ValueError naming `name` and the norm).
 Quat quat_from(nb::handle obj, const char* name) {
   std::vector<double> v;
   if (!nb::try_cast(obj, v) || v.size() != 4)
     throw nb::value_error((std::string(name) + ": expected four numbers (x, y, z, w), got " + describe(obj)).c_str());
   for (double c : v)
     if (!std::isfinite(c)) throw nb::value_error((std::string(name) + ": the quaternion is not finite").c_str());
-  return normalized(Quat{v[0], v[1], v[2], v[3]});
+  const Quat q{v[0], v[1], v[2], v[3]};
+  const double n = norm(q);
+  if (!(std::abs(n - 1.0) <= unit_quat_tolerance))
+    throw nb::value_error((std::string(name) + ": the quaternion (" + format_double(q.x) + ", " + format_double(q.y) +
+                           ", " + format_double(q.z) + ", " + format_double(q.w) + ") has norm " + format_double(n) +
+                           "; a rotation is a unit quaternion (x, y, z, w), to within " +
+                           short_text(unit_quat_tolerance))
+                              .c_str());
+  return normalized(q);
 }
+
+// The four Stokes maps of a sky of this NSIDE, as "2.58e+10 bytes".
+std::string sky_bytes(long long nside) { return bytes_text(4.0 * 12.0 * double(nside) * double(nside) * 8.0); }
 
 void check_nside_value(long long nside, const char* name) {
   if (!valid_nside(nside))
@@ -58,15 +73,26 @@ void check_nside_value(long long nside, const char* name) {
                            " is not a power of two in [1, " + std::to_string(max_nside) + "]").c_str());
 }
 
-Mueller mueller_from(nb::handle obj) {
+// The library's Mueller check (pisco::check_mueller) as a ValueError.
+void check_mueller_arg(const Mueller& m, const std::string& name, MuellerBounds bounds) {
+  try {
+    check_mueller(m, name, bounds);
+  } catch (const pisco::Error& e) {
+    throw nb::value_error(e.what());
+  }
+}
+
+// A 4x4 Mueller matrix given as 4 rows of 4 numbers, finite (ValueError naming `name`).
+Mueller mueller_from(nb::handle obj, const std::string& name) {
   Mueller m{};
   std::vector<std::vector<double>> rows;
   if (!nb::try_cast(obj, rows) || rows.size() != 4)
-    throw nb::value_error(("mueller: expected a 4x4 matrix, got " + describe(obj)).c_str());
+    throw nb::value_error((name + ": expected a 4x4 matrix, got " + describe(obj)).c_str());
   for (int i = 0; i < 4; ++i) {
-    if (rows[i].size() != 4) throw nb::value_error("mueller: expected a 4x4 matrix");
+    if (rows[i].size() != 4) throw nb::value_error((name + ": expected a 4x4 matrix").c_str());
     for (int j = 0; j < 4; ++j) m[i][j] = rows[i][j];
   }
+  check_mueller_arg(m, name, MuellerBounds::finite);
   return m;
 }
 
@@ -105,7 +131,10 @@ BeamOptions beam_options(double rho_max, double grid_step, double cross_polar, c
     o.cross_polar_pattern = CrossPolarPattern::quadrupole;
   else
     throw nb::value_error(("cross_polar_pattern: expected 'uniform' or 'quadrupole', got '" + pattern + "'").c_str());
-  if (!mueller.is_none()) o.mueller = mueller_from(mueller);
+  if (!mueller.is_none()) {
+    o.mueller = mueller_from(mueller, "mueller");
+    check_mueller_arg(o.mueller, "mueller", MuellerBounds::relative);
+  }
   o.split = split_from(sidelobes);
   return o;
 }
@@ -147,6 +176,14 @@ Mueller mueller_arg(nb::handle obj, const std::string& name) {
                                format_double(v) + ": Mueller matrices must be finite").c_str());
       m[i][j] = v;
     }
+  return m;
+}
+
+// A plate's M0: a Mueller matrix argument within a passive element's bounds (docs/physics.md,
+// "Physical bounds on Mueller matrices"), ValueError naming `mueller` otherwise.
+Mueller plate_mueller_arg(nb::handle obj) {
+  const Mueller m = mueller_arg(obj, "mueller");
+  check_mueller_arg(m, "mueller", MuellerBounds::passive);
   return m;
 }
 
@@ -203,7 +240,12 @@ void bind_sky(nb::module_& m) {
       .def("__init__",
            [](Sky* self, long long nside, std::string units) {
              check_nside_value(nside, "nside");
-             new (self) Sky(static_cast<int>(nside), std::move(units));
+             try {
+               new (self) Sky(static_cast<int>(nside), std::move(units));
+             } catch (const std::bad_alloc&) {
+               raise_memory_error("pisco.Sky(nside=" + std::to_string(nside) + "): " + sky_bytes(nside) +
+                                  " of maps could not be allocated");
+             }
            },
            "nside"_a, "units"_a = "K_CMB")
       .def_static(
@@ -231,7 +273,14 @@ void bind_sky(nb::module_& m) {
               throw nb::value_error(("maps: " + std::to_string(npix) +
                                      " pixels is not 12 NSIDE^2 for a power of two NSIDE").c_str());
             check_nside_value(nside, "maps");
-            Sky sky(static_cast<int>(nside), std::move(units));
+            std::optional<Sky> made;
+            try {
+              made.emplace(static_cast<int>(nside), std::move(units));
+            } catch (const std::bad_alloc&) {
+              raise_memory_error("pisco.Sky.from_maps: a sky of NSIDE " + std::to_string(nside) + " (" +
+                                 sky_bytes(nside) + " of maps) could not be allocated");
+            }
+            Sky& sky = *made;
             for (std::size_t k = 0; k < views.size(); ++k) {
               if (views[k].shape(0) != npix)
                 throw nb::value_error(("maps[" + std::to_string(k) + "]: " + std::to_string(views[k].shape(0)) +
@@ -244,7 +293,7 @@ void bind_sky(nb::module_& m) {
               auto dst = sky.stokes(static_cast<StokesIndex>(k));
               std::copy(src, src + npix, dst.begin());
             }
-            return sky;
+            return std::move(sky);
           },
           "maps"_a, "units"_a = "K_CMB",
           "A sky from HEALPix RING maps: a (k, npix) float64 array or a sequence of k 1-D float64 arrays,\n"
@@ -320,7 +369,7 @@ void bind_beamsor(nb::module_& m) {
              bool radial, nb::handle sidelobes) {
             const Beamsor::Field f = [&field](double rho, double sigma) {
               nb::object value = field(rho, sigma);
-              return mueller_from(value);
+              return mueller_from(value, "field(" + format_double(rho) + ", " + format_double(sigma) + ")");
             };
             return Beamsor::from_field(f, rho_max, grid_step, std::move(description), feature_scale, radial,
                                        split_from(sidelobes));
@@ -447,7 +496,9 @@ void bind_hwp(nb::module_& m) {
       "HalfWavePlate(mueller=None, placement='aperture', gamma=0.0)\n\n"
       "mueller: M0, the plate's 4x4 Mueller matrix with its fast axis along the detector's polarization\n"
       "axis (rows: I, Q, U, V leaving the plate; columns: those arriving); None is the ideal plate\n"
-      "diag(1, 1, -1, -1). placement: 'aperture' (skyward of the optics, the default) or 'detector'\n"
+      "diag(1, 1, -1, -1); a passive element's (docs/physics.md, \"Physical bounds on Mueller matrices\":\n"
+      "M00 > 0, no more light out than in, within pisco.mueller_tolerance), else ValueError naming `mueller`.\n"
+      "placement: 'aperture' (skyward of the optics, the default) or 'detector'\n"
       "(between the optics and the detector: four times the cost). gamma: the detector's polarization\n"
       "angle in the focal-plane frame (radians, TOAST's focal-plane `gamma`). At the plate's angle h\n"
       "(Engine.convolve's hwp_angle, in the focal-plane frame) the plate is M(theta) = R(-theta) M0\n"
@@ -455,7 +506,7 @@ void bind_hwp(nb::module_& m) {
       .def("__init__",
            [](HalfWavePlate* self, nb::handle mueller, const std::string& placement, double gamma) {
              HalfWavePlate p;
-             if (!mueller.is_none()) p.mueller = mueller_arg(mueller, "mueller");
+             if (!mueller.is_none()) p.mueller = plate_mueller_arg(mueller);
              p.placement = placement_from(placement);
              p.gamma = finite_arg(gamma, "gamma");
              new (self) HalfWavePlate(p);
@@ -463,7 +514,7 @@ void bind_hwp(nb::module_& m) {
            "mueller"_a = nb::none(), "placement"_a = "aperture", "gamma"_a = 0.0)
       .def_prop_rw(
           "mueller", [](const HalfWavePlate& p) { return mueller_readonly(p.mueller); },
-          [](HalfWavePlate& p, nb::handle v) { p.mueller = mueller_arg(v, "mueller"); },
+          [](HalfWavePlate& p, nb::handle v) { p.mueller = plate_mueller_arg(v); },
           "M0, the plate's Mueller matrix at theta = 0 (a read-only copy; assign a new (4, 4) array to change it).")
       .def_prop_rw(
           "placement", [](const HalfWavePlate& p) { return std::string(placement_name(p.placement)); },
@@ -511,14 +562,14 @@ void bind_focal_plane(nb::module_& m) {
                        "boresight as a quaternion (x, y, z, w), and its half-wave plate (a pisco.HalfWavePlate, or\n"
                        "None: then the engine's convolve() needs the plate's angles, hwp_angle).")
       .def("__init__",
-           [](Detector* self, std::string name, double zeta, double epsilon, double gain, std::size_t beam,
+           [](Detector* self, std::string name, double zeta, double epsilon, double gain, long long beam,
               nb::handle offset, nb::handle hwp) {
              Detector d{};
              d.name = std::move(name);
              d.zeta = zeta;
              d.epsilon = epsilon;
              d.gain = gain;
-             d.beam = beam;
+             d.beam = unsigned_arg<std::size_t>(beam, "beam");
              if (!offset.is_none()) d.offset = quat_from(offset, "offset");
              d.hwp = plate_arg(hwp);
              new (self) Detector(std::move(d));
@@ -529,7 +580,10 @@ void bind_focal_plane(nb::module_& m) {
       .def_rw("zeta", &Detector::zeta)
       .def_rw("epsilon", &Detector::epsilon)
       .def_rw("gain", &Detector::gain)
-      .def_rw("beam", &Detector::beam)
+      .def_prop_rw(
+          "beam", [](const Detector& d) { return d.beam; },
+          [](Detector& d, long long v) { d.beam = unsigned_arg<std::size_t>(v, "beam"); },
+          "The index of the detector's beam in the engine's beams (a non-negative integer).")
       .def_prop_rw(
           "offset", [](const Detector& d) { return nb::cast(quat_array(d.offset)); },
           [](Detector& d, nb::handle q) { d.offset = quat_from(q, "offset"); },
@@ -558,7 +612,7 @@ void bind_focal_plane(nb::module_& m) {
       .def(nb::init<>())
       .def(
           "add",
-          [](FocalPlane& fp, nb::handle detector_or_name, double zeta, double epsilon, double gain, std::size_t beam,
+          [](FocalPlane& fp, nb::handle detector_or_name, double zeta, double epsilon, double gain, long long beam,
              nb::handle offset, nb::handle hwp) {
             if (nb::isinstance<Detector>(detector_or_name)) {
               Detector d = nb::cast<Detector>(detector_or_name);
@@ -573,7 +627,7 @@ void bind_focal_plane(nb::module_& m) {
             d.zeta = zeta;
             d.epsilon = epsilon;
             d.gain = gain;
-            d.beam = beam;
+            d.beam = unsigned_arg<std::size_t>(beam, "beam");
             if (!offset.is_none()) d.offset = quat_from(offset, "offset");
             d.hwp = plate_arg(hwp);
             return fp.add(std::move(d));
@@ -584,8 +638,10 @@ void bind_focal_plane(nb::module_& m) {
           "pisco.HalfWavePlate for the detector (given with a Detector, it replaces the Detector's).")
       .def(
           "add_pair",
-          [](FocalPlane& fp, const std::string& name, double zeta, std::size_t beam_a, std::size_t beam_b,
+          [](FocalPlane& fp, const std::string& name, double zeta, long long beam_a_arg, long long beam_b_arg,
              double epsilon, double gain_a, double gain_b, nb::handle hwp) {
+            const auto beam_a = unsigned_arg<std::size_t>(beam_a_arg, "beam_a");
+            const auto beam_b = unsigned_arg<std::size_t>(beam_b_arg, "beam_b");
             const std::optional<HalfWavePlate> plate = plate_arg(hwp);
             if (!plate) return fp.add_pair(name, zeta, beam_a, beam_b, epsilon, gain_a, gain_b);
             FocalPlane pair;
@@ -629,9 +685,9 @@ void bind_focal_plane(nb::module_& m) {
                    })
       .def_static(
           "read_toast",
-          [](const std::filesystem::path& path, std::size_t beam, nb::handle hwp) {
+          [](const std::filesystem::path& path, long long beam, nb::handle hwp) {
             const std::optional<HalfWavePlate> plate = plate_arg(hwp);
-            ToastFocalPlane t = read_toast_focal_plane(path, beam);
+            ToastFocalPlane t = read_toast_focal_plane(path, unsigned_arg<std::size_t>(beam, "beam"));
             if (plate) {
               for (std::size_t i = 0; i < t.detectors.size(); ++i) {
                 Detector& d = t.detectors[i];
@@ -656,8 +712,8 @@ void bind_focal_plane(nb::module_& m) {
 
   m.def(
       "read_toast_focal_plane",
-      [](const std::filesystem::path& path, std::size_t beam) {
-        ToastFocalPlane t = read_toast_focal_plane(path, beam);
+      [](const std::filesystem::path& path, long long beam) {
+        ToastFocalPlane t = read_toast_focal_plane(path, unsigned_arg<std::size_t>(beam, "beam"));
         auto* fwhm = new std::vector<double>(std::move(t.fwhm));
         nb::capsule owner(fwhm, [](void* p) noexcept { delete static_cast<std::vector<double>*>(p); });
         return std::make_tuple(FocalPlane(std::move(t.detectors)),
@@ -698,6 +754,8 @@ void bind_helpers(nb::module_& m) {
         "Whether nside is a power of two in [1, 8192].");
   m.def("ang2pix", &ang2pix, "nside"_a, "theta"_a, "phi"_a, "The RING pixel containing (theta, phi).");
   m.attr("deg") = deg;
+  m.attr("unit_quat_tolerance") = unit_quat_tolerance;
+  m.attr("mueller_tolerance") = mueller_tolerance;
   m.attr("unseen") = unseen;
   m.attr("__version__") = version;
 }

@@ -280,6 +280,7 @@ double sum_bb(const Spectra& s, int lmax) {
 }
 
 void write_spectra(const std::filesystem::path& file, const Spectra& s, const std::vector<double>& ref, int lmax) {
+  check_finite(s, file.string(), 2, lmax);
   std::ostringstream o;
   o << "# D_l (uK^2) of the binned maps: pseudo-C_l / f_sky, beam (mean radial profile) and pixel windows divided "
        "out\n# l TT EE BB TE EB TB BB_ref(r=0.1 tensor)\n";

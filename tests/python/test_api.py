@@ -3,6 +3,9 @@
 import ast
 import os
 import re
+import subprocess
+import sys
+import textwrap
 import threading
 import time
 
@@ -508,8 +511,9 @@ def test_read_fits_unseen_policies(tmp_out):
 
 # --- half-wave plates ----------------------------------------------------------------------------
 
-# The ideal plate plus leakage in all 16 entries (tools/hwp_compare.py's generic plate).
-GENERIC_PLATE = np.diag([1.0, 1.0, -1.0, -1.0]) + np.array([[0.0, 0.012, -0.008, 0.005],
+# The ideal plate plus leakage in all 16 entries, a 2% loss in M_II keeping it passive
+# (tools/hwp_compare.py's generic plate).
+GENERIC_PLATE = np.diag([1.0, 1.0, -1.0, -1.0]) + np.array([[-0.02, 0.012, -0.008, 0.005],
                                                            [0.021, -0.03, 0.017, -0.011],
                                                            [-0.015, 0.009, 0.025, 0.04],
                                                            [0.007, -0.02, 0.033, 0.02]])
@@ -737,3 +741,199 @@ def test_docstrings_and_version():
                 pisco.ideal_hwp_mueller, pisco.Sky.read_fits, pisco.Sky.unseen_pixels, pisco.Engine.flag_samples):
         assert obj.__doc__ and len(obj.__doc__) > 20
     assert issubclass(pisco.Error, RuntimeError)
+
+
+# --- nothing silent: the library's checks, as Python sees them ----------------------------------
+
+
+def test_focal_plane_is_checked_as_the_command_line_checks_it():
+    """One library check of the focal plane (pisco::check_focal_plane), made by every engine: the same
+    errors as pisco-vk's, naming the detector."""
+    sky, beam, _ = small_setup(nside=8, fwhm=8 * deg)
+
+    def engine_error(fp):
+        with pytest.raises(pisco.Error) as info:
+            pisco.Engine(sky, beam, fp, backend="cpu")
+        return str(info.value)
+
+    fp = pisco.FocalPlane()
+    for name in ("a", "b", "a"):
+        fp.add(name)
+    assert engine_error(fp) == "focal plane: detectors 0 and 2 are both named 'a' (expected unique detector names)"
+    fp = pisco.FocalPlane()
+    fp.add("")
+    assert engine_error(fp) == "focal plane: detector 0 has an empty name (expected unique names)"
+    for gain, text in ((0.0, "0"), (-1.0, "-1"), (np.nan, "nan"), (np.inf, "inf")):
+        fp = pisco.FocalPlane()
+        fp.add("g", gain=gain)
+        assert engine_error(fp) == f"detector 'g': gain = {text} (its responsivity) must be positive and finite"
+    fp = pisco.FocalPlane()
+    fp.add("e", epsilon=-0.1)
+    assert engine_error(fp) == "detector 'e': epsilon = -0.1 (cross-polar leakage) is outside [0, 1]"
+
+
+def test_offsets_are_unit_quaternions():
+    """Offsets further than pisco.unit_quat_tolerance from unit norm are refused (ValueError naming the
+    argument and the norm), never normalized; within it the rounding is normalized away."""
+    assert pisco.unit_quat_tolerance == 1e-6
+    with pytest.raises(ValueError, match=r"^offset: the quaternion \(0, 0, 0, 2\) has norm 2; a rotation is a unit "
+                                         r"quaternion \(x, y, z, w\), to within 1e-06$"):
+        pisco.Detector("d", offset=[0, 0, 0, 2])
+    with pytest.raises(ValueError, match=r"^offset: .* has norm 1.0000100000000001;"):
+        pisco.FocalPlane().add("d", offset=[0, 0, 0, 1 + 1e-5])
+    d = pisco.Detector("d")
+    with pytest.raises(ValueError, match=r"^offset: the quaternion \(0.5, 0, 0, 0.5\) has norm 0.70710678118654757;"):
+        d.offset = [0.5, 0, 0, 0.5]
+    assert np.array_equal(d.offset, [0, 0, 0, 1])  # unchanged
+    d.offset = [0, 0, 0, 1 + 1e-9]
+    assert d.offset[3] == 1.0
+    with pytest.raises(ValueError, match=r"^q: the quaternion .* has norm 3"):
+        pisco.quat_to_pointing([0, 0, 0, 3])
+    # A table's quaternions: named by row and detector.
+    with pytest.raises(ValueError, match=r"^columns: 'quat' row 1 \(detector b\): offset: the quaternion .* has norm 1.1"):
+        pisco.FocalPlane.from_columns({"name": ["a", "b"], "quat": [[0, 0, 0, 1], [0, 0, 0, 1.1]]})
+
+
+def test_unsigned_arguments_refuse_negative_values_by_name():
+    sky, beam, fp = small_setup(nside=8, fwhm=8 * deg)
+    engine = pisco.Engine(sky, beam, fp, backend="cpu")
+    d = pisco.Detector("d")
+
+    def set_beam():
+        d.beam = -1
+
+    calls = {
+        "threads": lambda: pisco.Engine(sky, beam, fp, backend="cpu", threads=-1),
+        "chunk_samples": lambda: pisco.Engine(sky, beam, fp, backend="cpu", chunk_samples=-5),
+        "beam": lambda: pisco.Detector("d", beam=-1),
+        "beam_b": lambda: pisco.FocalPlane().add_pair("p", beam_b=-2),
+        "ticket": lambda: engine.wait(-3),
+    }
+    for name, call in calls.items():
+        with pytest.raises(ValueError, match=rf"^{name} = -\d is negative; expected a non-negative integer$"):
+            call()
+    for call in (set_beam, lambda: pisco.FocalPlane().add("d", beam=-1),
+                 lambda: pisco.FocalPlane.read_toast("no-such-file.h5", beam=-1),
+                 lambda: pisco.read_toast_focal_plane("no-such-file.h5", beam=-1)):
+        with pytest.raises(ValueError, match=r"^beam = -1 is negative"):
+            call()
+    assert d.beam == 0
+    with pytest.raises(ValueError, match=r"^threads = 4294967296 is beyond 4294967295$"):
+        pisco.Engine(sky, beam, fp, backend="cpu", threads=2**32)
+
+
+def test_plate_and_beam_mueller_bounds():
+    """A plate's M0 is a passive element's (docs/physics.md, "Physical bounds on Mueller matrices"), a
+    beam's constant matrix a Mueller matrix up to scale: ValueError naming `mueller` and the bound."""
+    assert pisco.mueller_tolerance == 0.01
+    ideal = np.diag([1.0, 1.0, -1.0, -1.0])
+    cases = [
+        (np.diag([-1.0, 1, -1, -1]), r"^mueller: M00 = -1 \(T to T\) is not positive"),
+        (ideal + np.pad([[0, 1e200]], ((0, 3), (0, 2))),
+         r"^mueller: transmits up to 1e\+200 times the light \(M00 \+ \|\(M01, M02, M03\)\| = 1e\+200\), at most 1.01 "
+         r"for a passive element$"),
+        (np.diag([1.0, 0.5, -0.5, -0.5]) + np.pad([[0.0], [0.8], [0.8]], ((0, 1), (0, 3))),
+         r"^mueller: polarizes unpolarized light to a degree of 1.13137 \(\|\(M10, M20, M30\)\| / M00\), at most 1.01"),
+        (np.diag([1.0, 1.0, -1.5, -1.0]), r"^mueller: \|M22\| = 1.5 exceeds \(1 \+ 0.01\) M00 = 1.01"),
+    ]
+    for m, message in cases:
+        with pytest.raises(ValueError, match=message):
+            pisco.HalfWavePlate(m)
+    plate = pisco.HalfWavePlate()
+    with pytest.raises(ValueError, match=r"^mueller: transmits up to 1.05 times"):
+        plate.mueller = np.diag([1.05, 1, -1, -1])
+    assert plate.is_ideal  # the refused assignment changed nothing
+    plate.mueller = GENERIC_PLATE  # a plate a little off its design, with a 2% loss
+    # A beam's constant matrix: M00 > 0, no entry above it; any overall scale.
+    leaky = np.eye(4)
+    leaky[1, 0] = 2.0
+    with pytest.raises(ValueError, match=r"^mueller: \|M10\| = 2 exceeds \(1 \+ 0.01\) M00 = 1.01"):
+        pisco.Beamsor.gaussian(1 * deg, mueller=leaky)
+    with pytest.raises(ValueError, match=r"^mueller: M00 = 0 \(T to T\) is not positive"):
+        pisco.Beamsor.gaussian(1 * deg, mueller=np.diag([0.0, 1, 1, 1]))
+    pisco.Beamsor.gaussian(1 * deg, mueller=1e6 * np.eye(4))
+
+    # A field's values: finite (ValueError naming the call), no entry above the peak B_TT (pisco.Error
+    # naming the beam, the entry and the node).
+    def field(bad):
+        def f(rho, sigma):
+            m = np.exp(-rho**2 / (2 * (1 * deg) ** 2)) * np.eye(4)
+            m[1, 2] = bad if rho > 1 * deg else 0.0
+            return m
+        return f
+
+    with pytest.raises(ValueError, match=r"^field\([^)]*\): Mueller entry \[1\]\[2\] is nan \(expected 16 finite"):
+        pisco.Beamsor.from_field(field(np.nan), 3 * deg, 0.2 * deg, "leaky")
+    with pytest.raises(pisco.Error, match=r"^beam 'leaky': B_UQ \(row 1, column 2\) = 2 at node \(\d+, \d+\) \(rho = "
+                                          r".*exceeds the beam's peak B_TT = 1 by more than 1%"):
+        pisco.Beamsor.from_field(field(2.0), 3 * deg, 0.2 * deg, "leaky")
+
+
+def test_non_finite_tod_names_the_detector_and_the_sample():
+    """A sky of 1e308 is finite; through a detector of gain 100 the TOD overflows float64: pisco.Error
+    naming the detector, the sample and the value, from convolve() and from wait() alike."""
+    nside = 8
+    sky = pisco.Sky.from_maps(np.full((1, 12 * nside * nside), 1e308))
+    beam = pisco.Beamsor.gaussian(10 * deg, rho_max=20 * deg)
+    fp = pisco.FocalPlane()
+    fp.add("cold")
+    fp.add("hot", gain=100.0)
+    n = 4
+    theta, phi, psi = np.full(n, np.pi / 2), np.linspace(0, 1, n), np.zeros(n)
+    with pisco.Engine(sky, beam, fp, backend="cpu", quadrature="plain") as engine:
+        with pytest.raises(pisco.Error, match=r"^convolving detector 'hot': sample 0 of the TOD is inf: the convolution "
+                                              r"overflowed float64; .* too large for float64"):
+            engine.convolve("hot", theta, phi, psi)
+        cold, hot = np.zeros(n), np.zeros(n)
+        engine.submit("cold", theta, phi, psi, out=cold)
+        engine.submit("hot", theta, phi, psi, out=hot)
+        with pytest.raises(pisco.Error, match=r"^convolving detector 'hot': sample 0"):
+            engine.wait()
+        engine.wait()  # nothing left half done
+        assert np.all(np.isfinite(cold)) and np.all(cold > 4e307)
+
+
+def run_limited(code):
+    """Runs `code` in a Python whose address space is limited to 1 GiB more than it holds after
+    importing pisco (what it allocates beyond that fails at once, untouched); returns its output."""
+    prelude = textwrap.dedent("""
+        import resource
+        import numpy as np
+        import pisco
+        def vm_size():
+            for line in open("/proc/self/status"):
+                if line.startswith("VmSize:"):
+                    return int(line.split()[1]) * 1024
+        def limit(extra):
+            resource.setrlimit(resource.RLIMIT_AS, (vm_size() + extra, resource.RLIM_INFINITY))
+    """)
+    done = subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code)], capture_output=True, text=True,
+                          env=os.environ, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/status")
+def test_memory_errors_say_what_was_too_large():
+    """std::bad_alloc from the library becomes a MemoryError saying what was too large, never a crash."""
+    out = run_limited("""
+        limit(1 << 30)
+        try:
+            pisco.Sky(8192)
+        except MemoryError as e:
+            print(e)
+    """)
+    assert out == "pisco.Sky(nside=8192): 2.58e+10 bytes of maps could not be allocated"
+    out = run_limited("""
+        sky = pisco.Sky(256)
+        beam = pisco.Beamsor.gaussian(1 * pisco.deg)
+        fp = pisco.FocalPlane()
+        fp.add("d")
+        limit(20 << 20)
+        try:
+            pisco.Engine(sky, beam, fp, backend="cpu", threads=1)
+        except MemoryError as e:
+            print(e)
+    """)
+    assert out.startswith("pisco.Engine: memory ran out while setting up for a sky of NSIDE 256 (786432 pixels; "
+                          "the engine keeps copies of its I, Q, U, V maps, 2.52e+07 bytes each)"), out

@@ -16,8 +16,9 @@ from conftest import assert_everywhere, offset_elliptical_blm, relative_rms, smo
 FWHM_ARCMIN = 60.0
 POL_ANGLES_DEG = (0.0, 90.0, 22.5)
 IDEAL = np.diag([1.0, 1.0, -1.0, -1.0])
-# The ideal plate plus leakage in all 16 entries (tools/hwp_compare.py's generic plate).
-GENERIC = IDEAL + np.array([[0.0, 0.012, -0.008, 0.005],
+# The ideal plate plus leakage in all 16 entries, a 2% loss in M_II keeping it passive
+# (tools/hwp_compare.py's generic plate).
+GENERIC = IDEAL + np.array([[-0.02, 0.012, -0.008, 0.005],
                             [0.021, -0.03, 0.017, -0.011],
                             [-0.015, 0.009, 0.025, 0.04],
                             [0.007, -0.02, 0.033, 0.02]])
@@ -322,6 +323,9 @@ def test_plate_arguments(tmp_path):
     # Refused: Mueller matrices that are not one finite 4x4 matrix per detector, Jones matrices.
     leaky.mueller_hwp = np.array([np.diag([1.0, 1.0, -1.0, np.nan])] * 3)
     with pytest.raises(ValueError, match="mueller_hwp is not finite"):
+        run(leaky)
+    leaky.mueller_hwp = np.array([-IDEAL] * 3)  # M00 = -1: not a passive element
+    with pytest.raises(ValueError, match=r"^detector .*: mueller_hwp: M00 = -1 \(T to T\) is not positive"):
         run(leaky)
     leaky.mueller_hwp = np.array([{"0f": IDEAL}] * 3, dtype=object)
     with pytest.raises(NotImplementedError, match="harmonic expansion"):

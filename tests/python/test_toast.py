@@ -528,7 +528,7 @@ def test_plate_options_and_missing_inputs():
     ideal = run("ideal")
     plain = run("plain", hwp_angle=None)  # no plate: hwp_angle=None ignores the observation's
     as_list = run("as_list", hwp_mueller=[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 0, 0, 0, 0, -1])
-    leaky = np.diag([1.0, 0.98, -0.97, -0.95]) + 0.01
+    leaky = np.diag([0.98, 0.98, -0.97, -0.95]) + 0.01  # a passive plate: M00 + |(M01, M02, M03)| < 1
     aperture = run("aperture", hwp_mueller=leaky)
     detector = run("detector", hwp_mueller=leaky, hwp_placement="detector")
     # The plates' gamma and angles reach the engine: the engine's own ideal plate gives the same TOD.
@@ -552,6 +552,9 @@ def test_plate_options_and_missing_inputs():
         pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_mueller=[1.0] * 15)
     with pytest.raises(Exception, match="hwp_mueller: the Mueller matrix must be finite"):
         pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_mueller=[[np.nan] * 4] * 4)
+    # A passive element's bounds (docs/physics.md, "Physical bounds on Mueller matrices").
+    with pytest.raises(Exception, match=r"hwp_mueller: transmits up to 1.05 times the light \(M00 \+"):
+        pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_mueller=np.diag([1.05, 1.0, -1.0, -1.0]))
     with pytest.raises(Exception, match="hwp_placement must be 'aperture' or 'detector'"):
         pisco.toast.PixelConvolve(sky=sky, beam=beam, hwp_placement="sky")
     ob.shared.create_column("bad_hwp", (ob.n_local_samples,))
