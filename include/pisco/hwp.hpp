@@ -34,7 +34,8 @@ struct HalfWavePlate {
   double gamma = 0.0;  // the detector's polarization angle in the focal-plane frame, radians
 
   static HalfWavePlate ideal(double gamma = 0.0, HwpPlacement placement = HwpPlacement::aperture);
-  // Throws pisco::Error naming `where` for a non-finite entry or gamma.
+  // Throws pisco::Error naming `where` for a non-finite entry or gamma, or a matrix no passive plate
+  // has (docs/physics.md, "Physical bounds on Mueller matrices": M00 > 0, transmission at most 1).
   void check(const std::string& where) const;
 };
 

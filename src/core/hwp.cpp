@@ -1,10 +1,12 @@
 #include "pisco/hwp.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
 #include "core/plate.hpp"
 #include "pisco/error.hpp"
+#include "pisco/time_ranges.hpp"
 
 namespace pisco {
 
@@ -54,7 +56,23 @@ void HwpAngleStream::check() const {
     throw Error("half-wave plate: step_seconds must be positive and finite");
 }
 
+void HwpAngleStream::check(std::size_t samples) const {
+  check();
+  // What float64 carries over the run (docs/formats.md, "Times, rates and angles").
+  const std::string times = sample_time_problem(start_time, double(samples), sample_rate);
+  if (!times.empty()) throw Error("half-wave plate: start_time and sample_rate: " + times);
+  const double t_max = std::max(std::abs(start_time), std::abs(start_time + double(samples) / sample_rate));
+  if (kind == Kind::continuous) {
+    const std::string why = turning_problem(2 * std::numbers::pi * frequency_hz, t_max, sample_rate);
+    if (!why.empty()) throw Error("half-wave plate: frequency: " + why);
+  } else {
+    const std::string why = stepping_problem(step_seconds, t_max, sample_rate);
+    if (!why.empty()) throw Error("half-wave plate: step_seconds: " + why);
+  }
+}
+
 void HwpAngleStream::generate(std::size_t first, std::size_t count, std::vector<double>& out) const {
+  check(first + count);
   out.resize(count);
   const double twopi = 2 * std::numbers::pi;
   for (std::size_t i = 0; i < count; ++i) {
@@ -64,9 +82,11 @@ void HwpAngleStream::generate(std::size_t first, std::size_t count, std::vector<
       const double turns = frequency_hz * t;
       out[i] = std::remainder(twopi * (turns - std::floor(turns)) + phase, twopi);
     } else {
+      // check() keeps |k| below 2^52: k and its remainder are exact integers within [0, n).
       const double k = std::floor(t / step_seconds);
       const double n = double(steps.size());
-      out[i] = steps[std::size_t(k - n * std::floor(k / n))];
+      const double step = k - n * std::floor(k / n);
+      out[i] = steps[step >= 0 && step < n ? std::size_t(step) : 0];
     }
   }
 }

@@ -175,6 +175,7 @@ std::optional<double> window_fwhm(const BeamConfig& b) {
 
 // Written whole or not at all (pisco::write_file_atomically): a full disk is an error naming the file.
 void write_spectra(const fs::path& file, const pisco::Spectra& s, int lmax, const std::string& header) {
+  pisco::check_finite(s, file.string(), 2, lmax);
   std::string text = "# " + header + "\n# l  D_l = l(l+1)C_l/2pi:  TT EE BB TE EB TB\n";
   char buf[256];
   for (int l = 2; l <= lmax; ++l) {
