@@ -192,12 +192,11 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
         "cannot set the link creation order");
   Handle fapl = file_access_plist(where);
   s.listed.emplace(temporary_);
+  const bool was_there = std::filesystem::exists(std::filesystem::symlink_status(temporary_, ec));
   const hid_t created = H5Fcreate(temporary_.c_str(), H5F_ACC_TRUNC, fcpl.get(), fapl.get());
-  if (created < 0) {
-    // HDF5 may have made the file before it failed (a full disk while writing its superblock).
-    std::error_code ec;
-    std::filesystem::remove(temporary_, ec);
-  }
+  // HDF5 may have made the file before it failed (a full disk while writing its superblock); what
+  // was in the way before is not the writer's to remove.
+  if (created < 0 && !was_there) std::filesystem::remove(temporary_, ec);
   s.file = checked(created, H5Fclose, where, "cannot create the temporary file " + in_quotes(temporary_.string()));
   s.temporary = temporary_;  // from here on, the Impl removes the temporary file if anything fails
   inject_write_fault(s.file.get(), file);
