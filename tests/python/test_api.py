@@ -914,6 +914,9 @@ def run_limited(code):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/status")
+@pytest.mark.skipif("libasan" in os.environ.get("LD_PRELOAD", ""),
+                    reason="under AddressSanitizer (scripts/run-sanitizers.sh) an address-space limit fails the "
+                           "sanitizer's own allocator, which aborts, before the library can see a lack of memory")
 def test_memory_errors_say_what_was_too_large():
     """std::bad_alloc from the library becomes a MemoryError saying what was too large, never a crash."""
     out = run_limited("""
