@@ -2,7 +2,8 @@
 // of the disc selection, and one weight grid per detector (docs/physics.md, "The measurement
 // equation": the 16-element beamsor collapsed to the 4-vector w a total-power detector needs). The
 // sky's pixels are packed by each backend itself, straight from pisco::Sky into the layout it keeps
-// (SkyPacker), so that no full-sky copy is made that the backend does not hold.
+// (vk::pack_sky in src/vulkan/tables.hpp, pixel_records in src/cuda/device_data.hpp, the simd and cpu
+// backends' own records), so that no full-sky copy is made that the backend does not hold.
 #pragma once
 
 #include <cstddef>
