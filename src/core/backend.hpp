@@ -58,7 +58,7 @@ struct BackendEntry {
   std::string name;
   // "auto" picks the available backend with the highest priority: cuda 20, vulkan on a GPU 10, simd 5,
   // vulkan on a CPU device -1 (lavapipe), the float64 reference -2. Measured (BENCHMARKS.md): on an
-  // H200 (2026-11-26) cuda is 1.04 to 1.8 times NVIDIA's Vulkan up to rho_max = 20 deg with a tenth of
+  // H200 (2026-11-26) cuda is 1.04 to 1.8 times NVIDIA's Vulkan up to rho_max = 20 deg with a quarter of
   // its set-up, Vulkan 1.1 times cuda at 25 to 30 deg; on two CPU cores simd is 2.6 to 2.7 times lavapipe
   // (2026-11-24, "the simd backend's weights in records").
   int priority;
