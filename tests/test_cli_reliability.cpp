@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <csignal>
+#include <cstdlib>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -92,6 +93,8 @@ TEST_F(Reliability, HostileOutputDirectoryReachesNoShell) {
       {{"-o", (dir_ / hostile).string()}, (dir_ / hostile).string()},
       {{"--output=-x"}, "-x"},
   };
+  const bool plots_possible =
+      std::system("/usr/bin/python3 -c 'import healpy, matplotlib' > /dev/null 2>&1") == 0;
   for (const auto& [output, dir] : cases) {
     const fs::path out = dir_ / dir;
     const std::string option = joined(output);
@@ -108,8 +111,13 @@ TEST_F(Reliability, HostileOutputDirectoryReachesNoShell) {
     const CliResult real = run_cli(args, {}, 120, dir_);
     std::cout << real.output;
     EXPECT_TRUE(real.exited && real.status == 0) << option << ": " << real.describe() << "\n" << real.output;
-    EXPECT_TRUE(contains(real.output, "plots: wrote") || contains(real.output, "plots: skipped")) << real.output;
-    if (contains(real.output, "plots: wrote")) EXPECT_TRUE(fs::exists(out / "maps_mollview.png")) << option;
+    // The plotting tool's interpreter (run.cpp: /usr/bin/python3) decides which outcome is right.
+    if (plots_possible) {
+      EXPECT_TRUE(contains(real.output, "plots: wrote")) << real.output;
+      EXPECT_TRUE(fs::exists(out / "maps_mollview.png")) << option;
+    } else {
+      EXPECT_TRUE(contains(real.output, "plots: skipped")) << real.output;
+    }
   }
   for (const auto& f : files_under(dir_))
     EXPECT_FALSE(contains(fs::path(f).filename().string(), "PWNED")) << "a shell ran: " << f;
