@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "pisco/beamsor.hpp"
+#include "pisco/time_ranges.hpp"
 
 namespace pisco {
 
@@ -56,6 +57,9 @@ struct HwpAngleStream {
   // check(), and what float64 carries over `samples` samples (docs/formats.md, "Times, rates and
   // angles"): sample times, the rotation's angle, the step count. Throws pisco::Error naming the field.
   void check(std::size_t samples) const;
+  // What float64 cannot carry over `samples` samples, by field: start_time (the sample times),
+  // frequency, step_seconds. Part of check(samples).
+  std::optional<TimeProblem> time_problem(std::size_t samples) const;
   // Angles of samples [first, first + count) into out (resized), each computed from its own time;
   // check(first + count) first.
   void generate(std::size_t first, std::size_t count, std::vector<double>& out) const;

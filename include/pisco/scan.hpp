@@ -4,10 +4,12 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "pisco/pointing.hpp"
 #include "pisco/quaternion.hpp"
+#include "pisco/time_ranges.hpp"
 
 namespace pisco {
 
@@ -49,6 +51,9 @@ struct CesScan {
 
   // Checks the parameters; throws pisco::Error naming the field.
   void check() const;
+  // What float64 cannot carry over the run (docs/formats.md, "Times, rates and angles"), by field:
+  // start_unix (the sample times), az_speed, earth (its rotation), boresight_period. Part of check().
+  std::optional<TimeProblem> time_problem() const;
   // Boresight pointing of samples [first, first + count), appended to `out` (cleared first).
   void generate(std::size_t first, std::size_t count, Pointing& out) const;
   // Azimuth and elevation of the boresight at sample i (radians), for tests and diagnostics.
@@ -103,6 +108,9 @@ struct SatelliteScan {
 
   // Checks the parameters; throws pisco::Error naming the field.
   void check() const;
+  // What float64 cannot carry over the run (docs/formats.md, "Times, rates and angles"), by field:
+  // start_time (the sample times), spin_period, precession_period, year. Part of check().
+  std::optional<TimeProblem> time_problem() const;
   // Boresight quaternions of samples [first, first + count), appended to `out` (cleared first).
   void generate(std::size_t first, std::size_t count, std::vector<Quat>& out) const;
   // Time of sample i, seconds from the reference epoch: start_time + i / sample_rate.

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstddef>
+#include <optional>
 #include <string>
 
 namespace pisco {
@@ -14,6 +15,13 @@ inline constexpr double time_resolution = 1e-3;
 // An angle may be rounded by at most this many radians anywhere in the run (2 arcsec: a
 // polarization angle error of 2e-5, five times below the engine's 1e-4 accuracy).
 inline constexpr double angle_resolution = 1e-5;
+
+// A value a run cannot carry: the field it concerns (the struct member's name, which a caller that
+// read it from a file maps to its key) and what is wrong.
+struct TimeProblem {
+  std::string field;
+  std::string what;
+};
 
 // Samples at start + i / sample_rate, i < samples: every time finite and resolved to time_resolution
 // of the sample interval.

@@ -30,20 +30,28 @@ void CesScan::check() const {
   require(!boresight_angles.empty(), "boresight_angles must not be empty");
   for (double b : boresight_angles) require(std::isfinite(b), "boresight_angles must be finite");
   require(boresight_period > 0 && std::isfinite(boresight_period), "boresight_period must be positive");
-  // What float64 carries over the run (docs/formats.md, "Times, rates and angles"): the sample times
-  // (Unix), the azimuth (from the run's start), the Earth's rotation (from Unix times) and the count
-  // of boresight periods.
-  const double duration = double(samples) / sample_rate;
-  const std::string times = sample_time_problem(start_unix, double(samples), sample_rate);
-  require(times.empty(), "start, sample_rate and samples: " + times);
-  const std::string az = turning_problem(az_speed, duration, sample_rate);
-  require(az.empty(), "az_speed: " + az);
-  const std::string earth = turning_problem(7.2921159e-5, std::abs(start_unix) + duration, sample_rate);
-  require(earth.empty(), "the Earth's rotation: " + earth);
-  if (boresight_angles.size() > 1) {
-    const std::string steps = stepping_problem(boresight_period, duration, sample_rate);
-    require(steps.empty(), "boresight_period: " + steps);
+  if (const auto p = time_problem()) {
+    const std::string label = p->field == "start_unix" ? "start, sample_rate and samples"
+                              : p->field == "earth"    ? "the Earth's rotation"
+                                                       : p->field;
+    require(false, label + ": " + p->what);
   }
+}
+
+// docs/formats.md, "Times, rates and angles": the sample times (Unix), the azimuth (from the run's
+// start), the Earth's rotation (from Unix times) and the count of boresight periods.
+std::optional<TimeProblem> CesScan::time_problem() const {
+  const double duration = double(samples) / sample_rate;
+  if (std::string why = sample_time_problem(start_unix, double(samples), sample_rate); !why.empty())
+    return TimeProblem{"start_unix", why};
+  if (std::string why = turning_problem(az_speed, duration, sample_rate); !why.empty())
+    return TimeProblem{"az_speed", why};
+  if (std::string why = turning_problem(7.2921159e-5, std::abs(start_unix) + duration, sample_rate); !why.empty())
+    return TimeProblem{"earth", why};
+  if (boresight_angles.size() > 1)
+    if (std::string why = stepping_problem(boresight_period, duration, sample_rate); !why.empty())
+      return TimeProblem{"boresight_period", why};
+  return std::nullopt;
 }
 
 double CesScan::azimuth(std::size_t i) const {

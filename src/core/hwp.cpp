@@ -58,17 +58,23 @@ void HwpAngleStream::check() const {
 
 void HwpAngleStream::check(std::size_t samples) const {
   check();
-  // What float64 carries over the run (docs/formats.md, "Times, rates and angles").
-  const std::string times = sample_time_problem(start_time, double(samples), sample_rate);
-  if (!times.empty()) throw Error("half-wave plate: start_time and sample_rate: " + times);
+  if (const auto p = time_problem(samples))
+    throw Error("half-wave plate: " + (p->field == "start_time" ? std::string("start_time and sample_rate") : p->field) +
+                ": " + p->what);
+}
+
+// docs/formats.md, "Times, rates and angles".
+std::optional<TimeProblem> HwpAngleStream::time_problem(std::size_t samples) const {
+  if (std::string why = sample_time_problem(start_time, double(samples), sample_rate); !why.empty())
+    return TimeProblem{"start_time", why};
   const double t_max = std::max(std::abs(start_time), std::abs(start_time + double(samples) / sample_rate));
   if (kind == Kind::continuous) {
-    const std::string why = turning_problem(2 * std::numbers::pi * frequency_hz, t_max, sample_rate);
-    if (!why.empty()) throw Error("half-wave plate: frequency: " + why);
-  } else {
-    const std::string why = stepping_problem(step_seconds, t_max, sample_rate);
-    if (!why.empty()) throw Error("half-wave plate: step_seconds: " + why);
+    if (std::string why = turning_problem(2 * std::numbers::pi * frequency_hz, t_max, sample_rate); !why.empty())
+      return TimeProblem{"frequency", why};
+  } else if (std::string why = stepping_problem(step_seconds, t_max, sample_rate); !why.empty()) {
+    return TimeProblem{"step_seconds", why};
   }
+  return std::nullopt;
 }
 
 void HwpAngleStream::generate(std::size_t first, std::size_t count, std::vector<double>& out) const {

@@ -171,7 +171,7 @@ PreparedDetector prepare_row_detector(const Detector& d, const Beamsor& beam, do
 
 EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
                             const FocalPlane& focal_plane, Normalization normalization) {
-  check_focal_plane(focal_plane, beams.size());
+  // The focal plane is the Engine's to check (check_focal_plane), before the sky's set-up.
   EngineInputs in;
   in.normalization = normalization;
   in.sky = prepare_sky(sky);

@@ -97,6 +97,7 @@ PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam,
 // no plate (the detector-placement plate's s_row).
 PreparedDetector prepare_row_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
                                       Normalization normalization, int row);
+// The focal plane as check_focal_plane() has accepted it (the Engine checks it first).
 EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
                             const FocalPlane& focal_plane, Normalization normalization);
 

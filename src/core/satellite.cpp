@@ -74,15 +74,20 @@ void SatelliteScan::check() const {
   require(std::isfinite(year) && year > 0, "year", "must be positive");
   require(frame == Frame::ecliptic || frame == Frame::equatorial || frame == Frame::galactic, "frame",
           "must be ecliptic, equatorial or galactic");
-  // What float64 carries over the run (docs/formats.md, "Times, rates and angles").
-  const std::string times = sample_time_problem(start_time, double(samples), sample_rate);
-  require(times.empty(), "start_time, sample_rate and samples:", times);
+  if (const auto p = time_problem())
+    require(false, p->field == "start_time" ? "start_time, sample_rate and samples:" : p->field, p->what);
+}
+
+// docs/formats.md, "Times, rates and angles".
+std::optional<TimeProblem> SatelliteScan::time_problem() const {
+  if (std::string why = sample_time_problem(start_time, double(samples), sample_rate); !why.empty())
+    return TimeProblem{"start_time", why};
   const double t_max = std::max(std::abs(start_time), std::abs(time(samples)));
   for (const auto& [field, period] : {std::pair<const char*, double>{"spin_period", spin_period},
-                                      {"precession_period", precession_period}, {"year", year}}) {
-    const std::string why = turning_problem(2 * pi / period, t_max, sample_rate);
-    require(why.empty(), field, why);
-  }
+                                      {"precession_period", precession_period}, {"year", year}})
+    if (std::string why = turning_problem(2 * pi / period, t_max, sample_rate); !why.empty())
+      return TimeProblem{field, why};
+  return std::nullopt;
 }
 
 double SatelliteScan::time(std::size_t i) const { return start_time + double(i) / sample_rate; }

@@ -1,18 +1,16 @@
 #include "pisco/time_ranges.hpp"
 
+#include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <limits>
 #include <numbers>
+
+#include "core/text.hpp"
 
 namespace pisco {
 namespace {
 
-std::string g(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.3g", v);
-  return b;
-}
+std::string g(double v) { return detail::number_text(v, 3); }
 
 // The spacing of float64 values at |x|.
 double ulp(double x) {

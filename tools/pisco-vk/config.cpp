@@ -557,12 +557,11 @@ void read_satellite(Table& t, ScanConfig& s) {
   c.samples = static_cast<std::size_t>(samples);
   s.nside = t.nside("nside", 64);  // the maps' default NSIDE
   // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
-  if (auto why = pisco::sample_time_problem(c.start_time, samples, c.sample_rate); !why.empty()) t.fail("start_time_s", why);
-  const double t_max = std::max(std::abs(c.start_time), std::abs(c.time(c.samples)));
-  if (auto why = pisco::turning_problem(2 * std::numbers::pi / c.spin_period, t_max, c.sample_rate); !why.empty())
-    t.fail("spin_period_min", why);
-  if (auto why = pisco::turning_problem(2 * std::numbers::pi / c.precession_period, t_max, c.sample_rate); !why.empty())
-    t.fail("precession_period_min", why);
+  if (const auto p = c.time_problem()) {
+    if (p->field == "start_time") t.fail("start_time_s", p->what);
+    if (p->field == "spin_period") t.fail("spin_period_min", p->what);
+    if (p->field == "precession_period") t.fail("precession_period_min", p->what);
+  }
   try {
     c.check();
   } catch (const pisco::Error& e) {
@@ -597,12 +596,11 @@ ScanConfig read_scan(Table t) {
     c.boresight_period = t.positive("boresight_period_hours", 24.0, 3600);
     s.nside = t.nside("nside", 128);  // the maps' default NSIDE
     // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
-    const double duration = samples / c.sample_rate;
-    if (auto why = pisco::sample_time_problem(c.start_unix, samples, c.sample_rate); !why.empty()) t.fail("start", why);
-    if (auto why = pisco::turning_problem(c.az_speed, duration, c.sample_rate); !why.empty()) t.fail("az_speed_deg_s", why);
-    if (c.boresight_angles.size() > 1)
-      if (auto why = pisco::stepping_problem(c.boresight_period, duration, c.sample_rate); !why.empty())
-        t.fail("boresight_period_hours", why);
+    if (const auto p = c.time_problem()) {
+      if (p->field == "start_unix") t.fail("start", p->what);
+      if (p->field == "az_speed") t.fail("az_speed_deg_s", p->what);
+      if (p->field == "boresight_period") t.fail("boresight_period_hours", p->what);
+    }
     try {
       c.check();
     } catch (const pisco::Error& e) {
@@ -968,19 +966,10 @@ SimulationConfig load_config(const fs::path& file) {
 
 void check_hwp_times(const SimulationConfig& c, std::size_t samples) {
   if (!c.hwp.enabled || c.hwp.angles_from_file) return;
-  const pisco::HwpAngleStream& a = c.hwp.stream;
-  auto fail = [&](const std::string& key, const std::string& why) {
-    throw pisco::Error(c.source.string() + ": [hwp] " + key + ": " + why + " (over the run's " + std::to_string(samples) +
-                       " samples)");
-  };
-  if (auto why = pisco::sample_time_problem(a.start_time, double(samples), a.sample_rate); !why.empty())
-    fail("start_time_s", why);
-  const double t_max = std::max(std::abs(a.start_time), std::abs(a.start_time + double(samples) / a.sample_rate));
-  if (a.kind == pisco::HwpAngleStream::Kind::continuous) {
-    if (auto why = pisco::turning_problem(2 * std::numbers::pi * a.frequency_hz, t_max, a.sample_rate); !why.empty())
-      fail(c.hwp.rate_key, why);
-  } else if (auto why = pisco::stepping_problem(a.step_seconds, t_max, a.sample_rate); !why.empty()) {
-    fail("step_seconds", why);
+  if (const auto p = c.hwp.stream.time_problem(samples)) {
+    const std::string key = p->field == "start_time" ? "start_time_s" : p->field == "frequency" ? c.hwp.rate_key : p->field;
+    throw pisco::Error(c.source.string() + ": [hwp] " + key + ": " + p->what + " (over the run's " +
+                       std::to_string(samples) + " samples)");
   }
 }
 
