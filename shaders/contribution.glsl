@@ -1,9 +1,9 @@
-// The per-pixel contribution of the measurement equation in float32: src/core/contribution.hpp line
-// for line (see the derivation there and in docs/physics.md), and the beam interpolation. The float64
-// tables of the monopole path are read here too, in float64 or, on devices without it, in float-float
-// (PISCO_FF). Written in the common subset of GLSL and C++ (common.glsl): tests/test_kernel_host.cpp
-// runs this file as C++ against the reference, and the backend parity tests hold the kernel to it.
-// Reads the tables `weight_pairs` and `weights64` and the specialization constants RADIAL and COLUMNS.
+// The per-pixel contribution of the measurement equation in float32 is pixel.glsl, the one text every
+// backend runs (see the derivation in src/core/contribution.hpp and docs/physics.md). Here: the float64
+// tables of the monopole path, read in float64 or, on devices without it, in float-float (PISCO_FF).
+// Written in the common subset of GLSL and C++ (common.glsl): tests/test_kernel_host.cpp runs this
+// file as C++ against the reference, and the backend parity tests hold the kernel to it. Reads the
+// tables `weight_pairs` and `weights64` and the specialization constants RADIAL and COLUMNS.
 #ifndef PISCO_CONTRIBUTION_GLSL
 #define PISCO_CONTRIBUTION_GLSL
 
@@ -11,90 +11,7 @@
 #if PISCO_FF
 #include "ff.glsl"
 #endif
-
-struct SampleFrame {
-  vec3 theta_p, phi_p, p;  // theta', phi', p'
-  vec3 e_c;                // cos(zeta) theta' + sin(zeta) phi'
-};
-
-// Antenna coordinates (x, y, z) of k, r2 = x^2 + y^2 (independent of psi) and (cos 2chi, sin 2chi),
-// all from d = k - p' (see contribution.hpp for why).
-PISCO_FN void pixel_geometry(SampleFrame f, vec3 k, PISCO_OUT(vec3) xyz, PISCO_OUT(float) r2, PISCO_OUT(float) cos2chi,
-                             PISCO_OUT(float) sin2chi) {
-  const vec3 d = k - f.p;
-  const float dz = dot(d, f.p);  // z - 1
-  xyz = vec3(dot(d, f.theta_p), dot(d, f.phi_p), 1.0f + dz);
-  r2 = dot(d, d) - dz * dz;
-  const float t = dot(d, f.e_c);
-  const float zp = 2.0f + dz;
-  const float c = (k.z * t - f.e_c.z) * zp - t * (d.z + k.z * dz);
-  const float s = (k.x * f.e_c.y - k.y * f.e_c.x) * zp - t * (d.x * f.p.y - d.y * f.p.x);
-  const float inv = 1.0f / (c * c + s * s);
-  cos2chi = (c * c - s * s) * inv;
-  sin2chi = 2.0f * c * s * inv;
-}
-
-// The beam grid of one detector, read from the push constants once per sample (lavapipe reads a
-// push constant inside a loop again for every invocation and iteration).
-struct Grid {
-  int offset;      // first texel in the weight texels
-  int n;           // nodes per axis (radial: along r)
-  float a;         // half-width: nodes at x_i = -a + i * step
-  float inv_step;  // 1 / step
-  uint offset64;   // first node in the float64 weights
-  PISCO_F64 a64, inv_step64;
-};
-
-// Node k's weights and its neighbour's along x (or r), stored side by side: one texel with the
-// two columns (w_I, w_Q) of each, or two texels with all four.
-PISCO_FN void weight_pair(Grid g, int k, PISCO_OUT(vec4) w, PISCO_OUT(vec4) next) {
-  if (COLUMNS == 2) {
-    const vec4 t = uintBitsToFloat(texelFetch(weight_pairs, g.offset + k));
-    w = vec4(t.x, t.y, 0.0f, 0.0f);
-    next = vec4(t.z, t.w, 0.0f, 0.0f);
-  } else {
-    w = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k));
-    next = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k + 1));
-  }
-}
-
-// Bilinear interpolation on the n x n grid at x_i = -a + i * step (x fastest); zero outside.
-// Without branches: the nodes are clamped into the grid and the result selected, which keeps
-// lavapipe's vector code free of masked writes.
-PISCO_FN vec4 interpolate_weights(Grid g, float x, float y) {
-  const float u = (x + g.a) * g.inv_step;
-  const float v = (y + g.a) * g.inv_step;
-  const float last = float(g.n - 1);
-  const bool inside = u >= 0.0f && v >= 0.0f && u <= last && v <= last;
-  const int i = clamp(int(u), 0, g.n - 2);
-  const int j = clamp(int(v), 0, g.n - 2);
-  const float fu = u - float(i);
-  const float fv = v - float(j);
-  const int k00 = j * g.n + i;
-  vec4 w00, w10, w01, w11;
-  weight_pair(g, k00, w00, w10);
-  weight_pair(g, k00 + g.n, w01, w11);
-  const vec4 w = ((1.0f - fu) * (1.0f - fv)) * w00 + (fu * (1.0f - fv)) * w10 + ((1.0f - fu) * fv) * w01 + (fu * fv) * w11;
-  return inside ? w : vec4(0.0f);
-}
-
-// Linear interpolation in r = sqrt(r2) of a radial profile at r = i * step; zero beyond.
-// Signed indices: CPUs (lavapipe) convert float to int in one instruction, to uint in several.
-PISCO_FN vec4 interpolate_radial(Grid g, float r2) {
-  const float u = sqrt(max(r2, 0.0f)) * g.inv_step;
-  const int i = clamp(int(u), 0, g.n - 2);
-  const float f = u - float(i);
-  vec4 w0, w1;
-  weight_pair(g, i, w0, w1);
-  const vec4 w = (1.0f - f) * w0 + f * w1;
-  return u <= float(g.n - 1) ? w : vec4(0.0f);
-}
-
-// w . Lambda(-chi) S (docs/physics.md, "The measurement equation").
-PISCO_FN float stokes_response(vec4 w, float cos2chi, float sin2chi, vec4 S) {
-  return w.x * S.x + w.y * (S.y * cos2chi + S.z * sin2chi) + w.z * (S.z * cos2chi - S.y * sin2chi) +
-         w.w * S.w;
-}
+#include "pixel.glsl"
 
 // The float64 interpolation at (x, y): its nodes (absolute node indices) and coefficients, linear in
 // r = sqrt(x^2 + y^2) for a radial profile (2 nodes), bilinear on the grid otherwise (4 nodes); no

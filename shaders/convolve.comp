@@ -80,6 +80,6 @@ void main() {
       count += s_count[local + q];
     }
   }
-  tod[sid] = finish_sample(d, acc.s0, acc.n0);
+  tod[sid] = sample_value(d, acc.s0, acc.n0);
   counts[sid] = count;
 }

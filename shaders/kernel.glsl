@@ -62,10 +62,8 @@ PISCO_FN mat4 plate_matrix(vec4 r0, vec4 r1, vec4 r2, vec4 r3, float c, float s)
 
 // Whether pixel p lies on ring NSIDE or 3 NSIDE, where the polar caps meet the belt: the monopole's
 // weight sum counts it with pc.ring_weight (src/core/poles.hpp).
-PISCO_FN bool on_cap_boundary(uint p) {
-  const uint n = pc.nside;
-  const uint north = 2u * n * (n - 1u), south = north + 8u * n * n;
-  return p - north < 4u * n || p - south < 4u * n;
+PISCO_FN bool cap_boundary_pixel(uint p) {
+  return on_cap_boundary(p, cap_boundary_north(pc.nside), cap_boundary_south(pc.nside), 4u * pc.nside);
 }
 
 // The pixels [b0, b0 + l0) then [b1, b1 + l1), in one loop.
@@ -76,9 +74,7 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
     const vec4 a = uintBitsToFloat(texelFetch(sky, int(2u * p)));
     const vec4 b = uintBitsToFloat(texelFetch(sky, int(2u * p + 1u)));
     const vec3 k = vec3(a.x, a.y, a.z);
-    vec3 xyz;
-    float r2, cos2chi, sin2chi;
-    pixel_geometry(smp.f, k, xyz, r2, cos2chi, sin2chi);
+    PixelGeometry g = pixel_geometry(smp.f, k);
     // On the float64 path the beam coordinates come from the float64 pixel vectors, as the cuda
     // kernel takes them (docs/vulkan.md, "Precision"): the float32 weights are interpolated there too.
 #if PISCO_FF
@@ -87,7 +83,8 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
       const ff3 k64 = sky_vector_ff(p);
       x64 = ff_dot(k64, smp.theta_p);
       y64 = ff_dot(k64, smp.phi_p);
-      xyz = vec3(x64.x, y64.x, xyz.z);
+      g.x = x64.x;
+      g.y = y64.x;
     }
 #else
     double x64 = 0.0lf, y64 = 0.0lf;
@@ -96,18 +93,16 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
       const dvec3 k64 = dvec3(k) + dvec3(lo.x, lo.y, lo.z);
       x64 = dot(k64, smp.theta_p);
       y64 = dot(k64, smp.phi_p);
-      xyz = vec3(float(x64), float(y64), xyz.z);
+      g.x = float(x64);
+      g.y = float(y64);
     }
 #endif
-    vec4 w = RADIAL ? interpolate_radial(smp.g, r2) : interpolate_weights(smp.g, xyz.x, xyz.y);
-    if (PLATE) w = w * smp.m;  // the effective weights w M(theta)
-    PISCO_PRECISE const float y = stokes_response(w, cos2chi, sin2chi, vec4(a.w, b.x, b.y, b.z)) - acc.comp;
-    PISCO_PRECISE const float t = acc.sum + y;
-    acc.comp = (t - acc.sum) - y;
-    acc.sum = t;
+    vec4 w = RADIAL ? interpolate_radial(smp.g, g.r2) : interpolate_weights(smp.g, g.x, g.y);
+    if (PLATE) w = effective_weights(w, smp.m[0], smp.m[1], smp.m[2], smp.m[3]);  // w M(theta)
+    kahan_add(acc.sum, acc.comp, stokes_response(w, g.cos2chi, g.sin2chi, vec4(a.w, b.x, b.y, b.z)));
     if (FLOAT64) {
       const Stencil64 st = stencil64(smp.g, x64, y64);
-      const bool ring = on_cap_boundary(p);
+      const bool ring = cap_boundary_pixel(p);
 #if PISCO_FF
       for (int q = 0; q < st.m; ++q) {
         if (PLATE) {
@@ -277,14 +272,13 @@ PISCO_FN PISCO_F64 float_part(Sums acc) {
 
 // The sample's TOD value from its float32 part d (float_part, summed over the parts of its disc) and
 // its float64 sums.
-PISCO_FN PISCO_F64 finish_sample(PISCO_F64 d, PISCO_F64 s0, PISCO_F64 n0) {
+PISCO_FN PISCO_F64 sample_value(PISCO_F64 d, PISCO_F64 s0, PISCO_F64 n0) {
   const bool per_sample = (pc.flags & PISCO_FLAG_PER_SAMPLE) != 0u;
 #if PISCO_FF
   const vec2 v = ff_add(d, ff_mul(pc.monopole, s0));
   return per_sample ? (n0.x > 0.0f ? ff_div(v, n0) : vec2(0.0f, 0.0f)) : v;
 #else
-  const double v = d + pc.monopole * s0;
-  return per_sample ? (n0 > 0.0lf ? v / n0 : 0.0lf) : v;
+  return finish_sample(d, pc.monopole, s0, n0, per_sample);
 #endif
 }
 

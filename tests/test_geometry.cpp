@@ -115,9 +115,10 @@ TEST(Geometry, IdealDetectorResponse) {
   // A2: with w = s/2 [(1+eps), (1-eps), 0, 0] the response is
   // s/2 [(1+eps) I + (1-eps)(Q cos 2chi + U sin 2chi)].
   const double s = 1.3, eps = 0.07, I = 2.0, Q = -0.4, U = 0.9, V = 0.2;
-  const double w[4] = {s / 2 * (1 + eps), s / 2 * (1 - eps), 0, 0};
+  const pisco::detail::Vec4<double> w{s / 2 * (1 + eps), s / 2 * (1 - eps), 0, 0};
   for (double chi : {0.0, 0.3, 1.1, 2.5, -0.7}) {
-    const double d = pisco::detail::stokes_response(w, std::cos(2 * chi), std::sin(2 * chi), I, Q, U, V);
+    const double d = pisco::detail::stokes_response(w, std::cos(2 * chi), std::sin(2 * chi),
+                                                    pisco::detail::Vec4<double>{I, Q, U, V});
     const double expected = s / 2 * ((1 + eps) * I + (1 - eps) * (Q * std::cos(2 * chi) + U * std::sin(2 * chi)));
     EXPECT_NEAR(d, expected, 1e-15);
   }
@@ -132,17 +133,21 @@ TEST(Geometry, BilinearInterpolationIsExactForBilinearFields) {
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i)
       for (int m = 0; m < 4; ++m) grid[(j * n + i) * 4 + m] = f(-a + i * step, -a + j * step, m);
+  const pisco::detail::ArrayGrid<double> g{grid.data(), n, a, 1 / step};
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> u(-a, a);
   for (int t = 0; t < 1000; ++t) {
     const double x = u(rng), y = u(rng);
-    double w[4];
-    pisco::detail::interpolate_weights(grid.data(), n, a, 1 / step, x, y, w);
-    for (int m = 0; m < 4; ++m) EXPECT_NEAR(w[m], f(x, y, m), 1e-13);
+    const auto w = pisco::detail::interpolate_weights(g, x, y);
+    const double wm[4] = {w.x, w.y, w.z, w.w};
+    for (int m = 0; m < 4; ++m) EXPECT_NEAR(wm[m], f(x, y, m), 1e-13);
   }
-  double w[4];
-  pisco::detail::interpolate_weights(grid.data(), n, a, 1 / step, a * 1.01, 0.0, w);
-  EXPECT_EQ(w[0], 0.0);  // outside the grid
+  // Outside the grid, a NaN included: zero.
+  for (const double x : {a * 1.01, -a * 1.01, std::nan("")}) {
+    const auto w = pisco::detail::interpolate_weights(g, x, 0.0);
+    EXPECT_EQ(w.x, 0.0);
+    EXPECT_EQ(w.w, 0.0);
+  }
 }
 
 }  // namespace

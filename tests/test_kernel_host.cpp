@@ -133,7 +133,7 @@ std::vector<double> host_kernel(const pisco::detail::EngineInputs& in, const vk:
     glsl::Sums acc;
     std::uint32_t count = 0;
     glsl::convolve_sample(sid, 0, acc, count);
-    const PISCO_F64 d = glsl::finish_sample(glsl::float_part(acc), acc.s0, acc.n0);
+    const PISCO_F64 d = glsl::sample_value(glsl::float_part(acc), acc.s0, acc.n0);
     double v = 0.0;
     std::memcpy(&v, &d, sizeof v);
     tod[sid] = mode.ff ? vk::from_ff_bits(v) : v;

@@ -1,9 +1,11 @@
 // The rings where HEALPix's polar caps meet its equatorial belt and their quadrature weight
-// (docs/physics.md, "The quadrature"; core/poles.hpp), in one struct for the host and the CUDA kernel.
+// (docs/physics.md, "The quadrature"; core/poles.hpp), in one struct for the host and the CUDA kernel;
+// the ring test is shaders/pixel.glsl's on_cap_boundary, which the shaders run too.
 #pragma once
 
 #include <cstdint>
 
+#include "core/contribution.hpp"
 #include "core/hd.hpp"
 
 namespace pisco::detail {
@@ -18,7 +20,7 @@ struct CapBoundary {
   std::uint32_t north = 0, south = 0, count = 0;
   double weight = 1.0;
   PISCO_HD double at(std::uint64_t pixel) const {
-    return pixel - north < count || pixel - south < count ? weight : 1.0;
+    return on_cap_boundary(static_cast<uint>(pixel), north, south, count) ? weight : 1.0;
   }
 };
 

@@ -1,7 +1,8 @@
 // The per-pixel contribution of the measurement equation (docs/physics.md, "Antenna basis, co-polarization and chi" and "The measurement equation"), written once for the float64
-// reference, the CUDA kernels and the simd backend; shaders/contribution.glsl mirrors it line by line.
-// The formulas themselves are in contribution-inl.hpp, which this header includes into pisco::detail
-// and the simd backend includes again into each of its instruction sets' namespaces (docs/simd.md).
+// reference, the CUDA kernels, the simd backend and the shaders: the formulas are in shaders/pixel.glsl,
+// in the common subset of GLSL and C++, which contribution-inl.hpp makes C++ templates of the number
+// type; this header includes that into pisco::detail and the simd backend includes it again into each
+// of its instruction sets' namespaces (docs/simd.md).
 //
 // For one sample with antenna basis (theta', phi', p') and detector angle zeta, let
 //   e_c = cos(zeta) theta' + sin(zeta) phi'         (co-polarization at the beam centre)

@@ -1,5 +1,6 @@
 // The float64 reference backend: one sample per task, the disc walked ring by ring, every pixel
-// through pixel_contribution(). Straightforward by design: it is the ground truth of every test.
+// through the per-pixel arithmetic of shaders/pixel.glsl (core/contribution.hpp). Straightforward by
+// design: it is the ground truth of every test.
 #include <atomic>
 #include <cmath>
 #include <memory>
@@ -31,8 +32,11 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
                                                     const PreparedDetector& det,
                                                     const SampleFrame<double>& f, double theta, double phi,
                                                     const double* plate, std::uint64_t& count) {
-  const double* grid = det.weights.data();
-  const double* norm_grid = det.norm_weights.data();
+  const ArrayGrid<double> grid{det.weights.data(), det.grid_n, det.grid_a, det.grid_inv_step};
+  const ArrayGrid<double> norm_grid{det.norm_weights.data(), det.grid_n, det.grid_a, det.grid_inv_step};
+  Vec4<double> m[4];  // the plate's M(theta) by columns
+  if constexpr (Plate)
+    for (int c = 0; c < 4; ++c) m[c] = {plate[c], plate[4 + c], plate[8 + c], plate[12 + c]};
   double sum = 0.0, norm = 0.0;
   for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
                       [&](std::uint32_t begin, std::uint32_t end) {
@@ -40,32 +44,13 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
                         for (std::uint32_t p = begin; p < end; ++p) {
                           const double* px = &pixels[std::size_t(p) * 8];
                           const Vec3<double> k{px[0], px[1], px[2]};
-                          if constexpr (PerSample || Plate) {
-                            const PixelGeometry<double> g = pixel_geometry(f, k);
-                            double w[4];
-                            if constexpr (Radial)
-                              interpolate_radial(grid, det.grid_n, det.grid_inv_step, g.r2, w);
-                            else
-                              interpolate_weights(grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, w);
-                            if constexpr (Plate) {
-                              double v[4];
-                              effective_weights(w, plate, v);
-                              sum += stokes_response(v, g.cos2chi, g.sin2chi, px[4], px[5], px[6], px[7]);
-                            } else {
-                              sum += stokes_response(w, g.cos2chi, g.sin2chi, px[4], px[5], px[6], px[7]);
-                            }
-                            if constexpr (PerSample) {
-                              double wn[4];
-                              if constexpr (Radial)
-                                interpolate_radial(norm_grid, det.grid_n, det.grid_inv_step, g.r2, wn);
-                              else
-                                interpolate_weights(norm_grid, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wn);
-                              norm += wn[0];
-                            }
-                          } else {
-                            sum += pixel_contribution<Radial>(f, k, px[4], px[5], px[6], px[7], grid, det.grid_n,
-                                                      det.grid_a, det.grid_inv_step);
-                          }
+                          const Vec4<double> S{px[4], px[5], px[6], px[7]};
+                          const PixelGeometry<double> g = pixel_geometry(f, k);
+                          Vec4<double> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
+                          if constexpr (Plate) w = effective_weights(w, m[0], m[1], m[2], m[3]);
+                          sum += stokes_response(w, g.cos2chi, g.sin2chi, S);
+                          if constexpr (PerSample)
+                            norm += (Radial ? interpolate_radial(norm_grid, g.r2) : interpolate_weights(norm_grid, g.x, g.y)).x;
                         }
                       });
   if constexpr (PerSample) return norm > 0 ? sum / norm : 0.0;

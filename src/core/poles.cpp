@@ -16,8 +16,8 @@ namespace pisco::detail {
 CapBoundary cap_boundary(int nside, Quadrature quadrature) {
   const std::uint32_t n = static_cast<std::uint32_t>(nside);
   CapBoundary b;
-  b.north = 2 * n * (n - 1);
-  b.south = b.north + 8 * n * n;
+  b.north = cap_boundary_north(n);
+  b.south = cap_boundary_south(n);
   b.count = 4 * n;
   b.weight = quadrature == Quadrature::corrected ? 1.0 - 1.0 / (12.0 * double(n)) : 1.0;
   return b;

@@ -15,7 +15,7 @@
 // weights: the same arithmetic as the reference. On that path the float32 evaluation also takes its
 // beam coordinates (x, y) from the float64 ones, which cuts its error about five-fold for free (the
 // rounding of the float32 pixel vectors is the largest float32 error, amplified by the beam's slope);
-// otherwise the whole evaluation is contribution.hpp's pixel_contribution<float>.
+// otherwise the whole evaluation is the arithmetic of shaders/pixel.glsl in float (core/contribution.hpp).
 #pragma once
 
 #include <cstdint>
@@ -99,12 +99,7 @@ PISCO_HD SampleFrame<float> to_float(const SampleFrame<double>& f) {
   return {v(f.theta_p), v(f.phi_p), v(f.p), v(f.e_c)};
 }
 
-PISCO_HD void kahan_add(LaneSums& s, float value) {
-  const float y = value - s.carry;
-  const float t = s.sum + y;
-  s.carry = (t - s.sum) - y;
-  s.sum = t;
-}
+PISCO_HD void kahan_add(LaneSums& s, float value) { pisco::detail::kahan_add(s.sum, s.carry, value); }
 
 // A lane's compensated float32 total, the value that enters the warp reduction.
 PISCO_HD float lane_total(const LaneSums& s) { return s.sum - s.carry; }
@@ -117,67 +112,48 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
                             const std::uint32_t* offset, int count, int lane, LaneSums& acc,
                             const PlateSample* plate = nullptr) {
   const std::uint32_t total = offset[count];
+  const ArrayGrid<float> grid{det.weights, det.grid_n, det.grid_a, det.grid_inv_step};
+  const ArrayGrid<double> exact{det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
+  const ArrayGrid<double> plate_exact{det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
   int r = 0;
   for (std::uint32_t j = std::uint32_t(lane); j < total; j += warp_lanes) {
     while (j >= offset[r + 1]) ++r;
     const std::uint32_t p = first[r] + (j - offset[r]);
     const PixelRecord px = sky.pixels[p];
     const Vec3<float> k{px.kx, px.ky, px.kz};
-    if constexpr (!Monopole && !PerSample && !Plate) {
-      kahan_add(acc, pixel_contribution<Radial>(f, k, px.i, px.q, px.u, px.v, det.weights, det.grid_n, det.grid_a,
-                                                det.grid_inv_step));
-    } else if constexpr (!Monopole && !PerSample) {
-      // A plate at the aperture: the effective weights w M(theta) (core/plate.hpp).
-      const PixelGeometry<float> g = pixel_geometry(f, k);
-      float wf[4], v[4];
-      if constexpr (Radial)
-        interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.r2, wf);
-      else
-        interpolate_weights(det.weights, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wf);
-      effective_weights(wf, plate->m, v);
-      kahan_add(acc, stokes_response(v, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
-    } else {
+    const Vec4<float> S{px.i, px.q, px.u, px.v};
+    PixelGeometry<float> g = pixel_geometry(f, k);
+    double x = 0.0, y = 0.0;
+    if constexpr (Monopole || PerSample) {
       // The beam coordinates in float64, from the reference's pixel vectors: they give the float64
       // sums their weights, and the float32 evaluation its (x, y), which float32 pixel vectors would
       // only carry to ~1e-7 (the largest float32 error otherwise, on steep beams).
       const double* kv = sky.vectors + 4 * std::size_t(p);
       const Vec3<double> kd{kv[0], kv[1], kv[2]};
-      const double x = dot(kd, fd.theta_p), y = dot(kd, fd.phi_p);
-      PixelGeometry<float> g = pixel_geometry(f, k);
+      x = dot(kd, fd.theta_p);
+      y = dot(kd, fd.phi_p);
       g.x = float(x);
       g.y = float(y);
-      float wf[4];
-      if constexpr (Radial)
-        interpolate_radial(det.weights, det.grid_n, det.grid_inv_step, g.r2, wf);
-      else
-        interpolate_weights(det.weights, det.grid_n, det.grid_a, det.grid_inv_step, g.x, g.y, wf);
-      if constexpr (Plate) {
-        float v[4];
-        effective_weights(wf, plate->m, v);
-        kahan_add(acc, stokes_response(v, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
-      } else {
-        kahan_add(acc, stokes_response(wf, g.cos2chi, g.sin2chi, px.i, px.q, px.u, px.v));
-      }
-      double w[4];
-      if constexpr (Radial)
-        interpolate_radial(det.exact_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
-      else
-        interpolate_weights(det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
+    }
+    Vec4<float> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
+    // A plate at the aperture: the effective weights w M(theta) (core/plate.hpp).
+    if constexpr (Plate) w = effective_weights(w, plate->m);
+    kahan_add(acc, stokes_response(w, g.cos2chi, g.sin2chi, S));
+    if constexpr (Monopole || PerSample) {
+      const Vec4<double> we = Radial ? interpolate_radial(exact, x * x + y * y) : interpolate_weights(exact, x, y);
       if constexpr (Monopole) {
         const double ring = sky.boundary.at(p);
         if constexpr (Plate) {
-          double wp[4];  // (w_Q, w_U, w_V, 0)
-          if constexpr (Radial)
-            interpolate_radial(det.plate_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wp);
-          else
-            interpolate_weights(det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wp);
-          acc.monopole += ring * (w[0] * plate->col0[0] + wp[0] * plate->col0[1] + wp[1] * plate->col0[2] +
-                                  wp[2] * plate->col0[3]);
+          // (w_Q, w_U, w_V, 0)
+          const Vec4<double> wp =
+              Radial ? interpolate_radial(plate_exact, x * x + y * y) : interpolate_weights(plate_exact, x, y);
+          acc.monopole += ring * (we.x * plate->col0[0] + wp.x * plate->col0[1] + wp.y * plate->col0[2] +
+                                  wp.z * plate->col0[3]);
         } else {
-          acc.monopole += ring * w[0];
+          acc.monopole += ring * we.x;
         }
       }
-      if constexpr (PerSample) acc.norm += w[1];
+      if constexpr (PerSample) acc.norm += we.y;
     }
   }
 }
@@ -210,12 +186,10 @@ PISCO_HD std::uint32_t walk_disc(const KernelSky& sky, const KernelDetector& det
   return pixels + batched;
 }
 
-// The sample from the reduced sums, as the reference: float32 sum plus I0 sum w_I, over the
-// normalization when per-sample.
+// The sample from the reduced sums, as every backend (shaders/pixel.glsl): float32 sum plus I0 sum w_I,
+// over the normalization when per-sample.
 PISCO_HD double finish_sample(float sum, double monopole_weight, double norm, double monopole, bool per_sample) {
-  const double d = double(sum) + monopole * monopole_weight;
-  if (per_sample) return norm > 0 ? d / norm : 0.0;
-  return d;
+  return pisco::detail::finish_sample(double(sum), monopole, monopole_weight, norm, per_sample);
 }
 
 }  // namespace pisco::detail::cuda

@@ -41,23 +41,54 @@ using VF = hn::Vec<DF>;
 using VI = hn::Vec<DI>;
 using MF = hn::Mask<DF>;
 
-// A vector of float32 lanes as the number type of the shared formulas. Trivially constructible, as
-// float is: the formulas' aggregates (Vec3<F>, PixelGeometry<F>) get implicit constructors, which
-// GCC compiles without the target's instruction set.
+// A vector of float32 lanes as the number type of the shared formulas, with its index vector I and
+// mask M. Trivially constructible, as float is: the formulas' aggregates (Vec3<F>, PixelGeometry<F>)
+// get implicit constructors, which GCC compiles without the target's instruction set.
+struct I {
+  VI v;
+};
+struct M {
+  MF v;
+};
 struct F {
   VF v;
   F() = default;
-  HWY_INLINE F(float x) : v(hn::Set(DF(), x)) {}  // NOLINT: T(1), T(2) in the formulas
-  HWY_INLINE F(VF x) : v(x) {}                    // NOLINT
+  HWY_INLINE F(float x) : v(hn::Set(DF(), x)) {}            // NOLINT: 1.0f, 2.0f in the formulas
+  HWY_INLINE F(VF x) : v(x) {}                              // NOLINT
+  HWY_INLINE explicit F(const I& i) : v(hn::ConvertTo(DF(), i.v)) {}  // float(i)
 };
 HWY_INLINE F operator+(const F& a, const F& b) { return F(hn::Add(a.v, b.v)); }
 HWY_INLINE F operator-(const F& a, const F& b) { return F(hn::Sub(a.v, b.v)); }
 HWY_INLINE F operator*(const F& a, const F& b) { return F(hn::Mul(a.v, b.v)); }
 HWY_INLINE F operator/(const F& a, const F& b) { return F(hn::Div(a.v, b.v)); }
+HWY_INLINE M operator>=(const F& a, const F& b) { return {hn::Ge(a.v, b.v)}; }
+HWY_INLINE M operator<=(const F& a, const F& b) { return {hn::Le(a.v, b.v)}; }  // false for NaN
+HWY_INLINE M operator&&(const M& a, const M& b) { return {hn::And(a.v, b.v)}; }
+HWY_INLINE I operator+(const I& a, const I& b) { return {hn::Add(a.v, b.v)}; }
+HWY_INLINE I operator+(const I& a, int b) { return {hn::Add(a.v, hn::Set(DI(), b))}; }
+HWY_INLINE I operator*(const I& a, int b) { return {hn::Mul(a.v, hn::Set(DI(), b))}; }
+HWY_INLINE F sqrt(const F& a) { return F(hn::Sqrt(a.v)); }
+HWY_INLINE F max(const F& a, float b) { return F(hn::Max(a.v, hn::Set(DF(), b))); }
 
-// The formulas of the reference, in this target's namespace (Vec3, SampleFrame, pixel_geometry,
-// stokes_response, effective_weights, ...).
+// The formulas of shaders/pixel.glsl, in this target's namespace (Vec3, SampleFrame, pixel_geometry,
+// interpolate_weights, stokes_response, effective_weights, kahan_add, ...).
 #include "core/contribution-inl.hpp"
+
+template <>
+struct Lanes<F> {
+  using Index = I;
+  using Mask = M;
+};
+
+// The interpolation's hooks for vectors of lanes: Highway's conversion is defined for every input
+// (lanes outside the grid get a clamped node, their weights discarded by select_weights).
+HWY_INLINE I node_index(const F& u, const M&, int top) {
+  return {hn::Min(hn::Max(hn::ConvertTo(DI(), u.v), hn::Zero(DI())), hn::Set(DI(), top))};
+}
+HWY_INLINE Vec4<F> select_weights(const M& inside, const Vec4<F>& w) {
+  return {F(hn::IfThenElseZero(inside.v, w.x.v)), F(hn::IfThenElseZero(inside.v, w.y.v)),
+          F(hn::IfThenElseZero(inside.v, w.z.v)), F(hn::IfThenElseZero(inside.v, w.w.v))};
+}
 
 constexpr std::size_t max_lanes = 64;
 static_assert(HWY_MAX_BYTES / sizeof(float) <= max_lanes, "scratch arrays hold one vector of float32 lanes");
@@ -121,6 +152,35 @@ HWY_INLINE void lookup_records(const float* table, VI node, F out[4]) {
 #endif
 }
 
+// A detector's float32 weights as records (lookup_records), for the shared interpolation: node k's
+// (w_I, w_Q) and node k + 1's in one record of r01, and (w_U, w_V) of both in r23 (Columns == 4).
+template <int Columns>
+struct RecordGrid {
+  const float* r01;
+  const float* r23;
+  int n;
+  F a, inv_step;
+};
+
+template <int Columns>
+HWY_INLINE void weight_pair(const RecordGrid<Columns>& g, const I& k, Vec4<F>& w, Vec4<F>& next) {
+  F a[4];
+  lookup_records(g.r01, k.v, a);
+  w.x = a[0];
+  w.y = a[1];
+  next.x = a[2];
+  next.y = a[3];
+  if constexpr (Columns == 4) {
+    lookup_records(g.r23, k.v, a);
+    w.z = a[0];
+    w.w = a[1];
+    next.z = a[2];
+    next.w = a[3];
+  } else {
+    w.z = w.w = next.z = next.w = F(0.0f);
+  }
+}
+
 #if HWY_TARGET != HWY_SCALAR  // the float64 path there is the reference's scalar code
 // The float64 path's counterpart of lookup_records: for every lane of a vector of doubles the
 // record at table + off, (w(k), w(k + 1)) of one column; the even lanes' records fill one vector, the
@@ -175,13 +235,14 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
     for (int k = 0; k < 16; ++k) m[k] = F(float(in.plate[k]));
     for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
   }
-  const F inv_step(det.grid_inv_step), grid_a(det.grid_a), last(float(det.grid_n - 1)), one(1.0f);
-  const VI zero_i = hn::Zero(di), max_i = hn::Set(di, det.grid_n - 2), n_i = hn::Set(di, det.grid_n);
+  const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
+                                 F(det.grid_inv_step)};
+  Vec4<F> mcols[4];  // Plate: the columns of M(theta)
+  if constexpr (Plate)
+    for (int c = 0; c < 4; ++c) mcols[c] = {m[c], m[4 + c], m[8 + c], m[12 + c]};
   const VF zero = hn::Zero(df);
-  const float* r01 = det.records[0];
-  const float* r23 = det.records[Columns == 4 ? 1 : 0];
 
-  VF sum = zero, carry = zero;
+  F sum(zero), carry(zero);
   double monopole = 0.0, norm = 0.0;
 
   // The float64 sums of pixels [p, p + count), count <= N, and their float64 beam coordinates
@@ -195,21 +256,15 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
       xs[l] = float(x);
       ys[l] = float(y);
-      double w[4];
-      if (Radial)
-        detail::interpolate_radial(det.weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, w);
-      else
-        detail::interpolate_weights(det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, w);
+      const detail::ArrayGrid<double> weights{det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
+      const detail::ArrayGrid<double> norm_weights{det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
+      const detail::Vec4<double> w =
+          Radial ? detail::interpolate_radial(weights, x * x + y * y) : detail::interpolate_weights(weights, x, y);
       if (in.monopole)
-        monopole += sky.boundary.at(p + l) * (Plate ? w[0] * col0[0] + w[1] * col0[1] + w[2] * col0[2] + w[3] * col0[3] : w[0]);
-      if (in.per_sample) {
-        double wn[4];
-        if (Radial)
-          detail::interpolate_radial(det.norm_weights, det.grid_n, det.grid_inv_step_d, x * x + y * y, wn);
-        else
-          detail::interpolate_weights(det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d, x, y, wn);
-        norm += wn[0];
-      }
+        monopole += sky.boundary.at(p + l) * (Plate ? w.x * col0[0] + w.y * col0[1] + w.z * col0[2] + w.w * col0[3] : w.x);
+      if (in.per_sample)
+        norm += (Radial ? detail::interpolate_radial(norm_weights, x * x + y * y)
+                        : detail::interpolate_weights(norm_weights, x, y)).x;
     }
   };
   auto finish_exact = [&] {};
@@ -314,67 +369,20 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       g.y = F(s[8]);
     }
 
-    // The beam weights (interpolate_radial / interpolate_weights of the formulas, with record lookups).
-    F w[4] = {F(zero), F(zero), F(zero), F(zero)};
-    MF inside;
-    if constexpr (Radial) {
-      const F u = F(hn::Sqrt(hn::Max(g.r2.v, zero))) * inv_step;
-      inside = hn::Le(u.v, last.v);  // false for NaN
-      const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
-      const F fr = u - F(hn::ConvertTo(df, i));
-      const F gr = one - fr;
-      // Columns 0 and 1 (and 2 and 3): w(i) and w(i + 1) of each, in one record a lane.
-      F a[4];
-      lookup_records(r01, i, a);
-      w[0] = gr * a[0] + fr * a[2];
-      w[1] = gr * a[1] + fr * a[3];
-      if constexpr (Columns == 4) {
-        lookup_records(r23, i, a);
-        w[2] = gr * a[0] + fr * a[2];
-        w[3] = gr * a[1] + fr * a[3];
-      }
-    } else {
-      const F u = (g.x + grid_a) * inv_step;
-      const F v = (g.y + grid_a) * inv_step;
-      inside = hn::And(hn::And(hn::Ge(u.v, zero), hn::Ge(v.v, zero)), hn::And(hn::Le(u.v, last.v), hn::Le(v.v, last.v)));
-      const VI i = hn::Min(hn::Max(hn::ConvertTo(di, u.v), zero_i), max_i);
-      const VI j = hn::Min(hn::Max(hn::ConvertTo(di, v.v), zero_i), max_i);
-      const F fu = u - F(hn::ConvertTo(df, i));
-      const F fv = v - F(hn::ConvertTo(df, j));
-      const F c00 = (one - fu) * (one - fv), c10 = fu * (one - fv), c01 = (one - fu) * fv, c11 = fu * fv;
-      const VI node = hn::Add(hn::Mul(j, n_i), i);
-      const VI above = hn::Add(node, n_i);
-      // Nodes (i, j), (i + 1, j) in the record at node and (i, j + 1), (i + 1, j + 1) in the record at
-      // node + n, for columns 0 and 1, then 2 and 3.
-      auto columns = [&](const float* table, F& wa, F& wb) HWY_ATTR {
-        F lo[4], hi[4];
-        lookup_records(table, node, lo);
-        lookup_records(table, above, hi);
-        wa = c00 * lo[0] + c10 * lo[2] + c01 * hi[0] + c11 * hi[2];
-        wb = c00 * lo[1] + c10 * lo[3] + c01 * hi[1] + c11 * hi[3];
-      };
-      columns(r01, w[0], w[1]);
-      if constexpr (Columns == 4) columns(r23, w[2], w[3]);
-    }
-
-    const F I(s[3]), Q(s[4]), U(s[5]);
+    // The beam weights (zero outside the grid), through the records (RecordGrid).
+    Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
+    const Vec4<F> S{F(s[3]), F(s[4]), F(s[5]), F(s[6])};
     F response;
     if constexpr (Plate) {
-      F v[4];
-      effective_weights(w, m, v);
-      response = stokes_response(v, g.cos2chi, g.sin2chi, I, Q, U, F(s[6]));
+      w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
+      response = stokes_response(w, g.cos2chi, g.sin2chi, S);
     } else if constexpr (Columns == 4) {
-      response = stokes_response(w, g.cos2chi, g.sin2chi, I, Q, U, F(s[6]));
+      response = stokes_response(w, g.cos2chi, g.sin2chi, S);
     } else {
-      // stokes_response with w_U = w_V = 0.
-      response = w[0] * I + w[1] * (Q * g.cos2chi + U * g.sin2chi);
+      response = stokes_response_iq(w, g.cos2chi, g.sin2chi, S);
     }
-    const VF value = hn::IfThenElseZero(hn::And(live, inside), response.v);
     // Kahan-compensated float32 sum, lane by lane (as each GPU lane sums its pixels).
-    const VF y = hn::Sub(value, carry);
-    const VF t = hn::Add(sum, y);
-    carry = hn::Sub(hn::Sub(t, sum), y);
-    sum = t;
+    kahan_add(sum, carry, F(hn::IfThenElseZero(live, response.v)));
   };
 
   // Whole vectors of a range straight from the sky; the rest of the range (fewer than N pixels)
@@ -429,7 +437,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
 
   if constexpr (Exact) finish_exact();
   HWY_ALIGN float totals[max_lanes];
-  hn::Store(hn::Sub(sum, carry), df, totals);
+  hn::Store(hn::Sub(sum.v, carry.v), df, totals);
   double total = 0.0;
   for (std::size_t l = 0; l < N; ++l) total += double(totals[l]);
   out.sum = total;
