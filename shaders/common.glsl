@@ -11,6 +11,13 @@
 #define PISCO_OUT(T) T&
 #define PISCO_INOUT(T) T&
 #define PISCO_PRECISE
+// rings.glsl's mul_rn, a float64 product rounded by itself: GLSL's `precise` on the product, here a
+// store through a volatile, which no compiler fuses with the addition it feeds (tests/CMakeLists.txt
+// compiles the ring arithmetic with contraction on to hold it to that).
+inline double mul_rn(double a, double b) {
+  volatile double r = a * b;
+  return r;
+}
 #else
 #define PISCO_FN
 #define PISCO_OUT(T) out T

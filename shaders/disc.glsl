@@ -1,6 +1,6 @@
-// Disc selection from the ring table (docs/physics.md, "Disc selection"). In float64: src/core/disc.hpp
-// line for line, with `precise` so that the compiler contracts nothing the reference computes in two
-// roundings. Without float64 (PISCO_FF): each ring's range estimated in float32 and its ends settled
+// Disc selection from the ring table (docs/physics.md, "Disc selection"). In float64: src/core/disc.hpp's
+// walk, with the ring arithmetic of rings.glsl, the reference's own text (every product that feeds an
+// addition rounded by itself, mul_rn). Without float64 (PISCO_FF): each ring's range estimated in float32 and its ends settled
 // by testing the pixels there in float-float (k . p' >= cos rho_max), which selects the same pixels
 // unless one lies within about 1e-14 of the disc's edge. Each ring gives at most two contiguous pixel
 // ranges. Written in the common subset of GLSL and C++ (tests/test_kernel_host.cpp runs it as C++);
@@ -41,14 +41,7 @@ PISCO_FN RingEntry ring_entry(int iz) {
 #if !PISCO_FF
 
 const double PISCO_PI = 3.141592653589793238462643383279502884lf;
-
-// HEALPix's ring_above: the ring just north of z (0 north of ring 1).
-PISCO_FN int ring_above(int nside, double z) {
-  const double az = abs(z);
-  if (az <= 2.0lf / 3.0lf) return int(double(nside) * (2.0lf - 1.5lf * z));
-  const int iring = int(double(nside) * sqrt(3.0lf * (1.0lf - az)));
-  return (z > 0.0lf) ? iring : 4 * nside - iring - 1;
-}
+#include "rings.glsl"
 
 // The rings of the disc of radius rho_max around colatitude theta: [first, last], of which those
 // outside [irmin, irmax] lie whole inside it (the polar caps).
@@ -72,20 +65,15 @@ PISCO_FN void disc_rings(int nside, double theta, double rho_max, PISCO_OUT(int)
 PISCO_FN void ring_ranges(RingEntry ring, double z0, double xa, double phi0, double cos_rho, PISCO_OUT(uint) b0,
                           PISCO_OUT(uint) l0, PISCO_OUT(uint) b1, PISCO_OUT(uint) l1) {
   b0 = 0u; l0 = 0u; b1 = 0u; l1 = 0u;
-  const double z = ring.z;
-  PISCO_PRECISE const double x = (cos_rho - z * z0) * xa;
-  PISCO_PRECISE const double ysq = 1.0lf - z * z - x * x;
+  const double x = ring_edge_x(ring.z, z0, xa, cos_rho);
+  const double ysq = ring_edge_ysq(ring.z, x);
   if (ysq <= 0.0lf) return;
   const double dphi = pisco_atan2_nonneg_y(sqrt(ysq), x);
   if (!(dphi > 0.0lf)) return;
   const int nr = int(ring.count);
   const uint first = ring.first;
-  const double shift = ring.shifted ? 0.5lf : 0.0lf;
-  const double inv_twopi = 0.5lf / PISCO_PI;
-  PISCO_PRECISE const double lo = double(nr) * inv_twopi * (phi0 - dphi) - shift;
-  PISCO_PRECISE const double hi = double(nr) * inv_twopi * (phi0 + dphi) - shift;
-  int ip_lo = int(floor(lo)) + 1;
-  int ip_hi = int(floor(hi));
+  int ip_lo = int(floor(ring_bound(ring.count, ring.shifted, phi0 - dphi))) + 1;
+  int ip_hi = int(floor(ring_bound(ring.count, ring.shifted, phi0 + dphi)));
   if (ip_lo > ip_hi) return;
   if (ip_hi >= nr) {
     ip_lo -= nr;

@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <random>
 #include <cstring>
 #include <numbers>
 #include <vector>
@@ -65,6 +67,16 @@ inline int PARTS = 1, COLUMNS = 4;
 
 #include "kernel_host.hpp"  // shaders/kernel.glsl and its includes
 }  // namespace glsl
+
+#if PISCO_TEST_CONTRACTED
+// rings.glsl compiled with contraction into fused multiply-adds (rings_contracted.cpp).
+namespace contracted_rings {
+int above(int nside, double z);
+double edge_x(double z, double z0, double xa, double cos_rho);
+double edge_ysq(double z, double x);
+double bound(unsigned count, bool shifted, double phi);
+}  // namespace contracted_rings
+#endif
 
 namespace {
 
@@ -305,5 +317,177 @@ TEST(KernelArithmetic, ChosenByTheDeviceOrAskedFor) {
                            "Apple M2 lacks shaderFloat64");
   pisco_test::expect_error([] { vk::use_float_float(true, "gpu", "double"); }, "unknown arithmetic \"double\"");
 }
+
+// One text for the maths (shaders/pixel.glsl, shaders/rings.glsl): every shared function, run through
+// the GLSL-as-C++ build (glm's types, as the shaders see it) and through the C++ template build the
+// reference, the simd backend and the CUDA kernels use (float here, as on the devices), on random
+// inputs: the same bits.
+template <class T>
+std::uint64_t bits(T v) {
+  if constexpr (sizeof(T) == 4)
+    return std::bit_cast<std::uint32_t>(v);
+  else
+    return std::bit_cast<std::uint64_t>(v);
+}
+
+TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
+  namespace d = pisco::detail;
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  auto unit = [&] {
+    glm::vec3 v(u(rng), u(rng), u(rng));
+    return v / std::sqrt(glm::dot(v, v));
+  };
+  auto same3 = [](const glm::vec3& a, const d::Vec3<float>& b) { return glsl::vec3(b.x, b.y, b.z) == a; };
+  (void)same3;
+  // A beam grid of n x n nodes with 4 weights each, as the shaders' texels (COLUMNS 4 and 2) and as
+  // the reference's array.
+  const int n = 9;
+  std::vector<float> nodes(4 * n * n + 4);
+  for (float& w : nodes) w = u(rng);
+  std::vector<float> two = nodes;  // COLUMNS 2: w_U = w_V = 0
+  for (std::size_t k = 0; k + 3 < two.size(); k += 4) two[k + 2] = two[k + 3] = 0.0f;
+  std::vector<float> pairs4, pairs2;
+  for (int k = 0; k < n * n; ++k) {
+    for (int m = 0; m < 8; ++m) pairs4.push_back(nodes[4 * k + m]);
+    for (int m : {0, 1, 4, 5}) pairs2.push_back(nodes[4 * k + m]);
+  }
+  const float a = 0.05f, inv_step = float(n - 1) / (2 * a);
+  glsl::Grid g{};
+  g.offset = 0;
+  g.n = n;
+  g.a = a;
+  g.inv_step = inv_step;
+  std::size_t checked = 0;
+  for (int t = 0; t < 20000; ++t) {
+    // Frame and pixel: an antenna basis from random angles, a pixel within ~0.07 rad of p'.
+    const float th = std::acos(u(rng)), ph = 3.14159f * u(rng), ps = 3.14159f * u(rng), ze = 3.14159f * u(rng);
+    const d::SampleFrame<float> fc = d::make_frame<float>(std::cos(th), std::sin(th), std::cos(ph), std::sin(ph),
+                                                          std::cos(ps), std::sin(ps), std::cos(ze), std::sin(ze));
+    glsl::SampleFrame fg;
+    fg.theta_p = glsl::vec3(fc.theta_p.x, fc.theta_p.y, fc.theta_p.z);
+    fg.phi_p = glsl::vec3(fc.phi_p.x, fc.phi_p.y, fc.phi_p.z);
+    fg.p = glsl::vec3(fc.p.x, fc.p.y, fc.p.z);
+    fg.e_c = glsl::vec3(fc.e_c.x, fc.e_c.y, fc.e_c.z);
+    glm::vec3 kg = fg.p + 0.07f * unit();
+    kg /= std::sqrt(glm::dot(kg, kg));
+    const d::Vec3<float> kc{kg.x, kg.y, kg.z};
+    const glsl::PixelGeometry pg = glsl::pixel_geometry(fg, kg);
+    const d::PixelGeometry<float> pc = d::pixel_geometry(fc, kc);
+    for (auto [x, y] : {std::pair{pg.x, pc.x}, {pg.y, pc.y}, {pg.z, pc.z}, {pg.r2, pc.r2}, {pg.cos2chi, pc.cos2chi},
+                        {pg.sin2chi, pc.sin2chi}})
+      ASSERT_EQ(bits(x), bits(y)) << "pixel_geometry, case " << t;
+    // Interpolation on the grid (in and out of it) and radially, with 4 and 2 columns.
+    for (const int columns : {4, 2}) {
+      glsl::COLUMNS = columns;
+      glsl::weight_pairs = texels(columns == 4 ? pairs4 : pairs2);
+      const d::ArrayGrid<float> gc{columns == 4 ? nodes.data() : two.data(), n, a, inv_step};
+      const glm::vec4 wg = glsl::interpolate_weights(g, pg.x, pg.y);
+      const d::Vec4<float> wc = d::interpolate_weights(gc, pc.x, pc.y);
+      const glm::vec4 rg = glsl::interpolate_radial(g, pg.r2);
+      const d::Vec4<float> rc = d::interpolate_radial(gc, pc.r2);
+      for (int m = 0; m < 4; ++m) {
+        const float cm[4] = {wc.x, wc.y, wc.z, wc.w}, rm[4] = {rc.x, rc.y, rc.z, rc.w};
+        ASSERT_EQ(bits(wg[m]), bits(cm[m])) << "interpolate_weights, case " << t << ", columns " << columns;
+        ASSERT_EQ(bits(rg[m]), bits(rm[m])) << "interpolate_radial, case " << t << ", columns " << columns;
+      }
+    }
+    // Stokes response, plate weights, a Kahan step.
+    const glm::vec4 w(u(rng), u(rng), u(rng), u(rng)), S(u(rng), u(rng), u(rng), u(rng));
+    const d::Vec4<float> wc{w.x, w.y, w.z, w.w}, Sc{S.x, S.y, S.z, S.w};
+    ASSERT_EQ(bits(glsl::stokes_response(w, pg.cos2chi, pg.sin2chi, S)),
+              bits(d::stokes_response(wc, pc.cos2chi, pc.sin2chi, Sc)));
+    ASSERT_EQ(bits(glsl::stokes_response_iq(w, pg.cos2chi, pg.sin2chi, S)),
+              bits(d::stokes_response_iq(wc, pc.cos2chi, pc.sin2chi, Sc)));
+    glm::vec4 col[4];
+    d::Vec4<float> colc[4];
+    for (int c = 0; c < 4; ++c) {
+      col[c] = glm::vec4(u(rng), u(rng), u(rng), u(rng));
+      colc[c] = {col[c].x, col[c].y, col[c].z, col[c].w};
+    }
+    const glm::vec4 vg = glsl::effective_weights(w, col[0], col[1], col[2], col[3]);
+    const d::Vec4<float> vc = d::effective_weights(wc, colc[0], colc[1], colc[2], colc[3]);
+    ASSERT_EQ(bits(vg.x), bits(vc.x));
+    ASSERT_EQ(bits(vg.w), bits(vc.w));
+    float sg = u(rng), cg = 1e-8f * u(rng), sc = sg, cc = cg;
+    const float value = 1e-3f * u(rng);
+    glsl::kahan_add(sg, cg, value);
+    d::kahan_add(sc, cc, value);
+    ASSERT_EQ(bits(sg), bits(sc));
+    ASSERT_EQ(bits(cg), bits(cc));
+#if !PISCO_FF
+    const double dd = u(rng), s0 = u(rng), n0 = u(rng) + 0.5, mono = 2.725;
+    for (const bool per_sample : {false, true})
+      ASSERT_EQ(bits(glsl::finish_sample(dd, mono, s0, n0, per_sample)),
+                bits(d::finish_sample(dd, mono, s0, n0, per_sample)));
+#endif
+    ++checked;
+  }
+  // The cap-boundary rings, pixel by pixel around them.
+  for (const unsigned nside : {1u, 2u, 16u, 1024u, 8192u}) {
+    ASSERT_EQ(glsl::cap_boundary_north(nside), d::cap_boundary_north(nside));
+    ASSERT_EQ(glsl::cap_boundary_south(nside), d::cap_boundary_south(nside));
+    const unsigned north = d::cap_boundary_north(nside), south = d::cap_boundary_south(nside), count = 4 * nside;
+    for (const unsigned first : {north, south})
+      for (unsigned p = first > 2 ? first - 2 : 0; p < first + count + 2; ++p)
+        ASSERT_EQ(glsl::on_cap_boundary(p, north, south, count), d::on_cap_boundary(p, north, south, count));
+  }
+  std::cout << checked << " random cases, every value the same bits in both builds\n";
+}
+
+#if !PISCO_FF
+// The ring arithmetic at every ring's own z and its neighbours (where ring_above's floor decides),
+// and at random discs: the GLSL-as-C++ build and the reference's give the same bits; so does a build
+// with contraction into fused multiply-adds (what a shader compiler may do where `precise` does not
+// forbid it), which an unprotected product (2 - 1.5 z instead of 2 - mul_rn(1.5, z)) fails.
+TEST(SharedMaths, RingArithmeticGivesTheSameBitsInEveryBuild) {
+  namespace d = pisco::detail;
+#if PISCO_TEST_CONTRACTED
+  const bool fused = __builtin_cpu_supports("fma");
+#else
+  const bool fused = false;
+#endif
+  std::size_t checked = 0, fused_checked = 0;
+  for (int nside = 1; nside <= 8192; nside *= 2) {
+    for (int ring = 1; ring < 4 * nside; ++ring) {
+      const double z0 = d::ring_z(nside, ring);
+      for (const double z : {z0, std::nextafter(z0, 2.0), std::nextafter(z0, -2.0)}) {
+        const int want = int(d::ring_above(nside, z));
+        ASSERT_EQ(glsl::ring_above(nside, z), want) << "NSIDE " << nside << ", ring " << ring << ", z " << z;
+#if PISCO_TEST_CONTRACTED
+        if (fused) {
+          ASSERT_EQ(contracted_rings::above(nside, z), want)
+              << "fused: NSIDE " << nside << ", ring " << ring << ", z " << z;
+          ++fused_checked;
+        }
+#endif
+        ++checked;
+      }
+    }
+  }
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int t = 0; t < 100000; ++t) {
+    const double z = u(rng), z0 = u(rng), xa = 1.0 / std::sqrt(1 - z0 * z0), cos_rho = 0.5 * (u(rng) + 1);
+    const double phi = 7 * u(rng);
+    const unsigned count = 4u << (t % 12);
+    const double x = d::ring_edge_x(z, z0, xa, cos_rho);
+    ASSERT_EQ(bits(glsl::ring_edge_x(z, z0, xa, cos_rho)), bits(x));
+    ASSERT_EQ(bits(glsl::ring_edge_ysq(z, x)), bits(d::ring_edge_ysq(z, x)));
+    ASSERT_EQ(bits(glsl::ring_bound(count, t % 2 == 1, phi)), bits(d::ring_bound(count, t % 2 == 1, phi)));
+#if PISCO_TEST_CONTRACTED
+    if (fused) {
+      ASSERT_EQ(bits(contracted_rings::edge_x(z, z0, xa, cos_rho)), bits(x));
+      ASSERT_EQ(bits(contracted_rings::edge_ysq(z, x)), bits(d::ring_edge_ysq(z, x)));
+      ASSERT_EQ(bits(contracted_rings::bound(count, t % 2 == 1, phi)), bits(d::ring_bound(count, t % 2 == 1, phi)));
+    }
+#endif
+    ++checked;
+  }
+  std::cout << checked << " ring values the same in the GLSL and C++ builds; " << fused_checked
+            << " also with fused multiply-adds" << (fused ? "" : " (none: this build or processor has no FMA)")
+            << "\n";
+}
+#endif
 
 }  // namespace

@@ -20,6 +20,8 @@
 // orthographic coordinates (x, y), which are the beamsor grid's coordinates (docs/physics.md, "Beamsors").
 #pragma once
 
+#include <cmath>
+
 #include "core/hd.hpp"
 
 namespace pisco::detail {

@@ -1,9 +1,9 @@
 // Disc selection from a ring table (docs/physics.md, "Disc selection"): the RING pixels whose centres lie within rho of a
 // pointing, the same set as HEALPix C++ query_disc(..., inclusive = false), produced as one or two
 // contiguous index ranges per ring crossing the disc. Written once for the reference and the CUDA
-// kernels; shaders/disc.glsl mirrors it. Double precision throughout: the result must be exact.
-// Every product that feeds an addition is mul_rn (core/hd.hpp), rounded by itself on the device as
-// on the host.
+// kernels; shaders/disc.glsl walks the disc the same way, and the ring arithmetic itself is one text
+// for both, shaders/rings.glsl. Double precision throughout: the result must be exact. Every product
+// that feeds an addition is mul_rn (core/hd.hpp), rounded by itself on the device as on the host.
 #pragma once
 
 #include <cmath>
@@ -43,13 +43,19 @@ PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
   return mul_rn(double(r * r), fact2) - 1.0;
 }
 
-// Index of the ring just north of z (0 when z is north of ring 1), HEALPix's ring_above.
-PISCO_HD std::int64_t ring_above(std::int64_t nside, double z) {
-  const double az = z < 0 ? -z : z;
-  if (az <= 2.0 / 3.0) return std::int64_t(double(nside) * (2.0 - mul_rn(1.5, z)));
-  const std::int64_t iring = std::int64_t(double(nside) * sqrt(3.0 * (1.0 - az)));
-  return (z > 0) ? iring : 4 * nside - iring - 1;
-}
+// The float64 ring arithmetic shared with the shaders (shaders/rings.glsl): ring_above, ring_edge_x,
+// ring_edge_ysq, ring_bound; mul_rn is core/hd.hpp's.
+constexpr double PISCO_PI = 3.141592653589793238462643383279502884;
+#pragma push_macro("PISCO_FN")
+#undef PISCO_FN
+#define PISCO_TEMPLATE_TEXT 1
+#define PISCO_FN PISCO_HD
+#define PISCO_RING_INT std::int64_t
+using uint = unsigned int;
+#include "../../shaders/rings.glsl"
+#undef PISCO_RING_INT
+#undef PISCO_TEMPLATE_TEXT
+#pragma pop_macro("PISCO_FN")
 
 // The table for all 4 nside - 1 rings; entry r - 1 describes ring r.
 std::vector<RingEntry> make_ring_table(int nside);
@@ -83,23 +89,18 @@ PISCO_HD DiscRings disc_rings(std::int64_t nside, double theta0, double rho) {
 // radius, and ysq = 1 - z^2 - x^2 (the ring does not cross the edge unless ysq > 0); the ring's
 // half-width in longitude is then dphi = atan2(sqrt(ysq), x).
 PISCO_HD void ring_edge(const RingEntry& r, const DiscRings& d, double cos_rho, double& x, double& ysq) {
-  const double z = r.z;
-  x = (cos_rho - mul_rn(z, d.z0)) * d.xa;
-  ysq = 1.0 - mul_rn(z, z) - mul_rn(x, x);
+  x = ring_edge_x(r.z, d.z0, d.xa, cos_rho);
+  ysq = ring_edge_ysq(r.z, x);
 }
 
-// A ring's pixels per radian of longitude, and the offset of its pixel centres in pixels.
-PISCO_HD double ring_pixels_per_radian(const RingEntry& r) {
-  const double inv_twopi = 0.5 / 3.141592653589793238462643383279502884;
-  return double(r.count) * inv_twopi;
-}
+// A ring's pixels per radian of longitude, and the offset of its pixel centres in pixels: ring_bound's
+// factors, for the simd disc walk's estimate (src/simd/simd_disc.cpp), which ring_bound settles.
+PISCO_HD double ring_pixels_per_radian(const RingEntry& r) { return double(r.count) * (0.5 / PISCO_PI); }
 PISCO_HD double ring_shift(const RingEntry& r) { return r.shifted ? 0.5 : 0.0; }
 
 // The argument whose floor is a bound of the ring's pixel indices: floor(arg(phi0 - dphi)) + 1 is the
 // first pixel, floor(arg(phi0 + dphi)) the last.
-PISCO_HD double ring_bound_arg(const RingEntry& r, double phi) {
-  return mul_rn(ring_pixels_per_radian(r), phi) - ring_shift(r);
-}
+PISCO_HD double ring_bound_arg(const RingEntry& r, double phi) { return ring_bound(r.count, r.shifted != 0, phi); }
 
 // Emits ring r's pixels first ... last, indices taken modulo the ring (one range, or two where they
 // wrap through phi = 0); none when first > last.
