@@ -22,6 +22,17 @@ inline std::string error_of(const std::function<void()>& f) {
   return "no error";
 }
 
+// The kind of the pisco::Error that f throws; fails the test if it throws none.
+inline pisco::ErrorKind kind_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const pisco::Error& e) {
+    return e.kind();
+  }
+  ADD_FAILURE() << "expected a pisco::Error";
+  return pisco::ErrorKind::internal;
+}
+
 inline bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
 
 // Runs f, expecting a pisco::Error whose message contains `needle`.

@@ -299,6 +299,11 @@ TEST(BackendParity, LostDeviceIsAClearError) {
   std::cout << e << "\n";
   EXPECT_TRUE(pisco_test::contains(e, "device was lost")) << e;
   EXPECT_TRUE(pisco_test::contains(e, "detector 1")) << e;
+  EXPECT_EQ(pisco_test::kind_of([&] {
+              pisco::Engine again(s.sky, s.beams, s.focal_plane, options(backend, 100));
+              again.convolve(1, p, tod);
+            }),
+            pisco::ErrorKind::device);
 }
 
 TEST(BackendParity, UnknownDeviceIsAClearError) {

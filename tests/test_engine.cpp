@@ -186,6 +186,18 @@ TEST(Engine, BackendsAndErrors) {
   EXPECT_TRUE(backends[0].available);
   const auto message = pisco_test::error_of;
   EXPECT_NE(message([&] { pisco::Engine(s.sky, s.beams, s.fp, {.backend = "opencl"}); }).find("unknown"), std::string::npos);
+  // Error kinds (pisco/error.hpp): a caller can tell a bad request from a backend this machine lacks.
+  EXPECT_EQ(pisco_test::kind_of([&] { pisco::Engine(s.sky, s.beams, s.fp, {.backend = "opencl"}); }),
+            pisco::ErrorKind::input);
+  for (const auto& b : backends)
+    if (!b.available)
+      EXPECT_EQ(pisco_test::kind_of([&] { pisco::Engine(s.sky, s.beams, s.fp, {.backend = b.name}); }),
+                pisco::ErrorKind::unavailable)
+          << b.name;
+  EXPECT_STREQ(pisco::error_kind_name(pisco::ErrorKind::unavailable), "unavailable");
+  // A file that cannot be created: io; a file that is not a map: input.
+  EXPECT_EQ(pisco_test::kind_of([&] { s.sky.write_fits("/proc/no-such-directory/sky.fits"); }), pisco::ErrorKind::io);
+  EXPECT_EQ(pisco_test::kind_of([&] { pisco::Sky::read_fits("/proc/self/status"); }), pisco::ErrorKind::input);
   pisco::FocalPlane bad;
   bad.add({"lost", 0, 0, 1, 7});
   EXPECT_NE(message([&] { pisco::Engine(s.sky, s.beams, bad); }).find("beam index 7"), std::string::npos);

@@ -68,10 +68,22 @@ struct BackendEntry;
 struct EngineInputs;
 }  // namespace detail
 
+// Thread safety: one Engine is used by one thread at a time. Its members that change it (convolve,
+// submit, wait, and moving it) must not run concurrently with any other member; guard a shared engine
+// with a mutex, or give each thread its own. Distinct engines may run concurrently in one process, on
+// the same device or not (each holds its own device state; the Vulkan instance they share is made once,
+// under a lock). The engine copies what it needs of the sky, beams and focal plane at construction:
+// the caller may change or destroy them afterwards. The cpu and simd backends run their own worker
+// threads inside each call; the GPU backends their own streams or queues.
+//
+// Errors are pisco::Error (pisco/error.hpp) with a kind: ErrorKind::unavailable for a backend or device
+// absent from this machine (a caller may fall back on another), ErrorKind::device for a device that
+// fails while working, ErrorKind::input for bad arguments.
 class Engine {
  public:
   // Prepares the sky, the beamsors and the detectors for the chosen backend. Throws pisco::Error on
-  // an unknown or unavailable backend, a detector referring to a missing beam, or a non-finite sky.
+  // an unknown (input) or unavailable (unavailable) backend, a detector referring to a missing beam,
+  // or a non-finite sky.
   Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
          const EngineOptions& options = {});
   ~Engine();

@@ -21,7 +21,25 @@ unit_quat_tolerance: float
 mueller_tolerance: float
 
 class Error(RuntimeError):
-    """An error of the C++ library (pisco::Error), carrying its message."""
+    """An error of the C++ library (pisco::Error), carrying its message; raised as one of its subclasses."""
+
+    kind: str | None
+    """What went wrong: "input", "unavailable", "device", "io" or "internal" (None on Error itself)."""
+
+class InputError(Error):
+    """A bad argument, file content or configuration."""
+
+class UnavailableError(Error):
+    """A backend, device, driver or library absent from this machine."""
+
+class DeviceError(Error):
+    """A device that failed while working: out of memory, lost, or a driver error."""
+
+class FileError(Error):
+    """A file that could not be opened, read, written or renamed."""
+
+class InternalError(Error):
+    """A broken invariant of the library itself: a bug to report."""
 
 class BackendInfo:
     """A backend compiled into the library and whether it runs here."""

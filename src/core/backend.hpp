@@ -16,7 +16,8 @@ namespace pisco::detail {
 
 // An error in a submission of `detector`: the engine names the detector in its message.
 struct SubmissionError : Error {
-  SubmissionError(std::size_t det, const std::string& what) : Error(what), detector(det) {}
+  SubmissionError(std::size_t det, const std::string& what, ErrorKind kind = ErrorKind::device)
+      : Error(what, kind), detector(det) {}
   std::size_t detector;
 };
 

@@ -29,14 +29,14 @@ std::string listing(const std::string& kind, const std::vector<DeviceCandidate>&
 std::size_t choose_device(const std::string& backend, const std::string& kind,
                           const std::vector<DeviceCandidate>& devices, const std::string& request) {
   if (devices.empty())
-    throw Error(backend + ": device '" + request + "' requested, but no " + kind + " devices are present");
+    throw Error(backend + ": device '" + request + "' requested, but no " + kind + " devices are present", ErrorKind::unavailable);
   const std::string list = listing(kind, devices);
   std::size_t pick = devices.size();
   if (request.empty() || request == "auto") {
     for (std::size_t i = 0; i < devices.size(); ++i)
       if (devices[i].unusable.empty() && (pick == devices.size() || devices[i].rank > devices[pick].rank))
         pick = i;
-    if (pick == devices.size()) throw Error(backend + ": no usable device; " + list);
+    if (pick == devices.size()) throw Error(backend + ": no usable device; " + list, ErrorKind::unavailable);
     return pick;
   }
   if (std::all_of(request.begin(), request.end(), [](unsigned char c) { return std::isdigit(c); })) {
@@ -52,7 +52,7 @@ std::size_t choose_device(const std::string& backend, const std::string& kind,
     if (pick == devices.size()) throw Error(backend + ": no device named '" + request + "'; " + list);
   }
   if (!devices[pick].unusable.empty())
-    throw Error(backend + ": device '" + request + "' (" + describe(devices[pick]) + ") " + devices[pick].unusable);
+    throw Error(backend + ": device '" + request + "' (" + describe(devices[pick]) + ") " + devices[pick].unusable, ErrorKind::unavailable);
   return pick;
 }
 

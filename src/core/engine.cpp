@@ -48,14 +48,15 @@ const BackendEntry& choose_backend(const std::string& name) {
         best_priority = priority;
       }
     }
-    if (!best) throw Error("backend 'auto': no backend is available on this machine");
+    if (!best) throw Error("backend 'auto': no backend is available on this machine", ErrorKind::unavailable);
     return *best;
   }
   std::string known;
   for (const auto& e : reg) {
     if (e.name == name) {
       const BackendInfo info = e.probe();
-      if (!info.available) throw Error("backend '" + name + "' is not available: " + info.detail);
+      if (!info.available)
+        throw Error("backend '" + name + "' is not available: " + info.detail, ErrorKind::unavailable);
       return e;
     }
     known += (known.empty() ? "" : ", ") + e.name;
@@ -273,9 +274,10 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
     }
     if (polar) polar_samples_ += pending_.back()->polar.index.size();
   } catch (const detail::SubmissionError& e) {
-    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what());
+    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
+                e.kind());
   } catch (const Error& e) {
-    throw Error("convolving detector '" + name + "': " + e.what());
+    throw Error("convolving detector '" + name + "': " + e.what(), e.kind());
   }
   samples_ += boresight.size();
   return ticket;
@@ -352,7 +354,8 @@ void Engine::wait(std::uint64_t ticket) {
     pixels_ += backend_->wait(ticket);
   } catch (const detail::SubmissionError& e) {
     pending_.clear();
-    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what());
+    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
+                e.kind());
   }
   finish_pending(ticket);
 }

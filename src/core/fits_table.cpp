@@ -19,8 +19,8 @@ namespace pisco::detail {
 
 namespace fs = std::filesystem;
 
-void fail(const fs::path& file, const std::string& what) {
-  throw Error(file.string() + ": " + what);
+void fail(const fs::path& file, const std::string& what, ErrorKind kind) {
+  throw Error(file.string() + ": " + what, kind);
 }
 
 std::string cfitsio_text(int status) {
@@ -36,7 +36,7 @@ void check(int status, const fs::path& file, const std::string& doing) {
   const int error = errno;
   std::string why = cfitsio_text(status);
   if ((status == WRITE_ERROR || status == FILE_NOT_CLOSED) && error != 0) why += ": " + std::string(std::strerror(error));
-  fail(file, doing + " failed (CFITSIO: " + why + ")");
+  fail(file, doing + " failed (CFITSIO: " + why + ")", ErrorKind::io);
 }
 
 void rethrow_naming(const fs::path& file) {
@@ -47,7 +47,7 @@ void rethrow_naming(const fs::path& file) {
   } catch (const PlanckError& e) {
     fail(file, std::string("HEALPix: ") + e.what());
   } catch (const fs::filesystem_error& e) {
-    fail(file, e.code().message());
+    fail(file, e.code().message(), ErrorKind::io);
   } catch (const std::bad_alloc&) {
     fail(file, "out of memory for the maps");
   } catch (const std::exception& e) {
@@ -95,11 +95,11 @@ FitsFile FitsFile::create(const fs::path& temporary, const fs::path& target) {
   if (status) {
     f.ptr_ = nullptr;
     fail(target, "cannot be created as " + temporary.filename().string() + " (CFITSIO: " +
-                     cfitsio_text(status) + ")");
+                     cfitsio_text(status) + ")", ErrorKind::io);
   }
   if (write_fault_requested(target)) {
     const int fd = descriptor_of(temporary);
-    if (fd < 0) fail(target, "PISCO_TEST_FAULT: the temporary file's descriptor was not found");
+    if (fd < 0) fail(target, "PISCO_TEST_FAULT: the temporary file's descriptor was not found", ErrorKind::io);
     make_disk_full(fd, target);
   }
   return f;

@@ -11,12 +11,15 @@
 #include <functional>
 #include <optional>
 #include <span>
+
 #include <string>
+
+#include "pisco/error.hpp"
 
 namespace pisco::detail {
 
 // Throws pisco::Error("<file>: <what>").
-[[noreturn]] void fail(const std::filesystem::path& file, const std::string& what);
+[[noreturn]] void fail(const std::filesystem::path& file, const std::string& what, ErrorKind kind = ErrorKind::input);
 
 // CFITSIO's own explanation of a status code; its message stack is cleared so that stale messages
 // never leak into a later, unrelated error.

@@ -311,7 +311,7 @@ HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
   try {
     beam.check();
   } catch (const Error& e) {
-    throw Error(std::string(e.what()));
+    throw Error(std::string(e.what()), e.kind());
   }
   return beam;
 }

@@ -66,7 +66,7 @@ void make_disk_full(int fd, const fs::path& file) {
   if (full < 0 || ::dup3(full, fd, O_CLOEXEC) < 0) {
     const int e = errno;
     if (full >= 0) ::close(full);
-    throw Error(file.string() + ": PISCO_TEST_FAULT: cannot open /dev/full (" + system_reason(e) + ")");
+    throw Error(file.string() + ": PISCO_TEST_FAULT: cannot open /dev/full (" + system_reason(e) + ")", ErrorKind::io);
   }
   ::close(full);
 }
@@ -99,11 +99,11 @@ void write_file_atomically(const std::filesystem::path& file, std::string_view c
   const int fd = ::open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
   if (fd < 0)
     throw Error(where + ": cannot create the temporary file '" + temporary.path().string() + "' (" +
-                detail::system_reason(errno) + ")");
+                detail::system_reason(errno) + ")", ErrorKind::io);
   auto fail = [&](const std::string& what, int error) {
     ::close(fd);
     ::unlink(tmp);
-    throw Error(where + ": " + what + " (" + detail::system_reason(error) + ")");
+    throw Error(where + ": " + what + " (" + detail::system_reason(error) + ")", ErrorKind::io);
   };
   try {
     if (detail::write_fault_requested(file)) detail::make_disk_full(fd, file);
@@ -122,12 +122,12 @@ void write_file_atomically(const std::filesystem::path& file, std::string_view c
   if (::close(fd) != 0) {
     const int e = errno;
     ::unlink(tmp);
-    throw Error(where + ": cannot close the temporary file (" + detail::system_reason(e) + ")");
+    throw Error(where + ": cannot close the temporary file (" + detail::system_reason(e) + ")", ErrorKind::io);
   }
   if (::rename(tmp, file.c_str()) != 0) {
     const int e = errno;
     ::unlink(tmp);
-    throw Error(where + ": cannot rename the temporary file to it (" + detail::system_reason(e) + ")");
+    throw Error(where + ": cannot rename the temporary file to it (" + detail::system_reason(e) + ")", ErrorKind::io);
   }
 }
 

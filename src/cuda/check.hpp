@@ -21,9 +21,11 @@ class DeviceOutOfMemory : public Error {
                         ": " + cudaGetErrorString(status) + " (" + cudaGetErrorName(status) + ")";
   if (status == cudaErrorMemoryAllocation) {
     cudaGetLastError();  // not sticky: clear it so that a retry starts clean
-    throw DeviceOutOfMemory(message);
+    throw DeviceOutOfMemory(message, ErrorKind::device);
   }
-  throw Error(message);
+  const bool absent = status == cudaErrorNoDevice || status == cudaErrorInsufficientDriver ||
+                      status == cudaErrorNoKernelImageForDevice;
+  throw Error(message, absent ? ErrorKind::unavailable : ErrorKind::device);
 }
 
 }  // namespace pisco::detail::cuda

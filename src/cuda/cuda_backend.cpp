@@ -110,7 +110,7 @@ class CudaBackend final : public Backend {
         s.job.busy = true;
       }
     } catch (const Error& e) {
-      fail(current, e.what());
+      fail(current, e.what(), e.kind());
     }
   }
 
@@ -123,7 +123,7 @@ class CudaBackend final : public Backend {
         return complete(done);
       });
     } catch (const Error& e) {
-      fail(current, e.what());
+      fail(current, e.what(), e.kind());
     }
     return ring_.take_pixels();
   }
@@ -135,13 +135,14 @@ class CudaBackend final : public Backend {
     return *s.host_pixels.data();
   }
 
-  [[noreturn]] void fail(const SlotJob& job, const std::string& what) {
+  [[noreturn]] void fail(const SlotJob& job, const std::string& what, ErrorKind kind) {
     for (Slot& s : slots_) cudaStreamSynchronize(s.stream.get());
     ring_.abandon();
     throw SubmissionError(job.detector, what + " (device " + device_.description() + ", detector " +
                                             std::to_string(job.detector) + ", samples " + std::to_string(job.first) +
                                             " to " + std::to_string(job.first + job.tod.size() - 1) +
-                                            " of a chunk of " + std::to_string(job.total) + ")");
+                                            " of a chunk of " + std::to_string(job.total) + ")",
+                          kind);
   }
 
   void enqueue(Slot& s, const KernelDetector& det, bool radial, bool plate, const PointingInput& pointing) {

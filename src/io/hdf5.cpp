@@ -72,7 +72,10 @@ std::string hdf5_detail() {
   return desc.empty() ? std::string() : " (HDF5: " + desc + ")";
 }
 
-void fail(const std::string& where, const std::string& what) { throw Error(where + ": " + what + hdf5_detail()); }
+// A failed HDF5 call: the file could not be read or written as asked (ErrorKind::io).
+void fail(const std::string& where, const std::string& what) {
+  throw Error(where + ": " + what + hdf5_detail(), ErrorKind::io);
+}
 
 Handle checked(hid_t id, Handle::Closer close, const std::string& where, const std::string& what) {
   if (id < 0) fail(where, what);
@@ -153,7 +156,7 @@ void check_room_for_metadata(hid_t id, const fs::path& file, const std::string& 
   const auto free = free_bytes(file);
   if (free && *free < current + (std::size_t(16) << 10))
     throw Error(where + ": no space left on the device for the file's last " + std::to_string(current) +
-                " bytes of metadata (" + std::to_string(*free) + " bytes free)");
+                " bytes of metadata (" + std::to_string(*free) + " bytes free)", ErrorKind::io);
 }
 
 void check_room_for_data(const fs::path& file, unsigned long long bytes, const std::string& where,
@@ -161,13 +164,13 @@ void check_room_for_data(const fs::path& file, unsigned long long bytes, const s
   const auto free = free_bytes(file);
   if (free && *free < bytes + (std::size_t(16) << 10))
     throw Error(where + ": no space left on the device for " + what + " (" + std::to_string(bytes) +
-                " bytes, " + std::to_string(*free) + " free)");
+                " bytes, " + std::to_string(*free) + " free)", ErrorKind::io);
 }
 
 void inject_write_fault(hid_t file, const fs::path& target) {
   if (!detail::write_fault_requested(target)) return;
   const int fd = file_descriptor(file);
-  if (fd < 0) throw Error(target.string() + ": PISCO_TEST_FAULT: HDF5 gives no file descriptor");
+  if (fd < 0) throw Error(target.string() + ": PISCO_TEST_FAULT: HDF5 gives no file descriptor", ErrorKind::io);
   detail::make_disk_full(fd, target);
 }
 

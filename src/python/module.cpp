@@ -763,9 +763,55 @@ void bind_helpers(nb::module_& m) {
 }  // namespace
 }  // namespace pisco::python
 
+namespace pisco::python {
+namespace {
+
+// pisco.Error (pisco::Error) and a subclass per pisco::ErrorKind, each with the class attribute
+// `kind`: a caller can catch pisco.UnavailableError to fall back on another backend, or OSError-like
+// failures as pisco.FileError, without reading messages (docs/python.md, "Errors").
+PyObject* error_types[5] = {};
+
+void bind_errors(nb::module_& m) {
+  PyObject* base = PyErr_NewExceptionWithDoc(
+      "pisco._pisco.Error", "An error of the C++ library (pisco::Error): its message names the file, key or sample.",
+      PyExc_RuntimeError, nullptr);
+  if (!base) throw nb::python_error();
+  m.attr("Error") = nb::borrow(base);
+  struct Kind {
+    ErrorKind kind;
+    const char* name;
+    const char* doc;
+  };
+  const Kind kinds[] = {
+      {ErrorKind::input, "InputError", "A bad argument, file content or configuration."},
+      {ErrorKind::unavailable, "UnavailableError", "A backend, device, driver or library absent from this machine."},
+      {ErrorKind::device, "DeviceError", "A device that failed while working: out of memory, lost, or a driver error."},
+      {ErrorKind::io, "FileError", "A file that could not be opened, read, written or renamed."},
+      {ErrorKind::internal, "InternalError", "A broken invariant of the library itself: a bug to report."},
+  };
+  nb::setattr(nb::borrow(base), "kind", nb::none());
+  for (const Kind& k : kinds) {
+    PyObject* type = PyErr_NewExceptionWithDoc((std::string("pisco._pisco.") + k.name).c_str(), k.doc, base, nullptr);
+    if (!type) throw nb::python_error();
+    nb::setattr(nb::borrow(type), "kind", nb::str(error_kind_name(k.kind)));
+    m.attr(k.name) = nb::borrow(type);
+    error_types[static_cast<int>(k.kind)] = type;
+  }
+  nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const pisco::Error& e) {
+      PyErr_SetString(error_types[static_cast<int>(e.kind())], e.what());
+    }
+  });
+}
+
+}  // namespace
+}  // namespace pisco::python
+
 NB_MODULE(_pisco, m) {
   m.doc() = "PISCO-VK's C++ library: pixel-space beam convolution (see the package pisco).";
-  nb::exception<pisco::Error>(m, "Error", PyExc_RuntimeError);
+  pisco::python::bind_errors(m);
   pisco::python::bind_helpers(m);
   pisco::python::bind_sky(m);
   pisco::python::bind_beamsor(m);

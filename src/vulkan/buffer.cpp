@@ -45,7 +45,7 @@ Buffer::Buffer(const Device& device, VkDeviceSize size, VkBufferUsageFlags usage
           type = find_type(mem, req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
         break;
     }
-    if (type < 0) throw Error("vulkan: no suitable memory type for a buffer of " + std::to_string(size) + " bytes");
+    if (type < 0) throw Error("vulkan: no suitable memory type for a buffer of " + std::to_string(size) + " bytes", ErrorKind::device);
     VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
     ai.allocationSize = req.size;
     ai.memoryTypeIndex = std::uint32_t(type);

@@ -47,9 +47,13 @@ void fail(VkResult r, const char* call) {
   if (const auto dot = name.find_last_of(".>"); dot != std::string::npos) name = name.substr(dot + 1);
   while (!name.empty() && name.back() == ' ') name.pop_back();
   const std::string what = "vulkan: " + name + " failed: " + result_name(r);
-  if (r == VK_ERROR_OUT_OF_DEVICE_MEMORY || r == VK_ERROR_OUT_OF_HOST_MEMORY) throw OutOfMemory(what);
-  if (r == VK_ERROR_DEVICE_LOST) throw Error(what + " (the device was lost: driver reset, hang or removal)");
-  throw Error(what);
+  if (r == VK_ERROR_OUT_OF_DEVICE_MEMORY || r == VK_ERROR_OUT_OF_HOST_MEMORY) throw OutOfMemory(what, ErrorKind::device);
+  if (r == VK_ERROR_DEVICE_LOST)
+    throw Error(what + " (the device was lost: driver reset, hang or removal)", ErrorKind::device);
+  if (r == VK_ERROR_INCOMPATIBLE_DRIVER || r == VK_ERROR_INITIALIZATION_FAILED || r == VK_ERROR_EXTENSION_NOT_PRESENT ||
+      r == VK_ERROR_LAYER_NOT_PRESENT)
+    throw Error(what, ErrorKind::unavailable);
+  throw Error(what, ErrorKind::device);
 }
 
 Faults injected_faults() {
@@ -85,7 +89,7 @@ void load_loader() {
   static const VkResult loaded = volkInitialize();
   if (loaded != VK_SUCCESS)
     throw Error("vulkan: the Vulkan loader (libvulkan.so.1) was not found; install it (Debian: libvulkan1, "
-                "and mesa-vulkan-drivers for the lavapipe CPU device)");
+                "and mesa-vulkan-drivers for the lavapipe CPU device)", ErrorKind::unavailable);
 }
 
 std::mutex instance_mutex;
@@ -108,7 +112,7 @@ Instance::Instance() {
   if (volkGetInstanceVersion() < VK_API_VERSION_1_2)
     throw Error("vulkan: the Vulkan loader supports only Vulkan " +
                 std::to_string(VK_API_VERSION_MAJOR(volkGetInstanceVersion())) + "." +
-                std::to_string(VK_API_VERSION_MINOR(volkGetInstanceVersion())) + "; Vulkan 1.2 is required");
+                std::to_string(VK_API_VERSION_MINOR(volkGetInstanceVersion())) + "; Vulkan 1.2 is required", ErrorKind::unavailable);
   const Validation mode = validation_requested();
   bool validate = false;
   std::vector<const char*> layers, extensions;
@@ -121,7 +125,7 @@ Instance::Instance() {
                                    [](const VkLayerProperties& p) { return std::strcmp(p.layerName, validation_layer) == 0; });
     if (!found && mode == Validation::required)
       throw Error("vulkan: PISCO_VK_VALIDATION is set but the layer VK_LAYER_KHRONOS_validation is not installed "
-                  "(Debian: vulkan-validationlayers; PISCO_VK_VALIDATION=auto runs without it)");
+                  "(Debian: vulkan-validationlayers; PISCO_VK_VALIDATION=auto runs without it)", ErrorKind::unavailable);
     if (found) {
       validate = true;
       layers.push_back(validation_layer);

@@ -77,7 +77,7 @@ class VulkanBackend final : public Backend {
                 const PointingInput& pointing);
   std::uint64_t collect(Slot& slot);
   // Abandons every slot in flight after an error, with the error's context.
-  [[noreturn]] void fail(const SlotJob& job, const std::string& what);
+  [[noreturn]] void fail(const SlotJob& job, const std::string& what, ErrorKind kind);
 
   std::shared_ptr<const EngineInputs> in_;
   std::unique_ptr<vk::Device> device_;
@@ -102,7 +102,7 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const S
     setup(info, sky, options);
   } catch (const Error& e) {
     release();  // the destructor does not run for a constructor that throws
-    throw Error(std::string(e.what()) + " (device " + info.describe() + ")");
+    throw Error(std::string(e.what()) + " (device " + info.describe() + ")", e.kind());
   } catch (...) {
     release();
     throw;
@@ -135,7 +135,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
   if (2.0 * double(npix) > max_texels)
     throw Error("vulkan: an NSIDE " + std::to_string(sky.nside) + " sky needs " + std::to_string(2 * npix) +
                 " texels in one texel buffer, but " + info.name + " binds at most " +
-                std::to_string(std::uint64_t(max_texels)) + " (maxTexelBufferElements); use the cpu backend");
+                std::to_string(std::uint64_t(max_texels)) + " (maxTexelBufferElements); use the cpu backend", ErrorKind::device);
   const PixelVectors vectors(sky.nside);
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
   std::vector<double> xyz;
@@ -168,7 +168,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const
   if (double(grids_.w32.size() / 4) > max_texels)
     throw Error("vulkan: the beam grids need " + std::to_string(grids_.w32.size() / 4) + " texels, but " + info.name +
                 " binds at most " + std::to_string(std::uint64_t(max_texels)) +
-                " (maxTexelBufferElements); use a coarser grid_step");
+                " (maxTexelBufferElements); use a coarser grid_step", ErrorKind::device);
   weights_ = upload(grids_.w32.data(), grids_.w32.size() * sizeof(float), "the beam grids");
   weights64_ = upload(grids_.w64.data(), grids_.w64.size() * sizeof(double), "the float64 beam grids");
   // Only the offsets and layouts stay on the host.
@@ -244,7 +244,7 @@ Buffer VulkanBackend::upload_records(std::size_t count, std::size_t record_bytes
     return target;
   } catch (const vk::OutOfMemory& e) {
     throw Error("vulkan: out of memory uploading " + std::string(what) + " (" + std::to_string(int(mib(double(bytes)))) +
-                " MiB) to " + device_->info().name + ": " + e.what());
+                " MiB) to " + device_->info().name + ": " + e.what(), ErrorKind::device);
   }
 }
 
@@ -387,13 +387,14 @@ std::uint64_t VulkanBackend::collect(Slot& slot) {
   return pixels;
 }
 
-void VulkanBackend::fail(const SlotJob& job, const std::string& what) {
+void VulkanBackend::fail(const SlotJob& job, const std::string& what, ErrorKind kind) {
   ring_.abandon();
   device_->fn().vkDeviceWaitIdle(device_->handle());
   throw SubmissionError(job.detector, what + " (device " + device_->info().name + ", detector " +
                                           std::to_string(job.detector) + ", samples " + std::to_string(job.first) +
                                           " to " + std::to_string(job.first + job.tod.size() - 1) + " of a chunk of " +
-                                          std::to_string(job.total) + ")");
+                                          std::to_string(job.total) + ")",
+                        kind);
 }
 
 void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod,
@@ -419,7 +420,7 @@ void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, 
       slot.job.busy = true;
     }
   } catch (const Error& e) {
-    fail(current, e.what());
+    fail(current, e.what(), e.kind());
   } catch (...) {
     ring_.abandon();
     device_->fn().vkDeviceWaitIdle(device_->handle());
@@ -435,7 +436,7 @@ std::uint64_t VulkanBackend::wait(std::uint64_t ticket) {
       return collect(s);
     });
   } catch (const Error& e) {
-    fail(current, e.what());
+    fail(current, e.what(), e.kind());
   } catch (...) {
     ring_.abandon();
     device_->fn().vkDeviceWaitIdle(device_->handle());

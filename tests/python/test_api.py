@@ -247,8 +247,20 @@ def test_argument_errors_name_the_argument():
 
 def test_engine_errors_and_close():
     sky, beam, fp = small_setup()
-    with pytest.raises(pisco.Error, match="backend 'nope' is unknown"):
+    with pytest.raises(pisco.InputError, match="backend 'nope' is unknown") as info:
         pisco.Engine(sky, beam, fp, backend="nope")
+    assert isinstance(info.value, pisco.Error) and info.value.kind == "input"
+    # Each kind of pisco::Error is its own subclass of pisco.Error (docs/python.md, "Errors").
+    for info_ in pisco.devices():
+        if not info_.available:
+            with pytest.raises(pisco.UnavailableError) as unavailable:
+                pisco.Engine(sky, beam, fp, backend=info_.name)
+            assert unavailable.value.kind == "unavailable"
+    with pytest.raises(pisco.FileError) as unwritable:
+        sky.write_fits("/proc/no-such-directory/sky.fits")
+    assert unwritable.value.kind == "io" and "sky.fits" in str(unwritable.value)
+    assert {e.kind for e in (pisco.InputError, pisco.UnavailableError, pisco.DeviceError, pisco.FileError,
+                             pisco.InternalError)} == {"input", "unavailable", "device", "io", "internal"}
     with pytest.raises(TypeError, match="beams: expected a pisco.Beamsor"):
         pisco.Engine(sky, [beam, "beam"], fp, backend="cpu")
     bad = pisco.FocalPlane()
