@@ -1,7 +1,7 @@
 // A whole simulation, as `pisco-vk run` does it (docs/library.md): sky -> beams -> focal plane -> scan ->
 // engine -> TOD file -> binned maps -> spectra, streaming the TOD chunk by chunk through the map-maker
 // and the TOD file, so that memory stays bounded whatever the length of the scan. Simulation::run()
-// chains the parts declared here (make_sky, make_beams, make_engine, write_maps, write_spectra), which
+// chains the parts declared here (make_sky, make_beams, make_engine, write_maps, write_spectra_files), which
 // a framework may also call one by one.
 //
 // The library knows nothing of MPI: a run of several processes (docs/scaling.md) goes through a
@@ -127,6 +127,13 @@ std::size_t write_maps(const std::filesystem::path& dir, const BinnedMaps& maps,
 // A spectra file: a header line, then l and D_l = l(l+1)C_l/2pi of TT EE BB TE EB TB for l = 2..lmax,
 // written whole or not at all.
 void write_spectra(const std::filesystem::path& file, const Spectra& spectra, int lmax, const std::string& header);
+
+// The spectra of a run's maps (spectra.txt: divided by window_fwhm's Gaussian window of the first
+// detector's beam with [output] deconvolve_beam, by the pixel window with deconvolve_pixel_window) and
+// of its input sky (input_spectra.txt), in [output] dir, up to [output] lmax (default 2 maps_nside).
+// Returns the two files.
+std::vector<std::filesystem::path> write_spectra_files(const SimulationConfig& config, const Sky& sky,
+                                                       const BinnedMaps& maps, int maps_nside);
 
 // What a run did.
 struct SimulationResult {

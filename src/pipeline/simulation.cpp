@@ -307,6 +307,33 @@ std::size_t write_maps(const fs::path& dir, const BinnedMaps& maps, int nside, c
   return static_cast<std::size_t>(std::count_if(maps.I.begin(), maps.I.end(), [](double v) { return v != unseen; }));
 }
 
+// The spectra of the solved maps (spectra.txt, the windows divided out as [output] says) and of the input
+// sky (input_spectra.txt), in [output] dir.
+std::vector<fs::path> write_spectra_files(const SimulationConfig& c, const Sky& sky, const BinnedMaps& maps,
+                                          int maps_nside) {
+  const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
+  const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
+  const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
+  std::vector<double> bt, bp, pt, pp;
+  std::string note = "binned maps";
+  const auto fw = window_fwhm(c.beams[c.detectors.front().beam]);
+  if (c.output.deconvolve_beam && fw) {
+    bt = pisco::gaussian_beam_window(*fw, lmax, false);
+    bp = pisco::gaussian_beam_window(*fw, lmax, true);
+    note += ", divided by the Gaussian beam window of FWHM " + std::to_string(*fw * 180 / std::numbers::pi) + " deg";
+  }
+  if (c.output.deconvolve_pixel_window) {
+    pt = pisco::pixel_window(maps_nside, lmax, false);
+    pp = pisco::pixel_window(maps_nside, lmax, true);
+    note += ", divided by the NSIDE " + std::to_string(maps_nside) + " pixel window";
+  }
+  const fs::path spectra_path = c.output.dir / "spectra.txt", input_path = c.output.dir / "input_spectra.txt";
+  write_spectra(spectra_path, pisco::deconvolve_windows(out, bt, bp, pt, pp), lmax, note);
+  write_spectra(input_path, pisco::anafast(sky.I(), sky.Q(), sky.U(), sky.nside(), lmax_sky), lmax_sky,
+                "input sky");
+  return {spectra_path, input_path};
+}
+
 Simulation::Simulation(SimulationConfig config, SimulationOptions options)
     : config_(std::move(config)), options_(std::move(options)) {}
 
@@ -697,32 +724,9 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
                            "half-wave plate or a boresight rotation cannot tell Q from U)" + outcome;
       }
 
-      if (c.output.spectra && nothing_solved.empty()) {
-        const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
-        const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
-        const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
-        std::vector<double> bt, bp, pt, pp;
-        std::string note = "binned maps";
-        const auto fw = window_fwhm(c.beams[c.detectors.front().beam]);
-        if (c.output.deconvolve_beam && fw) {
-          bt = pisco::gaussian_beam_window(*fw, lmax, false);
-          bp = pisco::gaussian_beam_window(*fw, lmax, true);
-          note += ", divided by the Gaussian beam window of FWHM " + std::to_string(*fw * 180 / std::numbers::pi) + " deg";
-        }
-        if (c.output.deconvolve_pixel_window) {
-          pt = pisco::pixel_window(maps_nside, lmax, false);
-          pp = pisco::pixel_window(maps_nside, lmax, true);
-          note += ", divided by the NSIDE " + std::to_string(maps_nside) + " pixel window";
-        }
-        const fs::path spectra_path = c.output.dir / "spectra.txt", input_path = c.output.dir / "input_spectra.txt";
-        write_spectra(spectra_path, pisco::deconvolve_windows(out, bt, bp, pt, pp), lmax, note);
-        write_spectra(input_path, pisco::anafast(sky.I(), sky.Q(), sky.U(), sky.nside(), lmax_sky), lmax_sky,
-                      "input sky");
-        written.push_back(spectra_path);
-        written.push_back(input_path);
-      }
+      if (c.output.spectra && nothing_solved.empty())
+        for (const auto& f : write_spectra_files(c, sky, maps, maps_nside)) written.push_back(f);
     }
-
   });
   nothing_solved = cl.broadcast(nothing_solved);
 
