@@ -184,6 +184,8 @@ TEST_F(SimulationTest, PartsOneByOne) {
   EXPECT_EQ(said[1].rfind("beam main: ", 0), 0u) << said[1];
   EXPECT_EQ(beams.detectors.size(), 3u);
   EXPECT_EQ(pisco::maps_nside(c, sky), 16);
+  // The cost model of a run shared out between processes: the disc's pixels.
+  EXPECT_DOUBLE_EQ(pisco::disc_pixels(beams.beams[1], 32, 0), 0.5 * (1 - std::cos(8 * pisco::deg)) * 12 * 32 * 32);
   ASSERT_TRUE(pisco::window_fwhm(c.beams[1]).has_value());
   EXPECT_EQ(*pisco::window_fwhm(c.beams[1]), 4.0 * pisco::deg);
   EXPECT_NEAR(*pisco::window_fwhm(c.beams[0]), std::sqrt(3.5 * 4.5) * pisco::deg, 1e-15);

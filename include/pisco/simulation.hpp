@@ -113,6 +113,11 @@ SimulationBeams make_beams(const SimulationConfig& config,
 Engine make_engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
                    const SimulationConfig& config, const RunContext& context = serial_run_context());
 
+// The cost model that shares a run out between processes (docs/scaling.md, "How a run is shared out"):
+// the sky pixels a sample of this beam sums, (1 - cos rho_max) / 2 * 12 NSIDE^2 (at least 1), plus a
+// split beam's outer part on the sidelobe sky (Engine::sidelobe_nside). A job costs its samples times it.
+double disc_pixels(const Beamsor& beam, int sky_nside, int sidelobe_nside);
+
 // The NSIDE of the maps: [output] maps_nside, else the scan's (the sky's for pointing files).
 int maps_nside(const SimulationConfig& config, const Sky& sky);
 

@@ -273,6 +273,14 @@ Engine make_engine(const Sky& sky, const std::vector<Beamsor>& beams, const Foca
   return std::move(*engine_holder);
 }
 
+double disc_pixels(const Beamsor& beam, int sky_nside, int sidelobe_nside) {
+  const double npix = 12.0 * double(sky_nside) * double(sky_nside);
+  double disc = std::max(1.0, 0.5 * (1 - std::cos(beam.rho_max())) * npix);
+  if (const Beamsor* outer = beam.sidelobes())  // a split beam's outer part, on the coarser sky
+    disc += 0.5 * (1 - std::cos(outer->rho_max())) * 12.0 * sidelobe_nside * sidelobe_nside;
+  return disc;
+}
+
 int maps_nside(const SimulationConfig& c, const Sky& sky) {
   return c.output.maps_nside > 0 ? c.output.maps_nside : c.scan.kind == ScanKind::file ? sky.nside() : c.scan.nside;
 }
@@ -500,12 +508,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     my_end = rounds = njobs;
   } else {
     std::vector<double> disc(ndet);
-    const double npix = 12.0 * double(sky.nside()) * double(sky.nside());
-    for (std::size_t d = 0; d < ndet; ++d)
-      disc[d] = std::max(1.0, 0.5 * (1 - std::cos(beams[fp[d].beam].rho_max())) * npix);
-    for (std::size_t d = 0; d < ndet; ++d)  // a split beam's outer part, on the coarser sky
-      if (const pisco::Beamsor* outer = beams[fp[d].beam].sidelobes())
-        disc[d] += 0.5 * (1 - std::cos(outer->rho_max())) * 12.0 * engine.sidelobe_nside() * engine.sidelobe_nside();
+    for (std::size_t d = 0; d < ndet; ++d) disc[d] = disc_pixels(beams[fp[d].beam], sky.nside(), engine.sidelobe_nside());
     double all = 0;
     for (std::size_t i = 0; i < njobs; ++i) {
       const Span j = job_at(i);
