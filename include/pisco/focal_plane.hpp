@@ -33,6 +33,15 @@ struct Detector {
   std::optional<HalfWavePlate> hwp;
 };
 
+// The gamma a detector's half-wave plate takes when its table gives none (no hwp_gamma_deg, no TOAST
+// gamma column): the detector's polarization angle in the focal plane, its offset's gamma plus zeta.
+// The one definition used by pisco-vk, the simulation files (simulation_config.hpp) and Python.
+inline double default_hwp_gamma(const Detector& d) noexcept {
+  double xi = 0, eta = 0, gamma = 0;
+  d.offset_xi_eta_gamma(xi, eta, gamma);
+  return gamma + d.zeta;
+}
+
 class FocalPlane {
  public:
   FocalPlane() = default;

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from ._pisco import Detector, FocalPlane, HalfWavePlate
+from ._pisco import Detector, FocalPlane, HalfWavePlate, default_hwp_gamma
 
 __all__ = ["focal_plane_from_columns", "focal_plane_from_toast", "quat_multiply"]
 
@@ -122,7 +122,7 @@ def focal_plane_from_columns(columns, beam=None, hwp=None):
         elif xi_eta_gamma is not None:
             d.set_offset(*(float(v) for v in xi_eta_gamma[i]))
         if hwp is not None:
-            gamma = hwp_gamma[i] if hwp_gamma is not None else d.offset_xi_eta_gamma()[2] + d.zeta
+            gamma = hwp_gamma[i] if hwp_gamma is not None else default_hwp_gamma(d)
             d.hwp = _plate_for(hwp, gamma)
         fp.add(d)
     return fp

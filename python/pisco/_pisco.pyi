@@ -327,6 +327,9 @@ class FocalPlane:
     ) -> FocalPlane:
         """From a TOAST 3 Focalplane, its table or its HDF5 file (pisco.focal_plane_from_toast)."""
 
+def default_hwp_gamma(detector: Detector) -> float:
+    """The gamma of a detector's half-wave plate when its table gives none: its offset's gamma plus zeta."""
+
 def read_toast_focal_plane(path: str | os.PathLike[str], beam: int = 0) -> tuple[FocalPlane, Float64Array, float]:
     """(FocalPlane, fwhm per detector in radians, sample rate in Hz) of a TOAST 3 focal-plane file."""
 
@@ -411,3 +414,40 @@ class Engine:
     def __len__(self) -> int: ...
     def __enter__(self) -> Engine: ...
     def __exit__(self, exc_type: object = None, exc_value: object = None, traceback: object = None) -> None: ...
+
+class Simulation:
+    """A whole simulation from a simulation file (docs/config.md), as `pisco-vk run` runs it (no plots)."""
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        output_dir: str | os.PathLike[str] | None = None,
+        backend: str | None = None,
+        device: str | None = None,
+        data_dir: str | os.PathLike[str] | None = None,
+    ) -> None: ...
+    @staticmethod
+    def from_file(
+        path: str | os.PathLike[str],
+        output_dir: str | os.PathLike[str] | None = None,
+        backend: str | None = None,
+        device: str | None = None,
+        data_dir: str | os.PathLike[str] | None = None,
+    ) -> Simulation:
+        """Reads a simulation file; raises pisco.Error naming the file and key."""
+    @property
+    def source(self) -> str: ...
+    @property
+    def output_dir(self) -> str: ...
+    @output_dir.setter
+    def output_dir(self, value: str | os.PathLike[str]) -> None: ...
+    @property
+    def backend(self) -> str: ...
+    @backend.setter
+    def backend(self, value: str) -> None: ...
+    @property
+    def detectors(self) -> list[str]: ...
+    def run(self) -> dict[str, Any]:
+        """Runs it (the GIL released): the TOD file, maps and spectra in the output directory. The dict:
+        files, tod, samples, detectors, samples_per_detector, mean_disc_pixels, convolution_seconds,
+        seconds, backend, device, flagged, solved_pixels, nothing_solved, log."""

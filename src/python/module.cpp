@@ -31,6 +31,7 @@ using namespace nb::literals;
 
 namespace pisco::python {
 void bind_engine(nb::module_& m);
+void bind_simulation(nb::module_& m);  // simulation.cpp
 UnseenPolicy unseen_policy_from(const std::string& name);  // engine.cpp
 
 namespace {
@@ -695,9 +696,7 @@ void bind_focal_plane(nb::module_& m) {
                 if (i < t.gamma.size()) {
                   d.hwp->gamma = t.gamma[i];
                 } else {  // no gamma column: the detector's polarization angle in the focal plane
-                  double xi = 0, eta = 0, gamma = 0;
-                  d.offset_xi_eta_gamma(xi, eta, gamma);
-                  d.hwp->gamma = gamma + d.zeta;
+                  d.hwp->gamma = default_hwp_gamma(d);
                 }
               }
             }
@@ -750,6 +749,9 @@ void bind_helpers(nb::module_& m) {
         return std::make_tuple(theta, phi, psi);
       },
       "q"_a, "The angles (theta, phi, psi) of a rotation (x, y, z, w).");
+  m.def("default_hwp_gamma", [](const Detector& d) { return default_hwp_gamma(d); }, "detector"_a,
+        "The gamma of a detector's half-wave plate when its table gives none: its polarization angle in the\n"
+        "focal plane, the offset's gamma plus zeta (as pisco-vk run takes it).");
   m.def("valid_nside", [](long long nside) { return valid_nside(nside); }, "nside"_a,
         "Whether nside is a power of two in [1, 8192].");
   m.def("ang2pix", &ang2pix, "nside"_a, "theta"_a, "phi"_a, "The RING pixel containing (theta, phi).");
@@ -818,4 +820,5 @@ NB_MODULE(_pisco, m) {
   pisco::python::bind_hwp(m);
   pisco::python::bind_focal_plane(m);
   pisco::python::bind_engine(m);
+  pisco::python::bind_simulation(m);
 }

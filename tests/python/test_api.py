@@ -722,6 +722,102 @@ def test_the_optics_of_one_detector():
     assert tod[0] == pytest.approx(2.0 + 0.9 / 1.1 * 0.5, rel=1e-7)
 
 
+# --- a whole simulation --------------------------------------------------------------------------
+
+
+def write_simulation(directory, output=""):
+    """A small simulation file: a synthesized sky, one PSB pair, NSIDE 16 pixel centres at three angles."""
+    path = directory / "sim.toml"
+    path.write_text(
+        "[sky]\nnside = 32\nlmax = 64\nseed = 3\n"
+        "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n"
+        "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n"
+        "[scan]\ntype = \"pixel_centres\"\nnside = 16\n"
+        "[engine]\nbackend = \"cpu\"\n"
+        f"[output]\ndir = \"{directory / 'out'}\"\nplots = false\nlmax = 32\n{output}"
+    )
+    return path
+
+
+def test_simulation_runs_a_file_as_pisco_vk_does(tmp_path):
+    """pisco.Simulation runs a simulation file through the library's pisco::Simulation: the files, the
+    account and the figures of `pisco-vk run`, and the same maps and spectra, byte for byte."""
+    path = write_simulation(tmp_path)
+    sim = pisco.Simulation.from_file(path, output_dir=tmp_path / "lib")
+    assert sim.source == str(path)
+    assert sim.output_dir == str(tmp_path / "lib")
+    assert sim.detectors == ["pa", "pb"]
+    assert "pisco.Simulation(" in repr(sim)
+    result = sim.run()
+    n = 12 * 16 * 16 * 3
+    assert result["samples"] == 2 * n
+    assert result["samples_per_detector"] == n
+    assert result["detectors"] == 2
+    assert result["backend"] == "cpu"
+    assert result["solved_pixels"] == 12 * 16 * 16
+    assert result["nothing_solved"] is None
+    assert result["mean_disc_pixels"] > 0 and result["convolution_seconds"] > 0 and result["seconds"] > 0
+    names = ["tod.h5", "maps.fits", "hits.fits", "spectra.txt", "input_spectra.txt"]
+    assert result["files"] == [str(tmp_path / "lib" / f) for f in names]
+    assert result["tod"] == str(tmp_path / "lib" / "tod.h5")
+    assert result["log"][0].startswith("sky: NSIDE 32, synthesized from ")
+    assert "scan: pixel_centres, 2 detectors x 9216 samples" in result["log"]
+    assert "maps: NSIDE 16, 3072 of 3072 pixels solved (rcond >= 0.001)" in result["log"]
+    assert sorted(os.listdir(tmp_path / "lib")) == sorted(names)
+
+    # Against the command line of the same build, where there is one.
+    exe = os.path.join(os.environ.get("PISCO_TEST_BUILD", ""), "tools", "pisco-vk")
+    if os.path.exists(exe):
+        subprocess.run([exe, "run", str(path), "-q", "--no-plots", "-o", str(tmp_path / "cli")], check=True)
+        for f in names[1:]:
+            assert (tmp_path / "cli" / f).read_bytes() == (tmp_path / "lib" / f).read_bytes(), f
+
+    # The constructor is from_file; the backend and output directory may be changed before a run.
+    again = pisco.Simulation(path, backend="cpu")
+    again.output_dir = tmp_path / "again"
+    again.backend = "cpu"
+    assert again.run()["samples"] == 2 * n
+
+
+def test_simulation_errors(tmp_path):
+    """The library's errors as pisco.Error with pisco-vk's messages; bad arguments as ValueError."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[sky]\nnside = 32\nseeed = 3\n")
+    with pytest.raises(pisco.Error, match=re.escape(f"{bad}: [sky] unknown key 'seeed' (did you mean 'seed'?)")):
+        pisco.Simulation.from_file(bad)
+    with pytest.raises(pisco.Error, match="cannot open the file"):
+        pisco.Simulation(tmp_path / "missing.toml")
+    with pytest.raises(ValueError, match="output_dir: expected a directory name"):
+        pisco.Simulation(write_simulation(tmp_path), output_dir="")
+    sim = pisco.Simulation(write_simulation(tmp_path, "maps_nside = 4\n"))
+    with pytest.raises(pisco.Error, match=r"\[output\] lmax: expected a multipole up to 4 maps_nside = 16, got 32"):
+        sim.run()
+    assert os.listdir(tmp_path / "out") == []  # nothing written
+
+
+def test_simulation_releases_the_gil(tmp_path):
+    """Other Python threads run while a simulation runs."""
+    sim = pisco.Simulation(write_simulation(tmp_path, "tod = false\nspectra = false\n"))
+    thread = threading.Thread(target=sim.run)
+    ticks = 0
+    thread.start()
+    while thread.is_alive():
+        ticks += 1
+        time.sleep(0.001)
+    thread.join()
+    assert ticks > 5
+    assert os.path.exists(tmp_path / "out" / "maps.fits")
+
+
+def test_default_hwp_gamma():
+    """The plate's gamma where a table gives none: the offset's gamma plus zeta, as pisco-vk takes it."""
+    d = pisco.Detector("d", zeta=0.3, offset=pisco.offset_quat(1 * deg, 2 * deg, 0.2))
+    assert pisco.default_hwp_gamma(d) == pytest.approx(0.5, abs=1e-12)
+    fp = pisco.FocalPlane.from_columns({"name": ["a"], "zeta": [0.3], "xi": [0.0], "gamma": [0.2]},
+                                       hwp=pisco.HalfWavePlate(pisco.ideal_hwp_mueller()))
+    assert fp[0].hwp.gamma == pisco.default_hwp_gamma(fp[0])
+
+
 # --- the package itself --------------------------------------------------------------------------
 
 
@@ -738,7 +834,7 @@ def test_stubs_cover_the_module():
     declared.discard("Float64Array")
     public = {n for n in dir(pisco._pisco) if not n.startswith("_")} | {"__version__"}
     assert declared == public
-    for cls in ("Sky", "Beamsor", "Detector", "FocalPlane", "Engine", "HalfWavePlate"):
+    for cls in ("Sky", "Beamsor", "Detector", "FocalPlane", "Engine", "HalfWavePlate", "Simulation"):
         node = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == cls)
         members = {n.name for n in node.body if isinstance(n, ast.FunctionDef)}
         members |= {n.target.id for n in node.body if isinstance(n, ast.AnnAssign)}

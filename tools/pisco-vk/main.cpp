@@ -12,7 +12,6 @@
 
 #include "bench.hpp"
 #include "cluster.hpp"
-#include "config.hpp"
 #include "run.hpp"
 #include "signals.hpp"
 #include "validation/validation.hpp"
@@ -191,8 +190,8 @@ static int main_body(int argc, char** argv) {
     const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
     if (run->count("--output") > 0 && output_dir.empty())
       throw pisco::Error("-o/--output: expected a directory name, got an empty string");
-    pisco_cli::SimulationConfig config;
-    cluster.step([&] { config = pisco_cli::load_config(config_file); });
+    pisco::SimulationConfig config;
+    cluster.step([&] { config = pisco::read_simulation_file(config_file); });
     if (!output_dir.empty()) config.output.dir = output_dir;
     if (!backend.empty()) config.engine.options.backend = backend;
     if (!device.empty()) config.engine.options.device = device;

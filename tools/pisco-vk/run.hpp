@@ -2,7 +2,8 @@
 
 #include <filesystem>
 
-#include "config.hpp"
+#include "pisco/pisco.hpp"
+#include "pisco/simulation.hpp"
 
 namespace pisco_cli {
 
@@ -16,7 +17,8 @@ struct RunOptions {
 // all UNSEEN, with a warning on stderr.
 inline constexpr int exit_nothing_solved = 4;
 
-// Runs a whole simulation: sky -> TOD -> maps -> spectra (-> plots). Returns the exit status.
-int run_simulation(const SimulationConfig& config, const RunOptions& options);
+// Runs a whole simulation: sky -> TOD -> maps -> spectra (pisco::Simulation), then the plots. Returns the
+// exit status.
+int run_simulation(const pisco::SimulationConfig& config, const RunOptions& options);
 
 }  // namespace pisco_cli

@@ -1,17 +1,24 @@
-// The simulation file of `pisco-vk run` (docs/config.md): one TOML file naming the sky, beams, focal plane,
-// scan, engine and outputs. docs/config.md documents every key.
+// A simulation file (docs/config.md): one TOML file naming the sky, beams, focal plane, scan, engine and
+// outputs of a run, read into the structs below. pisco::Simulation (simulation.hpp) runs it, as
+// `pisco-vk run` does; docs/config.md documents every key, docs/library.md the C++ and Python calls.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
-#include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
-#include "pisco/pisco.hpp"
+#include "pisco/beamsor.hpp"
+#include "pisco/engine.hpp"
+#include "pisco/focal_plane.hpp"
+#include "pisco/hwp.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/sky.hpp"
+#include "pisco/tod_file.hpp"
 
-namespace pisco_cli {
+namespace pisco {
 
 struct SkyConfig {
   std::filesystem::path file;    // a HEALPix FITS map, or empty to synthesize
@@ -19,27 +26,37 @@ struct SkyConfig {
   int nside = 128;
   int lmax = 0;                  // 0: 2 nside
   double r = 0.0;
-  std::filesystem::path bb_template;  // tensor BB D_l table for r = 1 (columns l, BB)
+  std::filesystem::path bb_template;  // tensor BB D_l table for r = 1 (columns l, BB); empty: the bundled one
   std::uint64_t seed = 1;
   bool unpolarized = false;      // Q = U = 0 after synthesis or loading
   std::vector<double> point_source;  // theta, phi (rad), I, Q, U, V: one non-zero pixel (paper 6.1)
   std::string units;
-  pisco::UnseenPolicy unseen = pisco::UnseenPolicy::error;  // a map file's UNSEEN pixels
+  UnseenPolicy unseen = UnseenPolicy::error;  // a map file's UNSEEN pixels
 };
+
+// [beams.NAME] type.
+enum class BeamKind { gaussian, elliptical, file, grasp, blm };
+// Its name in simulation files ("gaussian", ...).
+const char* beam_kind_name(BeamKind kind) noexcept;
 
 struct BeamConfig {
   std::string name;
-  std::string type;              // gaussian, elliptical, file, grasp, blm
+  BeamKind kind = BeamKind::gaussian;
   double fwhm = 0, fwhm_x = 0, fwhm_y = 0, angle = 0;  // radians
-  pisco::BeamOptions options;
+  BeamOptions options;
   std::filesystem::path file;
   int set = 0;                   // grasp: the beam of the file (1-based; 0 = its only one)
   // grasp and blm: the beam turns with each detector (its co-polar axis along the detector's zeta)
-  bool turns_with_detector() const { return type == "grasp" || type == "blm"; }
+  bool turns_with_detector() const { return kind == BeamKind::grasp || kind == BeamKind::blm; }
 };
 
+// [scan] type.
+enum class ScanKind { pixel_centres, random_offsets, raster, ces, satellite, file };
+// Its name in simulation files ("pixel_centres", ...).
+const char* scan_kind_name(ScanKind kind) noexcept;
+
 struct ScanConfig {
-  std::string type;              // pixel_centres, random_offsets, raster, ces, satellite, file
+  ScanKind kind = ScanKind::pixel_centres;
   int nside = 64;
   std::vector<double> psi;       // radians
   double f = 0.1;
@@ -47,15 +64,15 @@ struct ScanConfig {
   std::uint64_t seed = 1;
   double theta = 0, phi = 0, radius = 0;  // raster centre and radius, radians
   std::filesystem::path file;
-  pisco::CesScan ces;            // type = "ces"
-  pisco::SatelliteScan satellite;  // type = "satellite"
+  CesScan ces;                   // kind ces
+  SatelliteScan satellite;       // kind satellite
 };
 
 // [hwp]: one half-wave plate model for the focal plane, with per-detector overrides.
 struct HwpConfig {
   bool enabled = false;                  // an [hwp] table is present
-  pisco::HalfWavePlate plate;            // M0 and placement (gamma: per detector)
-  pisco::HwpAngleStream stream;          // continuous or stepped; sample_rate from the scan or the table
+  HalfWavePlate plate;                   // M0 and placement (gamma: per detector)
+  HwpAngleStream stream;                 // continuous or stepped; sample_rate from the scan or the table
   bool angles_from_file = false;         // the pointing file's per-sample `hwp_angle`
   bool ideal_mapmaker = false;           // bin the maps with an ideal plate's model (mapmaker = "ideal")
   std::string rate_key;                  // the key that gave the rotation: rpm or frequency_hz
@@ -66,18 +83,18 @@ struct DetectorHwp {
   std::optional<bool> enabled;
   std::optional<double> gamma;           // radians
   bool gamma_key = false;                // set by the row's hwp_gamma_deg (not a TOAST table's gamma)
-  std::optional<pisco::Mueller> mueller;
+  std::optional<Mueller> mueller;
 };
 
 struct EngineConfig {
-  pisco::EngineOptions options;
+  EngineOptions options;
   std::size_t chunk_samples = 1 << 16;
 };
 
 struct OutputConfig {
   std::filesystem::path dir = "pisco-out";
   bool tod = true;
-  pisco::TodPrecision tod_precision = pisco::TodPrecision::float64;
+  TodPrecision tod_precision = TodPrecision::float64;
   bool tod_pointing = false;
   bool tod_weights = false;  // each sample's (I, Q, U) weights in the TOD file
   bool maps = true;
@@ -87,15 +104,15 @@ struct OutputConfig {
   int lmax = 0;                  // 0: 2 maps_nside
   bool deconvolve_beam = true;
   bool deconvolve_pixel_window = false;
-  bool plots = true;
+  bool plots = true;             // for pisco-vk run's plotting tool; the library makes no plots
 };
 
 struct SimulationConfig {
-  std::filesystem::path source;  // the config file ("" for built-in defaults)
+  std::filesystem::path source;  // the simulation file ("" for built-in defaults)
   std::string text;              // its contents, recorded as provenance
   SkyConfig sky;
   std::vector<BeamConfig> beams;
-  std::vector<pisco::Detector> detectors;
+  std::vector<Detector> detectors;
   std::vector<DetectorHwp> detector_hwp;  // parallel to detectors (entries may be empty)
   HwpConfig hwp;
   ScanConfig scan;
@@ -103,19 +120,22 @@ struct SimulationConfig {
   OutputConfig output;
 };
 
-// Reads and checks a simulation file. Relative paths inside it are relative to its directory.
-// Throws pisco::Error naming the file and the key on anything unexpected, unknown keys included.
-SimulationConfig load_config(const std::filesystem::path& file);
+// Reads and checks a simulation file (docs/config.md). Relative paths inside it are relative to its
+// directory ([output] dir excepted: relative to the working directory). Throws pisco::Error naming
+// the file and the key on anything unexpected, unknown keys included.
+SimulationConfig read_simulation_file(const std::filesystem::path& file);
 
-// Reads a focal plane table: CSV with a header (name, zeta_deg, epsilon, gain, beam, xi_deg, eta_deg,
-// gamma_deg, hwp, hwp_gamma_deg), a TOAST HDF5 table (one beam, its gamma column as the plates' gamma) or TOML
-// ([[detectors]] / [[pairs]] as in the simulation file). Beam names are resolved against `beams`.
-std::vector<pisco::Detector> load_focal_plane(const std::filesystem::path& file,
-                                              const std::vector<BeamConfig>& beams,
-                                              std::vector<DetectorHwp>* hwp = nullptr);
+// Reads a focal plane table (docs/config.md, "[focal_plane]"): CSV with a header (name, zeta_deg,
+// epsilon, gain, beam, xi_deg, eta_deg, gamma_deg, hwp, hwp_gamma_deg), a TOAST HDF5 table (one beam,
+// its gamma column as the plates' gamma) or TOML ([[detectors]] / [[pairs]] as in the simulation
+// file). Each detector's beam is its index in `beam_names` (the [beams] tables); `hwp`, when given,
+// receives each detector's plate keys. Throws pisco::Error naming the file, line and column.
+std::vector<Detector> read_focal_plane_file(const std::filesystem::path& file,
+                                            const std::vector<std::string>& beam_names,
+                                            std::vector<DetectorHwp>* hwp = nullptr);
 
 // What float64 carries over a run of `samples` samples with the [hwp] plate's angle stream
 // (docs/formats.md, "Times, rates and angles"): throws pisco::Error naming the file and [hwp] key.
 void check_hwp_times(const SimulationConfig& c, std::size_t samples);
 
-}  // namespace pisco_cli
+}  // namespace pisco

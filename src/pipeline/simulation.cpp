@@ -1,0 +1,751 @@
+// pisco::Simulation (simulation.hpp): sky -> TOD -> binned maps -> spectra, streaming the TOD chunk by
+// chunk through the map-maker and the TOD file, so memory stays bounded whatever the length of the scan.
+#include "pisco/simulation.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <numbers>
+#include <span>
+#include <sstream>
+#include <thread>
+#include <unistd.h>
+
+#include "pisco/error.hpp"
+#include "pisco/healpix_map.hpp"
+#include "pisco/output_file.hpp"
+#include "pisco/pointing_file.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/tod_file.hpp"
+#include "pisco/version.hpp"
+
+namespace pisco {
+
+namespace fs = std::filesystem;
+
+void RunContext::agree(const std::optional<std::string>& error) {
+  if (error) throw Error(*error);
+}
+
+RunContext& serial_run_context() {
+  static RunContext context;
+  return context;
+}
+
+fs::path default_data_dir() {
+  if (const char* env = std::getenv("PISCO_DATA_DIR")) return env;
+  const fs::path installed = PISCO_INSTALL_DATA_DIR;
+  std::error_code ec;
+  if (fs::exists(installed / "assets", ec)) return installed;
+  return PISCO_SOURCE_DIR;
+}
+
+namespace {
+
+// printf into a string.
+template <typename... Args>
+std::string format(const char* fmt, Args... args) {
+  const int n = std::snprintf(nullptr, 0, fmt, args...);
+  if (n <= 0) return {};
+  std::string s(static_cast<std::size_t>(n) + 1, '\0');
+  std::snprintf(s.data(), s.size(), fmt, args...);
+  s.resize(static_cast<std::size_t>(n));
+  return s;
+}
+
+std::vector<double> read_bb_template(const fs::path& file, int lmax) {
+  std::ifstream in(file);
+  if (!in) throw pisco::Error(file.string() + ": cannot open the tensor BB template");
+  std::vector<double> cl(static_cast<std::size_t>(lmax) + 1, 0.0);
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    double l, dl;
+    if (!(ss >> l >> dl) || !std::isfinite(dl) || !(l >= 0))
+      throw pisco::Error(file.string() + ":" + std::to_string(lineno) + ": expected 'l D_l^BB'");
+    if (l > lmax) continue;  // also keeps the conversion below within int
+    const int il = static_cast<int>(l);
+    if (il >= 2 && il <= lmax) cl[il] = 2 * std::numbers::pi * dl / (l * (l + 1));
+  }
+  return cl;
+}
+
+// One chunk of boresight pointing, in the form its scan produces: angles for the generated ground and
+// test scans, quaternions for the satellite scan and pointing files.
+struct BoresightChunk {
+  pisco::Pointing angles;
+  std::vector<pisco::Quat> quats;
+  std::vector<double> hwp;  // the half-wave plate's angle per sample, with [hwp]
+  bool quaternions = false;
+  std::size_t first = 0;
+  std::size_t size() const { return quaternions ? quats.size() : angles.size(); }
+};
+
+// The boresight pointing of the scan, produced chunk by chunk (a week of constant-elevation
+// scanning, a year of satellite scanning or a season's pointing file is never held in memory whole).
+class Boresight {
+ public:
+  Boresight(const ScanConfig& s, const HwpConfig& hwp) : scan_(s), hwp_(hwp) {
+    if (s.kind == ScanKind::pixel_centres) all_ = pisco::pixel_centre_scan(s.nside, s.psi);
+    else if (s.kind == ScanKind::random_offsets) all_ = pisco::random_offset_scan(s.nside, s.psi, s.f, s.seed, s.symmetric);
+    else if (s.kind == ScanKind::raster) all_ = pisco::raster_scan(s.theta, s.phi, s.radius, s.nside, s.psi);
+    else if (s.kind == ScanKind::file) file_.emplace(s.file);
+    if (hwp_.angles_from_file && !(file_ && file_->has_hwp_angle()))
+      throw pisco::Error(s.file.string() + ": [hwp] gives no rotation or steps, and the pointing file has no "
+                                           "'hwp_angle' dataset (expected one of them)");
+  }
+  bool quaternions() const { return scan_.kind == ScanKind::satellite || file_.has_value(); }
+  std::size_t size() const {
+    if (scan_.kind == ScanKind::ces) return scan_.ces.samples;
+    if (scan_.kind == ScanKind::satellite) return scan_.satellite.samples;
+    if (file_) return file_->size();
+    return all_.size();
+  }
+  void fill(std::size_t first, std::size_t count, BoresightChunk& out) const {
+    out.first = first;
+    out.quaternions = quaternions();
+    if (scan_.kind == ScanKind::ces) scan_.ces.generate(first, count, out.angles);
+    else if (scan_.kind == ScanKind::satellite) scan_.satellite.generate(first, count, out.quats);
+    else if (file_) file_->read(first, count, out.quats);
+    else {
+      const pisco::PointingView v = all_.view().subspan(first, count);
+      out.angles.theta.assign(v.theta.begin(), v.theta.end());
+      out.angles.phi.assign(v.phi.begin(), v.phi.end());
+      out.angles.psi.assign(v.psi.begin(), v.psi.end());
+    }
+    out.hwp.clear();
+    if (hwp_.angles_from_file) file_->read_hwp_angle(first, count, out.hwp);
+    else if (hwp_.enabled) hwp_.stream.generate(first, count, out.hwp);
+  }
+
+ private:
+  ScanConfig scan_;
+  HwpConfig hwp_;
+  pisco::Pointing all_;
+  std::optional<pisco::BoresightFile> file_;
+};
+
+
+std::string utc_now() {
+  const std::time_t t = std::time(nullptr);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
+  return buf;
+}
+
+}  // namespace
+
+Sky make_sky(const SkyConfig& s, const fs::path& data_dir) {
+  const fs::path assets = data_dir / "assets";
+  if (!s.file.empty()) {
+    // UNSEEN pixels: an error naming the file's column, or kept for the engine ([sky] unseen).
+    pisco::Sky sky = pisco::Sky::read_fits(
+        s.file, s.unseen == pisco::UnseenPolicy::error ? pisco::UnseenPolicy::error : pisco::UnseenPolicy::flag);
+    if (s.unpolarized) {
+      std::fill(sky.Q().begin(), sky.Q().end(), 0.0);
+      std::fill(sky.U().begin(), sky.U().end(), 0.0);
+    }
+    return sky;
+  }
+  if (!s.point_source.empty()) {
+    pisco::Sky sky(s.nside, s.units);
+    const std::size_t p = pisco::ang2pix(s.nside, s.point_source[0], s.point_source[1]);
+    for (int k = 0; k < 4; ++k) sky.stokes(static_cast<pisco::StokesIndex>(k))[p] = s.point_source[2 + k];
+    return sky;
+  }
+  const int lmax = s.lmax > 0 ? s.lmax : 2 * s.nside;
+  pisco::Spectra cls = pisco::read_cl_table(s.cl_file, lmax, true);
+  if (s.r > 0) {
+    const fs::path tmpl = s.bb_template.empty() ? assets / "spectra" / "tensor_bb_r1.txt" : s.bb_template;
+    const std::vector<double> bb = read_bb_template(tmpl, lmax);
+    for (int l = 0; l <= lmax; ++l) cls.BB[l] = s.r * bb[l];
+  }
+  if (s.unpolarized) {
+    std::fill(cls.EE.begin(), cls.EE.end(), 0.0);
+    std::fill(cls.BB.begin(), cls.BB.end(), 0.0);
+    std::fill(cls.TE.begin(), cls.TE.end(), 0.0);
+  }
+  return pisco::synthesize_sky(cls, s.nside, s.seed);
+}
+
+// A beam of the simulation file; `angle` turns GRASP and b_lm beams (a detector's zeta).
+Beamsor make_beam(const BeamConfig& b, const fs::path& config, double angle) {
+  try {
+    if (b.kind == BeamKind::gaussian) return pisco::Beamsor::gaussian(b.fwhm, b.options);
+    if (b.kind == BeamKind::elliptical) return pisco::Beamsor::elliptical_gaussian(b.fwhm_x, b.fwhm_y, b.angle, b.options);
+    const pisco::FileBeamOptions fo{b.options.rho_max, b.options.grid_step, angle, b.options.split};
+    if (b.kind == BeamKind::blm) return pisco::Beamsor::from_harmonic(pisco::HarmonicBeam::read_fits(b.file), fo);
+    if (b.kind == BeamKind::grasp) {
+      const auto all = pisco::GraspBeam::read(b.file);
+      if (b.set == 0 && all.size() > 1)
+        throw pisco::Error(b.file.string() + " holds " + std::to_string(all.size()) +
+                           " beams (field sets or frequencies): choose one with set = 1.." + std::to_string(all.size()));
+      if (b.set > static_cast<int>(all.size()))
+        throw pisco::Error("set = " + std::to_string(b.set) + ", but " + b.file.string() + " holds " +
+                           std::to_string(all.size()) + " beam" + (all.size() > 1 ? "s" : ""));
+      return pisco::Beamsor::from_grasp(all[static_cast<std::size_t>(std::max(b.set, 1) - 1)], fo);
+    }
+    return pisco::Beamsor::read_healpix_fits(b.file, b.options.rho_max, b.options.grid_step);
+  } catch (const pisco::Error& e) {
+    throw pisco::Error(config.string() + ": [beams." + b.name + "] " + e.what());
+  }
+}
+
+
+SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(const std::string&)>& log) {
+  auto say = [&](const char* fmt, auto... args) {
+    if (log) log(format(fmt, args...));
+  };
+  SimulationBeams out;
+  std::vector<Beamsor>& beams = out.beams;
+  std::vector<std::string>& beam_names = out.names;
+  std::vector<Detector>& detectors = out.detectors;
+  detectors = c.detectors;
+  for (std::size_t k = 0; k < c.beams.size(); ++k) {
+    const auto& b = c.beams[k];
+    if (!b.turns_with_detector()) {
+      beams.push_back(make_beam(b, c.source));
+      say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
+      beam_names.push_back(b.name);
+      for (std::size_t i = 0; i < detectors.size(); ++i)
+        if (c.detectors[i].beam == k) detectors[i].beam = beams.size() - 1;
+      continue;
+    }
+    std::vector<std::pair<double, std::size_t>> made;  // zeta -> beam index
+    for (std::size_t i = 0; i < detectors.size(); ++i) {
+      if (c.detectors[i].beam != k) continue;
+      const double zeta = c.detectors[i].zeta;
+      auto it = std::find_if(made.begin(), made.end(), [&](const auto& m) { return m.first == zeta; });
+      if (it == made.end()) {
+        beams.push_back(make_beam(b, c.source, zeta));
+        beam_names.push_back(b.name);
+        say("beam %s for zeta %g deg: %s\n", b.name.c_str(), zeta * 180 / std::numbers::pi,
+            beams.back().description().c_str());
+        made.emplace_back(zeta, beams.size() - 1);
+        it = made.end() - 1;
+      }
+      detectors[i].beam = it->second;
+    }
+    if (made.empty()) {  // checked, though no detector uses it
+      beams.push_back(make_beam(b, c.source));
+      beam_names.push_back(b.name);
+    }
+  }
+  return out;
+}
+
+Engine make_engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& fp, const SimulationConfig& c,
+                   const RunContext& cl) {
+  EngineOptions engine_options = c.engine.options;
+  engine_options.unseen = c.sky.unseen;
+  auto share_out = [&](const std::string& backend, pisco::EngineOptions& o) {
+    if (cl.node_size() <= 1) return;
+    const bool threaded = backend == "cpu" || backend == "simd";  // the backends with a thread pool
+    if (threaded && o.threads == 0) {
+      o.threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
+    } else if (!threaded && (o.device == "auto" || o.device.empty())) {
+      for (const auto& b : pisco::Engine::backends())
+        if (b.name == backend && !b.devices.empty())
+          o.device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
+    }
+  };
+  pisco::EngineOptions o = engine_options;
+  if (o.backend != "auto") share_out(o.backend, o);
+  std::optional<Engine> engine_holder;
+  engine_holder.emplace(sky, beams, fp, o);
+  if (engine_options.backend == "auto") {
+    o.backend = engine_holder->backend_name();
+    share_out(o.backend, o);
+    if (o.threads != engine_options.threads || o.device != engine_options.device) {
+      engine_holder.reset();
+      engine_holder.emplace(sky, beams, fp, o);
+    }
+  }
+  return std::move(*engine_holder);
+}
+
+double disc_pixels(const Beamsor& beam, int sky_nside, int sidelobe_nside) {
+  const double npix = 12.0 * double(sky_nside) * double(sky_nside);
+  double disc = std::max(1.0, 0.5 * (1 - std::cos(beam.rho_max())) * npix);
+  if (const Beamsor* outer = beam.sidelobes())  // a split beam's outer part, on the coarser sky
+    disc += 0.5 * (1 - std::cos(outer->rho_max())) * 12.0 * sidelobe_nside * sidelobe_nside;
+  return disc;
+}
+
+int maps_nside(const SimulationConfig& c, const Sky& sky) {
+  return c.output.maps_nside > 0 ? c.output.maps_nside : c.scan.kind == ScanKind::file ? sky.nside() : c.scan.nside;
+}
+
+// Beam window for the spectra: exact for a Gaussian; the Gaussian of the geometric-mean width for
+// an elliptical beam (the leading term of its mean radial profile); none for beams from files.
+std::optional<double> window_fwhm(const BeamConfig& b) {
+  if (b.kind == BeamKind::gaussian) return b.fwhm;
+  if (b.kind == BeamKind::elliptical) return std::sqrt(b.fwhm_x * b.fwhm_y);
+  return std::nullopt;
+}
+
+// Written whole or not at all (pisco::write_file_atomically): a full disk is an error naming the file.
+void write_spectra(const fs::path& file, const pisco::Spectra& s, int lmax, const std::string& header) {
+  pisco::check_finite(s, file.string(), 2, lmax);
+  std::string text = "# " + header + "\n# l  D_l = l(l+1)C_l/2pi:  TT EE BB TE EB TB\n";
+  char buf[256];
+  for (int l = 2; l <= lmax; ++l) {
+    const double f = l * (l + 1.0) / (2 * std::numbers::pi);
+    std::snprintf(buf, sizeof buf, "%d %.10e %.10e %.10e %.10e %.10e %.10e\n", l, f * s.TT[l], f * s.EE[l],
+                  f * s.BB[l], f * s.TE[l], f * s.EB[l], f * s.TB[l]);
+    text += buf;
+  }
+  pisco::write_file_atomically(file, text);
+}
+
+std::size_t write_maps(const fs::path& dir, const BinnedMaps& maps, int nside, const std::string& units) {
+  const fs::path maps_path = dir / "maps.fits", hits_path = dir / "hits.fits";
+  write_healpix_map(maps_path, nside, {{"I_STOKES", maps.I}, {"Q_STOKES", maps.Q}, {"U_STOKES", maps.U}}, units);
+  std::vector<double> hits(maps.hits.begin(), maps.hits.end());
+  write_healpix_map(hits_path, nside, {{"HITS", hits}}, "samples");
+  return static_cast<std::size_t>(std::count_if(maps.I.begin(), maps.I.end(), [](double v) { return v != unseen; }));
+}
+
+// The spectra of the solved maps (spectra.txt, the windows divided out as [output] says) and of the input
+// sky (input_spectra.txt), in [output] dir.
+std::vector<fs::path> write_spectra_files(const SimulationConfig& c, const Sky& sky, const BinnedMaps& maps,
+                                          int maps_nside) {
+  const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
+  const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
+  const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
+  std::vector<double> bt, bp, pt, pp;
+  std::string note = "binned maps";
+  const auto fw = window_fwhm(c.beams[c.detectors.front().beam]);
+  if (c.output.deconvolve_beam && fw) {
+    bt = pisco::gaussian_beam_window(*fw, lmax, false);
+    bp = pisco::gaussian_beam_window(*fw, lmax, true);
+    note += ", divided by the Gaussian beam window of FWHM " + std::to_string(*fw * 180 / std::numbers::pi) + " deg";
+  }
+  if (c.output.deconvolve_pixel_window) {
+    pt = pisco::pixel_window(maps_nside, lmax, false);
+    pp = pisco::pixel_window(maps_nside, lmax, true);
+    note += ", divided by the NSIDE " + std::to_string(maps_nside) + " pixel window";
+  }
+  const fs::path spectra_path = c.output.dir / "spectra.txt", input_path = c.output.dir / "input_spectra.txt";
+  write_spectra(spectra_path, pisco::deconvolve_windows(out, bt, bp, pt, pp), lmax, note);
+  write_spectra(input_path, pisco::anafast(sky.I(), sky.Q(), sky.U(), sky.nside(), lmax_sky), lmax_sky,
+                "input sky");
+  return {spectra_path, input_path};
+}
+
+Simulation::Simulation(SimulationConfig config, SimulationOptions options)
+    : config_(std::move(config)), options_(std::move(options)) {}
+
+Simulation Simulation::from_file(const fs::path& file, SimulationOptions options) {
+  return Simulation(read_simulation_file(file), std::move(options));
+}
+
+SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
+  const auto t0 = std::chrono::steady_clock::now();
+  const SimulationConfig& c = config_;
+  RunObserver silent;
+  RunObserver& obs = observer ? *observer : silent;
+  // The run's account: the leading process's alone.
+  auto say = [&](const char* fmt, auto... args) {
+    if (cl.leader()) obs.log(format(fmt, args...));
+  };
+  const fs::path data_dir = options_.data_dir.empty() ? default_data_dir() : options_.data_dir;
+  SimulationResult result;
+
+  // The output directory, made when missing (pisco-vk makes and locks it before: then nothing to do).
+  cl.step([&] {
+    std::error_code ec;
+    if (!fs::is_directory(c.output.dir, ec)) {
+      fs::create_directories(c.output.dir, ec);
+      if (ec && !fs::is_directory(c.output.dir))
+        throw Error(c.output.dir.string() + ": cannot make the output directory: " + ec.message());
+    }
+  });
+  std::optional<Sky> sky_holder;
+  cl.step([&] { sky_holder.emplace(make_sky(c.sky, data_dir)); });
+  const Sky& sky = *sky_holder;
+  say("sky: NSIDE %d, %s%s\n", sky.nside(), c.sky.file.empty() ? "synthesized from " : "",
+      c.sky.file.empty() ? c.sky.cl_file.string().c_str() : c.sky.file.string().c_str());
+  SimulationBeams made;
+  cl.step([&] { made = make_beams(c, [&](const std::string& line) { if (cl.leader()) obs.log(line); }); });
+  const std::vector<Beamsor>& beams = made.beams;
+  const std::vector<std::string>& beam_names = made.names;
+  FocalPlane fp(made.detectors);
+  std::optional<Engine> engine_holder;
+  cl.step([&] { engine_holder.emplace(make_engine(sky, beams, fp, c, cl)); });
+  Engine& engine = *engine_holder;
+  say("backend: %s (%s)%s\n", engine.backend_name().c_str(), engine.device_name().c_str(),
+      cl.parallel() ? (", rank 0 of " + std::to_string(cl.size()) + " (" + std::to_string(cl.node_size()) +
+                       " on its node)").c_str()
+                    : "");
+  // [sky] unseen = "flag": samples whose disc holds an UNSEEN pixel are flagged in the TOD file and
+  // left out of the maps.
+  const bool flagging = c.sky.unseen == pisco::UnseenPolicy::flag && engine.unseen_pixels() > 0;
+  if (engine.unseen_pixels() > 0)
+    say("sky: %zu UNSEEN pixels taken as 0%s\n", engine.unseen_pixels(),
+        flagging ? "; samples whose disc holds one are flagged and left out of the maps" : " ([sky] unseen = \"zero\")");
+  std::vector<std::uint8_t> flags;
+  std::uint64_t flagged = 0;
+  auto flag_samples = [&](std::size_t detector, const auto& boresight_view) {
+    flags.resize(boresight_view.size());
+    flagged += engine.flag_samples(detector, boresight_view, flags);
+    return std::span<const std::uint8_t>(flags);
+  };
+
+  // Pointing files hold either boresight quaternions (the engine applies each detector's offset) or
+  // each detector's own angles (per-detector groups, read whole).
+  const bool per_detector_file = c.scan.kind == ScanKind::file && !pisco::BoresightFile::holds_boresight(c.scan.file);
+  std::optional<Boresight> boresight;
+  std::size_t samples_per_detector = 0;
+  cl.step([&] {
+    if (per_detector_file) {
+      const std::string* first = nullptr;  // the detector whose sample count the others must match
+      for (const auto& d : fp.detectors()) {
+        if (d.has_offset())
+          throw pisco::Error(c.scan.file.string() + ": the file gives detector '" + d.name +
+                             "' its own pointing, but the focal plane also gives it an offset from the boresight " +
+                             "(expected a boresight pointing file, or detectors without offsets)");
+        const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
+        if (!first) {
+          first = &d.name;
+          samples_per_detector = n;
+        } else if (n != samples_per_detector) {
+          throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
+                             " samples, detector '" + *first + "' " + std::to_string(samples_per_detector) +
+                             " (expected the same number of samples for every detector)");
+        }
+      }
+    } else {
+      boresight.emplace(c.scan, c.hwp);
+      samples_per_detector = boresight->size();
+    }
+    check_hwp_times(c, samples_per_detector);
+  });
+  const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
+  const int maps_nside = pisco::maps_nside(c, sky);
+  say("scan: %s, %zu detectors x %zu samples\n", scan_kind_name(c.scan.kind), fp.size(), samples_per_detector);
+
+  std::optional<pisco::BinnedMapmaker> mapper;
+  cl.step([&] {
+    if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
+      throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
+                         std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
+    if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
+  });
+  std::optional<pisco::TodWriter> tod_file;
+  const fs::path tod_path = c.output.dir / "tod.h5";
+  if (c.output.tod) {
+    std::string beam_desc;
+    for (std::size_t i = 0; i < beams.size(); ++i)
+      beam_desc += (i ? "; " : "") + beam_names[i] + ": " + beams[i].description();
+    const std::map<std::string, std::string> attributes{{"units", sky.units()},
+                                                        {"nside", std::to_string(sky.nside())},
+                                                        {"beam", beam_desc},
+                                                        {"backend", engine.backend_name()},
+                                                        {"device", engine.device_name()},
+                                                        {"pisco_version", pisco::version},
+                                                        {"created", utc_now()},
+                                                        {"config", c.text}};
+    if (!cl.parallel()) {
+      tod_file.emplace(tod_path, fp, samples_per_detector, c.output.tod_precision, c.output.tod_pointing, attributes,
+                       flagging, c.output.tod_weights);
+    } else {
+      // One file for all ranks (parallel HDF5): rank 0 creates it whole, then every rank opens it and
+      // writes its own samples; rank 0 renames it once every rank has closed it.
+      pisco::SharedTodOptions shared;
+      shared.temporary_suffix = ".tmp-" + cl.broadcast(std::to_string(::getpid()));
+      shared.leader = cl.leader();
+      shared.configure_access = cl.file_access();
+      shared.barrier = [&cl] { cl.barrier(); };
+      cl.step([&] {
+        if (cl.leader())
+          pisco::TodWriter::create_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
+                                          c.output.tod_pointing, attributes, flagging, shared.temporary_suffix,
+                                          c.output.tod_weights);
+      });
+      cl.step([&] {
+        tod_file.emplace(pisco::TodWriter::open_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
+                                                       c.output.tod_pointing, flagging, shared,
+                                                       c.output.tod_weights));
+      });
+    }
+  }
+
+  const std::size_t chunk = std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1));
+  // The jobs of the run (a detector's span of samples), in the order one process runs them: time
+  // spans outermost (each boresight chunk made once for all detectors), or, with per-detector pointing
+  // files, detectors outermost. Under MPI the spans are shortened until there are at least 4 jobs per
+  // rank, and each rank takes a contiguous run of jobs of about equal cost, a job costing its samples
+  // times its detector's disc pixels (from its beam's rho_max and the sky's NSIDE).
+  // The jobs are never listed (a season is 1e9 of them): job i of the run is job_at(i).
+  struct Span {
+    std::size_t detector = 0, first = 0, count = 0;
+  };
+  const std::size_t ndet = fp.size();
+  std::size_t span = chunk;
+  auto ceil_div = [](std::size_t a, std::size_t b) { return (a + b - 1) / b; };
+  if (cl.parallel() && samples_per_detector > 0) {
+    const std::size_t spans_needed = ceil_div(4 * std::size_t(cl.size()), std::max<std::size_t>(ndet, 1));
+    span = std::max<std::size_t>(1, std::min(chunk, ceil_div(samples_per_detector, spans_needed)));
+  }
+  const std::size_t spans = samples_per_detector == 0 ? 0 : ceil_div(samples_per_detector, span);
+  const std::size_t njobs = spans * ndet;
+  auto job_at = [&](std::size_t i) {
+    const std::size_t d = per_detector_file ? i / spans : i % ndet, s = per_detector_file ? i % spans : i / ndet;
+    return Span{d, s * span, std::min(span, samples_per_detector - s * span)};
+  };
+  std::size_t my_first = 0, my_end = 0, rounds = 0;  // this rank's jobs [my_first, my_end); the most any rank has
+  if (!cl.parallel()) {
+    my_end = rounds = njobs;
+  } else {
+    std::vector<double> disc(ndet);
+    for (std::size_t d = 0; d < ndet; ++d) disc[d] = disc_pixels(beams[fp[d].beam], sky.nside(), engine.sidelobe_nside());
+    double all = 0;
+    for (std::size_t i = 0; i < njobs; ++i) {
+      const Span j = job_at(i);
+      all += double(j.count) * disc[j.detector];
+    }
+    std::vector<std::size_t> per_rank(std::size_t(cl.size()), 0);
+    double before = 0;
+    my_first = njobs;
+    for (std::size_t i = 0; i < njobs; ++i) {
+      const Span j = job_at(i);
+      const double cost = double(j.count) * disc[j.detector];
+      const int owner = all > 0 ? std::min(cl.size() - 1, int((before + 0.5 * cost) / all * cl.size())) : 0;
+      before += cost;
+      ++per_rank[std::size_t(owner)];
+      if (owner == cl.rank()) {
+        my_first = std::min(my_first, i);
+        my_end = i + 1;
+      }
+    }
+    if (my_first > my_end) my_first = my_end;
+    rounds = *std::max_element(per_rank.begin(), per_rank.end());
+  }
+  // Checks for an error on another rank: after every check_every jobs, at most about 1000 in a run.
+  const std::size_t check_every = std::max<std::size_t>(1, ceil_div(rounds, 1000));
+  const std::size_t checks = ceil_div(rounds, check_every);
+  std::uint64_t my_samples = 0;
+  for (std::size_t i = my_first; i < my_end; ++i) my_samples += job_at(i).count;
+  obs.begin_convolution(my_samples);
+  const auto tc = std::chrono::steady_clock::now();
+  // The run as a stream of jobs (a detector's chunk), two in flight: while the engine convolves job
+  // j, job j - 1 is binned and written and job j + 1's pointing is prepared, so that the device never
+  // waits for the host (Engine::submit). Jobs alternate between two TOD buffers, and time chunks
+  // between two boresight buffers: the pending job is never more than one behind.
+  struct Job {
+    std::size_t detector = 0, first = 0, count = 0;
+    int bslot = 0;  // its boresight chunk
+    int slot = 0;   // its TOD buffer
+    std::uint64_t ticket = 0;
+  };
+  std::array<std::vector<double>, 2> tod;
+  for (auto& t : tod) t.resize(chunk);
+  std::array<BoresightChunk, 2> bore;
+  std::array<pisco::Pointing, 2> file_pointing;  // per-detector files: the detector's pointing, whole
+  std::array<std::vector<double>, 2> file_hwp;   // per-detector files: a job's plate angles, by TOD buffer
+  std::optional<Job> pending;
+  // The half-wave plate's angles of a job (empty for detectors without a plate), and the detectors as
+  // the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in place of the real one).
+  auto hwp_of = [&](const Job& j) -> std::span<const double> {
+    if (!fp[j.detector].hwp) return {};
+    return per_detector_file ? std::span<const double>(file_hwp[j.slot]) : std::span<const double>(bore[j.bslot].hwp);
+  };
+  std::vector<pisco::Detector> modelled = fp.detectors();
+  if (c.hwp.ideal_mapmaker)
+    for (auto& d : modelled)
+      if (d.hwp) d.hwp->mueller = pisco::ideal_hwp_mueller();
+  pisco::Pointing own;
+  std::vector<double> weights;
+  auto finish = [&](const Job& j) {
+    engine.wait(j.ticket);
+    const std::span<double> t(tod[j.slot].data(), j.count);
+    const pisco::Detector& det = fp[j.detector];
+    if (mapper || (tod_file && (c.output.tod_pointing || c.output.tod_weights))) {
+      const BoresightChunk& b = bore[j.bslot];
+      if (per_detector_file)
+        pisco::detector_pointing(file_pointing[j.detector % 2].view().subspan(j.first, j.count), det.offset, own);
+      else if (b.quaternions)
+        pisco::detector_pointing(pisco::QuatPointingView{b.quats}, det.offset, own);
+      else
+        pisco::detector_pointing(b.angles.view(), det.offset, own);
+    }
+    const pisco::PointingView detector_view = own.view();
+    std::span<const std::uint8_t> fl;  // [sky] unseen = "flag": the samples whose disc holds an UNSEEN pixel
+    if (flagging) {
+      const BoresightChunk& b = bore[j.bslot];
+      fl = per_detector_file ? flag_samples(j.detector, file_pointing[j.detector % 2].view().subspan(j.first, j.count))
+           : b.quaternions   ? flag_samples(j.detector, pisco::QuatPointingView{b.quats})
+                             : flag_samples(j.detector, b.angles.view());
+    }
+    if (mapper) mapper->add(modelled[j.detector], detector_view, t, hwp_of(j), fl);
+    if (tod_file && c.output.tod_weights) {  // the map-maker's weights of each sample
+      const std::span<const double> h = hwp_of(j);
+      weights.resize(3 * j.count);
+      for (std::size_t i = 0; i < j.count; ++i) {
+        const std::array<double, 3> a = pisco::stokes_weights(modelled[j.detector], detector_view.psi[i],
+                                                              h.empty() ? 0.0 : h[i]);
+        std::copy(a.begin(), a.end(), weights.begin() + std::ptrdiff_t(3 * i));
+      }
+    }
+    if (tod_file)
+      tod_file->write(j.detector, j.first, t, c.output.tod_pointing ? &detector_view : nullptr, fl,
+                      c.output.tod_weights ? std::span<const double>(weights) : std::span<const double>());
+    obs.advance(j.count);
+  };
+  int next_slot = 0;
+  auto submit = [&](Job j, auto submit_view) {
+    j.slot = next_slot;
+    next_slot ^= 1;
+    if (per_detector_file && c.hwp.enabled) c.hwp.stream.generate(j.first, j.count, file_hwp[j.slot]);
+    j.ticket = submit_view(std::span<double>(tod[j.slot].data(), j.count), hwp_of(j));
+    if (pending) finish(*pending);
+    pending = j;
+  };
+  // Fault injection for the tests (docs/scaling.md): a process told to fails after its first job, as
+  // one whose device or disk fails mid-run would.
+  const bool inject_failure = cl.parallel() && cl.inject_failure();
+  auto run_jobs = [&] {
+    std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
+    int bslot = 1;
+    for (std::size_t i = my_first; i < my_end; ++i) {
+      const Span job = job_at(i);
+      const std::size_t d = job.detector, off = job.first, n = job.count;
+      if (per_detector_file) {
+        pisco::Pointing& ptg = file_pointing[d % 2];
+        if (d != read_detector) ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
+        read_detector = d;
+        submit(Job{d, off, n}, [&](std::span<double> t, std::span<const double> h) {
+          return engine.submit(d, ptg.view().subspan(off, n), t, false, h);
+        });
+      } else {
+        if (off != filled_first) {  // a new time span: its boresight chunk, in the buffer not pending
+          bslot ^= 1;
+          boresight->fill(off, n, bore[bslot]);
+          filled_first = off;
+        }
+        BoresightChunk& b = bore[bslot];
+        submit(Job{d, off, n, bslot}, [&](std::span<double> t, std::span<const double> h) {
+          return b.quaternions ? engine.submit(d, pisco::QuatPointingView{b.quats}, t, false, h)
+                               : engine.submit(d, b.angles.view(), t, false, h);
+        });
+      }
+      if (inject_failure && i > my_first)
+        throw pisco::Error("injected failure on rank " + std::to_string(cl.rank()) + " (PISCO_TEST_RANK_FAIL)");
+      if ((i - my_first + 1) % check_every == 0) {
+        cl.post_check(false);
+        if (cl.stop()) return;  // another rank failed
+      }
+    }
+    if (pending) finish(*pending);
+  };
+  if (!cl.parallel()) {
+    run_jobs();
+  } else {
+    std::optional<std::string> failure;
+    try {
+      run_jobs();
+    } catch (const std::exception& e) {
+      failure = e.what();
+    }
+    engine.wait();  // after a failure or a stop, nothing in flight writes into the buffers any more
+    cl.finish_checks(checks, failure.has_value());
+    cl.agree(failure);
+  }
+  obs.end_convolution();
+  const double my_conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
+  const double conv = cl.max(my_conv);  // the slowest rank's
+  // Pixels per disc over every rank's samples.
+  const double mean_disc =
+      cl.parallel() && total > 0 ? cl.sum_of(engine.mean_disc_pixels() * double(my_samples)) / double(total)
+                                 : engine.mean_disc_pixels();
+  std::vector<fs::path>& written = result.written;
+  if (tod_file) {
+    cl.step([&] { tod_file->commit(); });
+    written.push_back(tod_path);
+  }
+  flagged = cl.sum(flagged);
+  std::uint64_t reduced_bytes = 0;
+  if (mapper) cl.step([&] { reduced_bytes = cl.sum(cl.reduce(*mapper)); });
+  if (flagging)
+    say("flags: %llu of %llu samples flagged (their disc holds an UNSEEN pixel)%s\n",
+        static_cast<unsigned long long>(flagged), static_cast<unsigned long long>(total),
+        tod_file ? "; the TOD file's 'flags' datasets" : "");
+
+  // Maps and spectra: the leader's, from the normal equations of every process. A run whose maps solve
+  // no pixel has no maps to speak of: no spectra (and pisco-vk makes no plots and exits with status 4).
+  std::string nothing_solved;
+  cl.step([&] {
+    if (mapper && cl.leader()) {
+      const BinnedMaps maps = mapper->solve();
+      const std::size_t solved_pixels = write_maps(c.output.dir, maps, maps_nside, sky.units());
+      const auto solved = static_cast<std::ptrdiff_t>(solved_pixels);
+      written.push_back(c.output.dir / "maps.fits");
+      written.push_back(c.output.dir / "hits.fits");
+      result.solved_pixels = solved_pixels;
+      say("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside, solved, maps.I.size(),
+          c.output.rcond_min);
+      if (c.hwp.enabled && solved > 0) {
+        // The plate's figure: the polarization of the maps against their temperature (on an unpolarized
+        // sky, the plate's leakage of temperature into polarization as the map-maker's model leaves it).
+        double ii = 0, qq = 0, uu = 0, mean_i = 0;
+        for (std::size_t p = 0; p < maps.I.size(); ++p)
+          if (maps.I[p] != pisco::unseen) mean_i += maps.I[p];
+        mean_i /= double(solved);
+        for (std::size_t p = 0; p < maps.I.size(); ++p)
+          if (maps.I[p] != pisco::unseen) {
+            ii += (maps.I[p] - mean_i) * (maps.I[p] - mean_i);
+            qq += maps.Q[p] * maps.Q[p];
+            uu += maps.U[p] * maps.U[p];
+          }
+        const double ri = std::sqrt(ii / double(solved)), rq = std::sqrt(qq / double(solved)), ru = std::sqrt(uu / double(solved));
+        say("hwp: maps' rms Q %.3g, U %.3g, I (mean removed) %.3g %s: leakage figure rms P / rms I = %.3g%s\n", rq, ru, ri,
+            sky.units().c_str(), std::hypot(rq, ru) / ri,
+            c.hwp.ideal_mapmaker ? " (maps binned with an ideal plate's model)" : "");
+      }
+      if (solved == 0) {
+        const auto hit = std::count_if(maps.hits.begin(), maps.hits.end(), [](std::uint32_t h) { return h > 0; });
+        const std::string outcome = "; maps.fits is all UNSEEN, and no spectra or plots were made";
+        if (hit == 0)
+          nothing_solved = std::string("the maps solve no pixel: ") +
+                           (flagging ? "every sample is flagged" : "no sample reached the maps") + outcome;
+        else
+          nothing_solved = "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) +
+                           " NSIDE " + std::to_string(maps_nside) + " pixels are hit" +
+                           (flagging ? " by unflagged samples" : "") + ", none with rcond >= " +
+                           [](double v) { char b[32]; std::snprintf(b, sizeof b, "%g", v); return std::string(b); }(c.output.rcond_min) +
+                           " (each pixel needs three or more polarization angles: one detector or pair without a "
+                           "half-wave plate or a boresight rotation cannot tell Q from U)" + outcome;
+      }
+
+      if (c.output.spectra && nothing_solved.empty())
+        for (const auto& f : write_spectra_files(c, sky, maps, maps_nside)) written.push_back(f);
+    }
+  });
+  nothing_solved = cl.broadcast(nothing_solved);
+
+  result.samples = total;
+  result.detectors = fp.size();
+  result.samples_per_detector = samples_per_detector;
+  result.mean_disc_pixels = mean_disc;
+  result.convolution_seconds = conv;
+  result.backend = engine.backend_name();
+  result.device = engine.device_name();
+  result.flagged = flagged;
+  result.reduced_bytes = reduced_bytes;
+  if (tod_file) result.tod_file = tod_path;
+  result.nothing_solved = nothing_solved;
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return result;
+}
+
+}  // namespace pisco

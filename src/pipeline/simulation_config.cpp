@@ -1,0 +1,513 @@
+// Simulation files (docs/config.md): TOML read key by key into pisco::SimulationConfig, every error naming
+// the file and key.
+#include "pisco/simulation_config.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <limits>
+#include <numbers>
+#include <set>
+#include <sstream>
+
+#include "io/focal_plane_file.hpp"
+#include "io/toml_table.hpp"
+#include "pisco/healpix_map.hpp"
+#include "pisco/spectra.hpp"
+#include "pisco/time_ranges.hpp"
+#include "pisco/units.hpp"
+
+namespace pisco {
+
+const char* beam_kind_name(BeamKind kind) noexcept {
+  switch (kind) {
+    case BeamKind::gaussian: return "gaussian";
+    case BeamKind::elliptical: return "elliptical";
+    case BeamKind::file: return "file";
+    case BeamKind::grasp: return "grasp";
+    case BeamKind::blm: return "blm";
+  }
+  return "?";
+}
+
+const char* scan_kind_name(ScanKind kind) noexcept {
+  switch (kind) {
+    case ScanKind::pixel_centres: return "pixel_centres";
+    case ScanKind::random_offsets: return "random_offsets";
+    case ScanKind::raster: return "raster";
+    case ScanKind::ces: return "ces";
+    case ScanKind::satellite: return "satellite";
+    case ScanKind::file: return "file";
+  }
+  return "?";
+}
+
+namespace {
+
+using namespace detail;
+using pisco::deg;
+constexpr double arcmin = deg / 60;
+
+SkyConfig read_sky(Table t) {
+  SkyConfig s;
+  s.file = t.input_file("file");
+  if (t.has("point_source")) {
+    const std::vector<double> p = t.numbers("point_source", {});
+    if (p.size() != 6) t.fail("point_source", "expected [theta_deg, phi_deg, I, Q, U, V]");
+    if (p[0] < 0 || p[0] > 180)
+      t.fail("point_source", "theta_deg = " + Table::format(p[0]) + " is outside [0, 180] (the colatitude)");
+    s.point_source = {p[0] * deg, p[1] * deg, p[2], p[3], p[4], p[5]};
+    s.units = t.string("units", "K");
+    if (s.units.size() > 68 || std::any_of(s.units.begin(), s.units.end(), [](char ch) { return ch < ' ' || ch > '~'; }))
+      t.fail("units", "expected at most 68 printable ASCII characters (a FITS TUNIT), got \"" + s.units + "\"");
+  }
+  s.nside = t.nside("nside", 128);
+  s.lmax = static_cast<int>(t.integer_in("lmax", 0, 0, 4LL * s.nside, "0 (2 nside) or a multipole up to 4 nside = " +
+                                                                            std::to_string(4LL * s.nside)));
+  s.r = t.number("r", 0.0);
+  s.seed = static_cast<std::uint64_t>(t.integer_in("seed", 1, 0, INT64_MAX, "a non-negative integer"));
+  if (t.has("unseen") && s.file.empty())
+    t.fail("unseen", "only for a map file (file = \"map.fits\"): what to do with its UNSEEN pixels");
+  const std::string unseen = t.choice("unseen", "error", {"error", "zero", "flag"});
+  s.unseen = unseen == "error" ? pisco::UnseenPolicy::error
+             : unseen == "zero" ? pisco::UnseenPolicy::zero
+                                : pisco::UnseenPolicy::flag;
+  s.unpolarized = t.boolean("unpolarized", false);
+  s.cl_file = t.input_file("cl_file");
+  s.bb_template = t.input_file("bb_template");
+  if (s.r < 0 || !std::isfinite(s.r)) t.fail("r", "expected r >= 0");
+  if (!s.file.empty() && (t.has("nside") || t.has("seed") || t.has("cl_file") || t.has("r") || t.has("point_source")))
+    t.fail("file", "give either a map file or the synthesis keys (nside, seed, cl_file, r), not both");
+  if (!s.point_source.empty() && (t.has("seed") || t.has("cl_file") || t.has("r")))
+    t.fail("point_source", "a point source takes nside and units only");
+  if (s.cl_file.empty()) s.cl_file = pisco::default_cl_file();
+  t.finish();
+  return s;
+}
+
+BeamConfig read_beam(Table t, const std::string& name) {
+  BeamConfig b;
+  b.name = name;
+  const std::string type = t.choice("type", "gaussian", {"gaussian", "elliptical", "file", "grasp", "blm"});
+  b.kind = type == "gaussian"     ? BeamKind::gaussian
+           : type == "elliptical" ? BeamKind::elliptical
+           : type == "file"       ? BeamKind::file
+           : type == "grasp"      ? BeamKind::grasp
+                                  : BeamKind::blm;
+  b.options.rho_max = t.positive("rho_max_deg", 5.0) * deg;
+  if (b.options.rho_max >= std::numbers::pi / 2) t.fail("rho_max_deg", "expected less than 90 deg");
+  b.options.grid_step = t.number("grid_step_arcmin", 0.0) * arcmin;
+  if (b.options.grid_step < 0) t.fail("grid_step_arcmin", "expected a positive step (or 0 for the default)");
+  // A Gaussian's width: its half-maximum radius within rho_max, and a grid of at most
+  // Beamsor::max_grid_nodes nodes a side at the step it implies (1/20 of the smallest FWHM by default).
+  auto width = [&](const std::string& key) {
+    const double fwhm = t.positive(key, 1.5) * deg;
+    if (fwhm / 2 >= b.options.rho_max)
+      t.fail(key, "a FWHM of " + Table::format(fwhm / deg) + " deg is wider than the beam grid: its half-maximum "
+                  "radius must fit within rho_max_deg = " + Table::format(b.options.rho_max / deg));
+    const double step = b.options.grid_step > 0 ? b.options.grid_step : fwhm / 20;
+    if (std::ceil(2 * std::sin(b.options.rho_max) / step) + 1 > pisco::Beamsor::max_grid_nodes)
+      t.fail(b.options.grid_step > 0 ? "grid_step_arcmin" : key,
+             "a grid step of " + Table::format(step / arcmin) + " arcmin needs more than " +
+                 std::to_string(pisco::Beamsor::max_grid_nodes) + " nodes a side within rho_max_deg = " +
+                 Table::format(b.options.rho_max / deg) + " (set a larger grid_step_arcmin)");
+    return fwhm;
+  };
+  if (b.kind == BeamKind::gaussian) {
+    b.fwhm = width("fwhm_deg");
+  } else if (b.kind == BeamKind::elliptical) {
+    b.fwhm_x = width("fwhm_x_deg");
+    b.fwhm_y = width("fwhm_y_deg");
+    b.angle = t.number("angle_deg", 0.0) * deg;
+  } else {
+    b.file = t.input_file("file");
+    if (b.file.empty())
+      t.fail("file", b.kind == BeamKind::grasp ? "a beam of type \"grasp\" needs file = \"beam.grd\" (or a .cut file)"
+                     : b.kind == BeamKind::blm ? "a beam of type \"blm\" needs file = \"beam_alm.fits\" (healpy.write_alm)"
+                                       : "a beam of type \"file\" needs file = \"beamsor.fits\"");
+    if (b.kind == BeamKind::grasp) {
+      const double set = t.number("set", 0.0);
+      if (!(set >= 0 && set <= 1e6 && set == std::floor(set)))
+        t.fail("set", "expected the number of one of the file's beams (1, 2, ...)");
+      b.set = static_cast<int>(set);
+    }
+  }
+  // Sidelobes (docs/beams.md, "Sidelobes"): a main part within sidelobe_split_deg on the sky's pixels, the
+  // rest on a band-limited coarser sky.
+  if (t.has("sidelobe_split_deg") || t.has("sidelobe_taper_deg") || t.has("sidelobe_nside")) {
+    if (b.kind == BeamKind::file)
+      t.fail(t.has("sidelobe_split_deg") ? "sidelobe_split_deg" : t.has("sidelobe_taper_deg") ? "sidelobe_taper_deg" : "sidelobe_nside",
+             "a HEALPix beamsor file (type \"file\") cannot be split; give the beam as grasp, blm, gaussian or elliptical");
+    if (!t.has("sidelobe_split_deg"))
+      t.fail(t.has("sidelobe_taper_deg") ? "sidelobe_taper_deg" : "sidelobe_nside",
+             "only with sidelobe_split_deg, the radius of the beam's main part");
+    b.options.split.rho_main = t.positive("sidelobe_split_deg", 1.0) * deg;
+    if (!(b.options.split.rho_main < b.options.rho_max))
+      t.fail("sidelobe_split_deg", "expected less than rho_max_deg = " + Table::format(b.options.rho_max / deg) +
+                                       ": the main part lies within the beam's disc");
+    b.options.split.taper = t.number("sidelobe_taper_deg", 0.0) * deg;
+    if (!(b.options.split.taper >= 0 && b.options.split.taper <= b.options.split.rho_main))
+      t.fail("sidelobe_taper_deg", "expected a width in [0, sidelobe_split_deg] (0: a quarter of it)");
+    const double nside = t.number("sidelobe_nside", 0.0);
+    const int n = nside >= 0 && nside <= 8192 ? static_cast<int>(nside) : -1;  // converted only within range
+    if (!(n >= 0 && nside == n && (n & (n - 1)) == 0))
+      t.fail("sidelobe_nside", "expected a power of two up to 8192 (or 0: chosen from the sidelobes' band limit)");
+    b.options.split.nside = n;
+  }
+  if (b.kind == BeamKind::gaussian || b.kind == BeamKind::elliptical) {
+    b.options.cross_polar = t.number("cross_polar", 0.0);
+    b.options.cross_polar_pattern =
+        t.choice("cross_polar_pattern", "uniform", {"uniform", "quadrupole"}) == "uniform"
+            ? pisco::CrossPolarPattern::uniform
+            : pisco::CrossPolarPattern::quadrupole;
+    const std::vector<double> m = t.numbers("mueller", {});
+    if (!m.empty()) {
+      if (m.size() != 16) t.fail("mueller", "expected 16 numbers (a 4x4 Mueller matrix, row by row)");
+      if (!(m[0] > 0)) t.fail("mueller", "the first element (T to T) must be positive: the beam's total response");
+      for (int i = 0; i < 16; ++i) b.options.mueller[i / 4][i % 4] = m[i];
+    }
+  }
+  t.finish();
+  return b;
+}
+
+// "YYYY-MM-DDTHH:MM:SSZ" (UTC) to seconds since 1970-01-01.
+double parse_utc(Table& t, const std::string& key, const std::string& text) {
+  int y, mo, d, h, mi;
+  double sec;
+  char z = 0;
+  // Field widths keep every integer within int; the seconds must be a number in [0, 61).
+  if (std::sscanf(text.c_str(), "%4d-%2d-%2dT%2d:%2d:%lf%c", &y, &mo, &d, &h, &mi, &sec, &z) != 7 || z != 'Z' || mo < 1 ||
+      mo > 12 || d < 1 || d > 31 || h < 0 || h > 23 || mi < 0 || mi > 59 || !(sec >= 0 && sec < 61))
+    t.fail(key, "expected a UTC time like \"2019-06-01T00:00:00Z\", got \"" + text + "\"");
+  // Days from civil (proleptic Gregorian), Howard Hinnant's algorithm.
+  y -= mo <= 2;
+  const int era = (y >= 0 ? y : y - 399) / 400;
+  const unsigned yoe = static_cast<unsigned>(y - era * 400);
+  const unsigned doy = (153 * (mo + (mo > 2 ? -3 : 9)) + 2) / 5 + d - 1;
+  const unsigned doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+  const long days = era * 146097L + static_cast<long>(doe) - 719468L;
+  return days * 86400.0 + h * 3600.0 + mi * 60.0 + sec;
+}
+
+// [scan] type = "satellite": a spinning, precessing spacecraft (pisco::SatelliteScan; every key is
+// checked here so that its error names it).
+void read_satellite(Table& t, ScanConfig& s) {
+  pisco::SatelliteScan& c = s.satellite;
+  auto angle = [&](const std::string& key, double fallback, bool open_interval) {
+    const double v = t.number(key, fallback);
+    if (!std::isfinite(v) || v < 0 || v > 180 || (open_interval && (v == 0 || v == 180)))
+      t.fail(key, std::string("expected an angle within ") + (open_interval ? "(0, 180)" : "[0, 180]") + " deg, got " +
+                      std::to_string(v));
+    return v * deg;
+  };
+  auto finite = [&](const std::string& key, double fallback) {
+    const double v = t.number(key, fallback);
+    if (!std::isfinite(v)) t.fail(key, "expected a finite number");
+    return v;
+  };
+  c.spin_sun_angle = angle("spin_sun_angle_deg", 45.0, false);
+  c.spin_boresight_angle = angle("spin_boresight_angle_deg", 50.0, true);
+  c.precession_period = t.positive("precession_period_min", 192.348, 60);
+  c.spin_period = t.positive("spin_period_min", 20.0, 60);
+  c.sample_rate = t.positive("sample_rate_hz", 19.0);
+  c.start_time = finite("start_time_s", 0.0);
+  c.precession_phase = finite("precession_phase_deg", 0.0) * deg;
+  c.spin_phase = finite("spin_phase_deg", 0.0) * deg;
+  const std::string frame = t.choice("frame", "ecliptic", {"ecliptic", "equatorial", "galactic"});
+  c.frame = frame == "ecliptic"     ? pisco::SatelliteScan::Frame::ecliptic
+            : frame == "equatorial" ? pisco::SatelliteScan::Frame::equatorial
+                                    : pisco::SatelliteScan::Frame::galactic;
+  const double hours = t.positive("duration_hours", 1.0);
+  const double samples = std::round(hours * 3600 * c.sample_rate);
+  if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
+  if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
+  c.samples = static_cast<std::size_t>(samples);
+  s.nside = t.nside("nside", 64);  // the maps' default NSIDE
+  // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
+  if (const auto p = c.time_problem()) {
+    if (p->field == "start_time") t.fail("start_time_s", p->what);
+    if (p->field == "spin_period") t.fail("spin_period_min", p->what);
+    if (p->field == "precession_period") t.fail("precession_period_min", p->what);
+  }
+  try {
+    c.check();
+  } catch (const pisco::Error& e) {
+    t.fail_table(e.what());
+  }
+}
+
+ScanConfig read_scan(Table t) {
+  ScanConfig s;
+  const std::string type =
+      t.choice("type", "pixel_centres", {"pixel_centres", "random_offsets", "raster", "ces", "satellite", "file"});
+  s.kind = type == "pixel_centres"    ? ScanKind::pixel_centres
+           : type == "random_offsets" ? ScanKind::random_offsets
+           : type == "raster"         ? ScanKind::raster
+           : type == "ces"            ? ScanKind::ces
+           : type == "satellite"      ? ScanKind::satellite
+                                      : ScanKind::file;
+  if (s.kind != ScanKind::ces && s.kind != ScanKind::satellite && s.kind != ScanKind::file)
+    for (double p : t.numbers("psi_deg", {0.0, 45.0, 90.0})) s.psi.push_back(p * deg);
+  if (s.kind == ScanKind::ces) {
+    pisco::CesScan& c = s.ces;
+    c.latitude = t.number_in("latitude_deg", -22.96, -90, 90, "a latitude in [-90, 90] deg") * deg;
+    c.longitude = t.number("longitude_deg", -67.79) * deg;
+    const double elevation = t.number("elevation_deg", 45.0);
+    if (!(elevation > 0 && elevation < 90)) t.fail("elevation_deg", "expected an elevation within (0, 90) deg, got " + Table::format(elevation));
+    c.elevation = elevation * deg;
+    c.az_centre = t.number("az_centre_deg", 180.0) * deg;
+    c.az_throw = t.number_in("az_throw_deg", 720.0, 0, 1e9, "a non-negative azimuth throw") * deg;
+    c.az_speed = t.positive("az_speed_deg_s", 1.0) * deg;
+    c.sample_rate = t.positive("sample_rate_hz", 20.0);
+    c.start_unix = parse_utc(t, "start", t.string("start", "2019-06-01T00:00:00Z"));
+    const double hours = t.positive("duration_hours", 1.0);
+    const double samples = std::round(hours * 3600 * c.sample_rate);
+    if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
+    if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
+    c.samples = static_cast<std::size_t>(samples);
+    c.boresight_angles.clear();
+    for (double b : t.numbers("boresight_deg", {0.0})) c.boresight_angles.push_back(b * deg);
+    c.boresight_period = t.positive("boresight_period_hours", 24.0, 3600);
+    s.nside = t.nside("nside", 128);  // the maps' default NSIDE
+    // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
+    if (const auto p = c.time_problem()) {
+      if (p->field == "start_unix") t.fail("start", p->what);
+      if (p->field == "az_speed") t.fail("az_speed_deg_s", p->what);
+      if (p->field == "boresight_period") t.fail("boresight_period_hours", p->what);
+    }
+    try {
+      c.check();
+    } catch (const pisco::Error& e) {
+      t.fail_table(e.what());
+    }
+  } else if (s.kind == ScanKind::satellite) {
+    read_satellite(t, s);
+  } else if (s.kind == ScanKind::file) {
+    s.file = t.input_file("file");
+    if (s.file.empty()) t.fail("file", "a scan of type \"file\" needs file = \"pointing.h5\"");
+  } else {
+    s.nside = t.nside("nside", 64);
+  }
+  if (s.kind == ScanKind::random_offsets) {
+    s.f = t.number_in("f", 0.1, 0, 1, "a fraction of the pixel size in [0, 1]");
+    s.symmetric = t.boolean("symmetric", false);
+    s.seed = static_cast<std::uint64_t>(t.integer_in("seed", 1, 0, INT64_MAX, "a non-negative integer"));
+  }
+  if (s.kind == ScanKind::raster) {
+    s.theta = t.number_in("theta_deg", 45.0, 0, 180, "a colatitude in [0, 180] deg") * deg;
+    s.phi = t.number("phi_deg", 0.0) * deg;
+    const double radius = t.positive("radius_deg", 5.0);
+    if (radius >= 180) t.fail("radius_deg", "expected a radius below 180 deg, got " + Table::format(radius));
+    s.radius = radius * deg;
+  }
+  t.finish();
+  return s;
+}
+
+// The TOD is streamed in chunks of at most this many samples (two buffers of 128 MiB at float64).
+constexpr std::int64_t max_chunk_samples = std::int64_t(1) << 24;
+
+EngineConfig read_engine(Table t) {
+  EngineConfig e;
+  e.options.backend = t.string("backend", "auto");
+  e.options.device = t.string("device", "auto");
+  e.options.arithmetic = t.choice("arithmetic", "auto", {"auto", "float64", "float-float"});
+  e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
+                                ? pisco::Normalization::integral
+                                : pisco::Normalization::per_sample;
+  e.options.quadrature = t.choice("quadrature", "corrected", {"corrected", "plain"}) == "corrected"
+                             ? pisco::Quadrature::corrected
+                             : pisco::Quadrature::plain;
+  const unsigned max_threads = pisco::Engine::max_threads();
+  e.options.threads = static_cast<unsigned>(t.integer_in(
+      "threads", 0, 0, max_threads,
+      "0 (all hardware threads) or a number of threads up to " + std::to_string(max_threads) +
+          " (64 per hardware thread of this machine)"));
+  const auto chunk = t.integer_in("chunk_samples", 1 << 16, 1, max_chunk_samples,
+                                  "a number of samples from 1 to " + std::to_string(max_chunk_samples));
+  e.chunk_samples = static_cast<std::size_t>(chunk);
+  t.finish();
+  return e;
+}
+
+OutputConfig read_output(Table t) {
+  OutputConfig o;
+  o.dir = t.string("dir", "pisco-out");  // relative to the working directory, not to the file
+  if (o.dir.empty()) t.fail("dir", "expected a directory name");
+  o.tod = t.boolean("tod", true);
+  o.tod_precision = t.choice("tod_precision", "float64", {"float64", "float32"}) == "float64"
+                        ? pisco::TodPrecision::float64
+                        : pisco::TodPrecision::float32;
+  o.tod_pointing = t.boolean("tod_pointing", false);
+  o.tod_weights = t.boolean("tod_weights", false);
+  o.maps = t.boolean("maps", true);
+  const std::int64_t maps_nside = t.integer("maps_nside", 0);
+  if (maps_nside != 0 && !pisco::valid_nside(maps_nside))
+    t.fail("maps_nside", "expected a power of two from 1 to " + std::to_string(pisco::max_nside) +
+                             " (or 0: the scan's), got " + std::to_string(maps_nside));
+  o.maps_nside = static_cast<int>(maps_nside);
+  o.rcond_min = t.number_in("rcond_min", 1e-3, 0, 1, "a reciprocal condition number in [0, 1]");
+  o.spectra = t.boolean("spectra", true);
+  o.lmax = static_cast<int>(t.integer_in("lmax", 0, 0, 4LL * pisco::max_nside,
+                                         "0 (2 maps_nside) or a multipole up to 4 maps_nside"));
+  o.deconvolve_beam = t.boolean("deconvolve_beam", true);
+  o.deconvolve_pixel_window = t.boolean("deconvolve_pixel_window", false);
+  o.plots = t.boolean("plots", true);
+  if (o.spectra && !o.maps) t.fail("spectra", "spectra are computed from the maps: set maps = true");
+  t.finish();
+  return o;
+}
+
+
+
+// [hwp] (docs/config.md): the plate model and its angle stream.
+HwpConfig read_hwp(Table t, const ScanConfig& scan) {
+  HwpConfig h;
+  h.enabled = true;
+  const std::string model = t.choice("model", "ideal", {"ideal", "mueller"});
+  if (model == "mueller") {
+    if (!t.has("mueller")) t.fail("mueller", "model = \"mueller\" needs the plate's 16 Mueller elements, row by row");
+    const std::vector<double> m = t.numbers("mueller", {});
+    if (m.size() != 16) t.fail("mueller", "expected 16 numbers, row by row, got " + std::to_string(m.size()));
+    for (int i = 0; i < 16; ++i) {
+      if (!std::isfinite(m[i])) t.fail("mueller", "entry " + std::to_string(i) + " is not finite");
+      h.plate.mueller[i / 4][i % 4] = m[i];
+    }
+  } else if (t.has("mueller")) {
+    t.fail("mueller", "only with model = \"mueller\"");
+  }
+  h.plate.placement = t.choice("placement", "aperture", {"aperture", "detector"}) == "aperture"
+                          ? pisco::HwpPlacement::aperture
+                          : pisco::HwpPlacement::detector;
+  h.ideal_mapmaker = t.choice("mapmaker", "same", {"same", "ideal"}) == "ideal";
+  const bool rotating = t.has("rpm") || t.has("frequency_hz");
+  const bool stepped = t.has("steps_deg") || t.has("step_seconds");
+  if (t.has("rpm") && t.has("frequency_hz")) t.fail("rpm", "give rpm or frequency_hz, not both");
+  if (rotating && stepped) t.fail("steps_deg", "a plate either rotates (rpm, frequency_hz) or steps (steps_deg, step_seconds)");
+  // The sample rate of the plate's angle stream: the scan's, or the table's own for scans without time.
+  double rate = scan.kind == ScanKind::ces ? scan.ces.sample_rate : scan.kind == ScanKind::satellite ? scan.satellite.sample_rate : 0.0;
+  if (t.has("sample_rate_hz")) rate = t.positive("sample_rate_hz", 1.0);
+  h.stream.sample_rate = rate;
+  h.stream.start_time = t.number("start_time_s", 0.0);
+  if (!std::isfinite(h.stream.start_time)) t.fail("start_time_s", "expected a finite number of seconds");
+  if (rotating) {
+    h.stream.kind = pisco::HwpAngleStream::Kind::continuous;
+    h.rate_key = t.has("rpm") ? "rpm" : "frequency_hz";
+    h.stream.frequency_hz = t.has("rpm") ? t.number("rpm", 0.0) / 60.0 : t.number("frequency_hz", 0.0);
+    if (!std::isfinite(h.stream.frequency_hz)) t.fail(t.has("rpm") ? "rpm" : "frequency_hz", "expected a finite number");
+  } else if (stepped) {
+    h.stream.kind = pisco::HwpAngleStream::Kind::stepped;
+    for (double a : t.numbers("steps_deg", {})) h.stream.steps.push_back(a * deg);
+    if (h.stream.steps.empty()) t.fail("steps_deg", "a stepped plate needs at least one angle");
+    for (std::size_t i = 0; i < h.stream.steps.size(); ++i)
+      if (!std::isfinite(h.stream.steps[i])) t.fail("steps_deg", "angle " + std::to_string(i) + " is not finite");
+    if (!t.has("step_seconds")) t.fail("step_seconds", "a stepped plate needs the time each angle is held");
+    h.stream.step_seconds = t.positive("step_seconds", 1.0);
+  } else if (scan.kind == ScanKind::file) {
+    h.angles_from_file = true;  // the pointing file's hwp_angle dataset
+  } else {
+    t.fail("rpm", "expected the plate's rotation (rpm or frequency_hz) or its steps (steps_deg, step_seconds)");
+  }
+  h.stream.phase = t.number("phase_deg", 0.0) * deg;
+  if (!std::isfinite(h.stream.phase)) t.fail("phase_deg", "expected a finite angle");
+  if (!h.angles_from_file && !(h.stream.sample_rate > 0))
+    t.fail("sample_rate_hz", "the scan has no sample rate (type = \"" + std::string(scan_kind_name(scan.kind)) +
+                                 "\"): give the rate at which the plate's angle is sampled");
+  t.finish();
+  return h;
+}
+
+// Every detector gets the [hwp] plate unless its row says hwp = false, with its own gamma (its row's
+// hwp_gamma_deg, a TOAST table's gamma, else its polarization angle in the focal plane: the offset's
+// gamma plus zeta) and Mueller matrix (its row's hwp_mueller, else [hwp]'s).
+void assign_plates(SimulationConfig& c, const fs::path& file) {
+  c.detector_hwp.resize(c.detectors.size());
+  for (std::size_t i = 0; i < c.detectors.size(); ++i) {
+    pisco::Detector& d = c.detectors[i];
+    const DetectorHwp& o = c.detector_hwp[i];
+    const bool has_keys = o.enabled.has_value() || o.mueller.has_value() || o.gamma_key;
+    if (!c.hwp.enabled) {
+      if (has_keys && o.enabled.value_or(true))
+        throw pisco::Error(file.string() + ": detector '" + d.name +
+                           "' has half-wave plate keys (hwp, hwp_gamma_deg, hwp_mueller) but there is no [hwp] table");
+      continue;
+    }
+    if (!o.enabled.value_or(true)) continue;
+    pisco::HalfWavePlate plate = c.hwp.plate;
+    if (o.mueller) plate.mueller = *o.mueller;
+    plate.gamma = o.gamma.value_or(default_hwp_gamma(d));
+    d.hwp = plate;
+  }
+}
+
+}  // namespace
+
+SimulationConfig read_simulation_file(const fs::path& file) {
+  SimulationConfig c;
+  c.source = file;
+  const toml::table root = parse(file, &c.text);
+  Table t(root, "top level", file);
+  const toml::table* sky = t.table("sky");
+  if (!sky) t.fail("sky", "missing [sky] table");
+  c.sky = read_sky(Table(*sky, "sky", file));
+
+  const toml::table* beams = t.table("beams");
+  if (!beams || beams->empty()) t.fail("beams", "missing [beams.NAME] tables");
+  for (const auto& [name, node] : *beams) {
+    if (!node.is_table()) Table(*beams, "beams", file).fail(std::string(name.str()), "expected a table [beams." + std::string(name.str()) + "]");
+    c.beams.push_back(read_beam(Table(*node.as_table(), "beams." + std::string(name.str()), file), std::string(name.str())));
+  }
+
+  std::vector<std::string> beam_names;
+  for (const auto& b : c.beams) beam_names.push_back(b.name);
+  const toml::table* fp = t.table("focal_plane");
+  if (!fp) t.fail("focal_plane", "missing [focal_plane] table");
+  Table fpt(*fp, "focal_plane", file);
+  const fs::path fp_file = fpt.input_file("file");
+  if (!fp_file.empty()) {
+    if (fp->contains("detectors") || fp->contains("pairs")) fpt.fail("file", "give either a file or detectors/pairs, not both");
+    if (is_hdf5_focal_plane(fp_file)) {
+      // A TOAST table has no beam column: one beam for all its detectors.
+      if (!fpt.has("beam") && c.beams.size() != 1)
+        fpt.fail("beam", "a TOAST focal plane gives all its detectors one beam: name one of the [beams] tables");
+      const pisco::ToastFocalPlane toast = pisco::read_toast_focal_plane(fp_file, beam_index(fpt, "beam", beam_names, true));
+      c.detectors = toast.detectors;
+      for (std::size_t i = 0; i < toast.gamma.size(); ++i) {  // TOAST's plate angle origin per detector
+        c.detector_hwp.resize(c.detectors.size());
+        c.detector_hwp[i].gamma = toast.gamma[i];
+      }
+    } else {
+      if (fpt.has("beam"))
+        fpt.fail("beam", "only for a TOAST focal plane (HDF5); a CSV or TOML table names each detector's beam itself");
+      c.detectors = read_focal_plane_file(fp_file, beam_names, &c.detector_hwp);
+    }
+    fpt.finish();
+  } else {
+    read_detectors(*fp, "focal_plane", file, beam_names, c.detectors, &c.detector_hwp);
+    if (c.detectors.empty()) fpt.fail("detectors", "no [[focal_plane.detectors]] or [[focal_plane.pairs]]");
+  }
+
+  const toml::table* scan = t.table("scan");
+  if (!scan) t.fail("scan", "missing [scan] table");
+  c.scan = read_scan(Table(*scan, "scan", file));
+  const toml::table* engine = t.table("engine");
+  c.engine = engine ? read_engine(Table(*engine, "engine", file)) : EngineConfig{};
+  const toml::table* output = t.table("output");
+  c.output = output ? read_output(Table(*output, "output", file)) : OutputConfig{};
+  if (const toml::table* hwp = t.table("hwp")) c.hwp = read_hwp(Table(*hwp, "hwp", file), c.scan);
+  assign_plates(c, file);
+  t.finish();
+  return c;
+}
+
+void check_hwp_times(const SimulationConfig& c, std::size_t samples) {
+  if (!c.hwp.enabled || c.hwp.angles_from_file) return;
+  if (const auto p = c.hwp.stream.time_problem(samples)) {
+    const std::string key = p->field == "start_time" ? "start_time_s" : p->field == "frequency" ? c.hwp.rate_key : p->field;
+    throw pisco::Error(c.source.string() + ": [hwp] " + key + ": " + p->what + " (over the run's " +
+                       std::to_string(samples) + " samples)");
+  }
+}
+
+}  // namespace pisco

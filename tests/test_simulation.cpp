@@ -1,0 +1,304 @@
+// pisco::Simulation (simulation.hpp; docs/library.md): a simulation file run through the library writes
+// the same TOD file, maps and spectra as `pisco-vk run`, bit for bit; and its parts (read_simulation_file,
+// make_sky, make_beams, make_engine, write_maps, write_spectra) work one by one.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstring>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <numbers>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+#include "pisco/pisco.hpp"
+#include "pisco/simulation.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string read_bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// A log of what a run said, with its steps counted.
+class Recorder final : public pisco::RunObserver {
+ public:
+  void log(const std::string& line) override { lines += line; }
+  void begin_convolution(std::uint64_t samples) override { expected = samples; ++begun; }
+  void advance(std::uint64_t samples) override { done += samples; }
+  void end_convolution() override { ++ended; }
+  std::string lines;
+  std::uint64_t expected = 0, done = 0;
+  int begun = 0, ended = 0;
+};
+
+// The one-process context, its steps counted.
+class CountingContext final : public pisco::RunContext {
+ public:
+  void step(const std::function<void()>& f) override {
+    ++steps;
+    f();
+  }
+  int steps = 0;
+};
+
+class SimulationTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("pisco-simulation-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // A small simulation: a synthesized sky, a Gaussian and an elliptical beam, a pair and a detector
+  // with an offset and a half-wave plate, pixel centres at three angles; the TOD with pointing and
+  // weights.
+  fs::path write_config(const std::string& extra_output = "") {
+    const fs::path p = dir_ / "sim.toml";
+    std::ofstream(p) << "[sky]\nnside = 32\nlmax = 64\nseed = 3\n"
+                        "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n"
+                        "[beams.ell]\ntype = \"elliptical\"\nfwhm_x_deg = 3.5\nfwhm_y_deg = 4.5\nangle_deg = 20\n"
+                        "rho_max_deg = 8.0\n"
+                        "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n"
+                        "[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"ell\"\nzeta_deg = 30\nxi_deg = 1\n"
+                        "eta_deg = -0.5\ngamma_deg = 10\n"
+                        "[scan]\ntype = \"pixel_centres\"\nnside = 16\n"
+                        "[hwp]\nrpm = 60\nsample_rate_hz = 10\n"
+                        "[engine]\nbackend = \"cpu\"\nchunk_samples = 1000\n"
+                        "[output]\ndir = \""
+                     << (dir_ / "out").string() << "\"\nplots = false\nlmax = 32\ntod_pointing = true\ntod_weights = true\n"
+                     << extra_output;
+    return p;
+  }
+
+  fs::path dir_;
+};
+
+int run_cli(const std::string& args) {
+  const std::string cmd = std::string(PISCO_VK_EXE) + " " + args + " > /dev/null 2>&1";
+  const int rc = std::system(cmd.c_str());
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+TEST_F(SimulationTest, WritesWhatTheCommandLineWrites) {
+  const fs::path file = write_config();
+  const fs::path cli_dir = dir_ / "cli", lib_dir = dir_ / "lib";
+  ASSERT_EQ(run_cli("run " + file.string() + " -q --no-plots -o " + cli_dir.string()), 0);
+
+  pisco::Simulation sim = pisco::Simulation::from_file(file);
+  sim.config().output.dir = lib_dir;
+  Recorder recorder;
+  const pisco::SimulationResult r = sim.run(&recorder);
+
+  const std::size_t n = 12 * 16 * 16 * 3;
+  EXPECT_EQ(r.detectors, 3u);
+  EXPECT_EQ(r.samples_per_detector, n);
+  EXPECT_EQ(r.samples, 3 * n);
+  EXPECT_EQ(r.backend, "cpu");
+  EXPECT_EQ(r.solved_pixels, 12u * 16 * 16);
+  EXPECT_TRUE(r.nothing_solved.empty());
+  EXPECT_GT(r.mean_disc_pixels, 0.0);
+  EXPECT_EQ(r.tod_file, lib_dir / "tod.h5");
+  const std::vector<fs::path> expected{lib_dir / "tod.h5", lib_dir / "maps.fits", lib_dir / "hits.fits",
+                                       lib_dir / "spectra.txt", lib_dir / "input_spectra.txt"};
+  EXPECT_EQ(r.written, expected);
+  // The account pisco-vk prints, line by line, and the progress of every sample.
+  EXPECT_NE(recorder.lines.find("sky: NSIDE 32, synthesized from "), std::string::npos) << recorder.lines;
+  EXPECT_NE(recorder.lines.find("beam main: Gaussian FWHM 4 deg, rho_max 8 deg"), std::string::npos) << recorder.lines;
+  EXPECT_NE(recorder.lines.find("backend: cpu ("), std::string::npos) << recorder.lines;
+  EXPECT_NE(recorder.lines.find("scan: pixel_centres, 3 detectors x 9216 samples\n"), std::string::npos) << recorder.lines;
+  EXPECT_NE(recorder.lines.find("maps: NSIDE 16, 3072 of 3072 pixels solved (rcond >= 0.001)\n"), std::string::npos)
+      << recorder.lines;
+  EXPECT_NE(recorder.lines.find("hwp: maps' rms Q "), std::string::npos) << recorder.lines;
+  EXPECT_EQ(recorder.begun, 1);
+  EXPECT_EQ(recorder.ended, 1);
+  EXPECT_EQ(recorder.expected, 3 * n);
+  EXPECT_EQ(recorder.done, 3 * n);
+
+  // Maps and spectra: the same bytes.
+  for (const char* name : {"maps.fits", "hits.fits", "spectra.txt", "input_spectra.txt"}) {
+    ASSERT_TRUE(fs::exists(cli_dir / name)) << name;
+    EXPECT_TRUE(read_bytes(cli_dir / name) == read_bytes(lib_dir / name)) << name << " differs";
+  }
+  // The TOD file: the same attributes but for the time it was created, the same detectors, and the same
+  // samples, pointing and weights, bit for bit (the file's bytes differ by HDF5's object times too).
+  const auto cli_attributes = pisco::read_tod_attributes(cli_dir / "tod.h5");
+  const auto lib_attributes = pisco::read_tod_attributes(lib_dir / "tod.h5");
+  ASSERT_EQ(cli_attributes.size(), lib_attributes.size());
+  for (const auto& [key, value] : cli_attributes)
+    if (key != "created") EXPECT_EQ(lib_attributes.at(key), value) << key;
+  const auto detectors = pisco::read_tod_detectors(lib_dir / "tod.h5");
+  ASSERT_EQ(detectors.size(), 3u);
+  ASSERT_EQ(pisco::read_tod_detectors(cli_dir / "tod.h5").size(), 3u);
+  for (const auto& d : detectors) {
+    const std::vector<double> tod = pisco::read_tod_signal(lib_dir / "tod.h5", d.name);
+    EXPECT_EQ(tod.size(), n);
+    EXPECT_TRUE(tod == pisco::read_tod_signal(cli_dir / "tod.h5", d.name)) << d.name;
+    EXPECT_TRUE(pisco::read_tod_weights(lib_dir / "tod.h5", d.name) == pisco::read_tod_weights(cli_dir / "tod.h5", d.name))
+        << d.name;
+    const std::vector<pisco::Quat> a = pisco::read_tod_quats(lib_dir / "tod.h5", d.name),
+                                   b = pisco::read_tod_quats(cli_dir / "tod.h5", d.name);
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_TRUE(std::memcmp(a.data(), b.data(), a.size() * sizeof(pisco::Quat)) == 0) << d.name;
+  }
+}
+
+TEST_F(SimulationTest, PartsOneByOne) {
+  const pisco::SimulationConfig c = pisco::read_simulation_file(write_config());
+  EXPECT_EQ(c.scan.kind, pisco::ScanKind::pixel_centres);
+  EXPECT_STREQ(pisco::scan_kind_name(c.scan.kind), "pixel_centres");
+  ASSERT_EQ(c.beams.size(), 2u);  // by name: ell, main
+  EXPECT_EQ(c.beams[0].name, "ell");
+  EXPECT_EQ(c.beams[0].kind, pisco::BeamKind::elliptical);
+  EXPECT_EQ(c.beams[1].kind, pisco::BeamKind::gaussian);
+  EXPECT_STREQ(pisco::beam_kind_name(c.beams[0].kind), "elliptical");
+  ASSERT_EQ(c.detectors.size(), 3u);
+  EXPECT_EQ(c.detectors[0].name, "d");  // [[detectors]], then [[pairs]]
+  EXPECT_EQ(c.detectors[0].beam, 0u);
+  EXPECT_EQ(c.detectors[2].name, "pb");
+  EXPECT_EQ(c.detectors[2].beam, 1u);
+  // Every detector gets the plate, with the default gamma: its polarization angle in the focal plane.
+  for (const auto& d : c.detectors) {
+    ASSERT_TRUE(d.hwp.has_value()) << d.name;
+    EXPECT_EQ(d.hwp->gamma, pisco::default_hwp_gamma(d)) << d.name;
+  }
+  EXPECT_NEAR(pisco::default_hwp_gamma(c.detectors[0]), 40 * pisco::deg, 1e-12);
+
+  const pisco::Sky sky = pisco::make_sky(c.sky, pisco::default_data_dir());
+  EXPECT_EQ(sky.nside(), 32);
+  std::vector<std::string> said;
+  const pisco::SimulationBeams beams = pisco::make_beams(c, [&](const std::string& line) { said.push_back(line); });
+  ASSERT_EQ(beams.beams.size(), 2u);
+  EXPECT_EQ(beams.names, (std::vector<std::string>{"ell", "main"}));
+  ASSERT_EQ(said.size(), 2u);
+  EXPECT_EQ(said[1].rfind("beam main: ", 0), 0u) << said[1];
+  EXPECT_EQ(beams.detectors.size(), 3u);
+  EXPECT_EQ(pisco::maps_nside(c, sky), 16);
+  // The cost model of a run shared out between processes: the disc's pixels.
+  EXPECT_DOUBLE_EQ(pisco::disc_pixels(beams.beams[1], 32, 0), 0.5 * (1 - std::cos(8 * pisco::deg)) * 12 * 32 * 32);
+  ASSERT_TRUE(pisco::window_fwhm(c.beams[1]).has_value());
+  EXPECT_EQ(*pisco::window_fwhm(c.beams[1]), 4.0 * pisco::deg);
+  EXPECT_NEAR(*pisco::window_fwhm(c.beams[0]), std::sqrt(3.5 * 4.5) * pisco::deg, 1e-15);
+
+  const pisco::FocalPlane fp(beams.detectors);
+  pisco::Engine engine = pisco::make_engine(sky, beams.beams, fp, c);
+  EXPECT_EQ(engine.backend_name(), "cpu");
+
+  // The engine's TOD of the first pixels equals the whole run's (the cpu backend sums each sample alone).
+  pisco::Simulation sim(c);
+  sim.config().output.dir = dir_ / "whole";
+  sim.config().output.spectra = false;
+  const pisco::SimulationResult r = sim.run();
+  EXPECT_EQ(r.written.size(), 3u);  // no spectra
+  const pisco::Pointing all = pisco::pixel_centre_scan(16, c.scan.psi);
+  const pisco::PointingView first = all.view().subspan(0, 64);
+  std::vector<double> hwp(64);
+  c.hwp.stream.generate(0, 64, hwp);
+  for (std::size_t d = 0; d < fp.size(); ++d) {
+    std::vector<double> tod(64);
+    engine.convolve(d, first, std::span<double>(tod), false, hwp);
+    const std::vector<double> written = pisco::read_tod_signal(r.tod_file, fp[d].name);
+    ASSERT_EQ(written.size(), all.size());
+    EXPECT_TRUE(std::equal(tod.begin(), tod.end(), written.begin())) << fp[d].name;
+  }
+
+  // Maps and spectra writers: whole files.
+  pisco::BinnedMaps maps;
+  maps.nside = 1;
+  maps.I.assign(12, 1.0);
+  maps.Q.assign(12, 0.0);
+  maps.U.assign(12, pisco::unseen);
+  maps.I[3] = pisco::unseen;
+  maps.hits.assign(12, 2);
+  fs::create_directories(dir_ / "parts");
+  EXPECT_EQ(pisco::write_maps(dir_ / "parts", maps, 1, "K"), 11u);
+  EXPECT_TRUE(fs::exists(dir_ / "parts" / "maps.fits"));
+  EXPECT_TRUE(fs::exists(dir_ / "parts" / "hits.fits"));
+  pisco::Spectra s;
+  for (auto* v : {&s.TT, &s.EE, &s.BB, &s.TE, &s.EB, &s.TB}) v->assign(5, 1.0);
+  pisco::write_spectra(dir_ / "parts" / "spectra.txt", s, 4, "test");
+  const std::string text = read_bytes(dir_ / "parts" / "spectra.txt");
+  EXPECT_EQ(text.rfind("# test\n# l  D_l", 0), 0u) << text;
+  EXPECT_NE(text.find("\n4 "), std::string::npos) << text;
+}
+
+TEST_F(SimulationTest, StepsGoThroughTheContext) {
+  const fs::path file = write_config();
+  pisco::Simulation sim = pisco::Simulation::from_file(file);
+  sim.config().output.tod = false;
+  CountingContext context;
+  const pisco::SimulationResult r = sim.run(context);
+  EXPECT_GE(context.steps, 6);  // directory, sky, beams, engine, scan, maps, ...
+  EXPECT_TRUE(r.tod_file.empty());
+  EXPECT_FALSE(fs::exists(dir_ / "out" / "tod.h5"));
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "maps.fits"));
+}
+
+TEST_F(SimulationTest, ErrorsNameTheFileAndKeyAndLeaveNoOutput) {
+  // A misspelt key, as pisco-vk reports it.
+  const fs::path bad = dir_ / "bad.toml";
+  std::ofstream(bad) << "[sky]\nnside = 32\nseeed = 3\n[beams.main]\n[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\n"
+                        "[scan]\n";
+  try {
+    (void)pisco::read_simulation_file(bad);
+    FAIL() << "no error";
+  } catch (const pisco::Error& e) {
+    EXPECT_EQ(std::string(e.what()), bad.string() + ": [sky] unknown key 'seeed' (did you mean 'seed'?)");
+  }
+  EXPECT_THROW((void)pisco::Simulation::from_file(dir_ / "missing.toml"), pisco::Error);
+
+  // An error found once the run has begun: nothing is left in the output directory.
+  pisco::Simulation sim = pisco::Simulation::from_file(write_config());
+  sim.config().output.lmax = 1000;  // beyond 4 maps_nside
+  try {
+    (void)sim.run();
+    FAIL() << "no error";
+  } catch (const pisco::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("[output] lmax: expected a multipole up to 4 maps_nside = 64, got 1000"),
+              std::string::npos)
+        << e.what();
+  }
+  ASSERT_TRUE(fs::is_directory(dir_ / "out"));
+  EXPECT_TRUE(fs::is_empty(dir_ / "out"));
+}
+
+TEST_F(SimulationTest, FocalPlaneFiles) {
+  const fs::path csv = dir_ / "fp.csv";
+  std::ofstream(csv) << "name,zeta_deg,beam,xi_deg,hwp_gamma_deg\na,0,main,1,5\nb,90,side,0,7\n";
+  std::vector<pisco::DetectorHwp> hwp;
+  const std::vector<pisco::Detector> dets = pisco::read_focal_plane_file(csv, {"main", "side"}, &hwp);
+  ASSERT_EQ(dets.size(), 2u);
+  EXPECT_EQ(dets[1].name, "b");
+  EXPECT_EQ(dets[1].beam, 1u);
+  EXPECT_NEAR(dets[1].zeta, std::numbers::pi / 2, 1e-15);
+  EXPECT_TRUE(dets[0].has_offset());
+  ASSERT_EQ(hwp.size(), 2u);
+  EXPECT_NEAR(*hwp[1].gamma, 7 * pisco::deg, 1e-15);
+
+  const fs::path toml = dir_ / "fp.toml";
+  std::ofstream(toml) << "[[pairs]]\nname = \"q\"\nbeam = \"side\"\nzeta_deg = 10\n";
+  const std::vector<pisco::Detector> pair = pisco::read_focal_plane_file(toml, {"main", "side"});
+  ASSERT_EQ(pair.size(), 2u);
+  EXPECT_EQ(pair[0].name, "qa");
+  EXPECT_EQ(pair[1].beam, 1u);
+
+  std::ofstream(csv) << "name,beam\na,nope\n";
+  try {
+    (void)pisco::read_focal_plane_file(csv, {"main"});
+    FAIL() << "no error";
+  } catch (const pisco::Error& e) {
+    EXPECT_EQ(std::string(e.what()), csv.string() + ":2: no beam named 'nope' in [beams]");
+  }
+}
+
+}  // namespace
