@@ -53,8 +53,8 @@ class RunContext {
   virtual double sum_of(double v) { return v; }
   // Adds every process's normal equations into the leader's map-maker; returns the bytes sent.
   virtual std::uint64_t reduce(BinnedMapmaker& /*mapper*/) { return 0; }
-  // For SharedTodOptions::configure_access (tod_file.hpp): a parallel file driver.
-  virtual std::function<void(std::int64_t)> file_access() const { return {}; }
+  // For SharedTodOptions::mpi_communicator (tod_file.hpp): the communicator's address, or null.
+  virtual const void* mpi_communicator() const { return nullptr; }
   // Early stop on an error elsewhere: post_check(failed) after each job of this process, stop() says
   // whether a completed check saw a failure, finish_checks(total, failed) posts the rest and waits.
   virtual void post_check(bool /*failed*/) {}

@@ -41,9 +41,9 @@ enum class TodPrecision { float64, float32 };
 // layout of a file written by one. The library knows nothing of MPI; the caller brings it here:
 //  1. one process (the leader) calls TodWriter::create_shared(): the temporary file (file + suffix) is
 //     created whole, the storage of every dataset allocated, and closed;
-//  2. every process opens it with TodWriter::open_shared(), whose file access list the caller
-//     configures (with parallel HDF5: H5Pset_fapl_mpio); opening, flushing and closing are then
-//     collective: every process makes the same calls in the same order;
+//  2. every process opens it with TodWriter::open_shared(), through parallel HDF5's MPI-IO driver on
+//     the caller's communicator; opening, flushing and closing are then collective: every process
+//     makes the same calls in the same order;
 //  3. each process writes its own samples with write() (independent writes, any order);
 //  4. every process calls commit(): flush and close, then `barrier`, then the leader renames the
 //     temporary file to its final name. commit() cannot check that every sample was written (no
@@ -53,8 +53,10 @@ enum class TodPrecision { float64, float32 };
 struct SharedTodOptions {
   std::string temporary_suffix;  // the same in every process, e.g. ".tmp-<the leader's process id>"
   bool leader = false;           // the process that renames the file at commit()
-  // Called with the file access property list (an HDF5 hid_t) before the file is opened.
-  std::function<void(std::int64_t file_access_list)> configure_access;
+  // The address of the MPI communicator (an MPI_Comm) of the processes that share the file: opened with
+  // the MPI-IO driver on it. It needs a library built on parallel HDF5 (PISCO_WITH_MPI, docs/scaling.md;
+  // otherwise pisco::Error of kind unavailable). Null: the file is opened by this process alone.
+  const void* mpi_communicator = nullptr;
   std::function<void()> barrier;  // returns when every process has called it
 };
 

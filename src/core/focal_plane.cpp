@@ -16,7 +16,7 @@ std::size_t FocalPlane::add(Detector detector) {
 
 std::size_t FocalPlane::add_pair(const std::string& name, double zeta, std::size_t beam_a,
                                  std::size_t beam_b, double epsilon, double gain_a, double gain_b) {
-  // Paper eq. copol_bolo: detector b's co-polarization is detector a's rotated by -90 deg.
+  // A pair (docs/config.md, focal_plane.pairs): detector b's co-polarization is detector a's rotated by -90 deg.
   Detector a, b;
   a.name = name + "a";
   b.name = name + "b";

@@ -1,6 +1,7 @@
 // A half-wave plate's Mueller matrix at an angle (docs/physics.md, "Half-wave plates"), written once
 // for the library (pisco::rotated_mueller), the float64 reference and the CUDA kernel;
-// shaders/contribution.glsl's plate_mueller computes the same product.
+// shaders/kernel.glsl's plate_matrix computes the same product in float32 (and its column 0 in float64)
+// from the plate's rows.
 #pragma once
 
 #include <cmath>

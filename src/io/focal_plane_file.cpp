@@ -141,7 +141,7 @@ void read_detectors(const toml::table& root, const std::string& where, const fs:
       a.name = *name + "a";
       b.name = *name + "b";
       a.zeta = zeta;
-      b.zeta = zeta - std::numbers::pi / 2;  // paper eq. copol_bolo
+      b.zeta = zeta - std::numbers::pi / 2;  // the pair partner (docs/config.md, focal_plane.pairs)
       a.epsilon = b.epsilon = eps;
       a.gain = ga;
       b.gain = gb;

@@ -346,7 +346,16 @@ TodWriter TodWriter::open_shared(const fs::path& file, const FocalPlane& focal_p
   s.dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
   check(H5Pset_chunk_cache(s.dapl.get(), 0, 0, 1.0), where, "cannot switch the chunk cache off");
   Handle fapl = file_access_plist(where);
-  if (options.configure_access) options.configure_access(static_cast<std::int64_t>(fapl.get()));
+  if (options.mpi_communicator) {
+#ifdef H5_HAVE_PARALLEL
+    check(H5Pset_fapl_mpio(fapl.get(), *static_cast<const MPI_Comm*>(options.mpi_communicator), MPI_INFO_NULL),
+          where, "cannot set the MPI-IO driver of parallel HDF5");
+#else
+    throw Error(where + ": a file shared by several processes needs a library built on parallel HDF5 "
+                        "(PISCO_WITH_MPI; docs/scaling.md)",
+                ErrorKind::unavailable);
+#endif
+  }
   s.listed.emplace(w.temporary_);
   s.file = checked(H5Fopen(w.temporary_.c_str(), H5F_ACC_RDWR, fapl.get()), H5Fclose, where,
                    "cannot open the temporary file " + in_quotes(w.temporary_.string()));

@@ -464,7 +464,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
       pisco::SharedTodOptions shared;
       shared.temporary_suffix = ".tmp-" + cl.broadcast(std::to_string(::getpid()));
       shared.leader = cl.leader();
-      shared.configure_access = cl.file_access();
+      shared.mpi_communicator = cl.mpi_communicator();
       shared.barrier = [&cl] { cl.barrier(); };
       cl.step([&] {
         if (cl.leader())

@@ -363,7 +363,18 @@ CaseResult class_survey(Scale scale, const std::string& backend, const SurveyOpt
   const double rp = p_bb / p2_bb * std::pow(subs[2].run.delta / subs[1].run.delta, 2);
   const double rb = b_bb / b2_bb * std::pow(subs[4].run.delta / subs[3].run.delta, 2);
   r.notes.push_back(fmt("delta^2 scaling: sum_l D_l^BB ratio / (delta1/delta2)^2 = %.4f (pointing), %.4f (beam)", rp, rb));
-  r.figures.push_back({"1 - solved sky fraction", 1 - subs[0].fsky, 0.95, ""});
+  // The map-maker solves the pixels the survey covers: of the pixels hit, the fraction its condition
+  // cut leaves unsolved (poorly crossed pixels at the survey's edge).
+  std::size_t hit = 0, hit_unsolved = 0;
+  for (std::size_t p = 0; p < subs[0].run.maps.hits.size(); ++p)
+    if (subs[0].run.maps.hits[p] > 0) {
+      ++hit;
+      hit_unsolved += subs[0].run.maps.I[p] == unseen;
+    }
+  r.notes.push_back(fmt("matched: %.0f pixels hit, %.0f of them unsolved; f_sky %.3f", double(hit), double(hit_unsolved),
+                        subs[0].fsky));
+  r.figures.push_back({"hit pixels left unsolved by the condition cut", hit ? double(hit_unsolved) / double(hit) : 1.0,
+                       0.15, "of hit pixels"});
   r.figures.push_back({"matched, unpolarized: max |D_l^EE|", m_ee, 1e-8, "uK^2"});
   r.figures.push_back({"matched, unpolarized: max |D_l^BB|", m_bbmax, 1e-8, "uK^2"});
   r.figures.push_back({"matched / pointing-mismatched BB (ordering)", m_bb / p_bb, 1e-6, "ratio"});

@@ -69,6 +69,10 @@ std::string fmt(const char* f, double a, double b = 0, double c = 0, double d = 
 }
 
 // One point-source observation: binned maps of a raster over the source against the smoothing.
+// Where the float64 reference runs alone, figures that only float32 rounding limits are held to float64
+// bars (docs/validation.md, "Bars"): a leak the float32 bars would let through shows there.
+bool float64_alone(const std::string& backend) { return backend == "cpu"; }
+
 void observe_point_source(double I, double Q, double U, double grid_step, const std::string& label,
                           const std::string& backend, CaseResult& r) {
   const int nside = 256;
@@ -113,7 +117,7 @@ void observe_point_source(double I, double Q, double U, double grid_step, const 
   r.figures.push_back({label + ": unsolved pixels in the raster", double(unsolved), 0, ""});
   r.figures.push_back({label + ": flux vs HEALPix smoothing", std::abs(flux_out / flux_ref - 1), 2e-3, "relative"});
   if (Q == 0 && U == 0)
-    r.figures.push_back({label + ": T->P, max |Q|,|U|", t_to_p / peak, 1e-6, "of peak"});
+    r.figures.push_back({label + ": T->P, max |Q|,|U|", t_to_p / peak, float64_alone(backend) ? 1e-12 : 1e-6, "of peak"});
   else
     r.figures.push_back({label + ": P->P, max residual Q, U", std::max(res_q, res_u) / peak, 1e-3, "of peak"});
   r.notes.push_back(label + fmt(": flux %.7f (reference %.7f); residual I %.2e, Q %.2e of the peak", flux_out,
@@ -241,12 +245,22 @@ CaseResult ideal_cmb(Scale scale, const std::string& backend) {
   const double bb_h = max_over_l(lmax_cmp, [&](int l) { return dl(l, dec.BB[l] - ref.BB[l]); });
   const double ee_floor = max_over_l(lmax_cmp, [&](int l) { return dl(l, ref.EE[l] - in.EE[l]); });
   const double bb_floor = max_over_l(lmax_cmp, [&](int l) { return dl(l, ref.BB[l] - in.BB[l]); });
+  // Beyond the floor, multipole by multipole: how much larger the residual against the input is than
+  // the estimator's own (harmonic image against input) at the same l.
+  auto beyond_floor = [&](const std::vector<double>& out, const std::vector<double>& image, const std::vector<double>& input) {
+    double m = 0;
+    for (int l = 2; l <= lmax_cmp; ++l)
+      m = std::max(m, std::abs(dl(l, out[l] - input[l])) - std::abs(dl(l, image[l] - input[l])));
+    return m;
+  };
   r.figures.push_back({"unsolved map pixels", double(o.unsolved), 0, ""});
   r.figures.push_back({"max |D_l^TT residual| vs input, l <= 250", tt, 8.0, "uK^2"});
   r.figures.push_back({"max |D_l^EE residual| vs harmonic image", ee_h, 4e-3, "uK^2"});
   r.figures.push_back({"max |D_l^BB residual| vs harmonic image", bb_h, 2e-6, "uK^2"});
-  r.figures.push_back({"max |D_l^EE residual| vs input, beyond the floor", std::max(0.0, ee - ee_floor), 4e-3, "uK^2"});
-  r.figures.push_back({"max |D_l^BB residual| vs input, beyond the floor", std::max(0.0, bb - bb_floor), 2e-6, "uK^2"});
+  r.figures.push_back({"max over l of |D_l^EE residual| vs input beyond the floor at that l",
+                       beyond_floor(dec.EE, ref.EE, in.EE), 4e-3, "uK^2"});
+  r.figures.push_back({"max over l of |D_l^BB residual| vs input beyond the floor at that l",
+                       beyond_floor(dec.BB, ref.BB, in.BB), 2e-6, "uK^2"});
   r.notes.push_back(fmt("residual vs input: TT %.3g, EE %.3g, BB %.3g uK^2; estimator floor (harmonic image vs "
                         "input): EE %.3g",
                         tt, ee, bb, ee_floor) +
@@ -280,8 +294,10 @@ CaseResult pointing_offsets(Scale scale, const std::string& backend) {
   r.figures.push_back({"unsolved map pixels (random, symmetric, unpolarized)",
                        double(random.unsolved + symmetric.unsolved + unpolarized.unsolved), 0, ""});
   r.figures.push_back({"symmetric / random spurious BB", bb_symmetric / bb_random, 1e-3, "ratio"});
-  r.figures.push_back({"unpolarized sky: max D_l^EE (no T->P), l <= 250", ee_unpol, 4e-3, "uK^2"});
-  r.figures.push_back({"unpolarized sky: max D_l^BB (no T->P), l <= 250", bb_unpol, 4e-3, "uK^2"});
+  // float64 alone: no T->P beyond float64 rounding (7e-24 uK^2 measured).
+  const double no_leak = float64_alone(backend) ? 1e-16 : 4e-3;
+  r.figures.push_back({"unpolarized sky: max D_l^EE (no T->P), l <= 250", ee_unpol, no_leak, "uK^2"});
+  r.figures.push_back({"unpolarized sky: max D_l^BB (no T->P), l <= 250", bb_unpol, no_leak, "uK^2"});
   r.seconds = seconds_since(t0);
   return r;
 }

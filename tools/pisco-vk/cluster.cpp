@@ -9,7 +9,6 @@
 #include <vector>
 
 #ifdef PISCO_WITH_MPI
-#include <hdf5.h>
 #include <mpi.h>
 #endif
 
@@ -48,7 +47,7 @@ double Cluster::max(double v) { return v; }
 std::uint64_t Cluster::sum(std::uint64_t v) { return v; }
 double Cluster::sum_of(double v) { return v; }
 std::uint64_t Cluster::reduce(pisco::BinnedMapmaker&) { return 0; }
-std::function<void(std::int64_t)> Cluster::file_access() const { return {}; }
+const void* Cluster::mpi_communicator() const { return nullptr; }
 void Cluster::post_check(bool) {}
 void Cluster::abort(int) {}
 void Cluster::finalize() {}
@@ -181,12 +180,9 @@ std::uint64_t Cluster::reduce(pisco::BinnedMapmaker& mapper) {
   return sent;
 }
 
-std::function<void(std::int64_t)> Cluster::file_access() const {
-  if (!parallel()) return {};
-  return [](std::int64_t fapl) {
-    if (H5Pset_fapl_mpio(static_cast<hid_t>(fapl), MPI_COMM_WORLD, MPI_INFO_NULL) < 0)
-      throw pisco::Error("cannot set the MPI-IO driver of parallel HDF5");
-  };
+const void* Cluster::mpi_communicator() const {
+  static const MPI_Comm world = MPI_COMM_WORLD;
+  return parallel() ? &world : nullptr;
 }
 
 void Cluster::abort(int status) {

@@ -58,8 +58,8 @@ class Cluster {
   // adds r + 1, r + 2, r + 4, ... in that order), so that the maps depend on nothing but the number
   // of processes; returns the bytes this process sent.
   std::uint64_t reduce(pisco::BinnedMapmaker& mapper);
-  // For pisco::SharedTodOptions::configure_access: the MPI-IO driver on MPI_COMM_WORLD.
-  std::function<void(std::int64_t)> file_access() const;
+  // For pisco::SharedTodOptions::mpi_communicator: MPI_COMM_WORLD's address when parallel, else null.
+  const void* mpi_communicator() const;
 
   // Early stop on an error elsewhere: non-blocking checks, each a collective every process posts in
   // the same order. post(failed) after each of this process's jobs; stop() says whether a completed

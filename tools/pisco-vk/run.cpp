@@ -38,7 +38,7 @@ class ClusterContext final : public pisco::RunContext {
   std::uint64_t sum(std::uint64_t v) override { return cl_.sum(v); }
   double sum_of(double v) override { return cl_.sum_of(v); }
   std::uint64_t reduce(pisco::BinnedMapmaker& mapper) override { return cl_.reduce(mapper); }
-  std::function<void(std::int64_t)> file_access() const override { return cl_.file_access(); }
+  const void* mpi_communicator() const override { return cl_.mpi_communicator(); }
   void post_check(bool failed) override { cl_.post_check(failed); }
   bool stop() override { return cl_.stop(); }
   void finish_checks(std::size_t total, bool failed) override { cl_.finish_checks(total, failed); }
