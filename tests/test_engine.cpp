@@ -12,6 +12,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "backend_fixtures.hpp"
 #include "support.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
@@ -333,6 +334,60 @@ TEST(Engine, BadQuaternionsAndOffsetsAreNamed) {
   m = message([&] { pisco::Engine(s.sky, s.beams, pisco::FocalPlane(dets)); });
   EXPECT_NE(m.find("'single'"), std::string::npos) << m;
   EXPECT_NE(m.find("unit quaternion"), std::string::npos) << m;
+}
+
+}  // namespace
+
+namespace {
+
+// A sky the caller holds (pisco::SkyView over its own arrays): the engine reads it without a Sky,
+// gives the TOD of the same maps as a Sky bit for bit, and keeps what it needs, so the arrays may
+// change once it is made. A view checks its maps' sizes; without V, V is zero.
+TEST(Engine, SkyViewOfTheCallersArrays) {
+  Scene s;
+  std::vector<double> I(s.sky.I().begin(), s.sky.I().end()), Q(s.sky.Q().begin(), s.sky.Q().end()),
+      U(s.sky.U().begin(), s.sky.U().end()), V(s.sky.V().begin(), s.sky.V().end());
+  pisco::Engine from_sky(s.sky, s.beams, s.fp, {.threads = 2});
+  std::vector<double> want(s.ptg.size()), got(s.ptg.size());
+  from_sky.convolve(1, s.ptg, want);
+  for (const char* backend : {"cpu", "simd"}) {
+    if (std::string(backend) == "simd" && !pisco_test::backend_unavailable("simd").empty()) continue;
+    std::vector<double> i2 = I, q2 = Q, u2 = U, v2 = V;
+    pisco::Engine from_view(pisco::SkyView(s.sky.nside(), i2, q2, u2, v2), s.beams, s.fp,
+                            {.backend = backend, .threads = 2});
+    std::fill(i2.begin(), i2.end(), 1e30);  // the engine holds its own copy
+    std::fill(q2.begin(), q2.end(), 1e30);
+    from_view.convolve(1, s.ptg, got);
+    if (std::string(backend) == "cpu") {
+      EXPECT_EQ(got, want);
+    } else {
+      pisco::Engine simd_sky(s.sky, s.beams, s.fp, {.backend = "simd", .threads = 2});
+      std::vector<double> simd_want(s.ptg.size());
+      simd_sky.convolve(1, s.ptg, simd_want);
+      EXPECT_EQ(got, simd_want);
+    }
+  }
+  // No V: zero, as a Sky's V of zeros.
+  pisco::Sky no_v = s.sky;
+  std::fill(no_v.V().begin(), no_v.V().end(), 0.0);
+  pisco::Engine a(no_v, s.beams, s.fp, {.threads = 2});
+  pisco::Engine b(pisco::SkyView(s.sky.nside(), I, Q, U), s.beams, s.fp, {.threads = 2});
+  std::vector<double> ta(s.ptg.size()), tb(s.ptg.size());
+  a.convolve(0, s.ptg, ta);
+  b.convolve(0, s.ptg, tb);
+  EXPECT_EQ(ta, tb);
+  // A Sky made from a view is a copy of its maps.
+  const pisco::Sky copy(pisco::SkyView(s.sky.nside(), I, Q, U, V, "uK_CMB"));
+  EXPECT_TRUE(std::equal(copy.Q().begin(), copy.Q().end(), Q.begin()));
+  EXPECT_EQ(copy.units(), "uK_CMB");
+  // Sizes and NSIDE checked, naming the map.
+  std::vector<double> short_map(I.begin(), I.end() - 1);
+  pisco_test::expect_error([&] { pisco::SkyView(s.sky.nside(), I, short_map, U); }, "Stokes Q map has");
+  pisco_test::expect_error([&] { pisco::SkyView(3, I, Q, U); }, "NSIDE = 3");
+  // Its checks are the Sky's.
+  std::vector<double> bad = U;
+  bad[7] = NAN;
+  pisco_test::expect_error([&] { pisco::Engine(pisco::SkyView(s.sky.nside(), I, Q, bad), s.beams, s.fp); }, "pixel 7");
 }
 
 }  // namespace

@@ -84,7 +84,7 @@ class Engine {
   // Prepares the sky, the beamsors and the detectors for the chosen backend. Throws pisco::Error on
   // an unknown (input) or unavailable (unavailable) backend, a detector referring to a missing beam,
   // or a non-finite sky.
-  Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
+  Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
          const EngineOptions& options = {});
   ~Engine();
   Engine(Engine&&) noexcept;

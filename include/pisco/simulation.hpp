@@ -110,7 +110,7 @@ SimulationBeams make_beams(const SimulationConfig& config,
 // The engine of a run: [engine]'s options with [sky] unseen. With several processes on a node, they
 // share it out: the cpu and simd backends' hardware threads, or the devices of a GPU backend, process
 // k on the node taking device k modulo their number.
-Engine make_engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
+Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
                    const SimulationConfig& config, const RunContext& context = serial_run_context());
 
 // The cost model that shares a run out between processes (docs/scaling.md, "How a run is shared out"):

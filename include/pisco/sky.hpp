@@ -4,6 +4,7 @@
 #include <array>
 #include <cstddef>
 #include <filesystem>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -20,10 +21,14 @@ enum class UnseenPolicy {
   flag,   // taken as 0, and the samples whose disc holds one are flagged (Engine::flag_samples)
 };
 
+class SkyView;
+
 class Sky {
  public:
   // A sky of zeros. Throws pisco::Error unless nside is a power of two in [1, 8192].
   explicit Sky(int nside, std::string units = "K_CMB");
+  // A copy of a view's maps.
+  explicit Sky(const SkyView& view);
 
   int nside() const noexcept { return nside_; }
   std::size_t npix() const noexcept { return maps_[0].size(); }
@@ -69,6 +74,39 @@ class Sky {
  private:
   int nside_;
   std::array<std::vector<double>, 4> maps_;
+  std::string units_;
+};
+
+// A sky whose maps the caller holds (a framework's own arrays): I, Q, U and V as spans, without a
+// copy. Accepted wherever the library takes a sky to read (Engine, the simulation's parts); a Sky
+// converts to one. The arrays must stay valid and unchanged while the call that takes the view runs;
+// an Engine copies what it needs while it is made, so they may change or go afterwards.
+class SkyView {
+ public:
+  // I, Q, U (and V; empty: zero) of 12 nside^2 values each, RING ordering, COSMO convention. Throws
+  // pisco::Error unless nside is a power of two in [1, 8192] and every map has 12 nside^2 values.
+  SkyView(int nside, std::span<const double> I, std::span<const double> Q, std::span<const double> U,
+          std::span<const double> V = {}, std::string units = "K_CMB");
+  SkyView(const Sky& sky);  // NOLINT(google-explicit-constructor): a Sky is read through its view
+
+  int nside() const noexcept { return nside_; }
+  std::size_t npix() const noexcept { return maps_[0].size(); }
+  double pixel_area() const noexcept;  // 4 pi / npix, steradians
+  std::span<const double> I() const noexcept { return maps_[0]; }
+  std::span<const double> Q() const noexcept { return maps_[1]; }
+  std::span<const double> U() const noexcept { return maps_[2]; }
+  std::span<const double> V() const noexcept { return maps_[3]; }
+  std::span<const double> stokes(StokesIndex s) const noexcept { return maps_[static_cast<int>(s)]; }
+  const std::string& units() const noexcept { return units_; }
+  // As Sky's (the same checks and messages).
+  void check_finite(const std::string& origin) const;
+  std::vector<std::size_t> unseen_pixels() const;
+  void check_unseen(const std::string& origin) const;
+
+ private:
+  int nside_;
+  std::array<std::span<const double>, 4> maps_;
+  std::shared_ptr<const std::vector<double>> zeros_;  // V when none is given
   std::string units_;
 };
 

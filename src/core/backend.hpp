@@ -65,7 +65,7 @@ struct BackendEntry {
   int priority;
   std::function<BackendInfo()> probe;
   // Makes the backend; it packs the sky's pixels from `sky` into what it keeps, during the call only.
-  std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const Sky&, const EngineOptions&)>
+  std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const SkyView&, const EngineOptions&)>
       create;
   // When set, replaces `priority` for "auto" once the backend is known to be available (the vulkan
   // backend ranks below simd when its only device is a CPU: docs/vulkan.md says why).

@@ -102,7 +102,7 @@ PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const do
 
 class CpuBackend final : public Backend {
  public:
-  CpuBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, unsigned threads)
+  CpuBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, unsigned threads)
       : in_(std::move(inputs)),
         pool_(threads ? threads : std::max(1u, std::thread::hardware_concurrency())),
         pixels_(reference_pixels(sky, unsigned(pool_.size()))) {}
@@ -145,7 +145,7 @@ BackendEntry cpu_backend_entry() {
                                    " hardware threads",
                                {}};
           },
-          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
             return std::make_unique<CpuBackend>(std::move(in), sky, o.threads);
           }};
 }

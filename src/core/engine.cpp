@@ -74,7 +74,7 @@ bool weighs_cap_boundaries(const EngineOptions& options) {
   return options.quadrature == Quadrature::corrected && options.normalization == Normalization::integral;
 }
 
-std::shared_ptr<const detail::EngineInputs> prepared(const Sky& sky, const std::vector<Beamsor>& beams,
+std::shared_ptr<const detail::EngineInputs> prepared(const SkyView& sky, const std::vector<Beamsor>& beams,
                                                      const FocalPlane& focal_plane, const EngineOptions& options) {
   detail::EngineInputs in = detail::prepare_inputs(sky, beams, focal_plane, options.normalization);
   in.quadrature = weighs_cap_boundaries(options) ? Quadrature::corrected : Quadrature::plain;
@@ -82,7 +82,7 @@ std::shared_ptr<const detail::EngineInputs> prepared(const Sky& sky, const std::
 }
 }  // namespace
 
-Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
+Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
                const EngineOptions& options)
     : focal_plane_(focal_plane) {
   detail::check_engine_options(options);
@@ -92,7 +92,7 @@ Engine::Engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPla
   std::optional<Sky> zeroed;
   // The backends get a copy with the rings where the polar caps meet the belt weighted (poles.hpp),
   // for the set-up only.
-  Sky weighted = detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_);
+  Sky weighted(detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_));
   zeroed.reset();
   if (weighs_cap_boundaries(options)) detail::weigh_cap_boundaries(weighted);
   inputs_ = prepared(weighted, beams, focal_plane, options);

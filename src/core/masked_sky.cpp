@@ -12,7 +12,7 @@
 namespace pisco {
 namespace detail {
 
-const Sky& sky_for_backends(const Sky& sky, UnseenPolicy policy, std::optional<Sky>& zeroed,
+SkyView sky_for_backends(const SkyView& sky, UnseenPolicy policy, std::optional<Sky>& zeroed,
                             std::vector<std::uint32_t>& masked, std::size_t& unseen) {
   masked.clear();
   const std::vector<std::size_t> pixels = sky.unseen_pixels();
@@ -22,7 +22,7 @@ const Sky& sky_for_backends(const Sky& sky, UnseenPolicy policy, std::optional<S
   zeroed.emplace(sky);
   zeroed->zero_unseen();
   if (policy == UnseenPolicy::flag) masked.assign(pixels.begin(), pixels.end());
-  return *zeroed;
+  return SkyView(*zeroed);
 }
 
 namespace {

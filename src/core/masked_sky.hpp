@@ -18,7 +18,7 @@ namespace pisco::detail {
 // and flag, a copy in `zeroed` with those pixels 0, their RING indices (ascending) in `masked` (flag
 // only); for error, pisco::Error naming the Stokes map, the number of UNSEEN pixels and the first.
 // `unseen` is their number.
-const Sky& sky_for_backends(const Sky& sky, UnseenPolicy policy, std::optional<Sky>& zeroed,
+SkyView sky_for_backends(const SkyView& sky, UnseenPolicy policy, std::optional<Sky>& zeroed,
                             std::vector<std::uint32_t>& masked, std::size_t& unseen);
 
 // Whether the disc of detector `det` around each sample holds a pixel of `masked` (ascending RING

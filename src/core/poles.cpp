@@ -32,7 +32,7 @@ void weigh_cap_boundaries(Sky& sky) {
 
 int polar_band_limit(int nside) { return nside == 1 ? 2 : 2 * nside; }
 
-Sky polar_sky(const Sky& sky, bool weigh_boundaries, int iterations) {
+Sky polar_sky(const SkyView& sky, bool weigh_boundaries, int iterations) {
   try {
     SkyAlm a = sky_alm(sky, polar_band_limit(sky.nside()), iterations, true);
     // S'(R p) = S(p) for R = 90 deg about y: HEALPix's Euler angles (psi, theta, phi) = (0, pi/2, 0).

@@ -41,7 +41,7 @@ int polar_band_limit(int nside);
 // The sky seen through R: S'(R p) = S(p), I, Q, U (as T, E, B) and V (spin 0) through HEALPix C++'s
 // map2alm (`iterations` Jacobi iterations, HEALPix's ring weights where healpy-data has them) up to
 // polar_band_limit, rotate_alm and alm2map; its own cap-boundary rings weighted when `weigh_boundaries`.
-Sky polar_sky(const Sky& sky, bool weigh_boundaries, int iterations = 3);
+Sky polar_sky(const SkyView& sky, bool weigh_boundaries, int iterations = 3);
 
 // The angle from a pole within which a detector's samples go to the polar copy: its disc radius plus
 // four pixel sizes, so that no ring within four of the pole meets the disc of a sample left on the

@@ -27,7 +27,7 @@ std::vector<RingEntry> make_ring_table(int nside) {
   return rings;
 }
 
-double float32_monopole(const Sky& sky) {
+double float32_monopole(const SkyView& sky) {
   const std::size_t npix = sky.npix();
   if (npix == 0) return 0.0;
   const auto& I = sky.I();
@@ -75,7 +75,7 @@ void PixelVectors::get(std::size_t first, std::size_t count, double* xyz, unsign
   for (auto& t : pool) t.join();
 }
 
-PreparedSky prepare_sky(const Sky& sky) {
+PreparedSky prepare_sky(const SkyView& sky) {
   sky.check_finite("sky");
   PreparedSky p;
   p.nside = sky.nside();
@@ -85,7 +85,7 @@ PreparedSky prepare_sky(const Sky& sky) {
   return p;
 }
 
-std::vector<double> reference_pixels(const Sky& sky, unsigned threads) {
+std::vector<double> reference_pixels(const SkyView& sky, unsigned threads) {
   const std::size_t npix = sky.npix();
   std::vector<double> pixels(npix * 8);
   const PixelVectors vectors(sky.nside());
@@ -169,7 +169,7 @@ PreparedDetector prepare_row_detector(const Detector& d, const Beamsor& beam, do
   return p;
 }
 
-EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
+EngineInputs prepare_inputs(const SkyView& sky, const std::vector<Beamsor>& beams,
                             const FocalPlane& focal_plane, Normalization normalization) {
   // The focal plane is the Engine's to check (check_focal_plane), before the sky's set-up.
   EngineInputs in;

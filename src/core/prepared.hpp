@@ -75,10 +75,10 @@ struct EngineInputs {
   Quadrature quadrature = Quadrature::plain;  // the engine sets its own (core/poles.hpp)
 };
 
-PreparedSky prepare_sky(const Sky& sky);
+PreparedSky prepare_sky(const SkyView& sky);
 // The float64 reference's pixel table: 8 doubles per pixel, the unit vector kx, ky, kz, 0, then
 // I, Q, U, V (one cache line per pixel).
-std::vector<double> reference_pixels(const Sky& sky, unsigned threads);
+std::vector<double> reference_pixels(const SkyView& sky, unsigned threads);
 // The detector's weights in float32 for the float32 backends (vulkan, cuda), 4 per node, with those
 // below 2^-64 of the largest (and any below float32's smallest normal number) set to zero.
 // A Gaussian's tail reaches float32's subnormal range within a Table 1 disc (below 1.2e-38 from
@@ -90,7 +90,7 @@ std::vector<float> float32_weights(const PreparedDetector& detector);
 // The monopole the float32 backends take out of the sky (docs/vulkan.md, "Precision"): the mean I0 of
 // I when it matters for float32, that is when |I0| > 0.1 x the RMS of I - I0; 0 otherwise. They add
 // I0 sum_k w_I(k) back in float64.
-double float32_monopole(const Sky& sky);
+double float32_monopole(const SkyView& sky);
 PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
                                   Normalization normalization);
 // Row `row` of the detector's beamsor as a detector of its own: weights Omega_pix / Omega~ B_row,.(x, y),
@@ -98,7 +98,7 @@ PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam,
 PreparedDetector prepare_row_detector(const Detector& detector, const Beamsor& beam, double pixel_area,
                                       Normalization normalization, int row);
 // The focal plane as check_focal_plane() has accepted it (the Engine checks it first).
-EngineInputs prepare_inputs(const Sky& sky, const std::vector<Beamsor>& beams,
+EngineInputs prepare_inputs(const SkyView& sky, const std::vector<Beamsor>& beams,
                             const FocalPlane& focal_plane, Normalization normalization);
 
 

@@ -30,8 +30,8 @@ int sidelobe_nside(const std::vector<Beamsor>& beams, int sky_nside) {
   return std::min(nside, sky_nside);
 }
 
-Sky band_limited_sky(const Sky& sky, int nside, int l_pass) {
-  if (nside == sky.nside()) return sky;
+Sky band_limited_sky(const SkyView& sky, int nside, int l_pass) {
+  if (nside == sky.nside()) return Sky(sky);
   const int l_stop = std::min(2 * nside, 3 * sky.nside() - 1);
   const int lmax = l_stop;
   try {

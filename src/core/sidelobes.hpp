@@ -18,6 +18,6 @@ int sidelobe_nside(const std::vector<Beamsor>& beams, int sky_nside);
 // (HEALPix C++ map2alm, 3 iterations; I, Q, U as T, E, B and V as a spin-0 map), multiplied by a window
 // that is 1 up to l_pass and falls as a half cosine to 0 at l_stop, synthesized at `nside`. The sky
 // itself when nside is its own NSIDE.
-Sky band_limited_sky(const Sky& sky, int nside, int l_pass);
+Sky band_limited_sky(const SkyView& sky, int nside, int l_pass);
 
 }  // namespace pisco::detail

@@ -27,11 +27,48 @@ Sky::Sky(int nside, std::string units) : nside_(nside), units_(std::move(units))
   for (auto& map : maps_) map.assign(npix, 0.0);
 }
 
+Sky::Sky(const SkyView& view) : nside_(view.nside()), units_(view.units()) {
+  for (int s = 0; s < 4; ++s) {
+    const auto map = view.stokes(static_cast<StokesIndex>(s));
+    maps_[s].assign(map.begin(), map.end());
+  }
+}
+
 double Sky::pixel_area() const noexcept {
   return 4.0 * std::numbers::pi / static_cast<double>(npix());
 }
 
-void Sky::check_finite(const std::string& origin) const {
+void Sky::check_finite(const std::string& origin) const { SkyView(*this).check_finite(origin); }
+
+std::vector<std::size_t> Sky::unseen_pixels() const { return SkyView(*this).unseen_pixels(); }
+
+void Sky::check_unseen(const std::string& origin) const { SkyView(*this).check_unseen(origin); }
+
+SkyView::SkyView(int nside, std::span<const double> I, std::span<const double> Q, std::span<const double> U,
+                 std::span<const double> V, std::string units)
+    : nside_(nside), units_(std::move(units)) {
+  check_nside(nside, "sky view");
+  const std::size_t npix = 12 * static_cast<std::size_t>(nside) * static_cast<std::size_t>(nside);
+  if (V.empty()) {
+    zeros_ = std::make_shared<const std::vector<double>>(npix, 0.0);
+    V = *zeros_;
+  }
+  maps_ = {I, Q, U, V};
+  for (int s = 0; s < 4; ++s)
+    if (maps_[s].size() != npix)
+      throw Error("sky view: the Stokes " + std::string(stokes_names[s]) + " map has " +
+                  std::to_string(maps_[s].size()) + " values; NSIDE " + std::to_string(nside) + " has " +
+                  std::to_string(npix) + " pixels");
+}
+
+SkyView::SkyView(const Sky& sky)
+    : nside_(sky.nside()), maps_{sky.I(), sky.Q(), sky.U(), sky.V()}, units_(sky.units()) {}
+
+double SkyView::pixel_area() const noexcept {
+  return 4.0 * std::numbers::pi / static_cast<double>(npix());
+}
+
+void SkyView::check_finite(const std::string& origin) const {
   for (int s = 0; s < 4; ++s) {
     const auto& map = maps_[s];
     for (std::size_t p = 0; p < map.size(); ++p) {
@@ -43,7 +80,7 @@ void Sky::check_finite(const std::string& origin) const {
   }
 }
 
-std::vector<std::size_t> Sky::unseen_pixels() const {
+std::vector<std::size_t> SkyView::unseen_pixels() const {
   std::vector<std::size_t> out;
   for (std::size_t p = 0; p < npix(); ++p)
     if (is_unseen(maps_[0][p]) || is_unseen(maps_[1][p]) || is_unseen(maps_[2][p]) || is_unseen(maps_[3][p]))
@@ -65,7 +102,7 @@ std::size_t Sky::zero_unseen() {
   return changed;
 }
 
-void Sky::check_unseen(const std::string& origin) const {
+void SkyView::check_unseen(const std::string& origin) const {
   for (int s = 0; s < 4; ++s) {
     const auto& map = maps_[s];
     std::size_t count = 0, first = 0;

@@ -18,7 +18,7 @@ Healpix_Map<double> healpix_map(std::span<const double> v, int nside) {
 void copy_map(const Healpix_Map<double>& m, std::span<double> out) { std::copy(&m[0], &m[0] + m.Npix(), out.begin()); }
 }  // namespace
 
-SkyAlm sky_alm(const Sky& sky, int lmax, int iterations, bool ring_weights) {
+SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights) {
   const int nside = sky.nside();
   arr<double> weight(static_cast<tsize>(2 * nside), 1.0);
   if (ring_weights) {

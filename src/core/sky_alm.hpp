@@ -19,7 +19,7 @@ struct SkyAlm {
 // The sky's a_lm up to lmax by HEALPix's map2alm with `iterations` Jacobi iterations; with
 // `ring_weights`, HEALPix's ring weights from healpy-data where it has them for the sky's NSIDE.
 // Throws PlanckError, which callers name.
-SkyAlm sky_alm(const Sky& sky, int lmax, int iterations, bool ring_weights);
+SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights);
 // The maps of `a` at `nside` (alm2map_pol, and alm2map for V).
 Sky sky_from_alm(const SkyAlm& a, int nside, const std::string& units);
 

@@ -43,7 +43,7 @@ struct Slot {
 
 class CudaBackend final : public Backend {
  public:
-  CudaBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& maps, const EngineOptions& options)
+  CudaBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& maps, const EngineOptions& options)
       : in_(std::move(inputs)), device_(open_device(options.device)) {
     check_kernel_image(device_.description());
     const PreparedSky& sky = in_->sky;
@@ -192,7 +192,7 @@ class CudaBackend final : public Backend {
 BackendEntry cuda_backend_entry() {
   // Above vulkan and cpu: on an NVIDIA machine "auto" runs the native backend.
   return {"cuda", 20, [] { return cuda::probe(); },
-          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
             return std::make_unique<cuda::CudaBackend>(std::move(in), sky, o);
           }};
 }

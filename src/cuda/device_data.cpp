@@ -6,7 +6,7 @@
 
 namespace pisco::detail::cuda {
 
-std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole, const CapBoundary& boundary) {
+std::vector<PixelRecord> pixel_records(const SkyView& sky, double monopole, const CapBoundary& boundary) {
   const std::size_t npix = sky.npix();
   std::vector<PixelRecord> out(npix);
   const PixelVectors vectors(sky.nside());
@@ -24,7 +24,7 @@ std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole, const Ca
   return out;
 }
 
-std::vector<double> pixel_vectors(const Sky& sky) {
+std::vector<double> pixel_vectors(const SkyView& sky) {
   const std::size_t npix = sky.npix();
   std::vector<double> out(npix * 4, 0.0);
   const PixelVectors vectors(sky.nside());

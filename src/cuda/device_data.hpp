@@ -13,10 +13,10 @@ namespace pisco::detail::cuda {
 
 // One record per pixel, I - monopole in float32.
 // The sky's pixels with monopole x boundary.at(p) taken out of I (core/cap_boundary.hpp).
-std::vector<PixelRecord> pixel_records(const Sky& sky, double monopole, const CapBoundary& boundary = {});
+std::vector<PixelRecord> pixel_records(const SkyView& sky, double monopole, const CapBoundary& boundary = {});
 
 // 4 doubles per pixel (kx, ky, kz, 0), the unit vectors of the reference.
-std::vector<double> pixel_vectors(const Sky& sky);
+std::vector<double> pixel_vectors(const SkyView& sky);
 
 // The detector's weights converted to float32, 4 per node as in the reference.
 std::vector<float> float_weights(const PreparedDetector& det);

@@ -243,7 +243,7 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
   return out;
 }
 
-Engine make_engine(const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& fp, const SimulationConfig& c,
+Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& fp, const SimulationConfig& c,
                    const RunContext& cl) {
   EngineOptions engine_options = c.engine.options;
   engine_options.unseen = c.sky.unseen;

@@ -101,7 +101,7 @@ DetectorTables detector_tables(const PreparedDetector& det, std::size_t index, b
 
 class SimdBackend final : public Backend {
  public:
-  SimdBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options)
+  SimdBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options)
       : in_(std::move(inputs)),
         pool_(options.threads ? options.threads : hardware_threads()),
         kernel_(simd::choose_kernel(requested_target(options.device))),
@@ -137,7 +137,7 @@ class SimdBackend final : public Backend {
 
  private:
   // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).
-  void pack_sky(const Sky& sky) {
+  void pack_sky(const SkyView& sky) {
     const std::size_t npix = sky.npix();
     for (auto* c : {&kx_, &ky_, &kz_, &i_, &q_, &u_, &v_}) c->assign(npix + simd::pad_floats, 0.0f);
     if (exact_)
@@ -232,7 +232,7 @@ BackendEntry simd_backend_entry() {
               return BackendInfo{"simd", false, e.what(), {}};
             }
           },
-          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
             return std::make_unique<SimdBackend>(std::move(in), sky, o);
           }};
 }

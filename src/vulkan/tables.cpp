@@ -55,7 +55,7 @@ bool use_float_float(bool device_float64, const std::string& device_name, const 
   throw Error("vulkan: unknown arithmetic \"" + arithmetic + "\" (expected \"auto\", \"float64\" or \"float-float\")");
 }
 
-KernelMode kernel_mode(const EngineInputs& in, const Sky& sky, bool ff) {
+KernelMode kernel_mode(const EngineInputs& in, const SkyView& sky, bool ff) {
   KernelMode m;
   m.ff = ff;
   m.monopole = float32_monopole(sky);
@@ -65,7 +65,7 @@ KernelMode kernel_mode(const EngineInputs& in, const Sky& sky, bool ff) {
   return m;
 }
 
-void pack_sky(const Sky& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out) {
+void pack_sky(const SkyView& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out) {
   for (std::size_t j = 0; j < n; ++j) {
     const std::size_t p = first + j;
     float* rec = out + 8 * j;

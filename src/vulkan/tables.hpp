@@ -39,10 +39,10 @@ struct KernelMode {
   // The kernel needs the float64 pixel vectors (sky_lo): on the float64 path, and always in float-float.
   bool vectors64() const { return float64 || ff; }
 };
-KernelMode kernel_mode(const EngineInputs& in, const Sky& sky, bool ff);
+KernelMode kernel_mode(const EngineInputs& in, const SkyView& sky, bool ff);
 
 // Pixels [first, first + n): 8 floats each (kx, ky, kz, I - I0, Q, U, V, 0), from their unit vectors xyz.
-void pack_sky(const Sky& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out);
+void pack_sky(const SkyView& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out);
 // 4 floats a pixel: k - float(k), 0.
 void pack_sky_lo(std::size_t n, const double* xyz, float* out);
 // One texel a ring: z (two words), first pixel, count | shifted << 31.

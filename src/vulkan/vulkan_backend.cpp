@@ -37,7 +37,7 @@ double mib(double bytes) { return bytes / double(1 << 20); }
 
 class VulkanBackend final : public Backend {
  public:
-  VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options);
+  VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options);
   ~VulkanBackend() override;
 
   std::string name() const override { return "vulkan"; }
@@ -59,7 +59,7 @@ class VulkanBackend final : public Backend {
     SlotJob job;
   };
 
-  void setup(const vk::DeviceInfo& info, const Sky& sky, const EngineOptions& options);
+  void setup(const vk::DeviceInfo& info, const SkyView& sky, const EngineOptions& options);
   void release() noexcept;
   // A device-local uniform texel buffer holding `bytes` of `data`, viewed as R32G32B32A32_UINT texels
   // (shaders/interface.h): every table the kernel reads.
@@ -93,7 +93,7 @@ class VulkanBackend final : public Backend {
   long completed_chunks_ = 0;
 };
 
-VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const Sky& sky, const EngineOptions& options)
+VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options)
     : in_(std::move(inputs)) {
   auto instance = vk::Instance::get();
   const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), options.device);
@@ -109,7 +109,7 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const S
   }
 }
 
-void VulkanBackend::setup(const vk::DeviceInfo& info, const Sky& sky_maps, const EngineOptions& options) {
+void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, const EngineOptions& options) {
   const auto& fn = device_->fn();
 
   VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
@@ -475,7 +475,7 @@ BackendEntry vulkan_backend_entry() {
               return BackendInfo{"vulkan", false, e.what(), {}};
             }
           },
-          [](std::shared_ptr<const EngineInputs> in, const Sky& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
+          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
             return std::make_unique<VulkanBackend>(std::move(in), sky, o);
           },
           [] {
