@@ -391,3 +391,23 @@ TEST(Engine, SkyViewOfTheCallersArrays) {
 }
 
 }  // namespace
+
+namespace {
+
+// Backends say what they can do (BackendCapabilities): the reference alone is float64 throughout,
+// the host backends run their own threads, a GPU backend reports its device's memory.
+TEST(Engine, BackendsReportCapabilities) {
+  for (const auto& b : pisco::Engine::backends()) {
+    if (!b.available) continue;
+    EXPECT_EQ(b.capabilities.float64, b.name == "cpu") << b.name;
+    EXPECT_EQ(b.capabilities.worker_threads, b.name == "cpu" || b.name == "simd") << b.name;
+    EXPECT_TRUE(b.capabilities.plates) << b.name;
+    EXPECT_FALSE(b.capabilities.adjoint) << b.name;
+    if (b.name == "vulkan" || b.name == "cuda")
+      EXPECT_GT(b.capabilities.device_memory, std::uint64_t(1) << 26) << b.name;  // at least 64 MiB
+    else
+      EXPECT_EQ(b.capabilities.device_memory, 0u) << b.name;
+  }
+}
+
+}  // namespace

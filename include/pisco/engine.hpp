@@ -52,6 +52,17 @@ struct EngineOptions {
   Quadrature quadrature = Quadrature::corrected;
 };
 
+// What a backend can do, so that a caller (a framework, the simulation pipeline) decides by
+// capability rather than by the backend's name.
+struct BackendCapabilities {
+  bool float64 = false;         // every operation in float64 (the reference); else float32 pixel sums
+                                // with float64 where it decides (docs/physics.md, "Device backends")
+  bool plates = true;           // half-wave plates, at the aperture and between optics and detector
+  bool adjoint = false;         // the transpose of convolve (not yet in any backend)
+  bool worker_threads = false;  // runs its own host threads: EngineOptions::threads applies
+  std::uint64_t device_memory = 0;  // bytes of memory of the device "auto" picks; 0: the host's memory
+};
+
 struct BackendInfo {
   std::string name;
   bool available = false;
@@ -60,6 +71,7 @@ struct BackendInfo {
   // kind it prefers (discrete GPUs before others), in index order; empty for cpu. Several processes on
   // one node (pisco-vk under MPI) share them out: process k takes devices[k % devices.size()].
   std::vector<std::size_t> devices;
+  BackendCapabilities capabilities;  // meaningful where available
 };
 
 namespace detail {

@@ -52,6 +52,10 @@ class BackendInfo:
     def detail(self) -> str:
         """The device found, or why the backend is unavailable."""
 
+    @property
+    def capabilities(self) -> dict[str, bool | int]:
+        """What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own host threads: `threads` applies), device_memory (bytes of the device auto picks; 0: host memory)."""
+
 def devices() -> list[BackendInfo]:
     """The backends compiled in ('cpu', 'vulkan', 'cuda'), with availability and device or reason."""
 

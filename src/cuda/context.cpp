@@ -46,6 +46,7 @@ BackendInfo probe() {
     for (int i = 0; i < n; ++i) detail += (i ? "; " : "") + describe(i).description();
     BackendInfo info{"cuda", true, detail, {}};
     for (int i = 0; i < n; ++i) info.devices.push_back(std::size_t(i));
+    info.capabilities.device_memory = describe(0).memory;
     return info;
   } catch (const Error& e) {
     return {"cuda", false, e.what(), {}};

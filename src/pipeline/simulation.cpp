@@ -249,13 +249,13 @@ Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const 
   engine_options.unseen = c.sky.unseen;
   auto share_out = [&](const std::string& backend, pisco::EngineOptions& o) {
     if (cl.node_size() <= 1) return;
-    const bool threaded = backend == "cpu" || backend == "simd";  // the backends with a thread pool
-    if (threaded && o.threads == 0) {
-      o.threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
-    } else if (!threaded && (o.device == "auto" || o.device.empty())) {
-      for (const auto& b : pisco::Engine::backends())
-        if (b.name == backend && !b.devices.empty())
-          o.device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
+    for (const auto& b : pisco::Engine::backends()) {
+      if (b.name != backend) continue;
+      if (b.capabilities.worker_threads) {  // the host's threads are what the processes share
+        if (o.threads == 0) o.threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
+      } else if ((o.device == "auto" || o.device.empty()) && !b.devices.empty()) {
+        o.device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
+      }
     }
   };
   pisco::EngineOptions o = engine_options;

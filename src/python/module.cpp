@@ -728,6 +728,19 @@ void bind_helpers(nb::module_& m) {
       .def_ro("name", &BackendInfo::name)
       .def_ro("available", &BackendInfo::available)
       .def_ro("detail", &BackendInfo::detail, "The device found, or why the backend is unavailable.")
+      .def_prop_ro(
+          "capabilities",
+          [](const BackendInfo& b) {
+            nb::dict d;
+            d["float64"] = b.capabilities.float64;
+            d["plates"] = b.capabilities.plates;
+            d["adjoint"] = b.capabilities.adjoint;
+            d["worker_threads"] = b.capabilities.worker_threads;
+            d["device_memory"] = b.capabilities.device_memory;
+            return d;
+          },
+          "What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own "
+          "host threads: `threads` applies), device_memory (bytes of the device auto picks; 0: host memory).")
       .def("__repr__", [](const BackendInfo& b) {
         return "pisco.BackendInfo('" + b.name + "', available=" + (b.available ? "True" : "False") + ", '" +
                b.detail + "')";

@@ -224,10 +224,12 @@ BackendEntry simd_backend_entry() {
           [] {
             try {
               const simd::Kernel k = simd::choose_kernel(requested_target(""));
-              return BackendInfo{"simd", true,
-                                 "Highway " + k.description + " on " +
-                                     std::to_string(hardware_threads()) + " hardware threads",
-                                 {}};
+              BackendInfo info{"simd", true,
+                               "Highway " + k.description + " on " + std::to_string(hardware_threads()) +
+                                   " hardware threads",
+                               {}};
+              info.capabilities.worker_threads = true;
+              return info;
             } catch (const Error& e) {
               return BackendInfo{"simd", false, e.what(), {}};
             }

@@ -229,6 +229,11 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
     d.max_texel_buffer_elements = props.properties.limits.maxTexelBufferElements;
     d.max_groups_x = props.properties.limits.maxComputeWorkGroupCount[0];
     d.max_groups_y = props.properties.limits.maxComputeWorkGroupCount[1];
+    VkPhysicalDeviceMemoryProperties memory{};
+    vkGetPhysicalDeviceMemoryProperties(phys[i], &memory);
+    for (std::uint32_t h = 0; h < memory.memoryHeapCount; ++h)
+      if (memory.memoryHeaps[h].flags & VK_MEMORY_HEAP_DEVICE_LOCAL_BIT)
+        d.device_memory = std::max<std::uint64_t>(d.device_memory, memory.memoryHeaps[h].size);
     std::uint32_t nq = 0;
     vkGetPhysicalDeviceQueueFamilyProperties(phys[i], &nq, nullptr);
     std::vector<VkQueueFamilyProperties> queues(nq);

@@ -53,6 +53,7 @@ struct DeviceInfo {
   VkDeviceSize max_storage_buffer_range = 0;
   std::uint32_t max_texel_buffer_elements = 0;
   std::uint32_t max_groups_x = 0, max_groups_y = 0;
+  std::uint64_t device_memory = 0;  // the largest device-local memory heap, bytes
   // shaderFloat64: the kernel's float64 work runs in float64; without it, in float-float
   // (docs/vulkan.md, "Devices without float64").
   bool float64 = false;

@@ -470,6 +470,7 @@ BackendEntry vulkan_backend_entry() {
               BackendInfo info{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")", {}};
               for (const auto& d : devices)
                 if (d.unusable.empty() && d.type == chosen.type) info.devices.push_back(d.index);
+              info.capabilities.device_memory = chosen.device_memory;
               return info;
             } catch (const Error& e) {
               return BackendInfo{"vulkan", false, e.what(), {}};

@@ -261,6 +261,10 @@ def test_engine_errors_and_close():
     assert unwritable.value.kind == "io" and "sky.fits" in str(unwritable.value)
     assert {e.kind for e in (pisco.InputError, pisco.UnavailableError, pisco.DeviceError, pisco.FileError,
                              pisco.InternalError)} == {"input", "unavailable", "device", "io", "internal"}
+    # Backends say what they can do (BackendCapabilities).
+    caps = {b.name: b.capabilities for b in pisco.devices() if b.available}
+    assert caps["cpu"]["float64"] and caps["cpu"]["worker_threads"] and caps["cpu"]["device_memory"] == 0
+    assert all(c["plates"] and not c["adjoint"] for c in caps.values())
     with pytest.raises(TypeError, match="beams: expected a pisco.Beamsor"):
         pisco.Engine(sky, [beam, "beam"], fp, backend="cpu")
     bad = pisco.FocalPlane()

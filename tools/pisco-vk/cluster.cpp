@@ -9,6 +9,9 @@
 #include <vector>
 
 #ifdef PISCO_WITH_MPI
+// MPI's C interface only (Open MPI and MPICH otherwise add C++ bindings needing a library of their own).
+#define OMPI_SKIP_MPICXX 1
+#define MPICH_SKIP_MPICXX 1
 #include <mpi.h>
 #endif
 
