@@ -1,5 +1,5 @@
 // The convolution of one sample (docs/vulkan.md, "The kernel"): its antenna basis, its disc walked
-// ring by ring as the float64 reference does (src/core/cpu_backend.cpp), and every pixel through the
+// ring by ring as the float64 reference does (src/cpu/cpu_backend.cpp), and every pixel through the
 // float32 contribution (pixel.glsl, every backend's one text) with a Kahan-compensated sum; a float64 path adds the sky's
 // monopole, I0 sum_k w_I(k), and the per-sample normalization when asked for. On devices without
 // float64 (PISCO_FF) the frame, the disc and that path run in float-float (ff.glsl).

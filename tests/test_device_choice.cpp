@@ -1,11 +1,11 @@
-// The device choice shared by the vulkan and cuda backends (src/core/device_choice.hpp), and the
+// The device choice shared by the vulkan and cuda backends (src/gpu/device_choice.hpp), and the
 // library-wide NSIDE check (pisco::check_nside), without any device.
 #include <gtest/gtest.h>
 
 #include <string>
 #include <vector>
 
-#include "core/device_choice.hpp"
+#include "gpu/device_choice.hpp"
 #include "pisco/healpix_map.hpp"
 #include "support.hpp"
 

@@ -20,7 +20,7 @@
 #include <thread>
 #include <unordered_map>
 
-#include "core/fits_table.hpp"
+#include "io/fits_table.hpp"
 #include "core/text.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/error.hpp"

@@ -38,18 +38,18 @@ BackendInfo probe() {
   const cudaError_t status = cudaGetDeviceCount(&n);
   if (status != cudaSuccess) {
     cudaGetLastError();
-    return {"cuda", false, std::string(cudaGetErrorString(status)) + " (" + cudaGetErrorName(status) + ")", {}};
+    return {"cuda", false, std::string(cudaGetErrorString(status)) + " (" + cudaGetErrorName(status) + ")", {}, {}};
   }
-  if (n == 0) return {"cuda", false, "no CUDA-capable device is detected", {}};
+  if (n == 0) return {"cuda", false, "no CUDA-capable device is detected", {}, {}};
   try {
     std::string detail;
     for (int i = 0; i < n; ++i) detail += (i ? "; " : "") + describe(i).description();
-    BackendInfo info{"cuda", true, detail, {}};
+    BackendInfo info{"cuda", true, detail, {}, {}};
     for (int i = 0; i < n; ++i) info.devices.push_back(std::size_t(i));
     info.capabilities.device_memory = describe(0).memory;
     return info;
   } catch (const Error& e) {
-    return {"cuda", false, e.what(), {}};
+    return {"cuda", false, e.what(), {}, {}};
   }
 }
 

@@ -8,7 +8,7 @@
 
 #include "core/poles.hpp"
 #include "core/backend.hpp"
-#include "core/streaming.hpp"
+#include "gpu/streaming.hpp"
 #include "cuda/buffer.hpp"
 #include "cuda/check.hpp"
 #include "cuda/chunk.hpp"

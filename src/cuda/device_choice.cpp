@@ -1,6 +1,6 @@
 #include "cuda/device_choice.hpp"
 
-#include "core/device_choice.hpp"
+#include "gpu/device_choice.hpp"
 
 namespace pisco::detail::cuda {
 

@@ -7,7 +7,7 @@
 #include <cstdio>
 #include <optional>
 
-#include "core/output_file.hpp"
+#include "io/output_file.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail::hdf5 {

@@ -118,7 +118,7 @@ void check_room_for_metadata(hid_t id, const std::filesystem::path& file, const 
 void check_room_for_data(const std::filesystem::path& file, unsigned long long bytes, const std::string& where,
                          const std::string& what);
 
-// Test hook (PISCO_TEST_FAULT=write-fail:NAME, core/output_file.hpp): when `target` is the file to
+// Test hook (PISCO_TEST_FAULT=write-fail:NAME, io/output_file.hpp): when `target` is the file to
 // fail, the descriptor of `file`, just created, is made to refer to /dev/full.
 void inject_write_fault(hid_t file, const std::filesystem::path& target);
 

@@ -9,7 +9,7 @@
 #include <string>
 #include <system_error>
 
-#include "core/output_file.hpp"
+#include "io/output_file.hpp"
 #include "io/hdf5.hpp"
 #include "pisco/error.hpp"
 

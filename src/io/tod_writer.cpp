@@ -11,7 +11,7 @@
 #include <set>
 #include <system_error>
 
-#include "core/output_file.hpp"
+#include "io/output_file.hpp"
 #include "core/text.hpp"
 
 #include "io/hdf5.hpp"

@@ -19,7 +19,7 @@
 #include "core/disc.hpp"
 #include "core/frame.hpp"
 #include "core/plate.hpp"
-#include "core/thread_pool.hpp"
+#include "cpu/thread_pool.hpp"
 #include "simd/simd_kernel.hpp"
 
 namespace pisco::detail {
@@ -227,11 +227,11 @@ BackendEntry simd_backend_entry() {
               BackendInfo info{"simd", true,
                                "Highway " + k.description + " on " + std::to_string(hardware_threads()) +
                                    " hardware threads",
-                               {}};
+                               {}, {}};
               info.capabilities.worker_threads = true;
               return info;
             } catch (const Error& e) {
-              return BackendInfo{"simd", false, e.what(), {}};
+              return BackendInfo{"simd", false, e.what(), {}, {}};
             }
           },
           [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {

@@ -5,7 +5,7 @@
 #include <cstring>
 #include <utility>
 
-#include "core/device_choice.hpp"
+#include "gpu/device_choice.hpp"
 #include "vulkan/check.hpp"
 #include "interface.h"
 

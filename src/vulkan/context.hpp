@@ -64,7 +64,7 @@ struct DeviceInfo {
 
 std::vector<DeviceInfo> enumerate_devices(const Instance& instance);
 
-// The device named by `selector`, by the rule of core/device_choice.hpp: "auto" (a usable discrete GPU
+// The device named by `selector`, by the rule of gpu/device_choice.hpp: "auto" (a usable discrete GPU
 // first, then integrated, virtual and cpu devices), an index into enumerate_devices(), or a
 // case-insensitive part of the device's name. Throws pisco::Error naming the selector and listing the
 // devices when none fits.

@@ -15,7 +15,7 @@
 #include "convolve.spv.h"
 #include "convolve_ff.spv.h"
 #include "core/backend.hpp"
-#include "core/streaming.hpp"
+#include "gpu/streaming.hpp"
 #include "pisco/quaternion.hpp"
 #include "interface.h"
 #include "vulkan/buffer.hpp"
@@ -463,17 +463,17 @@ BackendEntry vulkan_backend_entry() {
                                    devices.empty() ? "no Vulkan device was found (for a CPU device, install "
                                                      "mesa-vulkan-drivers)"
                                                    : "no usable Vulkan device: " + unusable.substr(0, unusable.size() - 2),
-                                   {}};
+                                   {}, {}};
               const vk::DeviceInfo chosen = vk::choose_device(devices, "auto");
               const std::string pick = chosen.describe();
               std::string detail = usable + unusable;
-              BackendInfo info{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")", {}};
+              BackendInfo info{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")", {}, {}};
               for (const auto& d : devices)
                 if (d.unusable.empty() && d.type == chosen.type) info.devices.push_back(d.index);
               info.capabilities.device_memory = chosen.device_memory;
               return info;
             } catch (const Error& e) {
-              return BackendInfo{"vulkan", false, e.what(), {}};
+              return BackendInfo{"vulkan", false, e.what(), {}, {}};
             }
           },
           [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {

@@ -1,4 +1,4 @@
-#include "core/fits_table.hpp"
+#include "io/fits_table.hpp"
 
 #include <unistd.h>
 
@@ -11,7 +11,7 @@
 
 #include <error_handling.h>
 
-#include "core/output_file.hpp"
+#include "io/output_file.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
 

@@ -1,4 +1,4 @@
-#include "core/thread_pool.hpp"
+#include "cpu/thread_pool.hpp"
 
 #include <algorithm>
 

@@ -1,4 +1,4 @@
-#include "core/device_choice.hpp"
+#include "gpu/device_choice.hpp"
 
 #include <algorithm>
 #include <cctype>

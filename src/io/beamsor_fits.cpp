@@ -17,7 +17,7 @@
 // All three fall as the square of the pixel size: a file should sample the beam's smallest feature
 // (s) with NSIDE >= 1 / (s sqrt(3e-3)) for an axis error below 1e-3.
 
-// The table goes through CFITSIO directly (core/fits_table.hpp; the same layout HEALPix C++ and
+// The table goes through CFITSIO directly (io/fits_table.hpp; the same layout HEALPix C++ and
 // healpy use), so that every failure is one pisco::Error naming the file; HEALPix C++ supplies the
 // pixel geometry.
 #include <fitsio.h>
@@ -36,7 +36,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
-#include "core/fits_table.hpp"
+#include "io/fits_table.hpp"
 #include "core/text.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/healpix_map.hpp"
@@ -46,7 +46,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-using namespace detail;  // core/fits_table.hpp
+using namespace detail;  // io/fits_table.hpp
 
 constexpr double pi = std::numbers::pi;
 constexpr const char* stokes_letters = "TQUV";

@@ -1,4 +1,4 @@
-#include "core/output_file.hpp"
+#include "io/output_file.hpp"
 
 #include <fcntl.h>
 #include <sys/mman.h>

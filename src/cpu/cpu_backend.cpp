@@ -11,7 +11,7 @@
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
 #include "core/frame.hpp"
-#include "core/thread_pool.hpp"
+#include "cpu/thread_pool.hpp"
 #include "core/plate.hpp"
 
 namespace pisco::detail {
@@ -143,7 +143,7 @@ BackendEntry cpu_backend_entry() {
                              "float64 reference on " +
                                  std::to_string(std::max(1u, std::thread::hardware_concurrency())) +
                                  " hardware threads",
-                             {}};
+                             {}, {}};
             info.capabilities.float64 = true;
             info.capabilities.worker_threads = true;
             return info;

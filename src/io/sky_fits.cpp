@@ -3,7 +3,7 @@
 // The files follow the layout HEALPix C++ and healpy write and read: an empty primary HDU, then a
 // binary table with one column per Stokes map and the keys NSIDE, ORDERING, POLCCONV, ... Pixel
 // geometry (NESTED to RING) comes from HEALPix C++. The table itself goes through CFITSIO directly
-// (core/fits_table.hpp), so that every failure becomes one pisco::Error naming the file.
+// (io/fits_table.hpp), so that every failure becomes one pisco::Error naming the file.
 #include <fitsio.h>
 
 #include <algorithm>
@@ -17,7 +17,7 @@
 
 #include <healpix_base.h>
 
-#include "core/fits_table.hpp"
+#include "io/fits_table.hpp"
 #include "core/text.hpp"
 #include "pisco/sky.hpp"
 #include "pisco/healpix_map.hpp"
@@ -27,7 +27,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-using namespace detail;  // core/fits_table.hpp
+using namespace detail;  // io/fits_table.hpp
 
 constexpr const char* expected_layout =
     "expected a full-sky HEALPix map: a FITS binary table with 1 (I), 3 (I Q U) or 4 (I Q U V) "
