@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/frame.hpp"
 #include "core/prepared.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
@@ -38,6 +39,18 @@ struct PointingInput {
     return p;
   }
 };
+
+// Sample i's antenna frame for detector `det` (its offset applied, frame.hpp), from either pointing
+// form, and its line of sight's theta and phi: the host backends' per-sample start.
+inline SampleFrame<double> detector_frame(const PointingInput& in, std::size_t i, const PreparedDetector& det,
+                                          double& theta, double& phi) {
+  if (in.quaternions) {
+    const Quat& q = in.quats.quats[i];
+    return quat_sample({q.x, q.y, q.z, q.w}, det.offset, det.cos_zeta, det.sin_zeta, theta, phi);
+  }
+  return angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta, det.sin_zeta,
+                      theta, phi);
+}
 
 class Backend {
  public:

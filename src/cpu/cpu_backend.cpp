@@ -80,12 +80,7 @@ PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const do
   double m[16];
   for (std::size_t i = begin; i < end; ++i) {
     double theta = 0.0, phi = 0.0;
-    const SampleFrame<double> f =
-        in.quaternions
-            ? quat_sample({in.quats.quats[i].x, in.quats.quats[i].y, in.quats.quats[i].z, in.quats.quats[i].w},
-                          det.offset, det.cos_zeta, det.sin_zeta, theta, phi)
-            : angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta,
-                           det.sin_zeta, theta, phi);
+    const SampleFrame<double> f = detector_frame(in, i, det, theta, phi);
     double d;
     if (plate) {
       plate_matrix(det, in.plate_angle[i], m);

@@ -181,12 +181,7 @@ class SimdBackend final : public Backend {
     double m[16];
     for (std::size_t i = begin; i < end; ++i) {
       double theta = 0.0, phi = 0.0;
-      const SampleFrame<double> f =
-          in.quaternions
-              ? quat_sample({in.quats.quats[i].x, in.quats.quats[i].y, in.quats.quats[i].z, in.quats.quats[i].w},
-                            det.offset, det.cos_zeta, det.sin_zeta, theta, phi)
-              : angle_sample(in.angles.theta[i], in.angles.phi[i], in.angles.psi[i], det.offset, det.cos_zeta,
-                             det.sin_zeta, theta, phi);
+      const SampleFrame<double> f = detector_frame(in, i, det, theta, phi);
       if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * in.plate_angle[i]), std::sin(2 * in.plate_angle[i]), m);
       const std::size_t n = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, theta, phi,
                                               det.rho_max, det.cos_rho_max, ranges);
