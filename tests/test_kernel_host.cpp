@@ -338,8 +338,6 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
     glm::vec3 v(u(rng), u(rng), u(rng));
     return v / std::sqrt(glm::dot(v, v));
   };
-  auto same3 = [](const glm::vec3& a, const d::Vec3<float>& b) { return glsl::vec3(b.x, b.y, b.z) == a; };
-  (void)same3;
   // A beam grid of n x n nodes with 4 weights each, as the shaders' texels (COLUMNS 4 and 2) and as
   // the reference's array.
   const int n = 9;

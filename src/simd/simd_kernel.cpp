@@ -229,17 +229,16 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   f.phi_p = broadcast(fd.phi_p);
   f.p = broadcast(fd.p);
   f.e_c = broadcast(fd.e_c);
-  F m[16];
+  Vec4<F> mcols[4];  // Plate: the columns of M(theta) in float32, and its column 0 in float64
   double col0[4] = {1.0, 0.0, 0.0, 0.0};
   if constexpr (Plate) {
-    for (int k = 0; k < 16; ++k) m[k] = F(float(in.plate[k]));
-    for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
+    const double* m = in.plate;
+    for (int c = 0; c < 4; ++c)
+      mcols[c] = {F(float(m[c])), F(float(m[4 + c])), F(float(m[8 + c])), F(float(m[12 + c]))};
+    for (int a = 0; a < 4; ++a) col0[a] = m[4 * a];
   }
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step)};
-  Vec4<F> mcols[4];  // Plate: the columns of M(theta)
-  if constexpr (Plate)
-    for (int c = 0; c < 4; ++c) mcols[c] = {m[c], m[4 + c], m[8 + c], m[12 + c]};
   const VF zero = hn::Zero(df);
 
   F sum(zero), carry(zero);
@@ -250,14 +249,14 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   // interpolate_weights with T = double, the weights from its own tables), in vectors of N / 2
   // doubles; the branches of the interpolation become masks. Sums are kept per lane.
 #if HWY_TARGET == HWY_SCALAR
+  const detail::ArrayGrid<double> weights{det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
+  const detail::ArrayGrid<double> norm_weights{det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
   auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) {
     for (std::size_t l = 0; l < count; ++l) {
       const detail::Vec3<double> kd{sky.vx[p + l], sky.vy[p + l], sky.vz[p + l]};
       const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
       xs[l] = float(x);
       ys[l] = float(y);
-      const detail::ArrayGrid<double> weights{det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
-      const detail::ArrayGrid<double> norm_weights{det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
       const detail::Vec4<double> w =
           Radial ? detail::interpolate_radial(weights, x * x + y * y) : detail::interpolate_weights(weights, x, y);
       if (in.monopole)
