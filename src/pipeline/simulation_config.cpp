@@ -192,6 +192,15 @@ double parse_utc(Table& t, const std::string& key, const std::string& text) {
 
 // [scan] type = "satellite": a spinning, precessing spacecraft (pisco::SatelliteScan; every key is
 // checked here so that its error names it).
+// The samples of a scan of duration_hours at `sample_rate` (Hz): at least one, at most 1e15.
+std::size_t scan_samples(Table& t, double sample_rate) {
+  const double hours = t.positive("duration_hours", 1.0);
+  const double samples = std::round(hours * 3600 * sample_rate);
+  if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
+  if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
+  return static_cast<std::size_t>(samples);
+}
+
 void read_satellite(Table& t, ScanConfig& s) {
   pisco::SatelliteScan& c = s.satellite;
   auto angle = [&](const std::string& key, double fallback, bool open_interval) {
@@ -218,11 +227,7 @@ void read_satellite(Table& t, ScanConfig& s) {
   c.frame = frame == "ecliptic"     ? pisco::SatelliteScan::Frame::ecliptic
             : frame == "equatorial" ? pisco::SatelliteScan::Frame::equatorial
                                     : pisco::SatelliteScan::Frame::galactic;
-  const double hours = t.positive("duration_hours", 1.0);
-  const double samples = std::round(hours * 3600 * c.sample_rate);
-  if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
-  if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
-  c.samples = static_cast<std::size_t>(samples);
+  c.samples = scan_samples(t, c.sample_rate);
   s.nside = t.nside("nside", 64);  // the maps' default NSIDE
   // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
   if (const auto p = c.time_problem()) {
@@ -261,11 +266,7 @@ ScanConfig read_scan(Table t) {
     c.az_speed = t.positive("az_speed_deg_s", 1.0) * deg;
     c.sample_rate = t.positive("sample_rate_hz", 20.0);
     c.start_unix = parse_utc(t, "start", t.string("start", "2019-06-01T00:00:00Z"));
-    const double hours = t.positive("duration_hours", 1.0);
-    const double samples = std::round(hours * 3600 * c.sample_rate);
-    if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
-    if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
-    c.samples = static_cast<std::size_t>(samples);
+    c.samples = scan_samples(t, c.sample_rate);
     c.boresight_angles.clear();
     for (double b : t.numbers("boresight_deg", {0.0})) c.boresight_angles.push_back(b * deg);
     c.boresight_period = t.positive("boresight_period_hours", 24.0, 3600);
