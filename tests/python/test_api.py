@@ -770,8 +770,9 @@ def test_simulation_runs_a_file_as_pisco_vk_does(tmp_path):
     assert sorted(os.listdir(tmp_path / "lib")) == sorted(names)
 
     # Against the command line of the same build, where there is one.
-    exe = os.path.join(os.environ.get("PISCO_TEST_BUILD", ""), "tools", "pisco-vk")
-    if os.path.exists(exe):
+    build = os.environ.get("PISCO_TEST_BUILD")
+    exe = os.path.join(build, "tools", "pisco-vk") if build else ""
+    if exe and os.path.isfile(exe) and os.access(exe, os.X_OK):
         subprocess.run([exe, "run", str(path), "-q", "--no-plots", "-o", str(tmp_path / "cli")], check=True)
         for f in names[1:]:
             assert (tmp_path / "cli" / f).read_bytes() == (tmp_path / "lib" / f).read_bytes(), f
