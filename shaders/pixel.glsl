@@ -146,6 +146,19 @@ PISCO_FN PISCO_REAL stokes_response(PISCO_IN(PISCO_V4) w, PISCO_REAL cos2chi, PI
   return w.x * S.x + w.y * (S.y * cos2chi + S.z * sin2chi) + w.z * (S.z * cos2chi - S.y * sin2chi) + w.w * S.w;
 }
 
+// The transpose of stokes_response: its gradient with respect to S = (I, Q, U, V), the weights with
+// which the adjoint scatters a sample's value onto the pixel's Stokes parameters (docs/physics.md,
+// "The adjoint"): stokes_response(w, c, s, S) = dot(stokes_adjoint(w, c, s), S).
+PISCO_TEMPLATE
+PISCO_FN PISCO_V4 stokes_adjoint(PISCO_IN(PISCO_V4) w, PISCO_REAL cos2chi, PISCO_REAL sin2chi) {
+  PISCO_V4 g;
+  g.x = w.x;
+  g.y = w.y * cos2chi - w.z * sin2chi;
+  g.z = w.y * sin2chi + w.z * cos2chi;
+  g.w = w.w;
+  return g;
+}
+
 // The same with w_U = w_V = 0 (detectors without a plate whose beams have no U, V rows).
 PISCO_TEMPLATE
 PISCO_FN PISCO_REAL stokes_response_iq(PISCO_IN(PISCO_V4) w, PISCO_REAL cos2chi, PISCO_REAL sin2chi,

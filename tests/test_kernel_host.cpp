@@ -397,6 +397,16 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
               bits(d::stokes_response(wc, pc.cos2chi, pc.sin2chi, Sc)));
     ASSERT_EQ(bits(glsl::stokes_response_iq(w, pg.cos2chi, pg.sin2chi, S)),
               bits(d::stokes_response_iq(wc, pc.cos2chi, pc.sin2chi, Sc)));
+    {  // the adjoint's scatter weights: the same bits, and the transpose of the response
+      const glm::vec4 ag = glsl::stokes_adjoint(w, pg.cos2chi, pg.sin2chi);
+      const d::Vec4<float> ac = d::stokes_adjoint(wc, pc.cos2chi, pc.sin2chi);
+      const float am[4] = {ac.x, ac.y, ac.z, ac.w};
+      for (int m = 0; m < 4; ++m) ASSERT_EQ(bits(ag[m]), bits(am[m])) << "stokes_adjoint, case " << t;
+      const d::Vec4<double> wd{w.x, w.y, w.z, w.w}, Sd{S.x, S.y, S.z, S.w};
+      const d::Vec4<double> ad = d::stokes_adjoint(wd, double(pc.cos2chi), double(pc.sin2chi));
+      const double forward = d::stokes_response(wd, double(pc.cos2chi), double(pc.sin2chi), Sd);
+      ASSERT_NEAR(ad.x * Sd.x + ad.y * Sd.y + ad.z * Sd.z + ad.w * Sd.w, forward, 1e-14) << "case " << t;
+    }
     glm::vec4 col[4];
     d::Vec4<float> colc[4];
     for (int c = 0; c < 4; ++c) {

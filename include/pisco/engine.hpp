@@ -58,7 +58,7 @@ struct BackendCapabilities {
   bool float64 = false;         // every operation in float64 (the reference); else float32 pixel sums
                                 // with float64 where it decides (docs/physics.md, "Device backends")
   bool plates = true;           // half-wave plates, at the aperture and between optics and detector
-  bool adjoint = false;         // the transpose of convolve (not yet in any backend)
+  bool adjoint = false;         // the transpose of convolve: Engine::adjoint
   bool worker_threads = false;  // runs its own host threads: EngineOptions::threads applies
   std::uint64_t device_memory = 0;  // bytes of memory of the device "auto" picks; 0: the host's memory
 };
@@ -72,6 +72,12 @@ struct BackendInfo {
   // one node (pisco-vk under MPI) share them out: process k takes devices[k % devices.size()].
   std::vector<std::size_t> devices;
   BackendCapabilities capabilities;  // meaningful where available
+};
+
+// Four writable maps at the engine's NSIDE (RING order) that Engine::take_adjoint adds into. V may
+// be empty: its part is then dropped.
+struct StokesMaps {
+  std::span<double> I, Q, U, V;
 };
 
 namespace detail {
@@ -133,6 +139,23 @@ class Engine {
   void wait(std::uint64_t ticket);
   void wait();
 
+  // The adjoint (docs/physics.md, "The adjoint"): convolve is a linear map A from the sky (I, Q, U,
+  // V at the engine's NSIDE) to a detector's TOD; adjoint() adds A^T tod, the transpose of the same
+  // map (offsets, plates, normalization, the polar copy and cap-boundary weights, split beams
+  // included), into the engine's own accumulated maps, and take_adjoint() adds those into `maps` and
+  // clears them. <s, A^T d> = <A s, d> to rounding. The sky the engine was made with plays no part.
+  // The order of the detectors and chunks given to adjoint() does not change the result beyond
+  // rounding, and the same calls give the same bits. Waits for every submission first. Throws
+  // pisco::Error of kind unavailable where the backend has no adjoint (capabilities().adjoint), and
+  // of kind input for bad arguments (as convolve; a TOD sample that is not finite is one).
+  void adjoint(std::size_t detector, const PointingView& boresight, std::span<const double> tod,
+               std::span<const double> hwp_angle = {});
+  void adjoint(std::size_t detector, const QuatPointingView& boresight, std::span<const double> tod,
+               std::span<const double> hwp_angle = {});
+  // maps.I, Q, U (and V unless empty) must have npix() samples each.
+  void take_adjoint(const StokesMaps& maps);
+  std::size_t npix() const noexcept;
+
   std::string backend_name() const;
   std::string device_name() const;
   const FocalPlane& focal_plane() const noexcept { return focal_plane_; }
@@ -169,6 +192,14 @@ class Engine {
   std::uint64_t submit_view(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
                             std::span<const double> hwp_angle);
   void finish_pending(std::uint64_t ticket);
+  template <class View>
+  void adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
+                    std::span<const double> hwp_angle);
+  // Checks a submission's arguments; fills plate_angle (hwp_angle - gamma) for a detector with a plate.
+  template <class View>
+  void check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
+                        std::span<const double> hwp_angle, std::vector<double>& plate_angle) const;
+  void make_polar_backend();
 
   // Work the engine itself completes when a submission is done (plates between the optics and the
   // detector: the combination of their row detectors), and the check that its TOD is finite.
@@ -199,6 +230,10 @@ class Engine {
   std::unique_ptr<detail::Backend> polar_backend_;
   std::vector<double> polar_cut_, offset_angle_;  // per prepared detector (row detectors included)
   std::uint64_t polar_ticket_ = 1, polar_samples_ = 0;
+  // Which backends hold adjoint maps not yet taken.
+  bool adjoint_main_ = false, adjoint_outer_ = false, adjoint_polar_ = false;
+  bool weighs_boundaries_ = false;
+  int outer_band_ = 0;  // the split beams' band limit l_pass
 };
 
 }  // namespace pisco

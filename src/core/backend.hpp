@@ -2,6 +2,7 @@
 // turns pointing chunks into TOD. Backends register themselves in backend_registry().
 #pragma once
 
+#include <array>
 #include <functional>
 #include <memory>
 #include <span>
@@ -66,6 +67,15 @@ class Backend {
   // evaluated. On an error, every pending submission is abandoned and the error names the
   // detector and samples of the submission that failed.
   virtual std::uint64_t wait(std::uint64_t ticket) = 0;
+
+  // The adjoint (docs/physics.md, "The adjoint"): adds A^T tod, the transpose of submit()'s map for
+  // `detector` (the pointing as submit() takes it, tod.size() samples), into the backend's own four
+  // accumulated maps (I, Q, U, V at the sky's NSIDE, RING). Completes before it returns; the caller
+  // has waited for every submission first. Returns the number of sky pixels evaluated. A backend
+  // without it (BackendCapabilities::adjoint false) throws ErrorKind::unavailable.
+  virtual std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod);
+  // Adds the accumulated maps into maps[0..3] (npix each) and clears them.
+  virtual void take_adjoint(const std::array<std::span<double>, 4>& maps);
 };
 
 struct BackendEntry {

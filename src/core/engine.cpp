@@ -34,6 +34,12 @@ const std::vector<BackendEntry>& backend_registry() {
   return registry;
 }
 
+std::uint64_t Backend::adjoint(std::size_t detector, const PointingInput&, std::span<const double>) {
+  throw SubmissionError(detector, "the " + name() + " backend has no adjoint", ErrorKind::unavailable);
+}
+
+void Backend::take_adjoint(const std::array<std::span<double>, 4>&) {}
+
 namespace {
 const BackendEntry& choose_backend(const std::string& name) {
   const auto& reg = backend_registry();
@@ -94,7 +100,8 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
   // for the set-up only.
   Sky weighted(detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_));
   zeroed.reset();
-  if (weighs_cap_boundaries(options)) detail::weigh_cap_boundaries(weighted);
+  weighs_boundaries_ = weighs_cap_boundaries(options);
+  if (weighs_boundaries_) detail::weigh_cap_boundaries(weighted);
   inputs_ = prepared(weighted, beams, focal_plane, options);
   backend_ = entry.create(inputs_, weighted, options);
 
@@ -137,7 +144,8 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
   for (const Beamsor& b : beams) outer.push_back(b.sidelobes() ? *b.sidelobes() : *placeholder);
   split_.resize(focal_plane.size());
   for (std::size_t d = 0; d < focal_plane.size(); ++d) split_[d] = beams.at(focal_plane[d].beam).sidelobes() != nullptr;
-  Sky coarse = detail::band_limited_sky(sky, outer_nside_, std::min(band, 2 * outer_nside_));
+  outer_band_ = std::min(band, 2 * outer_nside_);
+  Sky coarse = detail::band_limited_sky(sky, outer_nside_, outer_band_);
   if (weighs_cap_boundaries(options)) detail::weigh_cap_boundaries(coarse);
   outer_inputs_ = prepared(coarse, outer, focal_plane, options);
   outer_backend_ = entry.create(outer_inputs_, coarse, options);
@@ -170,49 +178,61 @@ detail::PointingInput input_of(const QuatPointingView& v) { return {{}, v, true,
 }  // namespace
 
 template <class View>
-std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
-                                  bool accumulate, std::span<const double> hwp_angle) {
+void Engine::check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
+                              std::span<const double> hwp_angle, std::vector<double>& plate_angle) const {
+  const std::string op = what;
   if (detector >= focal_plane_.size())
-    throw Error("convolve: detector index " + std::to_string(detector) + " but the focal plane has " +
+    throw Error(op + ": detector index " + std::to_string(detector) + " but the focal plane has " +
                 std::to_string(focal_plane_.size()) + " detectors");
   const std::string& name = focal_plane_[detector].name;
-  if (tod.size() != boresight.size())
-    throw Error("convolve: the TOD buffer of detector '" + name + "' has " + std::to_string(tod.size()) +
+  if (tod_size != boresight.size())
+    throw Error(op + ": the TOD buffer of detector '" + name + "' has " + std::to_string(tod_size) +
                 " samples but the pointing has " + std::to_string(boresight.size()));
   check_pointing(boresight, ("pointing of detector '" + name + "'").c_str());
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   const bool plate = det.plate != detail::PreparedDetector::Plate::none;
-  if (plate && hwp_angle.size() != tod.size())
-    throw Error("convolve: detector '" + name + "' has a half-wave plate: expected " + std::to_string(tod.size()) +
+  if (plate && hwp_angle.size() != tod_size)
+    throw Error(op + ": detector '" + name + "' has a half-wave plate: expected " + std::to_string(tod_size) +
                 " plate angles (hwp_angle), got " + std::to_string(hwp_angle.size()));
   if (!plate && !hwp_angle.empty())
-    throw Error("convolve: detector '" + name + "' has no half-wave plate, but plate angles (hwp_angle) were given");
+    throw Error(op + ": detector '" + name + "' has no half-wave plate, but plate angles (hwp_angle) were given");
+  if (plate) {
+    plate_angle.resize(tod_size);
+    for (std::size_t i = 0; i < tod_size; ++i) {
+      if (!std::isfinite(hwp_angle[i]))
+        throw Error(op + ": detector '" + name + "': plate angle (hwp_angle) of sample " + std::to_string(i) +
+                    " is not finite");
+      plate_angle[i] = hwp_angle[i] - det.plate_gamma;
+    }
+  }
+}
+
+void Engine::make_polar_backend() {
+  if (polar_backend_) return;
+  const Sky copy = detail::polar_sky(*polar_source_, weighs_cap_boundaries(options_));
+  polar_backend_ = entry_->create(inputs_, copy, options_);
+  polar_source_.reset();
+}
+
+template <class View>
+std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
+                                  bool accumulate, std::span<const double> hwp_angle) {
+  auto pending = std::make_unique<Pending>();
+  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle);
+  const std::string& name = focal_plane_[detector].name;
+  const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   if (accumulate)
     for (std::size_t i = 0; i < tod.size(); ++i)
       if (!std::isfinite(tod[i]))
         throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
                     " at sample " + std::to_string(i) + "; the TOD added to must be finite");
-  auto pending = std::make_unique<Pending>();
-  if (plate) {
-    pending->plate_angle.resize(tod.size());
-    for (std::size_t i = 0; i < tod.size(); ++i) {
-      if (!std::isfinite(hwp_angle[i]))
-        throw Error("convolve: detector '" + name + "': plate angle (hwp_angle) of sample " + std::to_string(i) +
-                    " is not finite");
-      pending->plate_angle[i] = hwp_angle[i] - det.plate_gamma;
-    }
-  }
   detail::PointingInput input = input_of(boresight);
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = pending->plate_angle;
   std::uint64_t ticket = 0;
   const bool split = !split_.empty() && split_[detector];
   const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
                                                                 polar_cut_.at(detector), pending->polar);
-  if (polar && !polar_backend_) {
-    const Sky copy = detail::polar_sky(*polar_source_, weighs_cap_boundaries(options_));
-    polar_backend_ = entry_->create(inputs_, copy, options_);
-    polar_source_.reset();
-  }
+  if (polar) make_polar_backend();
   try {
     if (det.plate == detail::PreparedDetector::Plate::detector) {
       // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
@@ -370,6 +390,130 @@ void Engine::convolve(std::size_t detector, const PointingView& boresight, std::
 void Engine::convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
                       bool accumulate, std::span<const double> hwp_angle) {
   wait(submit(detector, boresight, tod, accumulate, hwp_angle));
+}
+
+// The adjoint of submit_view, term by term (docs/physics.md, "The adjoint"): A = A_main W_cb on the
+// samples away from the poles, A_main C on those near them (C the polar copy, whose own cap-boundary
+// weights are inside it), plus A_outer W_cb B for a split beam's outer part (B the band-limited coarse
+// sky), and a plate between the optics and the detector combines four row detectors with per-sample
+// coefficients. The backends scatter each part into their own maps; take_adjoint applies the
+// transposes of W_cb, C and B.
+template <class View>
+void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
+                          std::span<const double> hwp_angle) {
+  std::vector<double> plate_angle;
+  check_submission("adjoint", detector, boresight, tod.size(), hwp_angle, plate_angle);
+  const std::string& name = focal_plane_[detector].name;
+  for (std::size_t i = 0; i < tod.size(); ++i)
+    if (!std::isfinite(tod[i]))
+      throw Error("adjoint: detector '" + name + "': TOD sample " + std::to_string(i) + " is " +
+                  detail::number_text(tod[i]) + "; the adjoint needs finite values");
+  wait();
+  const detail::PreparedDetector& det = inputs_->detectors.at(detector);
+  detail::PointingInput input = input_of(boresight);
+  if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
+  const bool split = !split_.empty() && split_[detector];
+  detail::PolarSamples polar_samples;
+  const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
+                                                                polar_cut_.at(detector), polar_samples);
+  if (polar) make_polar_backend();
+  // The TOD of each row detector (or of the detector itself): d, or d times the plate's coefficient.
+  std::array<std::vector<double>, 4> rows;
+  std::vector<std::size_t> targets;
+  if (det.plate == detail::PreparedDetector::Plate::detector) {
+    Mueller m0{};
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) m0[i][j] = det.plate_mueller[i][j];
+    for (int b = 0; b < 4; ++b) rows[b].resize(tod.size());
+    for (std::size_t i = 0; i < tod.size(); ++i) {
+      const Mueller m = rotated_mueller(m0, plate_angle[i]);
+      for (int b = 0; b < 4; ++b) rows[b][i] = (det.d0[0] * m[0][b] + det.d0[1] * m[1][b]) * tod[i];
+    }
+    targets.assign(det.rows, det.rows + 4);
+  } else {
+    rows[0].assign(tod.begin(), tod.end());
+    targets.push_back(detector);
+  }
+  try {
+    for (std::size_t r = 0; r < targets.size(); ++r) {
+      const std::vector<double>& d = rows[r];
+      if (split) {
+        pixels_ += outer_backend_->adjoint(targets[r], input, d);
+        adjoint_outer_ = true;
+      }
+      if (polar) {
+        std::vector<double> near(polar_samples.index.size()), away = d;
+        for (std::size_t k = 0; k < near.size(); ++k) {
+          near[k] = d[polar_samples.index[k]];
+          away[polar_samples.index[k]] = 0.0;
+        }
+        pixels_ += polar_backend_->adjoint(targets[r], polar_samples.input(), near);
+        adjoint_polar_ = true;
+        pixels_ += backend_->adjoint(targets[r], input, away);
+      } else {
+        pixels_ += backend_->adjoint(targets[r], input, d);
+      }
+      adjoint_main_ = true;
+    }
+  } catch (const detail::SubmissionError& e) {
+    throw Error("adjoint of detector '" + name + "': " + e.what(), e.kind());
+  } catch (const Error& e) {
+    throw Error("adjoint of detector '" + name + "': " + e.what(), e.kind());
+  }
+  samples_ += tod.size();
+}
+
+void Engine::adjoint(std::size_t detector, const PointingView& boresight, std::span<const double> tod,
+                     std::span<const double> hwp_angle) {
+  adjoint_view(detector, boresight, tod, hwp_angle);
+}
+
+void Engine::adjoint(std::size_t detector, const QuatPointingView& boresight, std::span<const double> tod,
+                     std::span<const double> hwp_angle) {
+  adjoint_view(detector, boresight, tod, hwp_angle);
+}
+
+std::size_t Engine::npix() const noexcept { return inputs_->sky.npix; }
+
+void Engine::take_adjoint(const StokesMaps& maps) {
+  const std::size_t n = npix();
+  for (const auto& [m, label] : {std::pair{maps.I, "I"}, {maps.Q, "Q"}, {maps.U, "U"}})
+    if (m.size() != n)
+      throw Error(std::string("take_adjoint: the ") + label + " map has " + std::to_string(m.size()) +
+                  " pixels; the engine's NSIDE " + std::to_string(inputs_->sky.nside) + " has " + std::to_string(n));
+  if (!maps.V.empty() && maps.V.size() != n)
+    throw Error("take_adjoint: the V map has " + std::to_string(maps.V.size()) + " pixels; expected " +
+                std::to_string(n) + " or none");
+  const int nside = inputs_->sky.nside;
+  const auto add = [&](const SkyView& part) {
+    const std::array<std::span<double>, 4> out{maps.I, maps.Q, maps.U, maps.V};
+    for (int c = 0; c < 4; ++c)
+      if (!out[c].empty())
+        for (std::size_t p = 0; p < n; ++p) out[c][p] += part.stokes(StokesIndex(c))[p];
+  };
+  // Each part on its own maps, then through the transpose of what the forward did to the sky.
+  const auto collect = [&](detail::Backend& b, int part_nside) {
+    Sky part(part_nside);
+    b.take_adjoint({part.I(), part.Q(), part.U(), part.V()});
+    return part;
+  };
+  if (adjoint_main_) {
+    Sky part = collect(*backend_, nside);
+    if (weighs_boundaries_) detail::weigh_cap_boundaries(part);
+    add(part);
+    adjoint_main_ = false;
+  }
+  if (adjoint_polar_) {
+    const Sky part = collect(*polar_backend_, nside);
+    add(detail::polar_sky_adjoint(part, weighs_cap_boundaries(options_)));
+    adjoint_polar_ = false;
+  }
+  if (adjoint_outer_) {
+    Sky part = collect(*outer_backend_, outer_nside_);
+    if (weighs_boundaries_) detail::weigh_cap_boundaries(part);
+    add(detail::band_limited_sky_adjoint(part, nside, outer_band_));
+    adjoint_outer_ = false;
+  }
 }
 
 std::string Engine::backend_name() const { return backend_->name(); }

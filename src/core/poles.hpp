@@ -42,6 +42,9 @@ int polar_band_limit(int nside);
 // map2alm (`iterations` Jacobi iterations, HEALPix's ring weights where healpy-data has them) up to
 // polar_band_limit, rotate_alm and alm2map; its own cap-boundary rings weighted when `weigh_boundaries`.
 Sky polar_sky(const SkyView& sky, bool weigh_boundaries, int iterations = 3);
+// Its transpose (docs/physics.md, "The adjoint"): maps on the polar copy's pixels back onto the sky's,
+// so that <polar_sky(s), m> = <s, polar_sky_adjoint(m)> to rounding.
+Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, int iterations = 3);
 
 // The angle from a pole within which a detector's samples go to the polar copy: its disc radius plus
 // four pixel sizes, so that no ring within four of the pole meets the disc of a sample left on the

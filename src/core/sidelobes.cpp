@@ -30,25 +30,45 @@ int sidelobe_nside(const std::vector<Beamsor>& beams, int sky_nside) {
   return std::min(nside, sky_nside);
 }
 
+namespace {
+// The window: 1 up to l_pass, a half cosine down to 0 at l_stop.
+void apply_window(SkyAlm& a, int l_pass, int l_stop) {
+  const int lmax = a.t.Lmax();
+  std::vector<double> window(static_cast<std::size_t>(lmax) + 1, 0.0);
+  for (int l = 0; l <= lmax; ++l) {
+    if (l <= l_pass) window[static_cast<std::size_t>(l)] = 1.0;
+    else if (l < l_stop) window[static_cast<std::size_t>(l)] = 0.5 * (1 + std::cos(std::numbers::pi * (l - l_pass) / double(l_stop - l_pass)));
+  }
+  for (int m = 0; m <= lmax; ++m)
+    for (int l = m; l <= lmax; ++l) {
+      const double w = window[static_cast<std::size_t>(l)];
+      a.t(l, m) *= w;
+      a.e(l, m) *= w;
+      a.b(l, m) *= w;
+      a.v(l, m) *= w;
+    }
+}
+}  // namespace
+
+Sky band_limited_sky_adjoint(const SkyView& maps, int sky_nside, int l_pass) {
+  if (maps.nside() == sky_nside) return Sky(maps);
+  const int l_stop = std::min(2 * maps.nside(), 3 * sky_nside - 1);
+  try {
+    SkyAlm a = sky_from_alm_adjoint(maps, l_stop);
+    apply_window(a, l_pass, l_stop);
+    return sky_alm_adjoint(a, sky_nside, 3, false, maps.units());
+  } catch (const PlanckError& err) {
+    throw Error(std::string("the adjoint of the sidelobes' band-limited sky: HEALPix: ") + err.what());
+  }
+}
+
 Sky band_limited_sky(const SkyView& sky, int nside, int l_pass) {
   if (nside == sky.nside()) return Sky(sky);
   const int l_stop = std::min(2 * nside, 3 * sky.nside() - 1);
   const int lmax = l_stop;
   try {
     SkyAlm a = sky_alm(sky, lmax, 3, false);
-    std::vector<double> window(static_cast<std::size_t>(lmax) + 1, 0.0);
-    for (int l = 0; l <= lmax; ++l) {
-      if (l <= l_pass) window[static_cast<std::size_t>(l)] = 1.0;
-      else if (l < l_stop) window[static_cast<std::size_t>(l)] = 0.5 * (1 + std::cos(std::numbers::pi * (l - l_pass) / double(l_stop - l_pass)));
-    }
-    for (int m = 0; m <= lmax; ++m)
-      for (int l = m; l <= lmax; ++l) {
-        const double w = window[static_cast<std::size_t>(l)];
-        a.t(l, m) *= w;
-        a.e(l, m) *= w;
-        a.b(l, m) *= w;
-        a.v(l, m) *= w;
-      }
+    apply_window(a, l_pass, l_stop);
     return sky_from_alm(a, nside, sky.units());
   } catch (const PlanckError& err) {
     throw Error(std::string("the sidelobes' band-limited sky: HEALPix: ") + err.what());

@@ -19,5 +19,7 @@ int sidelobe_nside(const std::vector<Beamsor>& beams, int sky_nside);
 // that is 1 up to l_pass and falls as a half cosine to 0 at l_stop, synthesized at `nside`. The sky
 // itself when nside is its own NSIDE.
 Sky band_limited_sky(const SkyView& sky, int nside, int l_pass);
+// Its transpose (docs/physics.md, "The adjoint"): maps at `nside` back onto the sky's `sky_nside`.
+Sky band_limited_sky_adjoint(const SkyView& maps, int sky_nside, int l_pass);
 
 }  // namespace pisco::detail

@@ -16,10 +16,9 @@ Healpix_Map<double> healpix_map(std::span<const double> v, int nside) {
 }
 
 void copy_map(const Healpix_Map<double>& m, std::span<double> out) { std::copy(&m[0], &m[0] + m.Npix(), out.begin()); }
-}  // namespace
 
-SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights) {
-  const int nside = sky.nside();
+// map2alm's ring weights (1 per ring of the northern half and the equator).
+arr<double> map2alm_weights(int nside, bool ring_weights) {
   arr<double> weight(static_cast<tsize>(2 * nside), 1.0);
   if (ring_weights) {
     // Each iteration is about 20 times more accurate with them: 3 recover a sky band-limited to
@@ -32,6 +31,13 @@ SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights) 
       weight.fill(1.0);
     }
   }
+  return weight;
+}
+}  // namespace
+
+SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights) {
+  const int nside = sky.nside();
+  const arr<double> weight = map2alm_weights(nside, ring_weights);
   SkyAlm a{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, false};
   map2alm_pol_iter(healpix_map(sky.I(), nside), healpix_map(sky.Q(), nside), healpix_map(sky.U(), nside), a.t, a.e,
                    a.b, iterations, weight);
@@ -52,6 +58,70 @@ Sky sky_from_alm(const SkyAlm& a, int nside, const std::string& units) {
     alm2map(a.v, v);
     copy_map(v, out.V());
   }
+  return out;
+}
+
+namespace {
+using AlmD = Alm<xcomplex<double>>;
+
+// D: each pixel times its ring's weight and 4 pi / Npix (map2alm's quadrature).
+void weigh_quadrature(Healpix_Map<double>& m, const arr<double>& weight) {
+  const int nside = m.Nside();
+  const double area = 4.0 * 3.14159265358979323846 / double(m.Npix());
+  for (int p = 0; p < m.Npix(); ++p) {
+    const int ring = m.pix2ring(p);
+    const int r = ring <= 2 * nside ? ring - 1 : 4 * nside - ring - 1;
+    m[p] *= weight[static_cast<tsize>(r)] * area;
+  }
+}
+
+void axpy(AlmD& y, double a, const AlmD& x) {
+  for (int m = 0; m <= y.Mmax(); ++m)
+    for (int l = m; l <= y.Lmax(); ++l) y(l, m) += a * x(l, m);
+}
+}  // namespace
+
+SkyAlm sky_from_alm_adjoint(const SkyView& maps, int lmax) {
+  const int nside = maps.nside();
+  SkyAlm a{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, true};
+  alm2map_pol_adjoint(healpix_map(maps.I(), nside), healpix_map(maps.Q(), nside), healpix_map(maps.U(), nside), a.t,
+                      a.e, a.b);
+  alm2map_adjoint(healpix_map(maps.V(), nside), a.v);
+  return a;
+}
+
+Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weights, const std::string& units) {
+  const arr<double> weight = map2alm_weights(nside, ring_weights);
+  const int lmax = b.t.Lmax();
+  // s = sum_j (1 - Y^T D Y)^j b, term by term: t <- t - Y^T D Y t.
+  SkyAlm t = b, s = b;
+  Healpix_Map<double> mt(nside, RING, SET_NSIDE), mq(nside, RING, SET_NSIDE), mu(nside, RING, SET_NSIDE),
+      mv(nside, RING, SET_NSIDE);
+  for (int j = 0; j < iterations; ++j) {
+    alm2map_pol(t.t, t.e, t.b, mt, mq, mu);
+    alm2map(t.v, mv);
+    for (Healpix_Map<double>* m : {&mt, &mq, &mu, &mv}) weigh_quadrature(*m, weight);
+    SkyAlm y{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, true};
+    alm2map_pol_adjoint(mt, mq, mu, y.t, y.e, y.b);
+    alm2map_adjoint(mv, y.v);
+    axpy(t.t, -1.0, y.t);
+    axpy(t.e, -1.0, y.e);
+    axpy(t.b, -1.0, y.b);
+    axpy(t.v, -1.0, y.v);
+    axpy(s.t, 1.0, t.t);
+    axpy(s.e, 1.0, t.e);
+    axpy(s.b, 1.0, t.b);
+    axpy(s.v, 1.0, t.v);
+  }
+  // D Y s.
+  alm2map_pol(s.t, s.e, s.b, mt, mq, mu);
+  alm2map(s.v, mv);
+  for (Healpix_Map<double>* m : {&mt, &mq, &mu, &mv}) weigh_quadrature(*m, weight);
+  Sky out(nside, units);
+  copy_map(mt, out.I());
+  copy_map(mq, out.Q());
+  copy_map(mu, out.U());
+  copy_map(mv, out.V());
   return out;
 }
 

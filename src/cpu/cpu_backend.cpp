@@ -1,6 +1,7 @@
 // The float64 reference backend: one sample per task, the disc walked ring by ring, every pixel
 // through the per-pixel arithmetic of shaders/pixel.glsl (core/contribution.hpp). Straightforward by
 // design: it is the ground truth of every test.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <memory>
@@ -95,6 +96,85 @@ PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const do
   return count;
 }
 
+// The adjoint of one sample (docs/physics.md, "The adjoint"): d times each pixel's weights, the
+// transpose of stokes_response, added onto the pixels of its disc that lie in [lo, hi) (acc: 4
+// doubles a pixel). With the per-sample normalization, d is divided by the sample's own norm first.
+template <bool Radial, bool Plate>
+inline void scatter_sample(const PreparedSky& sky, const double* pixels, const PreparedDetector& det,
+                           const SampleFrame<double>& f, double theta, double phi, const double* plate, double d,
+                           std::uint32_t lo, std::uint32_t hi, double* acc, std::uint64_t& count) {
+  const ArrayGrid<double> grid{det.weights.data(), det.grid_n, det.grid_a, det.grid_inv_step};
+  Vec4<double> m[4];
+  if constexpr (Plate)
+    for (int c = 0; c < 4; ++c) m[c] = {plate[c], plate[4 + c], plate[8 + c], plate[12 + c]};
+  for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
+                      [&](std::uint32_t begin, std::uint32_t end) {
+                        begin = std::max(begin, lo);
+                        end = std::min(end, hi);
+                        if (begin >= end) return;
+                        count += end - begin;
+                        for (std::uint32_t p = begin; p < end; ++p) {
+                          const double* px = &pixels[std::size_t(p) * 8];
+                          const PixelGeometry<double> g = pixel_geometry(f, Vec3<double>{px[0], px[1], px[2]});
+                          Vec4<double> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
+                          if constexpr (Plate) w = effective_weights(w, m[0], m[1], m[2], m[3]);
+                          const Vec4<double> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
+                          double* out = &acc[std::size_t(p) * 4];
+                          out[0] += d * a.x;
+                          out[1] += d * a.y;
+                          out[2] += d * a.z;
+                          out[3] += d * a.w;
+                        }
+                      });
+}
+
+// The per-sample normalization's divisor of each sample (sample() with a unit-free sky of zeros).
+template <bool Radial>
+double sample_norm(const PreparedSky& sky, const double* pixels, const PreparedDetector& det,
+                   const SampleFrame<double>& f, double theta, double phi) {
+  const ArrayGrid<double> norm_grid{det.norm_weights.data(), det.grid_n, det.grid_a, det.grid_inv_step};
+  double norm = 0.0;
+  for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
+                      [&](std::uint32_t begin, std::uint32_t end) {
+                        for (std::uint32_t p = begin; p < end; ++p) {
+                          const double* px = &pixels[std::size_t(p) * 8];
+                          const PixelGeometry<double> g = pixel_geometry(f, Vec3<double>{px[0], px[1], px[2]});
+                          norm += (Radial ? interpolate_radial(norm_grid, g.r2) : interpolate_weights(norm_grid, g.x, g.y)).x;
+                        }
+                      });
+  return norm;
+}
+
+// Samples [0, n) scattered onto the pixels [lo, hi) of the rings [ring_lo, ring_hi) (1-based, as
+// disc_rings counts them): each pixel receives its samples in sample order, whichever thread owns it,
+// so that the result does not depend on the number of threads.
+PISCO_CPU_CLONES std::uint64_t scatter_samples(const PreparedSky& sky, const double* pixels, const PreparedDetector& det,
+                                               const PointingInput& in, const double* tod, const double* norms,
+                                               double theta_lo, double theta_hi, std::uint32_t lo, std::uint32_t hi,
+                                               double* acc) {
+  std::uint64_t count = 0;
+  const bool plate = det.plate == PreparedDetector::Plate::aperture;
+  double m[16];
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    double d = tod[i];
+    if (norms) d = norms[i] > 0 ? d / norms[i] : 0.0;
+    if (d == 0.0) continue;
+    double theta = 0.0, phi = 0.0;
+    const SampleFrame<double> f = detector_frame(in, i, det, theta, phi);
+    if (theta + det.rho_max < theta_lo || theta - det.rho_max > theta_hi) continue;  // the disc misses the slice
+    if (plate) {
+      plate_matrix(det, in.plate_angle[i], m);
+      if (det.radial) scatter_sample<true, true>(sky, pixels, det, f, theta, phi, m, d, lo, hi, acc, count);
+      else scatter_sample<false, true>(sky, pixels, det, f, theta, phi, m, d, lo, hi, acc, count);
+    } else if (det.radial) {
+      scatter_sample<true, false>(sky, pixels, det, f, theta, phi, nullptr, d, lo, hi, acc, count);
+    } else {
+      scatter_sample<false, false>(sky, pixels, det, f, theta, phi, nullptr, d, lo, hi, acc, count);
+    }
+  }
+  return count;
+}
+
 class CpuBackend final : public Backend {
  public:
   CpuBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, unsigned threads)
@@ -121,7 +201,83 @@ class CpuBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
+  // Each thread owns a slice of whole rings (equal pixel counts) and scatters every sample onto its
+  // own pixels only: no two threads write one pixel, and each pixel sums its samples in order.
+  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod) override {
+    const PreparedDetector& det = in_->detectors.at(detector);
+    const PreparedSky& sky = in_->sky;
+    if (adjoint_.empty()) adjoint_.assign(sky.npix * 4, 0.0);
+    std::vector<double> norms;
+    if (in_->normalization == Normalization::per_sample) {
+      norms.resize(tod.size());
+      pool_.parallel_for(tod.size(), 64, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) {
+          double theta = 0.0, phi = 0.0;
+          const SampleFrame<double> f = detector_frame(pointing, i, det, theta, phi);
+          norms[i] = det.radial ? sample_norm<true>(sky, pixels_.data(), det, f, theta, phi)
+                                : sample_norm<false>(sky, pixels_.data(), det, f, theta, phi);
+        }
+      });
+    }
+    const std::vector<Slice>& slices = ring_slices();
+    std::atomic<std::uint64_t> pixels{0};
+    pool_.parallel_for(slices.size(), 1, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k < end; ++k) {
+        const Slice& s = slices[k];
+        pixels += scatter_samples(sky, pixels_.data(), det, pointing, tod.data(), norms.empty() ? nullptr : norms.data(),
+                                  s.theta_lo, s.theta_hi, s.lo, s.hi, adjoint_.data());
+      }
+    });
+    return pixels;
+  }
+
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override {
+    if (adjoint_.empty()) return;
+    for (int c = 0; c < 4; ++c)
+      if (!maps[c].empty())
+        for (std::size_t p = 0; p < in_->sky.npix; ++p) maps[c][p] += adjoint_[4 * p + std::size_t(c)];
+    adjoint_.clear();
+    adjoint_.shrink_to_fit();
+  }
+
  private:
+  // A slice of whole rings [lo, hi) in pixels, and the colatitudes of its first and last rings.
+  struct Slice {
+    std::uint32_t lo, hi;
+    double theta_lo, theta_hi;
+  };
+  const std::vector<Slice>& ring_slices() {
+    if (!slices_.empty()) return slices_;
+    const PreparedSky& sky = in_->sky;
+    const std::size_t wanted = std::size_t(pool_.size()) * 8;
+    const std::size_t per = std::max<std::size_t>(1, sky.npix / wanted);
+    Slice s{0, 0, 0.0, 0.0};
+    bool open = false;
+    for (const RingEntry& r : sky.rings) {
+      const double theta = std::acos(std::clamp(r.z, -1.0, 1.0));
+      if (!open) {
+        s = {r.first, r.first, theta, theta};
+        open = true;
+      }
+      s.hi = r.first + r.count;
+      s.theta_hi = theta;
+      if (s.hi - s.lo >= per) {
+        slices_.push_back(s);
+        open = false;
+      }
+    }
+    if (open) slices_.push_back(s);
+    // Margins: a pixel centre on a slice's edge ring is within rho of the axis only if its colatitude
+    // is; 1e-9 rad covers the rounding of acos.
+    for (Slice& x : slices_) {
+      x.theta_lo -= 1e-9;
+      x.theta_hi += 1e-9;
+    }
+    return slices_;
+  }
+
+  std::vector<double> adjoint_;  // 4 doubles a pixel: I, Q, U, V
+  std::vector<Slice> slices_;
   std::shared_ptr<const EngineInputs> in_;
   ThreadPool pool_;
   std::vector<double> pixels_;  // reference_pixels(): 8 doubles a pixel
@@ -141,6 +297,7 @@ BackendEntry cpu_backend_entry() {
                              {}, {}};
             info.capabilities.float64 = true;
             info.capabilities.worker_threads = true;
+            info.capabilities.adjoint = true;
             return info;
           },
           [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {

@@ -1,0 +1,317 @@
+// The adjoint (docs/physics.md, "The adjoint"; docs/validation.md, "M"): Engine::adjoint is the exact
+// transpose of convolve, tested as ducc0 tests its own operators, <s, A^T d> = <A s, d>, on random
+// skies with a monopole and a dipole, beams with cross-polar terms, detector offsets, both half-wave
+// plate placements, pointing across both poles as angles and as quaternions, both normalizations and
+// both quadratures; against a brute-force transpose (A^T d)_k = <A e_k, d> with one-pixel skies; and
+// across backends.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include "backend_fixtures.hpp"
+#include "pisco/engine.hpp"
+#include "pisco/error.hpp"
+#include "pisco/quaternion.hpp"
+#include "support.hpp"
+
+namespace {
+
+using pisco::deg;
+constexpr double pi = std::numbers::pi;
+
+// A random sky: white noise on I, Q, U, V, on a monopole and a dipole.
+pisco::Sky random_sky(int nside, std::uint64_t seed) {
+  pisco::Sky sky = pisco_test::cmb_like_sky(nside, seed, 2.725);
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  std::mt19937_64 rng(seed + 1);
+  std::normal_distribution<double> g(0, 1);
+  for (std::size_t p = 0; p < sky.npix(); ++p) {
+    const pointing a = base.pix2ang(int(p));
+    sky.I()[p] += 3e-3 * std::cos(a.theta) + 1e-6 * g(rng);
+    sky.Q()[p] += 1e-6 * g(rng);
+    sky.U()[p] += 1e-6 * g(rng);
+    sky.V()[p] += 1e-7 * g(rng);
+  }
+  return sky;
+}
+
+// The backend scene's detectors, with offsets, and two more behind a generic plate (one at the
+// aperture, one between the optics and the detector), both off the boresight.
+pisco_test::Scene adjoint_scene(int nside) {
+  pisco_test::Scene s = pisco_test::backend_scene(nside);
+  s.sky = random_sky(nside, 11);
+  pisco::FocalPlane fp;
+  for (std::size_t d = 0; d < s.focal_plane.size(); ++d) {
+    pisco::Detector det = s.focal_plane[d];
+    det.set_offset(0.02 * double(d), -0.015 * double(d), 0.3 * double(d));
+    fp.add(det);
+  }
+  for (const pisco::HwpPlacement placement : {pisco::HwpPlacement::aperture, pisco::HwpPlacement::detector}) {
+    pisco::Detector det{placement == pisco::HwpPlacement::aperture ? "plate_aperture" : "plate_detector",
+                        15 * deg, 0.01, 1.0, 0};
+    det.set_offset(-0.03, 0.02, 0.4);
+    det.hwp = pisco::HalfWavePlate{pisco_test::generic_plate(), placement, 0.2};
+    fp.add(det);
+  }
+  s.focal_plane = fp;
+  return s;
+}
+
+std::vector<double> gaussian_tod(std::size_t n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g(0, 1);
+  std::vector<double> d(n);
+  for (double& x : d) x = g(rng);
+  return d;
+}
+
+std::vector<double> plate_angles(std::size_t n) {
+  std::vector<double> h(n);
+  for (std::size_t i = 0; i < n; ++i) h[i] = 0.37 * double(i);
+  return h;
+}
+
+double dot(std::span<const double> a, std::span<const double> b) {
+  double s = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) s += a[i] * b[i];
+  return s;
+}
+
+double norm(std::span<const double> a) { return std::sqrt(dot(a, a)); }
+
+struct DotTest {
+  double forward = 0, adjoint = 0;  // <A s, d> and <s, A^T d>
+  double scale = 0;                 // ||A s|| ||d||, the size of either side for unrelated vectors
+  double relative() const { return std::abs(forward - adjoint) / scale; }
+};
+
+// <A s, d> and <s, A^T d> over every detector of `scene` on one engine: angles for even detectors,
+// quaternions for odd ones.
+DotTest dot_test(const pisco_test::Scene& scene, const pisco::EngineOptions& options, const pisco::Pointing& p) {
+  pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, options);
+  std::vector<pisco::Quat> quats;
+  for (std::size_t i = 0; i < p.size(); ++i) quats.push_back(pisco::quat_from_pointing(p.theta[i], p.phi[i], p.psi[i]));
+  const std::vector<double> h = plate_angles(p.size());
+  DotTest t;
+  double tod_norm2 = 0, d_norm2 = 0;
+  for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
+    const bool plate = scene.focal_plane[det].hwp.has_value();
+    const std::span<const double> angles = plate ? std::span<const double>(h) : std::span<const double>();
+    const std::vector<double> d = gaussian_tod(p.size(), 100 + det);
+    std::vector<double> tod(p.size());
+    if (det % 2 == 0) {
+      engine.convolve(det, p.view(), tod, false, angles);
+      engine.adjoint(det, p.view(), d, angles);
+    } else {
+      engine.convolve(det, pisco::QuatPointingView{quats}, tod, false, angles);
+      engine.adjoint(det, pisco::QuatPointingView{quats}, d, angles);
+    }
+    t.forward += dot(tod, d);
+    tod_norm2 += dot(tod, tod);
+    d_norm2 += dot(d, d);
+  }
+  pisco::Sky back(scene.sky.nside());
+  engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+  for (int c = 0; c < 4; ++c)
+    t.adjoint += dot(scene.sky.stokes(pisco::StokesIndex(c)), back.stokes(pisco::StokesIndex(c)));
+  t.scale = std::sqrt(tod_norm2 * d_norm2);
+  return t;
+}
+
+class Adjoint : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override {
+    const std::string why = pisco_test::backend_unavailable(GetParam());
+    if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
+    for (const pisco::BackendInfo& b : pisco::Engine::backends())
+      if (b.name == GetParam() && !b.capabilities.adjoint)
+        GTEST_SKIP() << GetParam() << ": this backend has no adjoint yet (BackendCapabilities::adjoint is false)";
+  }
+  // The bar of <s, A^T d> = <A s, d>: float64 rounding on the reference, float32 elsewhere.
+  double bar() const { return GetParam() == "cpu" ? 1e-12 : 1e-5; }
+};
+
+// <s, A^T d> = <A s, d> on every detector kind, both pointing forms, both normalizations and both
+// quadratures (the corrected one sums the samples near the poles on the sky's polar copy).
+TEST_P(Adjoint, DotProductIdentity) {
+  const pisco_test::Scene scene = adjoint_scene(16);
+  const pisco::Pointing p = pisco_test::random_pointing(600, 5);
+  for (const pisco::Normalization n : {pisco::Normalization::integral, pisco::Normalization::per_sample})
+    for (const pisco::Quadrature q : {pisco::Quadrature::corrected, pisco::Quadrature::plain}) {
+      pisco::EngineOptions o;
+      o.backend = GetParam();
+      o.normalization = n;
+      o.quadrature = q;
+      o.threads = 2;
+      const DotTest t = dot_test(scene, o, p);
+      std::cout << GetParam() << (n == pisco::Normalization::integral ? ", integral" : ", per-sample")
+                << (q == pisco::Quadrature::corrected ? ", corrected" : ", plain") << ": <As,d> = " << t.forward
+                << ", <s,A^T d> = " << t.adjoint << ", difference / (||As|| ||d||) = " << t.relative() << "\n";
+      EXPECT_LT(t.relative(), bar());
+      EXPECT_GT(std::abs(t.forward), 1e-3 * t.scale);  // the test is not comparing two zeros
+    }
+}
+
+// A split beam (docs/beams.md, "Sidelobes"): the outer part on the band-limited coarse sky, whose
+// transpose the engine applies too.
+TEST_P(Adjoint, DotProductIdentityWithSidelobes) {
+  const auto ring_beam = [](double rho, double) {
+    const double s = 2.0 * deg / std::sqrt(8 * std::log(2.0)), sr = 3.0 * deg / std::sqrt(8 * std::log(2.0));
+    const double b = std::exp(-rho * rho / (2 * s * s)) + 1e-2 * std::exp(-std::pow(rho - 10 * deg, 2) / (2 * sr * sr));
+    return pisco::Beamsor::stokes_mueller(b, 0.9 * b, 0.05 * b, 0.0);
+  };
+  pisco::SidelobeSplit split;
+  split.rho_main = 6 * deg;
+  pisco_test::Scene scene{random_sky(32, 3), {}, {}};
+  scene.beams.push_back(pisco::Beamsor::from_field(ring_beam, 16 * deg, 0.2 * deg, "ring", 0.0, false, split));
+  ASSERT_NE(scene.beams[0].sidelobes(), nullptr);
+  scene.focal_plane.add_pair("pair", 10 * deg, 0, 0);
+  pisco::EngineOptions o;
+  o.backend = GetParam();
+  o.threads = 2;
+  const DotTest t = dot_test(scene, o, pisco_test::random_pointing(300, 8));
+  std::cout << GetParam() << ", split beam: difference / (||As|| ||d||) = " << t.relative() << "\n";
+  EXPECT_LT(t.relative(), bar());
+}
+
+// (A^T d)_k = <A e_k, d>: the adjoint at a pixel against convolutions of a sky that is 1 in that
+// pixel's Stokes parameter and 0 elsewhere, at a pixel next to the north pole, one on a cap-boundary
+// ring and one near the equator, with samples whose discs cover them.
+TEST_P(Adjoint, MatchesTheTransposeColumnByColumn) {
+  const int nside = 16;
+  const pisco_test::Scene scene = adjoint_scene(nside);
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  const std::vector<int> pixels{1, 2 * nside * (nside - 1) + 5, 6 * nside * nside + 3};
+  pisco::Pointing p;
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (const int k : pixels) {
+    const pointing c = base.pix2ang(k);
+    for (int j = 0; j < 40; ++j)
+      p.push_back(std::clamp(c.theta + 3 * deg * u(rng), 0.0, pi), c.phi + 3 * deg * u(rng), pi * u(rng));
+  }
+  const std::vector<double> h = plate_angles(p.size());
+  pisco::EngineOptions o;
+  o.backend = GetParam();
+  o.threads = 2;
+  // A^T d over every detector.
+  pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
+  std::vector<std::vector<double>> d;
+  for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
+    d.push_back(gaussian_tod(p.size(), 7 + det));
+    engine.adjoint(det, p.view(), d.back(), scene.focal_plane[det].hwp ? std::span<const double>(h) : std::span<const double>());
+  }
+  pisco::Sky back(nside);
+  engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+  double largest = 0;
+  for (int c = 0; c < 4; ++c)
+    for (double x : back.stokes(pisco::StokesIndex(c))) largest = std::max(largest, std::abs(x));
+  for (const int k : pixels)
+    for (int c = 0; c < 4; ++c) {
+      pisco::Sky e(nside);
+      e.stokes(pisco::StokesIndex(c))[std::size_t(k)] = 1.0;
+      pisco::Engine column(e, scene.beams, scene.focal_plane, o);
+      double want = 0;
+      for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
+        std::vector<double> tod(p.size());
+        column.convolve(det, p.view(), tod, false,
+                        scene.focal_plane[det].hwp ? std::span<const double>(h) : std::span<const double>());
+        want += dot(tod, d[det]);
+      }
+      const double got = back.stokes(pisco::StokesIndex(c))[std::size_t(k)];
+      EXPECT_NEAR(got, want, bar() * largest) << "pixel " << k << ", Stokes " << "IQUV"[c];
+      if (c < 3) EXPECT_GT(std::abs(want), 1e-3 * largest) << "pixel " << k << " is not covered";
+    }
+}
+
+// The same calls give the same bits whatever the number of threads; chunking the TOD differently
+// changes only the order in which a plate's four row detectors meet in a pixel (rounding).
+TEST_P(Adjoint, DeterministicAcrossThreadsAndChunks) {
+  const pisco_test::Scene scene = adjoint_scene(16);
+  const pisco::Pointing p = pisco_test::random_pointing(400, 9);
+  const std::vector<double> h = plate_angles(p.size());
+  const auto run = [&](unsigned threads, std::size_t chunk) {
+    pisco::EngineOptions o;
+    o.backend = GetParam();
+    o.threads = threads;
+    pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
+    for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
+      const std::vector<double> d = gaussian_tod(p.size(), det);
+      for (std::size_t first = 0; first < p.size(); first += chunk) {
+        const std::size_t n = std::min(chunk, p.size() - first);
+        engine.adjoint(det, p.view().subspan(first, n), std::span<const double>(d).subspan(first, n),
+                       scene.focal_plane[det].hwp ? std::span<const double>(h).subspan(first, n)
+                                                  : std::span<const double>());
+      }
+    }
+    pisco::Sky back(16);
+    engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+    return back;
+  };
+  double largest = 0;
+  const pisco::Sky one = run(1, p.size());
+  for (int c = 0; c < 4; ++c)
+    for (double x : one.stokes(pisco::StokesIndex(c))) largest = std::max(largest, std::abs(x));
+  for (const auto& [threads, chunk] : {std::pair{2u, p.size()}, {3u, p.size()}, {1u, std::size_t(37)}, {2u, std::size_t(1)}}) {
+    const pisco::Sky other = run(threads, chunk);
+    for (int c = 0; c < 4; ++c)
+      for (std::size_t k = 0; k < one.npix(); ++k) {
+        const double a = one.stokes(pisco::StokesIndex(c))[k], b = other.stokes(pisco::StokesIndex(c))[k];
+        if (chunk == p.size()) ASSERT_EQ(a, b) << threads << " threads, pixel " << k;
+        else ASSERT_NEAR(a, b, 1e-14 * largest) << threads << " threads, chunks of " << chunk << ", pixel " << k;
+      }
+  }
+}
+
+// The adjoint maps are added into the caller's and the engine's are cleared; V may be left out.
+TEST_P(Adjoint, TakeAddsAndClears) {
+  const pisco_test::Scene scene = adjoint_scene(8);
+  const pisco::Pointing p = pisco_test::random_pointing(50, 2);
+  pisco::EngineOptions o;
+  o.backend = GetParam();
+  pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
+  const std::vector<double> d = gaussian_tod(p.size(), 1);
+  engine.adjoint(2, p.view(), d);
+  pisco::Sky first(8);
+  engine.take_adjoint({first.I(), first.Q(), first.U(), first.V()});
+  engine.adjoint(2, p.view(), d);
+  pisco::Sky twice(first);
+  engine.take_adjoint({twice.I(), twice.Q(), twice.U(), {}});
+  double largest = 0;
+  for (double x : first.I()) largest = std::max(largest, std::abs(x));
+  ASSERT_GT(largest, 0.0);
+  for (std::size_t k = 0; k < first.npix(); ++k) {
+    ASSERT_NEAR(twice.I()[k], 2 * first.I()[k], 1e-15 * largest);
+    ASSERT_EQ(twice.V()[k], first.V()[k]);
+  }
+  pisco::Sky none(8);
+  engine.take_adjoint({none.I(), none.Q(), none.U(), none.V()});
+  for (double x : none.I()) ASSERT_EQ(x, 0.0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, Adjoint, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+                         [](const auto& info) { return info.param; });
+
+TEST(AdjointErrors, BadArgumentsNameTheProblem) {
+  const pisco_test::Scene scene = adjoint_scene(8);
+  pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane);
+  const pisco::Pointing p = pisco_test::random_pointing(10, 1);
+  std::vector<double> d(10, 1.0);
+  pisco_test::expect_error([&] { engine.adjoint(99, p.view(), d); }, "detector index 99");
+  pisco_test::expect_error([&] { engine.adjoint(0, p.view(), std::span<const double>(d).first(5)); },
+                           "has 5 samples but the pointing has 10");
+  d[3] = NAN;
+  pisco_test::expect_error([&] { engine.adjoint(0, p.view(), d); }, "TOD sample 3 is nan");
+  d[3] = 1.0;
+  pisco_test::expect_error([&] { engine.adjoint(5, p.view(), d); }, "has a half-wave plate");
+  std::vector<double> small(10);
+  pisco::Sky back(8);
+  pisco_test::expect_error([&] { engine.take_adjoint({small, back.Q(), back.U(), back.V()}); },
+                           "the I map has 10 pixels; the engine's NSIDE 8 has 768");
+  EXPECT_EQ(pisco_test::kind_of([&] { engine.take_adjoint({back.I(), back.Q(), back.U(), small}); }),
+            pisco::ErrorKind::input);
+}
+
+}  // namespace
