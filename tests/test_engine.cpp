@@ -409,7 +409,9 @@ TEST(Engine, BackendsReportCapabilities) {
       fp.add({"d", 0.0, 0.0, 1.0, 0});
       pisco::EngineOptions o;
       o.backend = b.name;
-      pisco::Engine engine(sky, {pisco::Beamsor::gaussian(10 * pisco::deg)}, fp, o);
+      pisco::BeamOptions wide;
+      wide.rho_max = 30 * pisco::deg;
+      pisco::Engine engine(sky, {pisco::Beamsor::gaussian(10 * pisco::deg, wide)}, fp, o);
       pisco::Pointing p;
       p.push_back(1.0, 2.0, 0.5);
       const std::vector<double> d{1.0};
