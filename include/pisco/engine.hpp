@@ -154,6 +154,11 @@ class Engine {
                std::span<const double> hwp_angle = {});
   // maps.I, Q, U (and V unless empty) must have npix() samples each.
   void take_adjoint(const StokesMaps& maps);
+  // Replaces the sky, keeping the beams, the detectors and the options: what an iterative solver
+  // (DeconvolvingMapmaker) does between iterations. The same NSIDE; waits for every submission; the
+  // adjoint maps must have been taken. Costs what the constructor's sky set-up costs (the backend's
+  // copy of the pixels; the polar copy and a split beam's coarse sky when they are used).
+  void set_sky(const SkyView& sky);
   std::size_t npix() const noexcept;
 
   std::string backend_name() const;
@@ -200,6 +205,7 @@ class Engine {
   void check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
                         std::span<const double> hwp_angle, std::vector<double>& plate_angle) const;
   void make_polar_backend();
+  void load_sky(const SkyView& sky, const std::vector<Beamsor>* beams);
 
   // Work the engine itself completes when a submission is done (plates between the optics and the
   // detector: the combination of their row detectors), and the check that its TOD is finite.

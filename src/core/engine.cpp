@@ -93,19 +93,44 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
     : focal_plane_(focal_plane) {
   detail::check_engine_options(options);
   check_focal_plane(focal_plane, beams.size());  // before the sky's set-up, which takes time
-  const detail::BackendEntry& entry = detail::choose_backend(options.backend);
+  entry_ = &detail::choose_backend(options.backend);
+  options_ = options;
+  weighs_boundaries_ = weighs_cap_boundaries(options);
+  load_sky(sky, &beams);
+}
+
+void Engine::set_sky(const SkyView& sky) {
+  if (sky.nside() != inputs_->sky.nside)
+    throw Error("set_sky: the sky has NSIDE " + std::to_string(sky.nside()) + "; the engine was made for NSIDE " +
+                std::to_string(inputs_->sky.nside));
+  wait();
+  if (adjoint_main_ || adjoint_outer_ || adjoint_polar_)
+    throw Error("set_sky: the engine holds adjoint maps not yet taken; call take_adjoint first");
+  load_sky(sky, nullptr);
+}
+
+// Everything the engine makes from the sky; `beams` on the first call (from the constructor) only,
+// which also prepares the detectors (their weights do not depend on the sky's values).
+void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
+  const detail::BackendEntry& entry = *entry_;
+  const EngineOptions& options = options_;
   // A masked sky: the backends get a copy with its UNSEEN pixels 0, for the set-up only (masked_sky.hpp).
   std::optional<Sky> zeroed;
   // The backends get a copy with the rings where the polar caps meet the belt weighted (poles.hpp),
   // for the set-up only.
   Sky weighted(detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_));
   zeroed.reset();
-  weighs_boundaries_ = weighs_cap_boundaries(options);
   if (weighs_boundaries_) detail::weigh_cap_boundaries(weighted);
-  inputs_ = prepared(weighted, beams, focal_plane, options);
+  if (beams) inputs_ = prepared(weighted, *beams, focal_plane_, options);
+  else weighted.check_finite("sky");
+  backend_.reset();  // a device holds one sky at a time
   backend_ = entry.create(inputs_, weighted, options);
 
   // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator.
+  polar_backend_.reset();
+  polar_source_.reset();
+  polar_cut_.clear();
+  offset_angle_.clear();
   if (options.quadrature == Quadrature::corrected && unseen_pixels_ == 0) {
     bool any = false;
     for (const detail::PreparedDetector& d : inputs_->detectors) {
@@ -115,39 +140,40 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
       any = any || polar_cut_.back() > 0.0;
     }
     // Made when a submission first has such a sample (a ground scan far from the poles never pays
-    // for it): until then the engine keeps a copy of the sky, and how to make the backend. The
-    // detectors and the ring table are the main backend's.
-    if (any) {
-      polar_source_ = std::make_unique<Sky>(sky);
-      entry_ = &entry;
-      options_ = options;
-    }
+    // for it): until then the engine keeps a copy of the sky. The detectors and the ring table are
+    // the main backend's.
+    if (any) polar_source_ = std::make_unique<Sky>(sky);
   }
 
   // Split beams: their outer parts on a band-limited copy of the sky at a coarser NSIDE.
-  outer_nside_ = detail::sidelobe_nside(beams, sky.nside());
+  std::vector<Beamsor> outer;
+  if (beams) {
+    outer_nside_ = detail::sidelobe_nside(*beams, sky.nside());
+    if (outer_nside_ == 0) return;
+    if (options.normalization != Normalization::integral)
+      throw Error("engine: beams split into a main part and sidelobes need the integral normalization; a per-sample "
+                  "normalization would divide each part by its own sum");
+    int band = 0;
+    const Beamsor* placeholder = nullptr;
+    for (const Beamsor& b : *beams)
+      if (b.sidelobes()) {
+        band = std::max(band, b.sidelobe_band_limit());
+        if (!placeholder) placeholder = b.sidelobes();
+      }
+    for (const Beamsor& b : *beams) outer.push_back(b.sidelobes() ? *b.sidelobes() : *placeholder);
+    split_.resize(focal_plane_.size());
+    for (std::size_t d = 0; d < focal_plane_.size(); ++d)
+      split_[d] = (*beams).at(focal_plane_[d].beam).sidelobes() != nullptr;
+    outer_band_ = std::min(band, 2 * outer_nside_);
+  }
   if (outer_nside_ == 0) return;
-  if (options.normalization != Normalization::integral)
-    throw Error("engine: beams split into a main part and sidelobes need the integral normalization; a per-sample "
-                "normalization would divide each part by its own sum");
   if (options.unseen != UnseenPolicy::error && unseen_pixels_ > 0)
     throw Error("engine: the sky has UNSEEN pixels, which a band-limited copy for the beams' sidelobes cannot hold; "
                 "fill the mask or do not split the beams");
-  int band = 0;
-  const Beamsor* placeholder = nullptr;
-  for (const Beamsor& b : beams)
-    if (b.sidelobes()) {
-      band = std::max(band, b.sidelobe_band_limit());
-      if (!placeholder) placeholder = b.sidelobes();
-    }
-  std::vector<Beamsor> outer;
-  for (const Beamsor& b : beams) outer.push_back(b.sidelobes() ? *b.sidelobes() : *placeholder);
-  split_.resize(focal_plane.size());
-  for (std::size_t d = 0; d < focal_plane.size(); ++d) split_[d] = beams.at(focal_plane[d].beam).sidelobes() != nullptr;
-  outer_band_ = std::min(band, 2 * outer_nside_);
   Sky coarse = detail::band_limited_sky(sky, outer_nside_, outer_band_);
-  if (weighs_cap_boundaries(options)) detail::weigh_cap_boundaries(coarse);
-  outer_inputs_ = prepared(coarse, outer, focal_plane, options);
+  if (weighs_boundaries_) detail::weigh_cap_boundaries(coarse);
+  if (beams) outer_inputs_ = prepared(coarse, outer, focal_plane_, options);
+  outer_backend_.reset();
   outer_backend_ = entry.create(outer_inputs_, coarse, options);
 }
 
