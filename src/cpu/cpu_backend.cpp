@@ -12,6 +12,7 @@
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
 #include "core/frame.hpp"
+#include "cpu/ring_slices.hpp"
 #include "cpu/thread_pool.hpp"
 #include "core/plate.hpp"
 
@@ -145,13 +146,11 @@ double sample_norm(const PreparedSky& sky, const double* pixels, const PreparedD
   return norm;
 }
 
-// Samples [0, n) scattered onto the pixels [lo, hi) of the rings [ring_lo, ring_hi) (1-based, as
-// disc_rings counts them): each pixel receives its samples in sample order, whichever thread owns it,
-// so that the result does not depend on the number of threads.
+// Samples [0, n) scattered onto the pixels of one slice of rings (cpu/ring_slices.hpp).
 PISCO_CPU_CLONES std::uint64_t scatter_samples(const PreparedSky& sky, const double* pixels, const PreparedDetector& det,
                                                const PointingInput& in, const double* tod, const double* norms,
-                                               double theta_lo, double theta_hi, std::uint32_t lo, std::uint32_t hi,
-                                               double* acc) {
+                                               const RingSlice& slice, double* acc) {
+  const std::uint32_t lo = slice.lo, hi = slice.hi;
   std::uint64_t count = 0;
   const bool plate = det.plate == PreparedDetector::Plate::aperture;
   double m[16];
@@ -161,7 +160,7 @@ PISCO_CPU_CLONES std::uint64_t scatter_samples(const PreparedSky& sky, const dou
     if (d == 0.0) continue;
     double theta = 0.0, phi = 0.0;
     const SampleFrame<double> f = detector_frame(in, i, det, theta, phi);
-    if (theta + det.rho_max < theta_lo || theta - det.rho_max > theta_hi) continue;  // the disc misses the slice
+    if (slice.missed_by(theta, det.rho_max)) continue;
     if (plate) {
       plate_matrix(det, in.plate_angle[i], m);
       if (det.radial) scatter_sample<true, true>(sky, pixels, det, f, theta, phi, m, d, lo, hi, acc, count);
@@ -201,8 +200,7 @@ class CpuBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
-  // Each thread owns a slice of whole rings (equal pixel counts) and scatters every sample onto its
-  // own pixels only: no two threads write one pixel, and each pixel sums its samples in order.
+  // Spread over threads by slices of rings (cpu/ring_slices.hpp): deterministic.
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod) override {
     const PreparedDetector& det = in_->detectors.at(detector);
     const PreparedSky& sky = in_->sky;
@@ -219,13 +217,13 @@ class CpuBackend final : public Backend {
         }
       });
     }
-    const std::vector<Slice>& slices = ring_slices();
+    if (slices_.empty()) slices_ = ring_slices(sky, std::size_t(pool_.size()) * 8);
     std::atomic<std::uint64_t> pixels{0};
-    pool_.parallel_for(slices.size(), 1, [&](std::size_t begin, std::size_t end) {
+    pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
       for (std::size_t k = begin; k < end; ++k) {
-        const Slice& s = slices[k];
+        const RingSlice& s = slices_[k];
         pixels += scatter_samples(sky, pixels_.data(), det, pointing, tod.data(), norms.empty() ? nullptr : norms.data(),
-                                  s.theta_lo, s.theta_hi, s.lo, s.hi, adjoint_.data());
+                                  s, adjoint_.data());
       }
     });
     return pixels;
@@ -241,43 +239,8 @@ class CpuBackend final : public Backend {
   }
 
  private:
-  // A slice of whole rings [lo, hi) in pixels, and the colatitudes of its first and last rings.
-  struct Slice {
-    std::uint32_t lo, hi;
-    double theta_lo, theta_hi;
-  };
-  const std::vector<Slice>& ring_slices() {
-    if (!slices_.empty()) return slices_;
-    const PreparedSky& sky = in_->sky;
-    const std::size_t wanted = std::size_t(pool_.size()) * 8;
-    const std::size_t per = std::max<std::size_t>(1, sky.npix / wanted);
-    Slice s{0, 0, 0.0, 0.0};
-    bool open = false;
-    for (const RingEntry& r : sky.rings) {
-      const double theta = std::acos(std::clamp(r.z, -1.0, 1.0));
-      if (!open) {
-        s = {r.first, r.first, theta, theta};
-        open = true;
-      }
-      s.hi = r.first + r.count;
-      s.theta_hi = theta;
-      if (s.hi - s.lo >= per) {
-        slices_.push_back(s);
-        open = false;
-      }
-    }
-    if (open) slices_.push_back(s);
-    // Margins: a pixel centre on a slice's edge ring is within rho of the axis only if its colatitude
-    // is; 1e-9 rad covers the rounding of acos.
-    for (Slice& x : slices_) {
-      x.theta_lo -= 1e-9;
-      x.theta_hi += 1e-9;
-    }
-    return slices_;
-  }
-
   std::vector<double> adjoint_;  // 4 doubles a pixel: I, Q, U, V
-  std::vector<Slice> slices_;
+  std::vector<RingSlice> slices_;  // the adjoint's (cpu/ring_slices.hpp)
   std::shared_ptr<const EngineInputs> in_;
   ThreadPool pool_;
   std::vector<double> pixels_;  // reference_pixels(): 8 doubles a pixel

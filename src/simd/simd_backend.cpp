@@ -19,6 +19,7 @@
 #include "core/disc.hpp"
 #include "core/frame.hpp"
 #include "core/plate.hpp"
+#include "cpu/ring_slices.hpp"
 #include "cpu/thread_pool.hpp"
 #include "simd/simd_kernel.hpp"
 
@@ -135,6 +136,82 @@ class SimdBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
+  // The adjoint: frames (and the per-sample normalization's norms) over samples on all threads, then
+  // the scatter by slices of rings (cpu/ring_slices.hpp): deterministic.
+  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod) override {
+    const PreparedDetector& det = in_->detectors.at(detector);
+    const KernelDetector& kd = tables_.at(detector).view;
+    const PreparedSky& sky = in_->sky;
+    if (adjoint_[0].empty())
+      for (auto& m : adjoint_) m.assign(sky.npix, 0.0);
+    if (slices_.empty()) slices_ = ring_slices(sky, std::size_t(pool_.size()) * 8);
+    const std::size_t n = pointing.size();
+    struct Frame {
+      SampleFrame<double> f;
+      double theta, phi, value;
+    };
+    std::vector<Frame> frames(n);
+    const bool plate = det.plate == PreparedDetector::Plate::aperture;
+    pool_.parallel_for(n, 64, [&](std::size_t begin, std::size_t end) {
+      std::vector<std::uint32_t> ranges;
+      double m[16];
+      for (std::size_t i = begin; i < end; ++i) {
+        Frame& s = frames[i];
+        s.f = detector_frame(pointing, i, det, s.theta, s.phi);
+        s.value = tod[i];
+        if (!per_sample_ || s.value == 0.0) continue;
+        // The norm as the forward computes it (its float64 path).
+        if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), m);
+        const std::size_t count = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta, s.phi,
+                                                    det.rho_max, det.cos_rho_max, ranges);
+        const simd::SampleInput sample{&s.f, ranges.data(), count / 2, plate ? m : nullptr, false, true};
+        simd::SampleSums sums;
+        simd::convolve_sample(kernel_, sky_, kd, sample, sums);
+        s.value = sums.norm > 0 ? s.value / sums.norm : 0.0;
+      }
+    });
+    std::atomic<std::uint64_t> pixels{0};
+    pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
+      std::vector<std::uint32_t> ranges;
+      double m[16];
+      std::uint64_t count = 0;
+      for (std::size_t k = begin; k < end; ++k) {
+        const RingSlice& slice = slices_[k];
+        for (std::size_t i = 0; i < n; ++i) {
+          const Frame& s = frames[i];
+          if (s.value == 0.0 || slice.missed_by(s.theta, det.rho_max)) continue;
+          const std::size_t total = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta,
+                                                      s.phi, det.rho_max, det.cos_rho_max, ranges);
+          // The ranges clipped to the slice, in place.
+          std::size_t kept = 0;
+          for (std::size_t r = 0; r < total; r += 2) {
+            const std::uint32_t lo = std::max(ranges[r], slice.lo), hi = std::min(ranges[r + 1], slice.hi);
+            if (lo >= hi) continue;
+            ranges[kept++] = lo;
+            ranges[kept++] = hi;
+            count += hi - lo;
+          }
+          if (kept == 0) continue;
+          if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), m);
+          const simd::ScatterInput in{&s.f, ranges.data(), kept / 2, plate ? m : nullptr, s.value,
+                                      {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
+          simd::scatter_sample(kernel_, sky_, kd, in);
+        }
+      }
+      pixels += count;
+    });
+    return pixels;
+  }
+
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override {
+    if (adjoint_[0].empty()) return;
+    for (int c = 0; c < 4; ++c) {
+      if (!maps[c].empty())
+        for (std::size_t p = 0; p < in_->sky.npix; ++p) maps[c][p] += adjoint_[c][p];
+      adjoint_[c] = {};
+    }
+  }
+
  private:
   // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).
   void pack_sky(const SkyView& sky) {
@@ -209,6 +286,8 @@ class SimdBackend final : public Backend {
   KernelSky sky_{};
   std::vector<DetectorTables> tables_;
   std::uint64_t evaluated_ = 0;
+  std::array<std::vector<double>, 4> adjoint_;  // I, Q, U, V
+  std::vector<RingSlice> slices_;                // the adjoint's (cpu/ring_slices.hpp)
 };
 
 }  // namespace
@@ -224,6 +303,7 @@ BackendEntry simd_backend_entry() {
                                    " hardware threads",
                                {}, {}};
               info.capabilities.worker_threads = true;
+              info.capabilities.adjoint = true;
               return info;
             } catch (const Error& e) {
               return BackendInfo{"simd", false, e.what(), {}, {}};

@@ -475,6 +475,65 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
     SampleColumns<false>(sky, det, in, out);
 }
 
+// The adjoint of one sample: range by range, a vector of pixels at a time (the range's last vector
+// masked), the forward's float32 geometry and weights, stokes_adjoint, and d times each lane's four
+// weights added in float64 to its pixel, lane by lane in pixel order.
+template <bool Radial, int Columns, bool Plate>
+HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
+  const DF df;
+  const std::size_t N = hn::Lanes(df);
+  const detail::SampleFrame<double>& fd = *in.frame;
+  SampleFrame<F> f;
+  f.theta_p = broadcast(fd.theta_p);
+  f.phi_p = broadcast(fd.phi_p);
+  f.p = broadcast(fd.p);
+  f.e_c = broadcast(fd.e_c);
+  Vec4<F> mcols[4];
+  if constexpr (Plate) {
+    const double* m = in.plate;
+    for (int c = 0; c < 4; ++c)
+      mcols[c] = {F(float(m[c])), F(float(m[4 + c])), F(float(m[8 + c])), F(float(m[12 + c]))};
+  }
+  const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
+                                 F(det.grid_inv_step)};
+  HWY_ALIGN float out[4][max_lanes];
+  const double d = in.value;
+  for (std::size_t r = 0; r < in.range_count; ++r) {
+    const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
+    for (std::size_t p = begin; p < end; p += N) {
+      const std::size_t live = std::min(N, end - p);
+      const Vec3<F> k{F(hn::LoadU(df, sky.kx + p)), F(hn::LoadU(df, sky.ky + p)), F(hn::LoadU(df, sky.kz + p))};
+      const PixelGeometry<F> g = pixel_geometry(f, k);
+      Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
+      if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
+      const Vec4<F> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
+      hn::Store(a.x.v, df, out[0]);
+      hn::Store(a.y.v, df, out[1]);
+      hn::Store(a.z.v, df, out[2]);
+      hn::Store(a.w.v, df, out[3]);
+      for (int c = 0; c < 4; ++c) {
+        double* map = in.maps[c] + p;
+        for (std::size_t l = 0; l < live; ++l) map[l] += d * double(out[c][l]);
+      }
+    }
+  }
+}
+
+template <bool Radial, int Columns>
+HWY_INLINE void ScatterPlate(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
+  if (in.plate)
+    Scatter<Radial, Columns, true>(sky, det, in);
+  else
+    Scatter<Radial, Columns, false>(sky, det, in);
+}
+
+void ScatterSample(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
+  if (det.radial)
+    det.columns == 4 ? ScatterPlate<true, 4>(sky, det, in) : ScatterPlate<true, 2>(sky, det, in);
+  else
+    det.columns == 4 ? ScatterPlate<false, 4>(sky, det, in) : ScatterPlate<false, 2>(sky, det, in);
+}
+
 const char* TargetHere() { return hwy::TargetName(HWY_TARGET); }
 std::size_t LanesHere() { return hn::Lanes(DF()); }
 
@@ -486,6 +545,7 @@ HWY_AFTER_NAMESPACE();
 namespace pisco::detail::simd {
 
 HWY_EXPORT(ConvolveSample);
+HWY_EXPORT(ScatterSample);
 HWY_EXPORT(TargetHere);
 HWY_EXPORT(LanesHere);
 
@@ -535,6 +595,13 @@ void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDet
     HWY_DISPATCH_TABLE(ConvolveSample)[kernel.index](sky, det, in, out);
   else
     HWY_STATIC_DISPATCH(ConvolveSample)(sky, det, in, out);
+}
+
+void scatter_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
+  if (kernel.index < table_size)
+    HWY_DISPATCH_TABLE(ScatterSample)[kernel.index](sky, det, in);
+  else
+    HWY_STATIC_DISPATCH(ScatterSample)(sky, det, in);
 }
 
 }  // namespace pisco::detail::simd

@@ -81,6 +81,19 @@ struct SampleSums {
   double norm = 0.0;
 };
 
+// The adjoint of one sample (docs/physics.md, "The adjoint"): its value d scattered onto the pixels
+// of its disc's ranges (already clipped to the caller's slice of the sky), each pixel's float32
+// weights (stokes_adjoint of the forward's own float32 evaluation) times d added in float64 to the
+// accumulated maps, structure of arrays.
+struct ScatterInput {
+  const SampleFrame<double>* frame;
+  const std::uint32_t* ranges;  // begin, end pairs
+  std::size_t range_count;
+  const double* plate;  // 16, row-major; null without an aperture plate
+  double value;         // d (divided by its norm with the per-sample normalization)
+  double* maps[4];      // I, Q, U, V accumulators, npix each
+};
+
 // The kernel compiled for one instruction set.
 struct Kernel {
   std::size_t index = 0;    // in Highway's dispatch table
@@ -117,5 +130,7 @@ std::size_t disc_ranges(const Kernel& kernel, const RingEntry* rings, const Ring
 // Evaluates one sample with `kernel`.
 void convolve_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const SampleInput& in,
                      SampleSums& out);
+// Scatters one sample with `kernel`.
+void scatter_sample(const Kernel& kernel, const KernelSky& sky, const KernelDetector& det, const ScatterInput& in);
 
 }  // namespace pisco::detail::simd
