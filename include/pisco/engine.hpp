@@ -152,6 +152,15 @@ class Engine {
                std::span<const double> hwp_angle = {});
   void adjoint(std::size_t detector, const QuatPointingView& boresight, std::span<const double> tod,
                std::span<const double> hwp_angle = {});
+  // The diagonal of A^T A for these samples (per pixel and Stokes parameter, the sum over samples of
+  // the squared weights with which adjoint() scatters), added into the same maps: what a
+  // preconditioner needs (DeconvolvingMapmaker). Exact on the main beam's plain pixel sum; samples
+  // near the poles are counted on the sky rather than its polar copy, split beams' outer parts are
+  // left out, and a plate between the optics and the detector counts its four row detectors' squares
+  // without their cross terms. Take the maps before mixing it with adjoint().
+  void adjoint_diagonal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle = {});
+  void adjoint_diagonal(std::size_t detector, const QuatPointingView& boresight,
+                        std::span<const double> hwp_angle = {});
   // maps.I, Q, U (and V unless empty) must have npix() samples each.
   void take_adjoint(const StokesMaps& maps);
   // Replaces the sky, keeping the beams, the detectors and the options: what an iterative solver
@@ -199,7 +208,7 @@ class Engine {
   void finish_pending(std::uint64_t ticket);
   template <class View>
   void adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
-                    std::span<const double> hwp_angle);
+                    std::span<const double> hwp_angle, bool squares);
   // Checks a submission's arguments; fills plate_angle (hwp_angle - gamma) for a detector with a plate.
   template <class View>
   void check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "pisco/beamsor.hpp"
+#include "pisco/deconvolution.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
 #include "pisco/focal_plane.hpp"

@@ -73,7 +73,10 @@ class Backend {
   // accumulated maps (I, Q, U, V at the sky's NSIDE, RING). Completes before it returns; the caller
   // has waited for every submission first. Returns the number of sky pixels evaluated. A backend
   // without it (BackendCapabilities::adjoint false) throws ErrorKind::unavailable.
-  virtual std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod);
+  // With `squares`, adds (d a_k)^2 instead of d a_k for each pixel k and Stokes parameter: with d = 1,
+  // the diagonal of A^T A (a preconditioner's).
+  virtual std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
+                                bool squares = false);
   // Adds the accumulated maps into maps[0..3] (npix each) and clears them.
   virtual void take_adjoint(const std::array<std::span<double>, 4>& maps);
 };

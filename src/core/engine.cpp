@@ -34,7 +34,7 @@ const std::vector<BackendEntry>& backend_registry() {
   return registry;
 }
 
-std::uint64_t Backend::adjoint(std::size_t detector, const PointingInput&, std::span<const double>) {
+std::uint64_t Backend::adjoint(std::size_t detector, const PointingInput&, std::span<const double>, bool) {
   throw SubmissionError(detector, "the " + name() + " backend has no adjoint", ErrorKind::unavailable);
 }
 
@@ -426,9 +426,9 @@ void Engine::convolve(std::size_t detector, const QuatPointingView& boresight, s
 // transposes of W_cb, C and B.
 template <class View>
 void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
-                          std::span<const double> hwp_angle) {
+                          std::span<const double> hwp_angle, bool squares) {
   std::vector<double> plate_angle;
-  check_submission("adjoint", detector, boresight, tod.size(), hwp_angle, plate_angle);
+  check_submission(squares ? "adjoint_diagonal" : "adjoint", detector, boresight, tod.size(), hwp_angle, plate_angle);
   const std::string& name = focal_plane_[detector].name;
   for (std::size_t i = 0; i < tod.size(); ++i)
     if (!std::isfinite(tod[i]))
@@ -438,10 +438,12 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   detail::PointingInput input = input_of(boresight);
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
-  const bool split = !split_.empty() && split_[detector];
+  // The diagonal leaves out the outer parts and the polar copy (the main backend's plain sum instead).
+  const bool split = !squares && !split_.empty() && split_[detector];
   detail::PolarSamples polar_samples;
-  const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
-                                                                polar_cut_.at(detector), polar_samples);
+  const bool polar = !squares && polar_copy() &&
+                     detail::find_polar_samples(input, det.offset, offset_angle_.at(detector), polar_cut_.at(detector),
+                                                polar_samples);
   if (polar) make_polar_backend();
   // The TOD of each row detector (or of the detector itself): d, or d times the plate's coefficient.
   std::array<std::vector<double>, 4> rows;
@@ -477,7 +479,7 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
         adjoint_polar_ = true;
         pixels_ += backend_->adjoint(targets[r], input, away);
       } else {
-        pixels_ += backend_->adjoint(targets[r], input, d);
+        pixels_ += backend_->adjoint(targets[r], input, d, squares);
       }
       adjoint_main_ = true;
     }
@@ -491,12 +493,23 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
 
 void Engine::adjoint(std::size_t detector, const PointingView& boresight, std::span<const double> tod,
                      std::span<const double> hwp_angle) {
-  adjoint_view(detector, boresight, tod, hwp_angle);
+  adjoint_view(detector, boresight, tod, hwp_angle, false);
 }
 
 void Engine::adjoint(std::size_t detector, const QuatPointingView& boresight, std::span<const double> tod,
                      std::span<const double> hwp_angle) {
-  adjoint_view(detector, boresight, tod, hwp_angle);
+  adjoint_view(detector, boresight, tod, hwp_angle, false);
+}
+
+void Engine::adjoint_diagonal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle) {
+  const std::vector<double> ones(boresight.size(), 1.0);
+  adjoint_view(detector, boresight, ones, hwp_angle, true);
+}
+
+void Engine::adjoint_diagonal(std::size_t detector, const QuatPointingView& boresight,
+                              std::span<const double> hwp_angle) {
+  const std::vector<double> ones(boresight.size(), 1.0);
+  adjoint_view(detector, boresight, ones, hwp_angle, true);
 }
 
 std::size_t Engine::npix() const noexcept { return inputs_->sky.npix; }

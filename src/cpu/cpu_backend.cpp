@@ -100,7 +100,7 @@ PISCO_CPU_CLONES std::uint64_t convolve_samples(const PreparedSky& sky, const do
 // The adjoint of one sample (docs/physics.md, "The adjoint"): d times each pixel's weights, the
 // transpose of stokes_response, added onto the pixels of its disc that lie in [lo, hi) (acc: 4
 // doubles a pixel). With the per-sample normalization, d is divided by the sample's own norm first.
-template <bool Radial, bool Plate>
+template <bool Radial, bool Plate, bool Squares>
 inline void scatter_sample(const PreparedSky& sky, const double* pixels, const PreparedDetector& det,
                            const SampleFrame<double>& f, double theta, double phi, const double* plate, double d,
                            std::uint32_t lo, std::uint32_t hi, double* acc, std::uint64_t& count) {
@@ -121,10 +121,8 @@ inline void scatter_sample(const PreparedSky& sky, const double* pixels, const P
                           if constexpr (Plate) w = effective_weights(w, m[0], m[1], m[2], m[3]);
                           const Vec4<double> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
                           double* out = &acc[std::size_t(p) * 4];
-                          out[0] += d * a.x;
-                          out[1] += d * a.y;
-                          out[2] += d * a.z;
-                          out[3] += d * a.w;
+                          const double v[4] = {d * a.x, d * a.y, d * a.z, d * a.w};
+                          for (int c = 0; c < 4; ++c) out[c] += Squares ? v[c] * v[c] : v[c];
                         }
                       });
 }
@@ -149,7 +147,7 @@ double sample_norm(const PreparedSky& sky, const double* pixels, const PreparedD
 // Samples [0, n) scattered onto the pixels of one slice of rings (cpu/ring_slices.hpp).
 PISCO_CPU_CLONES std::uint64_t scatter_samples(const PreparedSky& sky, const double* pixels, const PreparedDetector& det,
                                                const PointingInput& in, const double* tod, const double* norms,
-                                               const RingSlice& slice, double* acc) {
+                                               const RingSlice& slice, bool squares, double* acc) {
   const std::uint32_t lo = slice.lo, hi = slice.hi;
   std::uint64_t count = 0;
   const bool plate = det.plate == PreparedDetector::Plate::aperture;
@@ -161,15 +159,17 @@ PISCO_CPU_CLONES std::uint64_t scatter_samples(const PreparedSky& sky, const dou
     double theta = 0.0, phi = 0.0;
     const SampleFrame<double> f = detector_frame(in, i, det, theta, phi);
     if (slice.missed_by(theta, det.rho_max)) continue;
-    if (plate) {
-      plate_matrix(det, in.plate_angle[i], m);
-      if (det.radial) scatter_sample<true, true>(sky, pixels, det, f, theta, phi, m, d, lo, hi, acc, count);
-      else scatter_sample<false, true>(sky, pixels, det, f, theta, phi, m, d, lo, hi, acc, count);
-    } else if (det.radial) {
-      scatter_sample<true, false>(sky, pixels, det, f, theta, phi, nullptr, d, lo, hi, acc, count);
+    if (plate) plate_matrix(det, in.plate_angle[i], m);
+    const double* pm = plate ? m : nullptr;
+#define PISCO_SCATTER(R, P, S) scatter_sample<R, P, S>(sky, pixels, det, f, theta, phi, pm, d, lo, hi, acc, count)
+    if (squares) {
+      if (plate) det.radial ? PISCO_SCATTER(true, true, true) : PISCO_SCATTER(false, true, true);
+      else det.radial ? PISCO_SCATTER(true, false, true) : PISCO_SCATTER(false, false, true);
     } else {
-      scatter_sample<false, false>(sky, pixels, det, f, theta, phi, nullptr, d, lo, hi, acc, count);
+      if (plate) det.radial ? PISCO_SCATTER(true, true, false) : PISCO_SCATTER(false, true, false);
+      else det.radial ? PISCO_SCATTER(true, false, false) : PISCO_SCATTER(false, false, false);
     }
+#undef PISCO_SCATTER
   }
   return count;
 }
@@ -201,7 +201,8 @@ class CpuBackend final : public Backend {
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
   // Spread over threads by slices of rings (cpu/ring_slices.hpp): deterministic.
-  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod) override {
+  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
+                        bool squares) override {
     const PreparedDetector& det = in_->detectors.at(detector);
     const PreparedSky& sky = in_->sky;
     if (adjoint_.empty()) adjoint_.assign(sky.npix * 4, 0.0);
@@ -223,7 +224,7 @@ class CpuBackend final : public Backend {
       for (std::size_t k = begin; k < end; ++k) {
         const RingSlice& s = slices_[k];
         pixels += scatter_samples(sky, pixels_.data(), det, pointing, tod.data(), norms.empty() ? nullptr : norms.data(),
-                                  s, adjoint_.data());
+                                  s, squares, adjoint_.data());
       }
     });
     return pixels;

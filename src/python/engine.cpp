@@ -247,6 +247,72 @@ class PyEngine {
     return result;
   }
 
+  // A^T tod of one detector, added into `out` ((4, npix) float64: I, Q, U, V), or into new zeros.
+  nb::object adjoint(nb::handle detector, nb::handle tod_arg, nb::handle theta, nb::handle phi, nb::handle psi,
+                     nb::handle quats, nb::handle out, nb::handle hwp_angle, bool diagonal) {
+    const std::size_t d = detector_index(detector);
+    const char* call = diagonal ? "adjoint_diagonal" : "adjoint";
+    const PointingArgs p = pointing_args(theta, phi, psi, quats, call);
+    const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    std::optional<ConstVector> tod;
+    if (!diagonal) {
+      tod = const_vector(tod_arg, "tod");
+      if (tod->shape(0) != p.size)
+        throw nb::value_error(("adjoint: tod has " + std::to_string(tod->shape(0)) + " samples, but the pointing has " +
+                               std::to_string(p.size)).c_str());
+    }
+    const std::size_t npix = open().npix();
+    nb::object result;
+    if (out.is_none()) {
+      result = nb::module_::import_("numpy").attr("zeros")(nb::make_tuple(4, npix), "float64");
+    } else {
+      const nb::tuple shape = nb::cast<nb::tuple>(out.attr("shape"));
+      if (shape.size() != 2 || nb::cast<std::size_t>(shape[0]) != 4 || nb::cast<std::size_t>(shape[1]) != npix)
+        throw nb::value_error((std::string(call) + ": out must have shape (4, " + std::to_string(npix) +
+                               ") (I, Q, U, V at the engine's NSIDE)").c_str());
+      result = nb::borrow(out);
+    }
+    Vector rows[4] = {vector(result[0], "out[0]"), vector(result[1], "out[1]"), vector(result[2], "out[2]"),
+                      vector(result[3], "out[3]")};
+    std::string problem;
+    bool out_of_memory = false;
+    {
+      nb::gil_scoped_release release;
+      problem = check_values(p);
+      if (problem.empty()) problem = check_hwp_values(h);
+      if (problem.empty() && tod) {
+        const std::size_t bad = first_non_finite(tod->data(), p.size);
+        if (bad < p.size) problem = "tod[" + std::to_string(bad) + "] is " + format_double(tod->data()[bad]) + ": the adjoint needs finite values";
+      }
+      if (problem.empty()) {
+        std::lock_guard lock(mutex_);
+        Engine& e = open();
+        try {
+          if (diagonal) {
+            if (p.theta) e.adjoint_diagonal(d, p.angles(), span_of(h));
+            else e.adjoint_diagonal(d, p.quaternions(), span_of(h));
+          } else {
+            const std::span<const double> t{tod->data(), p.size};
+            if (p.theta) e.adjoint(d, p.angles(), t, span_of(h));
+            else e.adjoint(d, p.quaternions(), t, span_of(h));
+          }
+          e.take_adjoint({{rows[0].data(), npix}, {rows[1].data(), npix}, {rows[2].data(), npix}, {rows[3].data(), npix}});
+        } catch (const std::bad_alloc&) {
+          out_of_memory = true;
+        }
+      }
+    }
+    if (!problem.empty()) throw nb::value_error(problem.c_str());
+    if (out_of_memory) raise_memory_error(chunk_memory(call, d, p.size));
+    return result;
+  }
+
+  void set_sky(const Sky& sky) {
+    nb::gil_scoped_release release;
+    std::lock_guard lock(mutex_);
+    open().set_sky(sky);
+  }
+
   std::uint64_t submit(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
                        nb::handle out, bool accumulate, nb::handle hwp_angle) {
     const std::size_t d = detector_index(detector);
@@ -356,6 +422,7 @@ class PyEngine {
   std::size_t unseen_pixels() { return locked([](Engine& e) { return e.unseen_pixels(); }); }
   FocalPlane focal_plane() { return locked([](Engine& e) { return e.focal_plane(); }); }
   std::size_t size() const { return names_.size(); }
+  std::size_t npix() { return open().npix(); }
 
  private:
   Engine& open() {
@@ -454,6 +521,30 @@ void bind_engine(nb::module_& m) {
            "hwp_angle: the half-wave plate's angle per sample (1-D float64, radians, in the focal-plane\n"
            "frame: TOAST's hwp_angle), required for a detector with a plate (Detector.hwp) and refused for\n"
            "one without (pisco.Error). The GIL is released while the engine runs.")
+      .def("adjoint",
+           [](PyEngine& e, nb::handle detector, nb::handle tod, nb::handle theta, nb::handle phi, nb::handle psi,
+              nb::handle quats, nb::handle out, nb::handle hwp) {
+             return e.adjoint(detector, tod, theta, phi, psi, quats, out, hwp, false);
+           },
+           "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
+           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "The adjoint of convolve(): A^T tod, the TOD of one detector scattered back onto the sky with the\n"
+           "same weights, offsets, plates and quadrature, so that sum(sky * A^T d) = sum(A sky * d).\n\n"
+           "Pointing and hwp_angle as for convolve(); tod: 1-D float64, one value per sample. out: a (4, npix)\n"
+           "float64 array (I, Q, U, V at the engine's NSIDE) the result is added into; None: new zeros.\n"
+           "Returns out. Backends without it raise pisco.UnavailableError (capabilities['adjoint']).")
+      .def("adjoint_diagonal",
+           [](PyEngine& e, nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
+              nb::handle out, nb::handle hwp) {
+             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, true);
+           },
+           "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
+           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "The diagonal of A^T A for these samples (squared scatter weights per pixel and Stokes parameter),\n"
+           "added into out ((4, npix)) or new zeros: a preconditioner for iterative map-making.")
+      .def("set_sky", &PyEngine::set_sky, "sky"_a,
+           "Replaces the sky (the same NSIDE), keeping beams, detectors and options.")
+      .def_prop_ro("npix", [](PyEngine& e) { return e.npix(); }, "Pixels of the engine's sky (12 NSIDE^2).")
       .def("submit", &PyEngine::submit, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
            "accumulate"_a = false, "hwp_angle"_a = nb::none(),

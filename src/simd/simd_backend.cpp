@@ -138,7 +138,8 @@ class SimdBackend final : public Backend {
 
   // The adjoint: frames (and the per-sample normalization's norms) over samples on all threads, then
   // the scatter by slices of rings (cpu/ring_slices.hpp): deterministic.
-  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod) override {
+  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
+                        bool squares) override {
     const PreparedDetector& det = in_->detectors.at(detector);
     const KernelDetector& kd = tables_.at(detector).view;
     const PreparedSky& sky = in_->sky;
@@ -193,7 +194,7 @@ class SimdBackend final : public Backend {
           }
           if (kept == 0) continue;
           if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), m);
-          const simd::ScatterInput in{&s.f, ranges.data(), kept / 2, plate ? m : nullptr, s.value,
+          const simd::ScatterInput in{&s.f, ranges.data(), kept / 2, plate ? m : nullptr, s.value, squares,
                                       {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
           simd::scatter_sample(kernel_, sky_, kd, in);
         }

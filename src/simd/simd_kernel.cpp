@@ -513,7 +513,10 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       hn::Store(a.w.v, df, out[3]);
       for (int c = 0; c < 4; ++c) {
         double* map = in.maps[c] + p;
-        for (std::size_t l = 0; l < live; ++l) map[l] += d * double(out[c][l]);
+        if (in.squares)
+          for (std::size_t l = 0; l < live; ++l) map[l] += (d * double(out[c][l])) * (d * double(out[c][l]));
+        else
+          for (std::size_t l = 0; l < live; ++l) map[l] += d * double(out[c][l]);
       }
     }
   }

@@ -91,6 +91,7 @@ struct ScatterInput {
   std::size_t range_count;
   const double* plate;  // 16, row-major; null without an aperture plate
   double value;         // d (divided by its norm with the per-sample normalization)
+  bool squares;         // add (d a)^2 instead of d a
   double* maps[4];      // I, Q, U, V accumulators, npix each
 };
 

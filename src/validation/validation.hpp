@@ -54,12 +54,17 @@ struct SurveyOptions {
   int pairs = 0;       // 0: the scale's
   double hours = 0;    // 0: the scale's
   bool polarized = false;  // run the polarized case at test scale too
+  int deconvolve_iterations = 0;  // case M: conjugate-gradient iterations (0: the case's own)
+  double deconvolve_regularization = -1;  // case M: DeconvolutionOptions::regularization (< 0: the case's own)
   // Non-empty: maps, hits, spectra and beam window of every case under report_dir/F/<case>/, and
   // report_dir/F/report.md.
   std::filesystem::path report_dir;
   std::filesystem::path assets_dir;  // empty: the source tree's assets/
 };
 CaseResult class_survey(Scale scale, const std::string& backend = "cpu", const SurveyOptions& options = {});
+// Case M: the survey's binned maps against the beam-deconvolving map-maker's, for matched, pointing-
+// and beam-mismatched pairs (docs/validation.md, "M").
+CaseResult deconvolved_survey(Scale scale, const std::string& backend = "simd", const SurveyOptions& options = {});
 
 // Every case, in order, through the given backend.
 std::vector<std::function<CaseResult(Scale)>> all_cases(const std::string& backend = "cpu");

@@ -162,6 +162,45 @@ def test_engine_convolves_angles_and_quaternions_alike():
     assert engine.closed
 
 
+def test_adjoint_is_the_transpose_of_convolve():
+    # <s, A^T d> = <A s, d> from Python, with a monopole and dipole on the sky, samples at the poles,
+    # angles and quaternions; out accumulates; set_sky gives a new sky's TOD.
+    sky, beam, fp = small_setup(nside=16, fwhm=4 * deg)
+    nside = 16
+    maps = np.array([sky.I, sky.Q, sky.U]) + 0.0
+    maps[0] += 2.725 + 3e-3 * np.cos(np.linspace(0, np.pi, maps.shape[1]))
+    sky = pisco.Sky.from_maps(maps, units="uK_CMB")
+    theta, phi, psi = pointing(400)
+    theta[:20] = np.linspace(0, 0.02, 20)
+    quats = np.array([pisco.quat_from_pointing(t, p, s) for t, p, s in zip(theta, phi, psi)])
+    rng = np.random.default_rng(5)
+    for backend in [b.name for b in pisco.devices() if b.available and b.capabilities["adjoint"]]:
+        with pisco.Engine(sky, beam, fp, backend=backend) as engine:
+            assert engine.npix == 12 * nside * nside
+            forward = back = 0.0
+            out = np.zeros((4, engine.npix))
+            for det in range(len(fp)):
+                d = rng.normal(size=400)
+                tod = engine.convolve(det, theta, phi, psi)
+                forward += tod @ d
+                engine.adjoint(det, d, boresight_quats=quats, out=out)
+            back = sum(np.asarray(m) @ out[k] for k, m in enumerate([sky.I, sky.Q, sky.U, sky.V]))
+            bar = 1e-12 if backend == "cpu" else 1e-5
+            assert abs(forward - back) <= bar * abs(forward), (backend, forward, back)
+            single = engine.adjoint(0, d, theta, phi, psi)
+            assert single.shape == (4, engine.npix) and np.any(single[0] != 0)
+            diag = engine.adjoint_diagonal(0, theta, phi, psi)
+            assert np.all(diag >= 0) and np.any(diag[0] > 0)
+            with pytest.raises(ValueError, match="out must have shape"):
+                engine.adjoint(0, d, theta, phi, psi, out=np.zeros((3, engine.npix)))
+            with pytest.raises(ValueError, match="tod has 3 samples"):
+                engine.adjoint(0, d[:3], theta, phi, psi)
+            other = pisco.Sky.from_maps(maps * 0.5, units="uK_CMB")
+            engine.set_sky(other)
+            with pisco.Engine(other, beam, fp, backend=backend) as fresh:
+                assert np.array_equal(engine.convolve(1, theta, phi, psi), fresh.convolve(1, theta, phi, psi))
+
+
 def test_out_is_written_in_place_and_accumulates():
     sky, beam, fp = small_setup()
     theta, phi, psi = pointing(300)

@@ -95,6 +95,21 @@ int run_bench(const BenchOptions& options) {
     for (std::size_t d = 0; d < fp.size(); ++d) engine.convolve(d, scan, tod, false, hwp_angle);
     const double conv = seconds_since(t1);
     const double evals = engine.mean_disc_pixels() * double(samples);
+    double adjoint = 0.0;
+    if (options.adjoint) {
+      pisco::Sky back(nside);
+      const auto t2 = std::chrono::steady_clock::now();
+      for (std::size_t d = 0; d < fp.size(); ++d) {
+        engine.convolve(d, scan, tod, false, hwp_angle);  // each detector's own TOD, outside the timing
+        const auto t3 = std::chrono::steady_clock::now();
+        engine.adjoint(d, scan, tod, hwp_angle);
+        adjoint += seconds_since(t3);
+      }
+      const auto t4 = std::chrono::steady_clock::now();
+      engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+      adjoint += seconds_since(t4);
+      (void)t2;
+    }
     const auto it = paper.find(rho);
     if (it != paper.end())
       std::printf("%8.1f %9.1f %10.3f %10.3f %12.3e %12.1f %10.3f\n", rho, engine.mean_disc_pixels(), setup,
@@ -102,6 +117,9 @@ int run_bench(const BenchOptions& options) {
     else
       std::printf("%8.1f %9.1f %10.3f %10.3f %12.3e %12s %10s\n", rho, engine.mean_disc_pixels(), setup, conv,
                   evals / conv, "-", "-");
+    if (options.adjoint)
+      std::printf("         adjoint: %.3f s, %.3e evals/s, %.2f x the forward path\n", adjoint, evals / adjoint,
+                  adjoint / conv);
     std::printf("         device: %s\n", engine.device_name().c_str());
   }
   return 0;

@@ -18,6 +18,9 @@ struct BenchOptions {
   // A monopole added to the sky's I, in uK (2.725e6 for the CMB's): the float32 backends then sum
   // the monopole's weight in float64 (docs/vulkan.md, "Precision"), which this measures.
   double monopole_uk = 0.0;
+  // Also time the adjoint (Engine::adjoint and take_adjoint) of the same TOD, and its ratio to the
+  // forward path's time.
+  bool adjoint = false;
 };
 
 // The paper's Table 1 workload: a table of evaluations/s and the ratio to the paper's GTX 1080.

@@ -161,6 +161,8 @@ static int main_body(int argc, char** argv) {
   bench->add_option("--monopole", bench_options.monopole_uk,
                     "A monopole added to the sky's I, in uK, e.g. 2.725e6 (default: 0): the float32 backends' "
                     "float64 path.");
+  bench->add_flag("--adjoint", bench_options.adjoint,
+                  "Also time the adjoint (Engine::adjoint) of the same TOD and its ratio to the forward path.");
   bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
       ->check(CLI::IsMember({"aperture", "detector"}));
 

@@ -1,0 +1,85 @@
+// The beam-deconvolving map-maker (docs/physics.md, "Map-making with the beams"): solves
+// (A^T A + lambda) s = A^T d for the sky s at the engine's NSIDE by conjugate gradients, A the
+// engine's convolution with each detector's own beamsor, offset and plate (Engine::convolve) and A^T
+// its adjoint (Engine::adjoint). Beam and pointing mismatch between the detectors of a pair, which a
+// binned map-maker turns into spurious polarization, are then part of the model.
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <functional>
+#include <span>
+#include <vector>
+
+#include "pisco/engine.hpp"
+#include "pisco/pointing.hpp"
+
+namespace pisco {
+
+struct DeconvolutionOptions {
+  int max_iterations = 100;
+  // Stop when ||r|| <= tolerance ||A^T d||, r the residual of the normal equations.
+  double tolerance = 1e-6;
+  // lambda as a fraction of the Rayleigh quotient <b, A^T A b> / <b, b> of the right-hand side b =
+  // A^T d (a typical eigenvalue of A^T A); 0 (the default): none, the minimum-norm solution that
+  // conjugate gradients from zero converge to, pixels out of every sample's disc left at zero.
+  double regularization = 0.0;
+  // > 0: the solution also returned reconvolved with a circular Gaussian of this FWHM (radians), by
+  // harmonic smoothing (HEALPix map2alm with 3 iterations, to 3 NSIDE - 1), for analysis.
+  double target_fwhm = 0.0;
+};
+
+// One chunk of a survey as the solver replays it: a detector, its boresight pointing (angles or
+// quaternions) and, for a detector with a half-wave plate, the plate's angles.
+struct SurveyChunk {
+  std::size_t detector = 0;
+  PointingView angles;
+  QuatPointingView quats;
+  bool quaternions = false;
+  std::span<const double> hwp_angle;
+  std::size_t size() const noexcept { return quaternions ? quats.size() : angles.size(); }
+};
+
+struct DeconvolutionProgress {
+  int iteration = 0;
+  double residual = 0.0;  // ||r|| / ||A^T d||
+  double seconds = 0.0;   // since solve() began
+};
+
+struct DeconvolvedMaps {
+  int nside = 0;
+  // The solution (RING); pisco::unseen where no sample's disc reaches the pixel.
+  std::vector<double> I, Q, U, V;
+  // The solution reconvolved with the target beam (DeconvolutionOptions::target_fwhm), unseen where
+  // the solution is; empty without a target.
+  std::vector<double> smoothed_I, smoothed_Q, smoothed_U;
+  int iterations = 0;
+  bool converged = false;
+  std::vector<double> residuals;  // ||r|| / ||A^T d|| after each iteration
+  double seconds = 0.0, seconds_per_iteration = 0.0;
+};
+
+class DeconvolvingMapmaker {
+ public:
+  // Replays every chunk of the survey, in the same order each time: `visit` is called once per chunk.
+  using Survey = std::function<void(const std::function<void(const SurveyChunk&)>& visit)>;
+
+  // The engine's beams, focal plane and options define A; its sky is replaced as the solver iterates
+  // (Engine::set_sky), so the engine must not be used elsewhere meanwhile. Its backend must have the
+  // adjoint (BackendCapabilities::adjoint). Memory: eight maps of 4 x npix doubles beside the engine's.
+  explicit DeconvolvingMapmaker(Engine& engine, const DeconvolutionOptions& options = {});
+
+  // Adds a chunk's TOD to the right-hand side A^T d.
+  void add(const SurveyChunk& chunk, std::span<const double> tod);
+
+  // Conjugate gradients from zero on the normal equations, one pass of the survey (convolve and
+  // adjoint of every chunk) per iteration; `progress`, when given, is called after each.
+  DeconvolvedMaps solve(const Survey& survey, const std::function<void(const DeconvolutionProgress&)>& progress = {});
+
+ private:
+  Engine& engine_;
+  DeconvolutionOptions options_;
+  bool any_ = false;
+};
+
+}  // namespace pisco
