@@ -136,8 +136,9 @@ class SimdBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
-  // The adjoint: frames (and the per-sample normalization's norms) over samples on all threads, then
-  // the scatter by slices of rings (cpu/ring_slices.hpp): deterministic.
+  // The adjoint, a block of samples at a time: their frames, discs (and the per-sample
+  // normalization's norms) on all threads, then the scatter by slices of rings (cpu/ring_slices.hpp):
+  // deterministic.
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override {
     const PreparedDetector& det = in_->detectors.at(detector);
@@ -146,61 +147,76 @@ class SimdBackend final : public Backend {
     if (adjoint_[0].empty())
       for (auto& m : adjoint_) m.assign(sky.npix, 0.0);
     if (slices_.empty()) slices_ = ring_slices(sky, std::size_t(pool_.size()) * 8);
-    const std::size_t n = pointing.size();
-    struct Frame {
-      SampleFrame<double> f;
-      double theta, phi, value;
-    };
-    std::vector<Frame> frames(n);
     const bool plate = det.plate == PreparedDetector::Plate::aperture;
-    pool_.parallel_for(n, 64, [&](std::size_t begin, std::size_t end) {
-      std::vector<std::uint32_t> ranges;
-      double m[16];
-      for (std::size_t i = begin; i < end; ++i) {
-        Frame& s = frames[i];
-        s.f = detector_frame(pointing, i, det, s.theta, s.phi);
-        s.value = tod[i];
-        if (!per_sample_ || s.value == 0.0) continue;
-        // The norm as the forward computes it (its float64 path).
-        if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), m);
-        const std::size_t count = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta, s.phi,
-                                                    det.rho_max, det.cos_rho_max, ranges);
-        const simd::SampleInput sample{&s.f, ranges.data(), count / 2, plate ? m : nullptr, false, true};
-        simd::SampleSums sums;
-        simd::convolve_sample(kernel_, sky_, kd, sample, sums);
-        s.value = sums.norm > 0 ? s.value / sums.norm : 0.0;
-      }
-    });
+    struct Sample {
+      SampleFrame<double> f;
+      double theta, value;
+      double m[16];  // the plate's M(theta), aperture plates only
+      std::size_t first, count;  // its ranges in `ranges` of its task
+      unsigned task;
+    };
+    constexpr std::size_t block = 8192, task_samples = 256;
+    std::vector<Sample> samples(std::min(block, pointing.size()));
+    std::vector<std::vector<std::uint32_t>> ranges((block + task_samples - 1) / task_samples);
     std::atomic<std::uint64_t> pixels{0};
-    pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
-      std::vector<std::uint32_t> ranges;
-      double m[16];
-      std::uint64_t count = 0;
-      for (std::size_t k = begin; k < end; ++k) {
-        const RingSlice& slice = slices_[k];
-        for (std::size_t i = 0; i < n; ++i) {
-          const Frame& s = frames[i];
-          if (s.value == 0.0 || slice.missed_by(s.theta, det.rho_max)) continue;
-          const std::size_t total = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta,
-                                                      s.phi, det.rho_max, det.cos_rho_max, ranges);
-          // The ranges clipped to the slice, in place.
-          std::size_t kept = 0;
-          for (std::size_t r = 0; r < total; r += 2) {
-            const std::uint32_t lo = std::max(ranges[r], slice.lo), hi = std::min(ranges[r + 1], slice.hi);
-            if (lo >= hi) continue;
-            ranges[kept++] = lo;
-            ranges[kept++] = hi;
-            count += hi - lo;
+    for (std::size_t b0 = 0; b0 < pointing.size(); b0 += block) {
+      const std::size_t n = std::min(block, pointing.size() - b0);
+      pool_.parallel_for((n + task_samples - 1) / task_samples, 1, [&](std::size_t t0, std::size_t t1) {
+        std::vector<std::uint32_t> disc;
+        for (std::size_t t = t0; t < t1; ++t) {
+          std::vector<std::uint32_t>& r = ranges[t];
+          r.clear();
+          for (std::size_t k = t * task_samples; k < std::min(n, (t + 1) * task_samples); ++k) {
+            const std::size_t i = b0 + k;
+            Sample& s = samples[k];
+            double phi = 0.0;
+            s.f = detector_frame(pointing, i, det, s.theta, phi);
+            s.value = tod[i];
+            s.task = unsigned(t);
+            s.first = r.size();
+            s.count = 0;
+            if (s.value == 0.0) continue;
+            if (plate)
+              plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), s.m);
+            const std::size_t c = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta, phi,
+                                                    det.rho_max, det.cos_rho_max, disc);
+            r.insert(r.end(), disc.begin(), disc.begin() + std::ptrdiff_t(c));
+            s.count = c;
+            if (per_sample_) {  // the norm as the forward computes it (its float64 path)
+              const simd::SampleInput in{&s.f, disc.data(), c / 2, plate ? s.m : nullptr, false, true};
+              simd::SampleSums sums;
+              simd::convolve_sample(kernel_, sky_, kd, in, sums);
+              s.value = sums.norm > 0 ? s.value / sums.norm : 0.0;
+            }
           }
-          if (kept == 0) continue;
-          if (plate) plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), m);
-          const simd::ScatterInput in{&s.f, ranges.data(), kept / 2, plate ? m : nullptr, s.value, squares,
-                                      {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
-          simd::scatter_sample(kernel_, sky_, kd, in);
         }
-      }
-      pixels += count;
-    });
+      });
+      pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
+        std::vector<std::uint32_t> clipped;
+        std::uint64_t count = 0;
+        for (std::size_t k = begin; k < end; ++k) {
+          const RingSlice& slice = slices_[k];
+          for (std::size_t j = 0; j < n; ++j) {
+            const Sample& s = samples[j];
+            if (s.count == 0 || s.value == 0.0 || slice.missed_by(s.theta, det.rho_max)) continue;
+            const std::uint32_t* r = ranges[s.task].data() + s.first;
+            clipped.clear();
+            for (std::size_t q = 0; q < s.count; q += 2) {
+              const std::uint32_t lo = std::max(r[q], slice.lo), hi = std::min(r[q + 1], slice.hi);
+              if (lo >= hi) continue;
+              clipped.push_back(lo);
+              clipped.push_back(hi);
+              count += hi - lo;
+            }
+            if (clipped.empty()) continue;
+            const simd::ScatterInput in{&s.f, clipped.data(), clipped.size() / 2, plate ? s.m : nullptr, s.value, squares,
+                                        {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
+            simd::scatter_sample(kernel_, sky_, kd, in);
+          }
+        }
+        pixels += count;
+      });
+    }
     return pixels;
   }
 

@@ -507,6 +507,28 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
       if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
       const Vec4<F> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
+#if HWY_TARGET != HWY_SCALAR
+      if (live == N) {  // a whole vector: its lanes promoted to float64 and added to the maps in vectors
+        const hn::Half<DF> dh;
+        const hn::Rebind<double, hn::Half<DF>> dd;
+        const std::size_t H = hn::Lanes(dd);
+        const auto dv = hn::Set(dd, d);
+        const VF cols[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
+        for (int c = 0; c < 4; ++c) {
+          double* map = in.maps[c] + p;
+          const auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, cols[c])));
+          const auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, cols[c])));
+          if (in.squares) {
+            hn::StoreU(hn::Add(hn::LoadU(dd, map), hn::Mul(lo, lo)), dd, map);
+            hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hn::Mul(hi, hi)), dd, map + H);
+          } else {
+            hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
+            hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
+          }
+        }
+        continue;
+      }
+#endif
       hn::Store(a.x.v, df, out[0]);
       hn::Store(a.y.v, df, out[1]);
       hn::Store(a.z.v, df, out[2]);

@@ -53,10 +53,11 @@ int validate(const ValidateOptions& o, const fs::path& data) {
       {"C", [&] { return point_source(scale, o.backend); }},
       {"D", [&] { return ideal_cmb(scale, o.backend); }},
       {"E", [&] { return pointing_offsets(scale, o.backend); }},
-      {"F", [&] { return class_survey(scale, o.backend, survey); }}};
+      {"F", [&] { return class_survey(scale, o.backend, survey); }},
+      {"M", [&] { return deconvolved_survey(scale, o.backend, survey); }}};
   for (const auto& c : o.cases)
-    if (c != "C" && c != "D" && c != "E" && c != "F")
-      throw pisco::Error("validate --case: expected C, D, E or F, got '" + c + "'");
+    if (c != "C" && c != "D" && c != "E" && c != "F" && c != "M")
+      throw pisco::Error("validate --case: expected C, D, E, F or M, got '" + c + "'");
   bool all = true;
   for (const auto& [id, run_case] : cases) {
     if (!o.cases.empty() && std::find(o.cases.begin(), o.cases.end(), id) == o.cases.end()) continue;
@@ -166,11 +167,11 @@ static int main_body(int argc, char** argv) {
   bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
       ->check(CLI::IsMember({"aperture", "detector"}));
 
-  auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E, F) and print a pass/fail table.");
+  auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E, F) and the deconvolving map-maker's (M), and print a pass/fail table.");
   ValidateOptions vo;
   val->add_flag("--full", vo.full, "Paper scale (C at three beam resolutions, D and E with an NSIDE 512 sky, F a week of 36 pairs at NSIDE 128); hours on a CPU.");
   val->add_option("-b,--backend", vo.backend, "Backend the cases run through (default: cpu, the reference).");
-  val->add_option("--case", vo.cases, "Only these cases (C, D, E, F; repeatable).");
+  val->add_option("--case", vo.cases, "Only these cases (C, D, E, F, M; repeatable).");
   val->add_option("--report-dir", vo.report_dir, "Where F writes its maps, spectra and report.md (default with --full: docs/validation).");
   val->add_option("--f-hours", vo.survey.hours, "F: hours of scan instead of the scale's (test 4, full 168).")->check(CLI::PositiveNumber);
   val->add_option("--f-pairs", vo.survey.pairs, "F: PSB pairs instead of the scale's (test 4, full 36).")->check(CLI::Range(1, 400));
