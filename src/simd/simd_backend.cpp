@@ -210,6 +210,7 @@ class SimdBackend final : public Backend {
             }
             if (clipped.empty()) continue;
             const simd::ScatterInput in{&s.f, clipped.data(), clipped.size() / 2, plate ? s.m : nullptr, s.value, squares,
+                                        slice.hi,
                                         {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
             simd::scatter_sample(kernel_, sky_, kd, in);
           }

@@ -496,7 +496,9 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   }
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step)};
+#if HWY_TARGET == HWY_SCALAR
   HWY_ALIGN float out[4][max_lanes];
+#endif
   const double d = in.value;
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
@@ -508,38 +510,45 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
       const Vec4<F> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
 #if HWY_TARGET != HWY_SCALAR
-      if (live == N) {  // a whole vector: its lanes promoted to float64 and added to the maps in vectors
-        const hn::Half<DF> dh;
-        const hn::Rebind<double, hn::Half<DF>> dd;
-        const std::size_t H = hn::Lanes(dd);
-        const auto dv = hn::Set(dd, d);
-        const VF cols[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
-        for (int c = 0; c < 4; ++c) {
-          double* map = in.maps[c] + p;
-          const auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, cols[c])));
-          const auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, cols[c])));
-          if (in.squares) {
-            hn::StoreU(hn::Add(hn::LoadU(dd, map), hn::Mul(lo, lo)), dd, map);
-            hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hn::Mul(hi, hi)), dd, map + H);
-          } else {
-            hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
-            hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
-          }
+      // The lanes promoted to float64 and added to the maps in vectors (Mul, then Add: the same bits on
+      // every instruction set, with or without fused multiply-adds). A range's last vector goes through
+      // a scratch copy of its pixels, unless the pixels past the range are the caller's own (below
+      // in.limit), to which its masked lanes then add zero.
+      const hn::Half<DF> dh;
+      const hn::Rebind<double, hn::Half<DF>> dd;
+      const std::size_t H = hn::Lanes(dd);
+      const auto dv = hn::Set(dd, d);
+      const MF mask = hn::FirstN(df, live);
+      const VF cols[4] = {hn::IfThenElseZero(mask, a.x.v), hn::IfThenElseZero(mask, a.y.v),
+                          hn::IfThenElseZero(mask, a.z.v), hn::IfThenElseZero(mask, a.w.v)};
+      const bool direct = p + N <= in.limit;
+      HWY_ALIGN double scratch[max_lanes];
+      for (int c = 0; c < 4; ++c) {
+        double* map = direct ? in.maps[c] + p : scratch;
+        if (!direct)
+          for (std::size_t l = 0; l < N; ++l) scratch[l] = l < live ? in.maps[c][p + l] : 0.0;
+        auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, cols[c])));
+        auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, cols[c])));
+        if (in.squares) {
+          lo = hn::Mul(lo, lo);
+          hi = hn::Mul(hi, hi);
         }
-        continue;
+        hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
+        hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
+        if (!direct)
+          for (std::size_t l = 0; l < live; ++l) in.maps[c][p + l] = scratch[l];
       }
-#endif
+#else
+      (void)live;
       hn::Store(a.x.v, df, out[0]);
       hn::Store(a.y.v, df, out[1]);
       hn::Store(a.z.v, df, out[2]);
       hn::Store(a.w.v, df, out[3]);
       for (int c = 0; c < 4; ++c) {
-        double* map = in.maps[c] + p;
-        if (in.squares)
-          for (std::size_t l = 0; l < live; ++l) map[l] += (d * double(out[c][l])) * (d * double(out[c][l]));
-        else
-          for (std::size_t l = 0; l < live; ++l) map[l] += d * double(out[c][l]);
+        const double v = d * double(out[c][0]);
+        in.maps[c][p] += in.squares ? v * v : v;
       }
+#endif
     }
   }
 }

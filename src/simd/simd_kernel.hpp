@@ -92,6 +92,8 @@ struct ScatterInput {
   const double* plate;  // 16, row-major; null without an aperture plate
   double value;         // d (divided by its norm with the per-sample normalization)
   bool squares;         // add (d a)^2 instead of d a
+  std::size_t limit;    // pixels below it belong to the caller's thread: a range's last vector may add
+                        // zeros to those past the range (read and written back) when they lie below it
   double* maps[4];      // I, Q, U, V accumulators, npix each
 };
 
