@@ -371,6 +371,38 @@ class Engine:
         hwp_angle: the plate's angle per sample (1-D float64, radians, focal-plane frame), required
         for a detector with a plate and refused for one without.
         """
+    def adjoint(
+        self,
+        detector: int | str,
+        tod: Float64Array,
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        out: Float64Array | None = None,
+        hwp_angle: Float64Array | None = None,
+    ) -> Float64Array:
+        """The adjoint of convolve(): A^T tod added into out ((4, npix): I, Q, U, V) or new zeros.
+
+        sum(sky * A^T d) == sum(A sky * d) to rounding; backends without it raise UnavailableError.
+        """
+    def adjoint_diagonal(
+        self,
+        detector: int | str,
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        out: Float64Array | None = None,
+        hwp_angle: Float64Array | None = None,
+    ) -> Float64Array:
+        """The diagonal of A^T A for these samples, added into out ((4, npix)) or new zeros."""
+    def set_sky(self, sky: Sky) -> None:
+        """Replaces the sky (the same NSIDE), keeping beams, detectors and options."""
+    @property
+    def npix(self) -> int: ...
     def submit(
         self,
         detector: int | str,
