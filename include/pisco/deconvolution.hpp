@@ -65,8 +65,10 @@ class DeconvolvingMapmaker {
   using Survey = std::function<void(const std::function<void(const SurveyChunk&)>& visit)>;
 
   // The engine's beams, focal plane and options define A; its sky is replaced as the solver iterates
-  // (Engine::set_sky), so the engine must not be used elsewhere meanwhile. Its backend must have the
-  // adjoint (BackendCapabilities::adjoint). Memory: eight maps of 4 x npix doubles beside the engine's.
+  // (Engine::set_sky), so the engine must not be used elsewhere meanwhile, and after solve() its sky
+  // is the solver's last search direction: set_sky before convolving with it again. Its backend
+  // must have the adjoint (BackendCapabilities::adjoint). Memory: eight maps of 4 x npix doubles
+  // beside the engine's.
   explicit DeconvolvingMapmaker(Engine& engine, const DeconvolutionOptions& options = {});
 
   // Adds a chunk's TOD to the right-hand side A^T d.

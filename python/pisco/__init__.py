@@ -15,6 +15,7 @@ HEALPix COSMO convention; maps are in RING ordering.
 from ._pisco import (
     BackendInfo,
     Beamsor,
+    DeconvolvingMapmaker,
     Detector,
     DeviceError,
     Engine,
@@ -52,6 +53,7 @@ FocalPlane.from_toast = staticmethod(focal_plane_from_toast)
 __all__ = [
     "BackendInfo",
     "Beamsor",
+    "DeconvolvingMapmaker",
     "Detector",
     "DeviceError",
     "Engine",

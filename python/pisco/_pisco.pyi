@@ -1,7 +1,7 @@
 """PISCO-VK's C++ library: pixel-space beam convolution (see the package pisco)."""
 
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, Literal
 
 import numpy
@@ -336,6 +336,36 @@ def default_hwp_gamma(detector: Detector) -> float:
 
 def read_toast_focal_plane(path: str | os.PathLike[str], beam: int = 0) -> tuple[FocalPlane, Float64Array, float]:
     """(FocalPlane, fwhm per detector in radians, sample rate in Hz) of a TOAST 3 focal-plane file."""
+
+class DeconvolvingMapmaker:
+    """The beam-deconvolving map-maker: conjugate gradients on (A^T A + lambda) s = A^T d."""
+
+    def __init__(
+        self,
+        engine: Engine,
+        max_iterations: int = 100,
+        tolerance: float = 1e-6,
+        regularization: float = 0.0,
+        target_fwhm: float = 0.0,
+    ) -> None: ...
+    def add(
+        self,
+        detector: int | str,
+        tod: Float64Array,
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        hwp_angle: Float64Array | None = None,
+    ) -> None:
+        """Adds a chunk's TOD to the right-hand side A^T d."""
+    def solve(
+        self,
+        survey: Callable[[], Iterable[dict[str, Any]]],
+        progress: Callable[[int, float, float], None] | None = None,
+    ) -> dict[str, Any]:
+        """Solves, replaying survey() once an iteration; returns the maps and the convergence."""
 
 class Engine:
     """The convolution engine: set up once for a sky, beams and focal plane; then pointing -> TOD."""

@@ -4,6 +4,7 @@
 // taken after the GIL is released, so that other engines (and any other Python code) run meanwhile.
 // close() waits for the calls in progress and frees the device's memory; later calls raise.
 #include <algorithm>
+#include <functional>
 #include <cmath>
 #include <cstdint>
 #include <map>
@@ -19,12 +20,14 @@
 
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/function.h>
 #include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
 #include "args.hpp"
 #include "arrays.hpp"
+#include "pisco/deconvolution.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
 
@@ -423,6 +426,10 @@ class PyEngine {
   FocalPlane focal_plane() { return locked([](Engine& e) { return e.focal_plane(); }); }
   std::size_t size() const { return names_.size(); }
   std::size_t npix() { return open().npix(); }
+  // For pisco.DeconvolvingMapmaker, which drives this engine.
+  Engine& engine() { return open(); }
+  std::mutex& mutex() { return mutex_; }
+  std::size_t detector(nb::handle d) const { return detector_index(d); }
 
  private:
   Engine& open() {
@@ -484,9 +491,139 @@ class PyEngine {
   std::unique_ptr<Engine> engine_;
 };
 
+// pisco.DeconvolvingMapmaker: pisco::DeconvolvingMapmaker over a pisco.Engine (kept alive), the survey
+// a Python callable returning an iterable of chunks (dicts), called once an iteration.
+class PyMapmaker {
+ public:
+  PyMapmaker(nb::object engine, int max_iterations, double tolerance, double regularization, double target_fwhm)
+      : owner_(std::move(engine)), py_(nb::cast<PyEngine&>(owner_)) {
+    DeconvolutionOptions o;
+    o.max_iterations = max_iterations;
+    o.tolerance = tolerance;
+    o.regularization = regularization;
+    o.target_fwhm = target_fwhm;
+    maker_ = std::make_unique<DeconvolvingMapmaker>(py_.engine(), o);
+  }
+
+  void add(nb::handle detector, nb::handle tod_arg, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
+           nb::handle hwp_angle) {
+    const Chunk c = chunk(detector, theta, phi, psi, quats, hwp_angle, "DeconvolvingMapmaker.add");
+    const ConstVector tod = const_vector(tod_arg, "tod");
+    if (tod.shape(0) != c.chunk.size())
+      throw nb::value_error(("DeconvolvingMapmaker.add: tod has " + std::to_string(tod.shape(0)) +
+                             " samples, but the pointing has " + std::to_string(c.chunk.size())).c_str());
+    nb::gil_scoped_release release;
+    std::lock_guard lock(py_.mutex());
+    maker_->add(c.chunk, {tod.data(), tod.shape(0)});
+  }
+
+  nb::dict solve(nb::callable survey, nb::object progress) {
+    const auto replay = [&](const std::function<void(const SurveyChunk&)>& visit) {
+      nb::gil_scoped_acquire gil;
+      const nb::object chunks = survey();
+      for (nb::handle item : chunks) {
+        if (!nb::isinstance<nb::dict>(item))
+          throw nb::type_error("DeconvolvingMapmaker.solve: the survey must yield dicts with 'detector' and the "
+                               "pointing ('theta', 'phi', 'psi' or 'boresight_quats'; 'hwp_angle' for plates)");
+        const nb::dict d = nb::borrow<nb::dict>(item);
+        const auto get = [&](const char* key) -> nb::object {
+          return d.contains(key) ? nb::object(d[key]) : nb::none();
+        };
+        if (!d.contains("detector")) throw nb::key_error("DeconvolvingMapmaker.solve: a chunk has no 'detector'");
+        const Chunk c = chunk(d["detector"], get("theta"), get("phi"), get("psi"), get("boresight_quats"),
+                              get("hwp_angle"), "DeconvolvingMapmaker.solve");
+        nb::gil_scoped_release release;
+        std::lock_guard lock(py_.mutex());
+        visit(c.chunk);
+      }
+    };
+    std::function<void(const DeconvolutionProgress&)> report;
+    if (!progress.is_none())
+      report = [&](const DeconvolutionProgress& p) {
+        nb::gil_scoped_acquire gil;
+        progress(p.iteration, p.residual, p.seconds);
+      };
+    DeconvolvedMaps m;
+    {
+      nb::gil_scoped_release release;
+      m = maker_->solve(replay, report);
+    }
+    nb::dict out;
+    const auto array = [](const std::vector<double>& v) {
+      nb::object a = nb::module_::import_("numpy").attr("empty")(v.size(), "float64");
+      Vector w = vector(a, "maps");
+      std::copy(v.begin(), v.end(), w.data());
+      return a;
+    };
+    out["nside"] = m.nside;
+    out["I"] = array(m.I);
+    out["Q"] = array(m.Q);
+    out["U"] = array(m.U);
+    out["V"] = array(m.V);
+    if (!m.smoothed_I.empty()) {
+      out["smoothed_I"] = array(m.smoothed_I);
+      out["smoothed_Q"] = array(m.smoothed_Q);
+      out["smoothed_U"] = array(m.smoothed_U);
+    }
+    out["iterations"] = m.iterations;
+    out["converged"] = m.converged;
+    out["residuals"] = array(m.residuals);
+    out["seconds"] = m.seconds;
+    out["seconds_per_iteration"] = m.seconds_per_iteration;
+    return out;
+  }
+
+ private:
+  // A chunk's arguments, checked, and the views into them (kept alive with it).
+  struct Chunk {
+    PointingArgs p;
+    std::optional<ConstVector> h;
+    SurveyChunk chunk;
+  };
+  Chunk chunk(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
+              nb::handle hwp_angle, const char* call) {
+    Chunk c;
+    c.chunk.detector = py_.detector(detector);
+    c.p = pointing_args(theta, phi, psi, quats, call);
+    c.h = hwp_args(hwp_angle, c.p.size);
+    std::string problem = check_values(c.p);
+    if (problem.empty()) problem = check_hwp_values(c.h);
+    if (!problem.empty()) throw nb::value_error(problem.c_str());
+    if (c.p.theta) c.chunk.angles = c.p.angles();
+    else c.chunk.quats = c.p.quaternions();
+    c.chunk.quaternions = !c.p.theta;
+    c.chunk.hwp_angle = span_of(c.h);
+    return c;
+  }
+
+  nb::object owner_;
+  PyEngine& py_;
+  std::unique_ptr<DeconvolvingMapmaker> maker_;
+};
+
 }  // namespace
 
 void bind_engine(nb::module_& m) {
+  nb::class_<PyMapmaker>(m, "DeconvolvingMapmaker",
+                         "The beam-deconvolving map-maker (docs/physics.md, 'Map-making with the beams'):\n"
+                         "conjugate gradients on (A^T A + lambda) s = A^T d with each detector's own beam.\n\n"
+                         "DeconvolvingMapmaker(engine, max_iterations=100, tolerance=1e-6, regularization=0.0,\n"
+                         "                     target_fwhm=0.0)\n\n"
+                         "engine: a pisco.Engine whose backend has the adjoint; its sky is replaced as the solver\n"
+                         "iterates (set_sky it again afterwards). add() each chunk's TOD, then solve(survey), survey\n"
+                         "a callable returning the same chunks each time, as dicts: {'detector': ..., 'theta': ...,\n"
+                         "'phi': ..., 'psi': ...} or {'detector': ..., 'boresight_quats': ...}, with 'hwp_angle'\n"
+                         "for detectors with a plate.")
+      .def(nb::init<nb::object, int, double, double, double>(), "engine"_a, "max_iterations"_a = 100,
+           "tolerance"_a = 1e-6, "regularization"_a = 0.0, "target_fwhm"_a = 0.0)
+      .def("add", &PyMapmaker::add, "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
+           "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "Adds a chunk's TOD to the right-hand side A^T d.")
+      .def("solve", &PyMapmaker::solve, "survey"_a, "progress"_a = nb::none(),
+           "Solves; progress(iteration, residual, seconds) after each iteration when given. Returns a\n"
+           "dict: nside, I, Q, U, V (UNSEEN where no beam reaches), smoothed_I/Q/U with a target_fwhm,\n"
+           "iterations, converged, residuals, seconds, seconds_per_iteration.");
+
   nb::class_<PyEngine>(m, "Engine",
                        "The convolution engine: the sky, beams and focal plane are set up once for a backend,\n"
                        "then chunks of pointing become TOD.\n\n"
