@@ -475,7 +475,7 @@ CaseResult deconvolved_survey(Scale scale, const std::string& backend, const Sur
   const Geometry g = geometry(Scale::test, own);
   const int lmax = 2 * g.nside;
   CaseResult r{"M",
-               fmt("deconvolving map-maker on the CLASS-like survey: %.0f h of CES, %.0f pairs, NSIDE %.0f", g.hours,
+               fmt("deconvolving map-maker on the CLASS-like survey: %.3g h of CES, %.0f pairs, NSIDE %.0f", g.hours,
                    g.pairs, g.nside),
                {}, {}, 0};
   const double dp = 0.0042, db = 0.0173;
@@ -504,6 +504,9 @@ CaseResult deconvolved_survey(Scale scale, const std::string& backend, const Sur
     // Both on the binned maps' solved pixels less a margin of 3 deg at the survey's edge, where the
     // deconvolution is constrained from one side only.
     const std::vector<bool> keep = eroded(run.maps, 3 * deg);
+    if (std::count(keep.begin(), keep.end(), true) == 0)
+      throw Error("case M: no solved pixel of the " + sub.name + " survey lies 3 deg inside its edge (" +
+                  fmt("%.3g h of %.0f pairs", g.hours, g.pairs) + "): scan longer or with more pairs");
     BinnedMaps bm = run.maps, dm = run.maps;
     for (std::size_t p = 0; p < dm.I.size(); ++p) {
       if (!keep[p]) {
