@@ -97,6 +97,20 @@ HWY_INLINE Vec3<F> broadcast(const detail::Vec3<double>& a) {
   return {F(float(a.x)), F(float(a.y)), F(float(a.z))};
 }
 
+// A sample's float64 frame in float32 lanes, and a plate's M(theta) (row-major, float64) by columns.
+HWY_INLINE SampleFrame<F> broadcast(const detail::SampleFrame<double>& fd) {
+  SampleFrame<F> f;
+  f.theta_p = broadcast(fd.theta_p);
+  f.phi_p = broadcast(fd.phi_p);
+  f.p = broadcast(fd.p);
+  f.e_c = broadcast(fd.e_c);
+  return f;
+}
+
+HWY_INLINE void plate_columns(const double* m, Vec4<F> columns[4]) {
+  for (int c = 0; c < 4; ++c) columns[c] = {F(float(m[c])), F(float(m[4 + c])), F(float(m[8 + c])), F(float(m[12 + c]))};
+}
+
 // Makes the compiler read `a` back from memory after it is stored: left to itself, GCC extracts the
 // offsets of a lookup from the vector one by one (vpextrd: two micro-ops each, and a lane-crossing
 // extract every four), slower than a store and a scalar load each.
@@ -224,18 +238,12 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   const DI di;
   const std::size_t N = hn::Lanes(df);
   const detail::SampleFrame<double>& fd = *in.frame;
-  SampleFrame<F> f;
-  f.theta_p = broadcast(fd.theta_p);
-  f.phi_p = broadcast(fd.phi_p);
-  f.p = broadcast(fd.p);
-  f.e_c = broadcast(fd.e_c);
+  const SampleFrame<F> f = broadcast(fd);
   Vec4<F> mcols[4];  // Plate: the columns of M(theta) in float32, and its column 0 in float64
   double col0[4] = {1.0, 0.0, 0.0, 0.0};
   if constexpr (Plate) {
-    const double* m = in.plate;
-    for (int c = 0; c < 4; ++c)
-      mcols[c] = {F(float(m[c])), F(float(m[4 + c])), F(float(m[8 + c])), F(float(m[12 + c]))};
-    for (int a = 0; a < 4; ++a) col0[a] = m[4 * a];
+    plate_columns(in.plate, mcols);
+    for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
   }
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step)};
@@ -477,23 +485,14 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
 
 // The adjoint of one sample: range by range, a vector of pixels at a time (the range's last vector
 // masked), the forward's float32 geometry and weights, stokes_adjoint, and d times each lane's four
-// weights added in float64 to its pixel, lane by lane in pixel order.
+// weights added to its pixel in float64 vectors.
 template <bool Radial, int Columns, bool Plate>
 HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
   const DF df;
   const std::size_t N = hn::Lanes(df);
-  const detail::SampleFrame<double>& fd = *in.frame;
-  SampleFrame<F> f;
-  f.theta_p = broadcast(fd.theta_p);
-  f.phi_p = broadcast(fd.phi_p);
-  f.p = broadcast(fd.p);
-  f.e_c = broadcast(fd.e_c);
+  const SampleFrame<F> f = broadcast(*in.frame);
   Vec4<F> mcols[4];
-  if constexpr (Plate) {
-    const double* m = in.plate;
-    for (int c = 0; c < 4; ++c)
-      mcols[c] = {F(float(m[c])), F(float(m[4 + c])), F(float(m[8 + c])), F(float(m[12 + c]))};
-  }
+  if constexpr (Plate) plate_columns(in.plate, mcols);
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step)};
 #if HWY_TARGET == HWY_SCALAR
