@@ -170,6 +170,7 @@ class Engine {
   // copy of the pixels; the polar copy and a split beam's coarse sky when they are used).
   void set_sky(const SkyView& sky);
   std::size_t npix() const noexcept;
+  int nside() const noexcept;
 
   std::string backend_name() const;
   std::string device_name() const;
@@ -248,7 +249,6 @@ class Engine {
   std::uint64_t polar_ticket_ = 1, polar_samples_ = 0;
   // Which backends hold adjoint maps not yet taken.
   bool adjoint_main_ = false, adjoint_outer_ = false, adjoint_polar_ = false;
-  bool weighs_boundaries_ = false;
   int outer_band_ = 0;  // the split beams' band limit l_pass
 };
 

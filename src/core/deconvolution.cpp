@@ -70,11 +70,7 @@ void DeconvolvingMapmaker::add(const SurveyChunk& chunk, std::span<const double>
 DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
                                             const std::function<void(const DeconvolutionProgress&)>& progress) {
   const auto t0 = std::chrono::steady_clock::now();
-  const int nside = [&] {
-    int n = 1;
-    while (std::size_t(12) * std::size_t(n) * std::size_t(n) < engine_.npix()) n *= 2;
-    return n;
-  }();
+  const int nside = engine_.nside();
   if (!any_) throw Error("deconvolution: no TOD was added; call add() for every chunk of the survey before solve()");
   Sky b(nside), x(nside), r(nside), p(nside), q(nside), z(nside), diagonal(nside);
   engine_.take_adjoint(maps_of(b));

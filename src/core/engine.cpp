@@ -95,7 +95,6 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
   check_focal_plane(focal_plane, beams.size());  // before the sky's set-up, which takes time
   entry_ = &detail::choose_backend(options.backend);
   options_ = options;
-  weighs_boundaries_ = weighs_cap_boundaries(options);
   load_sky(sky, &beams);
 }
 
@@ -120,7 +119,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   // for the set-up only.
   Sky weighted(detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_));
   zeroed.reset();
-  if (weighs_boundaries_) detail::weigh_cap_boundaries(weighted);
+  if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(weighted);
   if (beams) inputs_ = prepared(weighted, *beams, focal_plane_, options);
   else weighted.check_finite("sky");
   backend_.reset();  // a device holds one sky at a time
@@ -171,7 +170,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
     throw Error("engine: the sky has UNSEEN pixels, which a band-limited copy for the beams' sidelobes cannot hold; "
                 "fill the mask or do not split the beams");
   Sky coarse = detail::band_limited_sky(sky, outer_nside_, outer_band_);
-  if (weighs_boundaries_) detail::weigh_cap_boundaries(coarse);
+  if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(coarse);
   if (beams) outer_inputs_ = prepared(coarse, outer, focal_plane_, options);
   outer_backend_.reset();
   outer_backend_ = entry.create(outer_inputs_, coarse, options);
@@ -513,6 +512,7 @@ void Engine::adjoint_diagonal(std::size_t detector, const QuatPointingView& bore
 }
 
 std::size_t Engine::npix() const noexcept { return inputs_->sky.npix; }
+int Engine::nside() const noexcept { return inputs_->sky.nside; }
 
 void Engine::take_adjoint(const StokesMaps& maps) {
   const std::size_t n = npix();
@@ -538,7 +538,7 @@ void Engine::take_adjoint(const StokesMaps& maps) {
   };
   if (adjoint_main_) {
     Sky part = collect(*backend_, nside);
-    if (weighs_boundaries_) detail::weigh_cap_boundaries(part);
+    if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(part);
     add(part);
     adjoint_main_ = false;
   }
@@ -549,7 +549,7 @@ void Engine::take_adjoint(const StokesMaps& maps) {
   }
   if (adjoint_outer_) {
     Sky part = collect(*outer_backend_, outer_nside_);
-    if (weighs_boundaries_) detail::weigh_cap_boundaries(part);
+    if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(part);
     add(detail::band_limited_sky_adjoint(part, nside, outer_band_));
     adjoint_outer_ = false;
   }
