@@ -23,6 +23,10 @@
 #define PISCO_BINDING_PLATE 8      // storage: 1 double per sample: the plate's angle from the detector's axis;
                                    // without float64, 2: cos 2 angle, sin 2 angle
 #define PISCO_BINDINGS 9
+// The adjoint kernel's (adjoint.comp) two more bindings.
+#define PISCO_BINDING_MAPS 9       // storage: 4 int64 per pixel (I, Q, U, V), the fixed-point sums
+#define PISCO_BINDING_VALUES 10    // storage: 1 double per sample: the scaled value the sample scatters
+#define PISCO_ADJOINT_BINDINGS 11
 
 #define PISCO_FLAG_PER_SAMPLE 2u  // divide each sample by its own sum of Omega_pix B_TT / Omega~
 #define PISCO_FLAG_QUATERNION 4u  // the pointing is boresight quaternions, not angles
@@ -34,6 +38,8 @@
 #define PISCO_SPEC_PARTS 2    // invocations per sample (a power of two <= PISCO_WG_SIZE)
 #define PISCO_SPEC_COLUMNS 3  // weights stored per node: 2 (w_I, w_Q; w_U = w_V = 0) or 4
 #define PISCO_SPEC_PLATE 4    // a half-wave plate at the aperture: effective weights w M(theta) per pixel
+#define PISCO_SPEC_NORMS 5    // adjoint.comp: compute each sample's normalization instead of scattering
+#define PISCO_SPEC_SQUARES 6  // adjoint.comp: scatter v g^2 (the diagonal of A^T A) instead of v g
 
 #ifdef __cplusplus
 #include <cstdint>

@@ -9,10 +9,17 @@
 #ifndef PISCO_KERNEL_GLSL
 #define PISCO_KERNEL_GLSL
 
+#ifndef PISCO_ADJOINT
+#define PISCO_ADJOINT 0  // adjoint.comp sets it: the scatter instead of the sum
+#endif
+
 #include "common.glsl"
 #include "contribution.glsl"
 #include "disc.glsl"
 #include "frame.glsl"
+#if PISCO_ADJOINT
+#include "scatter.glsl"
+#endif
 
 // The running sums of one sample: Kahan-compensated float32, float64 monopole weight and norm.
 struct Sums {
@@ -31,6 +38,9 @@ struct Sample {
 #else
   dvec3 theta_p, phi_p;
   dvec4 m0;
+#endif
+#if PISCO_ADJOINT
+  PISCO_F64 value;  // the scaled value the sample scatters (scatter.glsl)
 #endif
 };
 
@@ -99,8 +109,14 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
 #endif
     vec4 w = RADIAL ? interpolate_radial(smp.g, g.r2) : interpolate_weights(smp.g, g.x, g.y);
     if (PLATE) w = effective_weights(w, smp.m[0], smp.m[1], smp.m[2], smp.m[3]);  // w M(theta)
+#if PISCO_ADJOINT
+    // The adjoint: the transpose of stokes_response, scattered; its norm pass needs only the float64 sums.
+    if (!NORMS) scatter_pixel(p, stokes_adjoint(w, g.cos2chi, g.sin2chi), smp.value);
+    if (FLOAT64 && NORMS) {
+#else
     kahan_add(acc.sum, acc.comp, stokes_response(w, g.cos2chi, g.sin2chi, vec4(a.w, b.x, b.y, b.z)));
     if (FLOAT64) {
+#endif
       const Stencil64 st = stencil64(smp.g, x64, y64);
       const bool ring = cap_boundary_pixel(p);
 #if PISCO_FF
@@ -150,6 +166,12 @@ PISCO_FN void convolve_sample(uint sid, int part, PISCO_OUT(Sums) acc, PISCO_OUT
   Sample smp;
   smp.g = sample_grid();
   const int nside = int(pc.nside);
+#if PISCO_ADJOINT
+  acc.s0 = PISCO_F64(0.0);
+  acc.n0 = PISCO_F64(0.0);
+  smp.value = NORMS ? PISCO_F64(0.0) : values[sid];
+  if (!NORMS && smp.value == PISCO_F64(0.0)) return;  // nothing to scatter
+#endif
 #if PISCO_FF
   acc.s0 = vec2(0.0f, 0.0f);
   acc.n0 = vec2(0.0f, 0.0f);

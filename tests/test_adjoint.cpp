@@ -9,6 +9,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <tuple>
 
 #include "backend_fixtures.hpp"
 #include "pisco/engine.hpp"
@@ -138,6 +139,10 @@ class Adjoint : public ::testing::TestWithParam<std::string> {
 TEST_P(Adjoint, DotProductIdentity) {
   const pisco_test::Scene scene = adjoint_scene(16);
   const pisco::Pointing p = pisco_test::random_pointing(600, 5);
+  // vulkan: also its float-float kernel, for devices without float64 (docs/vulkan.md).
+  std::vector<std::string> arithmetic{"auto"};
+  if (GetParam() == "vulkan") arithmetic.push_back("float-float");
+  for (const std::string& a : arithmetic)
   for (const pisco::Normalization n : {pisco::Normalization::integral, pisco::Normalization::per_sample})
     for (const pisco::Quadrature q : {pisco::Quadrature::corrected, pisco::Quadrature::plain}) {
       pisco::EngineOptions o;
@@ -145,8 +150,9 @@ TEST_P(Adjoint, DotProductIdentity) {
       o.normalization = n;
       o.quadrature = q;
       o.threads = 2;
+      o.arithmetic = a;
       const DotTest t = dot_test(scene, o, p);
-      std::cout << GetParam() << (n == pisco::Normalization::integral ? ", integral" : ", per-sample")
+      std::cout << GetParam() << ", " << a << (n == pisco::Normalization::integral ? ", integral" : ", per-sample")
                 << (q == pisco::Quadrature::corrected ? ", corrected" : ", plain") << ": <As,d> = " << t.forward
                 << ", <s,A^T d> = " << t.adjoint << ", difference / (||As|| ||d||) = " << t.relative() << "\n";
       EXPECT_LT(t.relative(), bar());
@@ -226,16 +232,18 @@ TEST_P(Adjoint, MatchesTheTransposeColumnByColumn) {
     }
 }
 
-// The same calls give the same bits whatever the number of threads; chunking the TOD differently
+// The same calls give the same bits whatever the number of threads and the device backends' chunk
+// size (their fixed-point sums, docs/vulkan.md, "The adjoint"); cutting the TOD into other calls
 // changes only the order in which a plate's four row detectors meet in a pixel (rounding).
 TEST_P(Adjoint, DeterministicAcrossThreadsAndChunks) {
   const pisco_test::Scene scene = adjoint_scene(16);
   const pisco::Pointing p = pisco_test::random_pointing(400, 9);
   const std::vector<double> h = plate_angles(p.size());
-  const auto run = [&](unsigned threads, std::size_t chunk) {
+  const auto run = [&](unsigned threads, std::size_t chunk, std::size_t device_chunk = 0) {
     pisco::EngineOptions o;
     o.backend = GetParam();
     o.threads = threads;
+    o.chunk_samples = device_chunk;
     pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
     for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
       const std::vector<double> d = gaussian_tod(p.size(), det);
@@ -254,12 +262,14 @@ TEST_P(Adjoint, DeterministicAcrossThreadsAndChunks) {
   const pisco::Sky one = run(1, p.size());
   for (int c = 0; c < 4; ++c)
     for (double x : one.stokes(pisco::StokesIndex(c))) largest = std::max(largest, std::abs(x));
-  for (const auto& [threads, chunk] : {std::pair{2u, p.size()}, {3u, p.size()}, {1u, std::size_t(37)}, {2u, std::size_t(1)}}) {
-    const pisco::Sky other = run(threads, chunk);
+  for (const auto& [threads, chunk, device_chunk] :
+       {std::tuple{2u, p.size(), std::size_t(0)}, {3u, p.size(), std::size_t(0)}, {1u, p.size(), std::size_t(7)},
+        {1u, std::size_t(37), std::size_t(0)}, {2u, std::size_t(1), std::size_t(0)}}) {
+    const pisco::Sky other = run(threads, chunk, device_chunk);
     for (int c = 0; c < 4; ++c)
       for (std::size_t k = 0; k < one.npix(); ++k) {
         const double a = one.stokes(pisco::StokesIndex(c))[k], b = other.stokes(pisco::StokesIndex(c))[k];
-        if (chunk == p.size()) ASSERT_EQ(a, b) << threads << " threads, pixel " << k;
+        if (chunk == p.size()) ASSERT_EQ(a, b) << threads << " threads, device chunks of " << device_chunk << ", pixel " << k;
         else ASSERT_NEAR(a, b, 1e-14 * largest) << threads << " threads, chunks of " << chunk << ", pixel " << k;
       }
   }
@@ -298,9 +308,10 @@ TEST_P(Adjoint, MatchesTheReference) {
   const pisco_test::Scene scene = adjoint_scene(16);
   const pisco::Pointing p = pisco_test::random_pointing(2000, 12);
   const std::vector<double> h = plate_angles(p.size());
-  const auto run = [&](const std::string& backend) {
+  const auto run = [&](const std::string& backend, const std::string& arithmetic) {
     pisco::EngineOptions o;
     o.backend = backend;
+    o.arithmetic = arithmetic;
     pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
     for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
       std::vector<double> d = gaussian_tod(p.size(), 40 + det);
@@ -311,17 +322,22 @@ TEST_P(Adjoint, MatchesTheReference) {
     engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
     return back;
   };
-  const pisco::Sky ref = run("cpu"), got = run(GetParam());
+  const pisco::Sky ref = run("cpu", "auto");
+  std::vector<std::string> arithmetic{"auto"};
+  if (GetParam() == "vulkan") arithmetic.push_back("float-float");
+  for (const std::string& arith : arithmetic) {
+  const pisco::Sky got = run(GetParam(), arith);
   for (int c = 0; c < 4; ++c) {
     const auto a = ref.stokes(pisco::StokesIndex(c)), b = got.stokes(pisco::StokesIndex(c));
     const pisco_test::Stats st = pisco_test::compare(std::vector<double>(a.begin(), a.end()), std::vector<double>(b.begin(), b.end()));
     double largest = 0;
     for (double x : a) largest = std::max(largest, std::abs(x));
-    std::cout << GetParam() << " " << "IQUV"[c] << ": relative RMS " << st.rms_err / st.rms_ref << ", max / max "
-              << st.max_err / largest << "\n";
-    EXPECT_LT(st.rms_err, 1e-5 * st.rms_ref) << "IQUV"[c];
-    EXPECT_LT(st.max_err, 1e-4 * largest) << "IQUV"[c];
+    std::cout << GetParam() << " (" << arith << ") " << "IQUV"[c] << ": relative RMS " << st.rms_err / st.rms_ref
+              << ", max / max " << st.max_err / largest << "\n";
+    EXPECT_LT(st.rms_err, 1e-5 * st.rms_ref) << arith << " " << "IQUV"[c];
+    EXPECT_LT(st.max_err, 1e-4 * largest) << arith << " " << "IQUV"[c];
     EXPECT_EQ(st.non_finite, 0u);
+  }
   }
 }
 

@@ -222,6 +222,13 @@ std::vector<DeviceInfo> enumerate_devices(const Instance& instance) {
     vkGetPhysicalDeviceFeatures(phys[i], &features);
     d.name = props.properties.deviceName;
     d.float64 = features.shaderFloat64 == VK_TRUE;
+    if (props.properties.apiVersion >= VK_API_VERSION_1_2) {
+      VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+      VkPhysicalDeviceFeatures2 f2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+      f2.pNext = &f12;
+      vkGetPhysicalDeviceFeatures2(phys[i], &f2);
+      d.int64_atomics = f2.features.shaderInt64 == VK_TRUE && f12.shaderBufferInt64Atomics == VK_TRUE;
+    }
     d.type = props.properties.deviceType;
     d.api_version = props.properties.apiVersion;
     d.subgroup_size = sub.subgroupSize;
@@ -282,7 +289,11 @@ Device::Device(std::shared_ptr<Instance> instance, DeviceInfo info) : instance_(
   qi.pQueuePriorities = &priority;
   VkPhysicalDeviceFeatures features{};
   features.shaderFloat64 = info_.float64 ? VK_TRUE : VK_FALSE;
+  features.shaderInt64 = info_.int64_atomics ? VK_TRUE : VK_FALSE;
+  VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+  f12.shaderBufferInt64Atomics = info_.int64_atomics ? VK_TRUE : VK_FALSE;
   VkDeviceCreateInfo ci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+  ci.pNext = &f12;
   ci.queueCreateInfoCount = 1;
   ci.pQueueCreateInfos = &qi;
   ci.pEnabledFeatures = &features;

@@ -57,6 +57,9 @@ struct DeviceInfo {
   // shaderFloat64: the kernel's float64 work runs in float64; without it, in float-float
   // (docs/vulkan.md, "Devices without float64").
   bool float64 = false;
+  // shaderInt64 and shaderBufferInt64Atomics: the adjoint's fixed-point accumulation (docs/vulkan.md,
+  // "The adjoint"). Without them the device runs the forward kernels only.
+  bool int64_atomics = false;
   std::string unusable;  // why the kernels cannot run on it ("" when they can)
   std::string type_name() const;
   std::string describe() const;  // "llvmpipe (...) [cpu, Vulkan 1.3, float64]"

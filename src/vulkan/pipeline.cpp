@@ -1,5 +1,8 @@
 #include "vulkan/pipeline.hpp"
 
+#include <string>
+
+#include "pisco/error.hpp"
 #include "vulkan/check.hpp"
 
 namespace pisco::detail::vk {
@@ -11,8 +14,10 @@ VkDescriptorType descriptor_type(std::uint32_t binding) {
 
 }  // namespace
 
-ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint32_t> spirv, std::uint32_t max_sets)
-    : device_(device) {
+ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint32_t> spirv, std::uint32_t bindings,
+                                 std::uint32_t max_sets)
+    : device_(device), bindings_(bindings) {
+  if (bindings > PISCO_ADJOINT_BINDINGS) throw Error("vulkan: a kernel with " + std::to_string(bindings) + " bindings");
   const auto& fn = device.fn();
   const VkDevice dev = device.handle();
   try {
@@ -21,16 +26,16 @@ ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint
     mi.pCode = spirv.data();
     PISCO_VK(fn.vkCreateShaderModule(dev, &mi, nullptr, &module_));
 
-    std::array<VkDescriptorSetLayoutBinding, PISCO_BINDINGS> bindings{};
-    for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) {
-      bindings[b].binding = b;
-      bindings[b].descriptorType = descriptor_type(b);
-      bindings[b].descriptorCount = 1;
-      bindings[b].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
+    std::array<VkDescriptorSetLayoutBinding, PISCO_ADJOINT_BINDINGS> layout{};
+    for (std::uint32_t b = 0; b < bindings_; ++b) {
+      layout[b].binding = b;
+      layout[b].descriptorType = descriptor_type(b);
+      layout[b].descriptorCount = 1;
+      layout[b].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
     }
     VkDescriptorSetLayoutCreateInfo li{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
-    li.bindingCount = PISCO_BINDINGS;
-    li.pBindings = bindings.data();
+    li.bindingCount = bindings_;
+    li.pBindings = layout.data();
     PISCO_VK(fn.vkCreateDescriptorSetLayout(dev, &li, nullptr, &set_layout_));
 
     VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(PushConstants)};
@@ -42,8 +47,8 @@ ComputePipeline::ComputePipeline(const Device& device, std::span<const std::uint
     PISCO_VK(fn.vkCreatePipelineLayout(dev, &pli, nullptr, &layout_));
 
     std::uint32_t texel = 0;
-    for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) texel += is_texel_binding(b) ? 1 : 0;
-    const std::array<VkDescriptorPoolSize, 2> sizes{{{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (PISCO_BINDINGS - texel) * max_sets},
+    for (std::uint32_t b = 0; b < bindings_; ++b) texel += is_texel_binding(b) ? 1 : 0;
+    const std::array<VkDescriptorPoolSize, 2> sizes{{{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (bindings_ - texel) * max_sets},
                                                      {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texel * max_sets}}};
     VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pi.maxSets = max_sets;
@@ -74,7 +79,8 @@ void ComputePipeline::release() noexcept {
   module_ = VK_NULL_HANDLE;
 }
 
-VkDescriptorSet ComputePipeline::make_set(const std::array<const Buffer*, PISCO_BINDINGS>& buffers) {
+VkDescriptorSet ComputePipeline::make_set(std::span<const Buffer* const> buffers) {
+  if (buffers.size() != bindings_) throw Error("vulkan: a descriptor set of " + std::to_string(buffers.size()) + " buffers for " + std::to_string(bindings_) + " bindings");
   const auto& fn = device_.fn();
   VkDescriptorSetAllocateInfo ai{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
   ai.descriptorPool = pool_;
@@ -82,10 +88,10 @@ VkDescriptorSet ComputePipeline::make_set(const std::array<const Buffer*, PISCO_
   ai.pSetLayouts = &set_layout_;
   VkDescriptorSet set = VK_NULL_HANDLE;
   PISCO_VK(fn.vkAllocateDescriptorSets(device_.handle(), &ai, &set));
-  std::array<VkDescriptorBufferInfo, PISCO_BINDINGS> infos{};
-  std::array<VkBufferView, PISCO_BINDINGS> views{};
-  std::array<VkWriteDescriptorSet, PISCO_BINDINGS> writes{};
-  for (std::uint32_t b = 0; b < PISCO_BINDINGS; ++b) {
+  std::array<VkDescriptorBufferInfo, PISCO_ADJOINT_BINDINGS> infos{};
+  std::array<VkBufferView, PISCO_ADJOINT_BINDINGS> views{};
+  std::array<VkWriteDescriptorSet, PISCO_ADJOINT_BINDINGS> writes{};
+  for (std::uint32_t b = 0; b < bindings_; ++b) {
     writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
     writes[b].dstSet = set;
     writes[b].dstBinding = b;
@@ -99,7 +105,7 @@ VkDescriptorSet ComputePipeline::make_set(const std::array<const Buffer*, PISCO_
       writes[b].pBufferInfo = &infos[b];
     }
   }
-  fn.vkUpdateDescriptorSets(device_.handle(), PISCO_BINDINGS, writes.data(), 0, nullptr);
+  fn.vkUpdateDescriptorSets(device_.handle(), bindings_, writes.data(), 0, nullptr);
   return set;
 }
 

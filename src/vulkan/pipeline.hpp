@@ -1,4 +1,4 @@
-// The compute pipelines of one embedded SPIR-V kernel: its descriptor set layout (PISCO_BINDINGS
+// The compute pipelines of one embedded SPIR-V kernel: its descriptor set layout (its bindings,
 // storage and uniform texel buffers, shaders/interface.h), push constants, a pool of descriptor sets, and one pipeline per
 // set of specialization-constant values, created when first used.
 #pragma once
@@ -19,15 +19,18 @@ namespace pisco::detail::vk {
 
 class ComputePipeline {
  public:
-  ComputePipeline(const Device& device, std::span<const std::uint32_t> spirv, std::uint32_t max_sets);
+  // `bindings`: PISCO_BINDINGS for convolve.comp, PISCO_ADJOINT_BINDINGS for adjoint.comp.
+  ComputePipeline(const Device& device, std::span<const std::uint32_t> spirv, std::uint32_t bindings,
+                  std::uint32_t max_sets);
   ~ComputePipeline();
   ComputePipeline(const ComputePipeline&) = delete;
   ComputePipeline& operator=(const ComputePipeline&) = delete;
 
   // A descriptor set with buffers[b] at binding b (its texel view for a texel binding).
-  VkDescriptorSet make_set(const std::array<const Buffer*, PISCO_BINDINGS>& buffers);
-  // Values of the kernel's specialization constants, by constant_id (booleans as 0 or 1).
-  using Specialization = std::array<std::uint32_t, 5>;
+  VkDescriptorSet make_set(std::span<const Buffer* const> buffers);
+  // Values of the kernels' specialization constants, by constant_id (booleans as 0 or 1); a kernel
+  // ignores those it does not declare.
+  using Specialization = std::array<std::uint32_t, 7>;
   // Creates the pipeline specialized with `spec` now rather than at its first use.
   void prepare(const Specialization& spec) { pipeline(spec); }
   // Records: bind the pipeline specialized with `spec`, bind `set`, push `push`, dispatch (x, y)
@@ -38,6 +41,7 @@ class ComputePipeline {
  private:
   void release() noexcept;
   const Device& device_;
+  std::uint32_t bindings_;
   VkShaderModule module_ = VK_NULL_HANDLE;
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout layout_ = VK_NULL_HANDLE;

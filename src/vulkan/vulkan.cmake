@@ -20,9 +20,11 @@ file(MAKE_DIRECTORY ${pisco_spv_dir})
 set(pisco_spv_headers)
 # The kernel is built twice: with float64, and with its float64 work in float-float (PISCO_FF=1) for
 # devices without shaderFloat64 (docs/vulkan.md, "Devices without float64").
-foreach(variant convolve convolve_ff)
+# The adjoint kernel (adjoint.comp) likewise.
+foreach(variant convolve convolve_ff adjoint adjoint_ff)
   set(out ${pisco_spv_dir}/${variant}.spv.h)
-  if(variant STREQUAL "convolve_ff")
+  string(REGEX REPLACE "_ff$" "" source ${variant})
+  if(variant MATCHES "_ff$")
     set(defines -DPISCO_FF=1)
   else()
     set(defines -DPISCO_FF=0)
@@ -30,10 +32,10 @@ foreach(variant convolve convolve_ff)
   add_custom_command(
     OUTPUT ${out}
     COMMAND ${PISCO_GLSLANG} --target-env vulkan1.2 -Os --quiet ${defines}
-            --vn pisco_spv_${variant} --depfile ${out}.d -o ${out} ${pisco_shader_dir}/convolve.comp
-    DEPENDS ${pisco_shader_dir}/convolve.comp
+            --vn pisco_spv_${variant} --depfile ${out}.d -o ${out} ${pisco_shader_dir}/${source}.comp
+    DEPENDS ${pisco_shader_dir}/${source}.comp
     DEPFILE ${out}.d
-    COMMENT "SPIR-V: shaders/convolve.comp (${variant})"
+    COMMENT "SPIR-V: shaders/${source}.comp (${variant})"
     VERBATIM)
   list(APPEND pisco_spv_headers ${out})
 endforeach()

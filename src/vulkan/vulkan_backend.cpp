@@ -12,9 +12,12 @@
 #include <memory>
 #include <numbers>
 
+#include "adjoint.spv.h"
+#include "adjoint_ff.spv.h"
 #include "convolve.spv.h"
 #include "convolve_ff.spv.h"
 #include "core/backend.hpp"
+#include "gpu/fixed_point.hpp"
 #include "gpu/streaming.hpp"
 #include "pisco/quaternion.hpp"
 #include "interface.h"
@@ -49,6 +52,9 @@ class VulkanBackend final : public Backend {
   void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
               std::uint64_t ticket) override;
   std::uint64_t wait(std::uint64_t ticket) override;
+  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
+                        bool squares) override;
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override;
 
  private:
   struct Slot {
@@ -57,6 +63,18 @@ class VulkanBackend final : public Backend {
     VkFence fence = VK_NULL_HANDLE;
     VkDescriptorSet set = VK_NULL_HANDLE;
     SlotJob job;
+    // The adjoint's, made at its first use: the scaled values, and the set with the maps.
+    Buffer values;
+    VkDescriptorSet adjoint_set = VK_NULL_HANDLE;
+  };
+  // The adjoint's device state (docs/vulkan.md, "The adjoint"), made at its first use: the kernel, the
+  // fixed-point maps and their readback, and the float64 maps they are folded into.
+  struct Adjoint {
+    std::unique_ptr<vk::ComputePipeline> pipeline;
+    Buffer sums, readback;  // 4 int64 a pixel
+    VkCommandBuffer cmd = VK_NULL_HANDLE;
+    VkFence fence = VK_NULL_HANDLE;
+    std::array<std::vector<double>, 4> maps;  // I, Q, U, V
   };
 
   void setup(const vk::DeviceInfo& info, const SkyView& sky, const EngineOptions& options);
@@ -73,9 +91,21 @@ class VulkanBackend final : public Backend {
   double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
   vk::ComputePipeline::Specialization specialization(std::size_t detector) const;
   vk::PushConstants push_constants(std::size_t detector, bool quaternions) const;
-  void dispatch(Slot& slot, const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push,
+  void dispatch(Slot& slot, vk::ComputePipeline& pipeline, VkDescriptorSet set,
+                const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push,
                 const PointingInput& pointing);
-  std::uint64_t collect(Slot& slot);
+  // Waits for the slot's work; delivers its results to the job's span unless told not to (the
+  // adjoint's scatter has none). Returns the pixels its samples' discs held.
+  std::uint64_t collect(Slot& slot, bool results = true);
+  // Samples per chunk for a detector: at most chunk_ and about 1e9 pixel evaluations.
+  std::size_t chunk_for(const PreparedDetector& det) const;
+  void prepare_adjoint();
+  // One pass of the adjoint kernel over `pointing` through the slots: with norms, each sample's
+  // normalization into `io`; without, the scatter of the scaled values `io`. Returns the pixels.
+  std::uint64_t adjoint_pass(std::size_t detector, const PointingInput& pointing, std::span<double> io, bool norms,
+                             bool squares);
+  // Adds the fixed-point sums times 1/scale into the float64 maps and clears them.
+  void fold(double scale);
   // Abandons every slot in flight after an error, with the error's context.
   [[noreturn]] void fail(const SlotJob& job, const std::string& what, ErrorKind kind);
 
@@ -89,6 +119,7 @@ class VulkanBackend final : public Backend {
   std::size_t chunk_ = 0;
   std::array<Slot, 2> slots_;
   SlotRing<Slot> ring_{slots_};
+  Adjoint adjoint_;
   long lose_device_after_ = vk::injected_faults().lose_device_after;
   long completed_chunks_ = 0;
 };
@@ -120,7 +151,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, c
   const std::span<const std::uint32_t> spirv =
       ff ? std::span<const std::uint32_t>(pisco_spv_convolve_ff, sizeof(pisco_spv_convolve_ff) / sizeof(std::uint32_t))
          : std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t));
-  pipeline_ = std::make_unique<vk::ComputePipeline>(*device_, spirv, std::uint32_t(slots_.size()));
+  pipeline_ = std::make_unique<vk::ComputePipeline>(*device_, spirv, PISCO_BINDINGS, std::uint32_t(slots_.size()));
 
   // The sky in float32 without its monopole I0, which float32 cannot carry next to micro-kelvin
   // anisotropies (docs/vulkan.md, "Precision"): I0 sum_k w_I(k) is added back by the kernel's float64
@@ -301,6 +332,8 @@ void VulkanBackend::release() noexcept {
   for (Slot& s : slots_) s = Slot{};
   for (Buffer* b : {&sky_, &sky_lo_, &rings_, &weights_, &weights64_}) *b = Buffer();
   pipeline_.reset();
+  if (adjoint_.fence) fn.vkDestroyFence(device_->handle(), adjoint_.fence, nullptr);
+  adjoint_ = Adjoint{};
   if (pool_) fn.vkDestroyCommandPool(device_->handle(), pool_, nullptr);
   pool_ = VK_NULL_HANDLE;
 }
@@ -337,8 +370,9 @@ vk::PushConstants VulkanBackend::push_constants(std::size_t detector, bool quate
 }
 
 // Fills the slot's pointing (4 doubles a sample, shaders/interface.h) and queues its kernel.
-void VulkanBackend::dispatch(Slot& slot, const vk::ComputePipeline::Specialization& spec,
-                             const vk::PushConstants& push_in, const PointingInput& pointing) {
+void VulkanBackend::dispatch(Slot& slot, vk::ComputePipeline& pipeline, VkDescriptorSet set,
+                             const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push_in,
+                             const PointingInput& pointing) {
   const auto& fn = device_->fn();
   const std::size_t n = pointing.size();
   vk::pack_pointing(pointing, mode_.ff, static_cast<double*>(slot.pointing.mapped()));
@@ -356,7 +390,7 @@ void VulkanBackend::dispatch(Slot& slot, const vk::ComputePipeline::Specializati
   VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   PISCO_VK(fn.vkBeginCommandBuffer(slot.cmd, &bi));
-  pipeline_->record(slot.cmd, spec, slot.set, push, gx, gy);
+  pipeline.record(slot.cmd, spec, set, push, gx, gy);
   VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
   barrier.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
   barrier.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
@@ -370,17 +404,19 @@ void VulkanBackend::dispatch(Slot& slot, const vk::ComputePipeline::Specializati
   PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, slot.fence));
 }
 
-std::uint64_t VulkanBackend::collect(Slot& slot) {
+std::uint64_t VulkanBackend::collect(Slot& slot, bool results) {
   const auto& fn = device_->fn();
   PISCO_VK(fn.vkWaitForFences(device_->handle(), 1, &slot.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()));
   if (lose_device_after_ >= 0 && completed_chunks_++ >= lose_device_after_)
     vk::fail(VK_ERROR_DEVICE_LOST, "vkWaitForFences (PISCO_VK_TEST_FAULT)");
   slot.tod.invalidate();
   slot.counts.invalidate();
-  auto* tod = static_cast<double*>(slot.tod.mapped());
-  if (mode_.ff)
-    for (std::size_t i = 0; i < slot.job.tod.size(); ++i) tod[i] = vk::from_ff_bits(tod[i]);
-  deliver(slot.job, tod);
+  if (results) {
+    auto* tod = static_cast<double*>(slot.tod.mapped());
+    if (mode_.ff)
+      for (std::size_t i = 0; i < slot.job.tod.size(); ++i) tod[i] = vk::from_ff_bits(tod[i]);
+    deliver(slot.job, tod);
+  }
   const auto* counts = static_cast<const std::uint32_t*>(slot.counts.mapped());
   std::uint64_t pixels = 0;
   for (std::size_t i = 0; i < slot.job.tod.size(); ++i) pixels += counts[i];
@@ -402,10 +438,7 @@ void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, 
   const PreparedDetector& det = in_->detectors.at(detector);
   const vk::PushConstants push = push_constants(detector, pointing.quaternions);
   const vk::ComputePipeline::Specialization spec = specialization(detector);
-  // Chunks of at most chunk_ samples and about 1e9 pixel evaluations, so that no submission runs
-  // for long enough to meet a driver's watchdog on large discs.
-  const double disc = disc_pixels(det);
-  const std::size_t chunk = std::max<std::size_t>(1, std::min<std::size_t>(chunk_, std::size_t(1e9 / std::max(disc, 1.0))));
+  const std::size_t chunk = chunk_for(det);
   SlotJob current;
   try {
     for (std::size_t begin = 0; begin < pointing.size(); begin += chunk) {
@@ -415,7 +448,7 @@ void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, 
         return collect(s);
       });
       current = SlotJob{false, ticket, detector, begin, pointing.size(), tod.subspan(begin, n), accumulate};
-      dispatch(slot, spec, push, pointing.subspan(begin, n));
+      dispatch(slot, *pipeline_, slot.set, spec, push, pointing.subspan(begin, n));
       slot.job = current;
       slot.job.busy = true;
     }
@@ -446,6 +479,187 @@ std::uint64_t VulkanBackend::wait(std::uint64_t ticket) {
   return ring_.take_pixels();
 }
 
+// Chunks of at most chunk_ samples and about 1e9 pixel evaluations, so that no submission runs for
+// long enough to meet a driver's watchdog on large discs.
+std::size_t VulkanBackend::chunk_for(const PreparedDetector& det) const {
+  const double disc = disc_pixels(det);
+  return std::max<std::size_t>(1, std::min<std::size_t>(chunk_, std::size_t(1e9 / std::max(disc, 1.0))));
+}
+
+void VulkanBackend::prepare_adjoint() {
+  if (adjoint_.pipeline) return;
+  const vk::DeviceInfo& info = device_->info();
+  if (!info.int64_atomics)
+    throw Error("vulkan: " + info.name +
+                    " lacks shaderInt64 or shaderBufferInt64Atomics, which the adjoint's deterministic fixed-point "
+                    "sums need; use the cpu or simd backend for the adjoint",
+                ErrorKind::unavailable);
+  const auto& fn = device_->fn();
+  const std::span<const std::uint32_t> spirv =
+      mode_.ff ? std::span<const std::uint32_t>(pisco_spv_adjoint_ff, sizeof(pisco_spv_adjoint_ff) / sizeof(std::uint32_t))
+               : std::span<const std::uint32_t>(pisco_spv_adjoint, sizeof(pisco_spv_adjoint) / sizeof(std::uint32_t));
+  const std::size_t bytes = 4 * in_->sky.npix * sizeof(std::int64_t);
+  if (bytes > info.max_storage_buffer_range)
+    throw Error("vulkan: the adjoint's maps of an NSIDE " + std::to_string(in_->sky.nside) + " sky take " +
+                    std::to_string(int(mib(double(bytes)))) + " MiB in one storage buffer, but " + info.name +
+                    " binds at most " + std::to_string(int(mib(double(info.max_storage_buffer_range)))) +
+                    " MiB (maxStorageBufferRange); use the cpu or simd backend for the adjoint",
+                ErrorKind::device);
+  try {
+    adjoint_.pipeline = std::make_unique<vk::ComputePipeline>(*device_, spirv, PISCO_ADJOINT_BINDINGS, std::uint32_t(slots_.size()));
+    adjoint_.sums = Buffer(*device_, bytes, storage | VK_BUFFER_USAGE_TRANSFER_SRC_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                           MemoryUse::device);
+    adjoint_.readback = Buffer(*device_, bytes, VK_BUFFER_USAGE_TRANSFER_DST_BIT, MemoryUse::readback);
+    for (Slot& s : slots_) s.values = Buffer(*device_, chunk_ * sizeof(double), storage, MemoryUse::upload);
+  } catch (const vk::OutOfMemory& e) {
+    adjoint_ = Adjoint{};
+    throw Error("vulkan: out of memory for the adjoint's maps (" + std::to_string(int(mib(2.0 * double(bytes)))) +
+                    " MiB) on " + info.name + ": " + e.what(),
+                ErrorKind::device);
+  }
+  for (Slot& s : slots_) {
+    std::array<const Buffer*, PISCO_ADJOINT_BINDINGS> b{};
+    b[PISCO_BINDING_SKY] = &sky_;
+    b[PISCO_BINDING_SKY_LO] = &sky_lo_;
+    b[PISCO_BINDING_RINGS] = &rings_;
+    b[PISCO_BINDING_WEIGHTS] = &weights_;
+    b[PISCO_BINDING_WEIGHTS64] = &weights64_;
+    b[PISCO_BINDING_POINTING] = &s.pointing;
+    b[PISCO_BINDING_TOD] = &s.tod;
+    b[PISCO_BINDING_COUNT] = &s.counts;
+    b[PISCO_BINDING_PLATE] = &s.plate;
+    b[PISCO_BINDING_MAPS] = &adjoint_.sums;
+    b[PISCO_BINDING_VALUES] = &s.values;
+    s.adjoint_set = adjoint_.pipeline->make_set(b);
+  }
+  VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+  ai.commandPool = pool_;
+  ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+  ai.commandBufferCount = 1;
+  PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &adjoint_.cmd));
+  VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+  PISCO_VK(fn.vkCreateFence(device_->handle(), &fi, nullptr, &adjoint_.fence));
+  fold(0.0);  // device memory starts undefined: clear the sums
+}
+
+void VulkanBackend::fold(double scale) {
+  const auto& fn = device_->fn();
+  VkCommandBuffer cmd = adjoint_.cmd;
+  PISCO_VK(fn.vkResetCommandBuffer(cmd, 0));
+  VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  PISCO_VK(fn.vkBeginCommandBuffer(cmd, &bi));
+  const auto barrier = [&](VkPipelineStageFlags from, VkAccessFlags src, VkPipelineStageFlags to, VkAccessFlags dst) {
+    VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+    b.srcAccessMask = src;
+    b.dstAccessMask = dst;
+    fn.vkCmdPipelineBarrier(cmd, from, to, 0, 1, &b, 0, nullptr, 0, nullptr);
+  };
+  const VkDeviceSize bytes = adjoint_.sums.size();
+  barrier(VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT,
+          VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT);
+  if (scale > 0.0) {
+    const VkBufferCopy region{0, 0, bytes};
+    fn.vkCmdCopyBuffer(cmd, adjoint_.sums.handle(), adjoint_.readback.handle(), 1, &region);
+    barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+            VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_READ_BIT);
+  }
+  fn.vkCmdFillBuffer(cmd, adjoint_.sums.handle(), 0, bytes, 0u);
+  barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+          VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+  PISCO_VK(fn.vkEndCommandBuffer(cmd));
+  PISCO_VK(fn.vkResetFences(device_->handle(), 1, &adjoint_.fence));
+  VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  si.commandBufferCount = 1;
+  si.pCommandBuffers = &cmd;
+  PISCO_VK(fn.vkQueueSubmit(device_->queue(), 1, &si, adjoint_.fence));
+  PISCO_VK(fn.vkWaitForFences(device_->handle(), 1, &adjoint_.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()));
+  if (scale > 0.0) {
+    adjoint_.readback.invalidate();
+    fold_fixed_point(static_cast<const std::int64_t*>(adjoint_.readback.mapped()), in_->sky.npix, scale, adjoint_.maps);
+  }
+}
+
+std::uint64_t VulkanBackend::adjoint_pass(std::size_t detector, const PointingInput& pointing, std::span<double> io,
+                                          bool norms, bool squares) {
+  const PreparedDetector& det = in_->detectors.at(detector);
+  const vk::PushConstants push = push_constants(detector, pointing.quaternions);
+  vk::ComputePipeline::Specialization spec = specialization(detector);
+  spec[PISCO_SPEC_NORMS] = norms ? 1u : 0u;
+  spec[PISCO_SPEC_SQUARES] = squares ? 1u : 0u;
+  const std::size_t chunk = chunk_for(det);
+  SlotJob current;
+  const auto complete = [&](Slot& s) {
+    current = s.job;
+    return collect(s, norms);
+  };
+  try {
+    for (std::size_t begin = 0; begin < pointing.size(); begin += chunk) {
+      const std::size_t n = std::min(chunk, pointing.size() - begin);
+      Slot& slot = ring_.acquire(complete);
+      current = SlotJob{false, 0, detector, begin, pointing.size(), io.subspan(begin, n), false};
+      if (!norms) {
+        auto* values = static_cast<double*>(slot.values.mapped());
+        for (std::size_t i = 0; i < n; ++i) values[i] = mode_.ff ? vk::ff_bits(io[begin + i]) : io[begin + i];
+      }
+      dispatch(slot, *adjoint_.pipeline, slot.adjoint_set, spec, push, pointing.subspan(begin, n));
+      slot.job = current;
+      slot.job.busy = true;
+    }
+    ring_.drain(std::numeric_limits<std::uint64_t>::max(), complete);
+  } catch (const Error& e) {
+    fail(current, e.what(), e.kind());
+  } catch (...) {
+    ring_.abandon();
+    device_->fn().vkDeviceWaitIdle(device_->handle());
+    throw;
+  }
+  return ring_.take_pixels();
+}
+
+// The adjoint (docs/vulkan.md, "The adjoint"): batches of samples, each with its own fixed-point scale;
+// with the per-sample normalization, a first pass computes every sample's norm as the forward kernel
+// does, and the host divides the TOD by it before the scale is chosen.
+std::uint64_t VulkanBackend::adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
+                                     bool squares) {
+  const PreparedDetector& det = in_->detectors.at(detector);
+  prepare_adjoint();
+  if (adjoint_.maps[0].empty())
+    for (auto& m : adjoint_.maps) m.assign(in_->sky.npix, 0.0);
+  double bound = adjoint_weight_bound(det);
+  if (squares) bound *= bound;
+  std::uint64_t pixels = 0;
+  std::vector<double> values, norms;
+  for (std::size_t b0 = 0; b0 < pointing.size(); b0 += fixed_point_batch) {
+    const std::size_t m = std::min(fixed_point_batch, pointing.size() - b0);
+    const PointingInput part = pointing.subspan(b0, m);
+    values.assign(tod.begin() + std::ptrdiff_t(b0), tod.begin() + std::ptrdiff_t(b0 + m));
+    if (mode_.per_sample) {
+      norms.assign(m, 0.0);
+      adjoint_pass(detector, part, norms, true, squares);
+      for (std::size_t i = 0; i < m; ++i) values[i] = norms[i] > 0.0 ? values[i] / norms[i] : 0.0;
+    }
+    if (squares)
+      for (double& v : values) v *= v;
+    const double scale = fixed_point_scale(values, bound);
+    if (scale == 0.0) continue;
+    for (double& v : values) v *= scale;
+    pixels += adjoint_pass(detector, part, values, false, squares);
+    fold(scale);
+  }
+  device_->check_validation("the adjoint");
+  return pixels;
+}
+
+void VulkanBackend::take_adjoint(const std::array<std::span<double>, 4>& maps) {
+  if (adjoint_.maps[0].empty()) return;
+  for (int c = 0; c < 4; ++c) {
+    if (!maps[c].empty())
+      for (std::size_t p = 0; p < in_->sky.npix; ++p) maps[c][p] += adjoint_.maps[c][p];
+    adjoint_.maps[c] = {};
+  }
+}
+
 }  // namespace
 
 BackendEntry vulkan_backend_entry() {
@@ -471,6 +685,7 @@ BackendEntry vulkan_backend_entry() {
               for (const auto& d : devices)
                 if (d.unusable.empty() && d.type == chosen.type) info.devices.push_back(d.index);
               info.capabilities.device_memory = chosen.device_memory;
+              info.capabilities.adjoint = chosen.int64_atomics;
               return info;
             } catch (const Error& e) {
               return BackendInfo{"vulkan", false, e.what(), {}, {}};
