@@ -1,9 +1,10 @@
 // The cuda backend without a GPU: chunk sizing, device choice, the monopole split, and the kernel's
 // per-sample float32 arithmetic (src/cuda/sample.hpp, the functions convolve.cu runs) executed on the
 // host with the warp emulated lane by lane, held to the precision contract of docs/validation.md, "B", against
-// the float64 reference. On a GPU, test_cuda checks the device itself against the same bars.
+// the float64 reference; likewise the adjoint's norm pass and fixed-point scatter. On a GPU, test_cuda checks the device itself against the same bars.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -17,6 +18,7 @@
 #include "cuda/device_choice.hpp"
 #include "cuda/device_data.hpp"
 #include "cuda/sample.hpp"
+#include "gpu/fixed_point.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/units.hpp"
@@ -340,6 +342,155 @@ TEST(CudaHostKernel, WithoutTheSplitTheMonopoleSkyFails) {
   const std::vector<double> aniso = reference(a, 0, p, pisco::Normalization::integral);
   const double aniso_rms = compare(aniso, aniso).rms_ref;
   EXPECT_GT(st.max_err, 1e-5 * aniso_rms);
+}
+
+
+// ---- the adjoint's kernels on the host ----
+
+struct EmulatedAdjoint {
+  std::array<std::vector<double>, 4> maps;  // I Q U V, after the fold
+  std::vector<std::int64_t> sums;           // the fixed-point sums before it
+};
+
+// convolve.cu's adjoint for one detector, lanes in order and samples in the order given (reversed
+// with `reverse`): the norm pass (convolve_kernel with Norms) where per-sample, the batch's scale,
+// scatter_kernel's integer sums, and the fold (gpu/fixed_point.hpp).
+template <bool Radial, bool Exact, bool Plate>
+EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::PreparedDetector& prepared, std::size_t d,
+                                const pisco::Pointing& p, std::vector<double> values, const double* plate_angle,
+                                bool reverse) {
+  const pc::KernelSky& sky = dev.sky;
+  const pc::KernelDetector& det = dev.detectors[d];
+  const std::size_t npix = dev.vectors.size() / 4;
+  const auto frame = [&](std::size_t i, double& theta, double& phi) {
+    const double angles[4] = {p.theta[i], p.phi[i], p.psi[i], 0.0};
+    return pc::sample_frame(angles, false, det, theta, phi);
+  };
+  std::uint32_t first[pc::batch_ranges], offset[pc::batch_ranges + 1];
+  if (dev.per_sample)
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      double theta = 0.0, phi = 0.0;
+      const auto fd = frame(i, theta, phi);
+      const auto f = pc::to_float(fd);
+      pc::PlateSample plate{};
+      if constexpr (Plate) plate = pc::plate_sample(det, plate_angle[i]);
+      pc::LaneSums lanes[pc::warp_lanes];
+      pc::walk_disc(sky, det, theta, phi, first, offset, true, [&](int count) {
+        for (int l = 0; l < pc::warp_lanes; ++l)
+          pc::process_batch<Radial, false, true, Plate>(sky, det, f, fd, first, offset, count, l, lanes[l], &plate);
+      });
+      double norm[pc::warp_lanes];
+      for (int l = 0; l < pc::warp_lanes; ++l) norm[l] = lanes[l].norm;
+      const double n = butterfly(norm);
+      values[i] = n > 0.0 ? values[i] / n : 0.0;
+    }
+  const double scale = pisco::detail::fixed_point_scale(values, pisco::detail::adjoint_weight_bound(prepared));
+  for (double& v : values) v *= scale;
+  EmulatedAdjoint out;
+  out.sums.assign(4 * npix, 0);
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    const std::size_t i = reverse ? p.size() - 1 - k : k;
+    if (values[i] == 0.0) continue;
+    double theta = 0.0, phi = 0.0;
+    const auto fd = frame(i, theta, phi);
+    const auto f = pc::to_float(fd);
+    pc::PlateSample plate{};
+    if constexpr (Plate) plate = pc::plate_sample(det, plate_angle[i]);
+    pc::walk_disc(sky, det, theta, phi, first, offset, true, [&](int count) {
+      for (int l = 0; l < pc::warp_lanes; ++l)
+        pc::scatter_batch<Radial, Exact, Plate, false>(sky, det, f, fd, first, offset, count, l, values[i], &plate,
+                                                       [&](std::size_t c, std::int64_t q) { out.sums[c] += q; });
+    });
+  }
+  for (auto& m : out.maps) m.assign(npix, 0.0);
+  pisco::detail::fold_fixed_point(out.sums.data(), npix, scale, out.maps);
+  return out;
+}
+
+EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::PreparedDetector& prepared, std::size_t d,
+                                const pisco::Pointing& p, const std::vector<double>& values, const double* plate_angle,
+                                bool reverse = false) {
+  const int v = (prepared.radial ? 4 : 0) + (dev.monopole || dev.per_sample ? 2 : 0) + (plate_angle ? 1 : 0);
+  switch (v) {
+    case 0: return emulate_adjoint<false, false, false>(dev, prepared, d, p, values, plate_angle, reverse);
+    case 1: return emulate_adjoint<false, false, true>(dev, prepared, d, p, values, plate_angle, reverse);
+    case 2: return emulate_adjoint<false, true, false>(dev, prepared, d, p, values, plate_angle, reverse);
+    case 3: return emulate_adjoint<false, true, true>(dev, prepared, d, p, values, plate_angle, reverse);
+    case 4: return emulate_adjoint<true, false, false>(dev, prepared, d, p, values, plate_angle, reverse);
+    case 5: return emulate_adjoint<true, false, true>(dev, prepared, d, p, values, plate_angle, reverse);
+    case 6: return emulate_adjoint<true, true, false>(dev, prepared, d, p, values, plate_angle, reverse);
+    default: return emulate_adjoint<true, true, true>(dev, prepared, d, p, values, plate_angle, reverse);
+  }
+}
+
+// The adjoint kernel's arithmetic against the reference's adjoint (the maps of every detector, at the
+// float32 bars of the backends' adjoint parity, tests/test_adjoint.cpp), and the transpose of the
+// emulated forward kernel: <s, A^T d> = <A s, d> to float32 rounding. Both normalizations, a sky with
+// a 2.725 K monopole (the forward's float64 sums, and the beam coordinates from float64 vectors),
+// aperture plates, samples over the whole sphere and near both poles. The integer sums are the same
+// whatever the order of the samples.
+TEST(CudaHostKernel, AdjointMatchesTheReferenceAndTheForward) {
+  const pisco::Mueller m0 = pisco_test::generic_plate();
+  pisco::Pointing p = random_pointing(300, 23);
+  for (int i = 0; i < 30; ++i) p.push_back(i % 2 ? pi - 0.01 * i * deg : 0.01 * i * deg, 0.3 * i, 0.1 * i);
+  std::vector<double> h(p.size()), theta(p.size());
+  for (std::size_t i = 0; i < h.size(); ++i) {
+    h[i] = 0.173 * double(i);
+    theta[i] = h[i] - 0.3;
+  }
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> g;
+  for (const bool plates : {false, true})
+    for (const auto norm : {pisco::Normalization::integral, pisco::Normalization::per_sample}) {
+      Scene s = scene(32, 2.725);
+      if (plates) {
+        std::vector<pisco::Detector> dets = s.focal_plane.detectors();
+        for (auto& det : dets) det.hwp = pisco::HalfWavePlate{m0, pisco::HwpPlacement::aperture, 0.3};
+        s.focal_plane = pisco::FocalPlane(dets);
+      }
+      const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, norm);
+      const HostDevice dev(in, s.sky);
+      pisco::EngineOptions o;
+      o.backend = "cpu";
+      o.quadrature = pisco::Quadrature::plain;
+      o.normalization = norm;
+      pisco::Engine cpu(s.sky, s.beams, s.focal_plane, o);
+      for (std::size_t d = 0; d < s.focal_plane.size(); ++d) {
+        std::vector<double> values(p.size());
+        for (double& v : values) v = g(rng);
+        cpu.adjoint(d, p, values, plates ? std::span<const double>(h) : std::span<const double>());
+        pisco::Sky want(s.sky.nside());
+        cpu.take_adjoint({want.I(), want.Q(), want.U(), want.V()});
+        const double* plate_angle = plates ? theta.data() : nullptr;
+        const EmulatedAdjoint got = emulate_adjoint(dev, in.detectors[d], d, p, values, plate_angle);
+        const std::string what = s.focal_plane[d].name + (plates ? ", plate" : "") +
+                                 (norm == pisco::Normalization::per_sample ? ", per sample" : "");
+        // Against the reference's maps.
+        for (int c = 0; c < 4; ++c) {
+          const auto a = want.stokes(pisco::StokesIndex(c));
+          if (c == 3 && !plates) continue;  // no V response without a plate
+          const Stats st = compare(std::vector<double>(a.begin(), a.end()), got.maps[c]);
+          double largest = 0;
+          for (double x : a) largest = std::max(largest, std::abs(x));
+          EXPECT_LT(st.rms_err, 1e-5 * st.rms_ref) << what << " " << "IQUV"[c];
+          EXPECT_LT(st.max_err, 1e-4 * largest) << what << " " << "IQUV"[c];
+        }
+        // The transpose of the emulated forward kernel.
+        const Emulated forward = emulate(dev, d, in.detectors[d].radial, p, nullptr, plate_angle);
+        double as_d = 0, s_atd = 0, n_as = 0, n_d = 0;
+        for (std::size_t i = 0; i < p.size(); ++i) {
+          as_d += forward.tod[i] * values[i];
+          n_as += forward.tod[i] * forward.tod[i];
+          n_d += values[i] * values[i];
+        }
+        for (int c = 0; c < 4; ++c)
+          for (std::size_t k = 0; k < s.sky.npix(); ++k) s_atd += s.sky.stokes(pisco::StokesIndex(c))[k] * got.maps[c][k];
+        const double relative = std::abs(as_d - s_atd) / std::sqrt(n_as * n_d);
+        std::cout << what << ": adjoint against the forward kernel, difference / (||As|| ||d||) = " << relative << "\n";
+        EXPECT_LT(relative, 1e-5) << what;
+        if (d == 0) EXPECT_EQ(emulate_adjoint(dev, in.detectors[d], d, p, values, plate_angle, true).sums, got.sums) << what;
+      }
+    }
 }
 
 }  // namespace

@@ -426,7 +426,8 @@ TEST(Engine, BackendsReportCapabilities) {
         EXPECT_EQ(pisco_test::kind_of([&] { engine.adjoint(0, p, d); }), pisco::ErrorKind::unavailable) << b.name;
       }
     }
-    EXPECT_EQ(b.capabilities.adjoint, b.name == "cpu" || b.name == "simd") << b.name;
+    // Every backend has it; a Vulkan device only with 64-bit integer atomics (lavapipe has them).
+    if (b.name != "vulkan") EXPECT_TRUE(b.capabilities.adjoint) << b.name;
     if (b.name == "vulkan" || b.name == "cuda")
       EXPECT_GT(b.capabilities.device_memory, std::uint64_t(1) << 26) << b.name;  // at least 64 MiB
     else

@@ -47,6 +47,7 @@ BackendInfo probe() {
     BackendInfo info{"cuda", true, detail, {}, {}};
     for (int i = 0; i < n; ++i) info.devices.push_back(std::size_t(i));
     info.capabilities.device_memory = describe(0).memory;
+    info.capabilities.adjoint = true;  // 64-bit integer atomics, on every architecture CUDA builds for
     return info;
   } catch (const Error& e) {
     return {"cuda", false, e.what(), {}, {}};

@@ -17,7 +17,9 @@ __device__ __forceinline__ T warp_sum(T v) {
   return v;
 }
 
-template <bool Radial, bool Monopole, bool PerSample, bool Plate>
+// With Norms (the adjoint's first pass, PerSample and no Monopole), each sample's normalization is
+// written instead of its value.
+template <bool Radial, bool Monopole, bool PerSample, bool Plate, bool Norms = false>
 __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, KernelDetector det, ChunkArgs chunk) {
   __shared__ std::uint32_t first[warps_per_block][batch_ranges];
   __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
@@ -47,9 +49,75 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
   const double monopole_weight = Monopole ? warp_sum(acc.monopole) : 0.0;
   const double norm = PerSample ? warp_sum(acc.norm) : 0.0;
   if (lane == 0) {
-    chunk.tod[i] = finish_sample(sum, monopole_weight, norm, sky.monopole, PerSample);
+    chunk.tod[i] = Norms ? norm : finish_sample(sum, monopole_weight, norm, sky.monopole, PerSample);
     atomicAdd(chunk.pixels, static_cast<unsigned long long>(pixels));
   }
+}
+
+// The adjoint's scatter (sample.hpp, scatter_batch): one warp per sample, its value times each pixel's
+// adjoint weights added to the fixed-point maps with integer atomics.
+template <bool Radial, bool Exact, bool Plate, bool Squares>
+__global__ void __launch_bounds__(block_threads) scatter_kernel(KernelSky sky, KernelDetector det, AdjointArgs chunk) {
+  __shared__ std::uint32_t first[warps_per_block][batch_ranges];
+  __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
+  const int warp = int(threadIdx.x) / warp_lanes;
+  const int lane = int(threadIdx.x) % warp_lanes;
+  const std::size_t i = std::size_t(blockIdx.x) * warps_per_block + warp;
+  if (i >= chunk.count) return;  // whole warps only
+  const double value = chunk.values[i];
+  if (value == 0.0) return;  // the whole warp: nothing to scatter
+
+  double theta = 0.0, phi = 0.0;
+  const SampleFrame<double> fd = sample_frame(chunk.pointing + 4 * i, chunk.quaternions, det, theta, phi);
+  const SampleFrame<float> f = to_float(fd);
+  PlateSample plate;
+  if constexpr (Plate) plate = plate_sample(det, chunk.plate_angle[i]);
+  std::uint32_t* my_first = first[warp];
+  std::uint32_t* my_offset = offset[warp];
+  auto* sums = reinterpret_cast<unsigned long long*>(chunk.sums);
+  const std::uint32_t pixels = walk_disc(sky, det, theta, phi, my_first, my_offset, lane == 0, [&](int count) {
+    __syncwarp();
+    scatter_batch<Radial, Exact, Plate, Squares>(sky, det, f, fd, my_first, my_offset, count, lane, value, &plate,
+                                                 [&](std::size_t k, std::int64_t q) {
+                                                   atomicAdd(sums + k, static_cast<unsigned long long>(q));
+                                                 });
+    __syncwarp();
+  });
+  if (lane == 0) atomicAdd(chunk.pixels, static_cast<unsigned long long>(pixels));
+}
+
+template <bool Radial, bool Exact, bool Plate>
+void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool squares,
+                    cudaStream_t stream) {
+  const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
+  if (squares)
+    scatter_kernel<Radial, Exact, Plate, true><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+  else
+    scatter_kernel<Radial, Exact, Plate, false><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+}
+
+template <bool Radial, bool Exact>
+void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool plate, bool squares,
+                    cudaStream_t stream) {
+  if (plate)
+    launch_scatter<Radial, Exact, true>(sky, det, chunk, squares, stream);
+  else
+    launch_scatter<Radial, Exact, false>(sky, det, chunk, squares, stream);
+}
+
+template <bool Radial>
+void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool exact, bool plate,
+                    bool squares, cudaStream_t stream) {
+  if (exact)
+    launch_scatter<Radial, true>(sky, det, chunk, plate, squares, stream);
+  else
+    launch_scatter<Radial, false>(sky, det, chunk, plate, squares, stream);
+}
+
+template <bool Radial, bool Plate>
+void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
+  const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
+  convolve_kernel<Radial, false, true, Plate, true><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
 }
 
 template <bool Radial, bool Monopole, bool PerSample, bool Plate>
@@ -85,6 +153,26 @@ void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& ch
 }
 
 }  // namespace
+
+void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial, bool plate,
+                  cudaStream_t stream) {
+  if (chunk.count == 0) return;
+  if (radial)
+    plate ? launch_norms<true, true>(sky, det, chunk, stream) : launch_norms<true, false>(sky, det, chunk, stream);
+  else
+    plate ? launch_norms<false, true>(sky, det, chunk, stream) : launch_norms<false, false>(sky, det, chunk, stream);
+  PISCO_CUDA_CHECK(cudaGetLastError());
+}
+
+void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool radial, bool exact,
+                    bool plate, bool squares, cudaStream_t stream) {
+  if (chunk.count == 0) return;
+  if (radial)
+    launch_scatter<true>(sky, det, chunk, exact, plate, squares, stream);
+  else
+    launch_scatter<false>(sky, det, chunk, exact, plate, squares, stream);
+  PISCO_CUDA_CHECK(cudaGetLastError());
+}
 
 void check_kernel_image(const std::string& device) {
   cudaFuncAttributes attributes{};

@@ -3,11 +3,15 @@
 // buffers, so that while one chunk computes the host fills the other and the copy engines move the
 // third's data. The kernel is convolve.cu; what it computes per sample is sample.hpp.
 #include <algorithm>
+#include <array>
 #include <cstring>
+#include <limits>
 #include <memory>
+#include <vector>
 
 #include "core/poles.hpp"
 #include "core/backend.hpp"
+#include "gpu/fixed_point.hpp"
 #include "gpu/streaming.hpp"
 #include "cuda/buffer.hpp"
 #include "cuda/check.hpp"
@@ -34,6 +38,8 @@ struct Slot {
   PinnedArray<unsigned long long> host_pixels;
   DeviceArray<double> dev_in, dev_out;
   DeviceArray<unsigned long long> dev_pixels;
+  PinnedArray<double> host_values;  // the adjoint's scaled values, made at its first use
+  DeviceArray<double> dev_values;
   SlotJob job;
 
   explicit Slot(std::size_t capacity)
@@ -114,6 +120,56 @@ class CudaBackend final : public Backend {
     }
   }
 
+  // The adjoint (docs/cuda.md, "The adjoint"): batches of samples, each with its own fixed-point scale
+  // (gpu/fixed_point.hpp); with the per-sample normalization, a first pass computes every sample's
+  // norm as the forward kernel does, and the host divides the TOD by it before the scale is chosen.
+  std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
+                        bool squares) override {
+    make_current(device_);
+    const PreparedDetector& det = in_->detectors.at(detector);
+    prepare_adjoint();
+    if (maps_[0].empty())
+      for (auto& m : maps_) m.assign(in_->sky.npix, 0.0);
+    double bound = adjoint_weight_bound(det);
+    if (squares) bound *= bound;
+    std::uint64_t pixels = 0;
+    std::vector<double> values, norms;
+    for (std::size_t b0 = 0; b0 < pointing.size(); b0 += fixed_point_batch) {
+      const std::size_t m = std::min(fixed_point_batch, pointing.size() - b0);
+      const PointingInput part = pointing.subspan(b0, m);
+      values.assign(tod.begin() + std::ptrdiff_t(b0), tod.begin() + std::ptrdiff_t(b0 + m));
+      if (per_sample_) {
+        norms.assign(m, 0.0);
+        adjoint_pass(detector, part, norms, true, squares);
+        for (std::size_t i = 0; i < m; ++i) values[i] = norms[i] > 0.0 ? values[i] / norms[i] : 0.0;
+      }
+      if (squares)
+        for (double& v : values) v *= v;
+      const double scale = fixed_point_scale(values, bound);
+      if (scale == 0.0) continue;
+      for (double& v : values) v *= scale;
+      pixels += adjoint_pass(detector, part, values, false, squares);
+      try {
+        const std::size_t bytes = 4 * in_->sky.npix * sizeof(std::int64_t);
+        PISCO_CUDA_CHECK(cudaMemcpy(host_sums_.data(), sums_.data(), bytes, cudaMemcpyDeviceToHost));
+        PISCO_CUDA_CHECK(cudaMemset(sums_.data(), 0, bytes));
+      } catch (const Error& e) {
+        throw SubmissionError(detector, std::string(e.what()) + " (device " + device_.description() + ", the adjoint's maps)", e.kind());
+      }
+      fold_fixed_point(host_sums_.data(), in_->sky.npix, scale, maps_);
+    }
+    return pixels;
+  }
+
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override {
+    if (maps_[0].empty()) return;
+    for (int c = 0; c < 4; ++c) {
+      if (!maps[c].empty())
+        for (std::size_t p = 0; p < in_->sky.npix; ++p) maps[c][p] += maps_[c][p];
+      maps_[c] = {};
+    }
+  }
+
   std::uint64_t wait(std::uint64_t ticket) override {
     make_current(device_);
     SlotJob current;
@@ -145,7 +201,78 @@ class CudaBackend final : public Backend {
                           kind);
   }
 
-  void enqueue(Slot& s, const KernelDetector& det, bool radial, bool plate, const PointingInput& pointing) {
+  // The adjoint's device maps (4 int64 a pixel), their pinned readback and the slots' value buffers.
+  void prepare_adjoint() {
+    if (sums_.size()) return;
+    const std::size_t n = 4 * in_->sky.npix;
+    try {
+      DeviceArray<std::int64_t> sums(n);
+      PISCO_CUDA_CHECK(cudaMemset(sums.data(), 0, n * sizeof(std::int64_t)));
+      PinnedArray<std::int64_t> host(n);
+      for (Slot& s : slots_) {
+        s.host_values = PinnedArray<double>(capacity_);
+        s.dev_values = DeviceArray<double>(capacity_);
+      }
+      sums_ = std::move(sums);
+      host_sums_ = std::move(host);
+    } catch (const DeviceOutOfMemory& e) {
+      throw Error("cuda: out of memory for the adjoint's maps (" + std::to_string(n * sizeof(std::int64_t) >> 20) +
+                      " MiB) on " + device_.description() + ": " + e.what(),
+                  ErrorKind::device);
+    }
+  }
+
+  // One pass of the adjoint over `pointing` through the slots: with norms, each sample's
+  // normalization into `io`; without, the scatter of the scaled values `io`. Returns the pixels.
+  std::uint64_t adjoint_pass(std::size_t detector, const PointingInput& pointing, std::span<double> io, bool norms,
+                             bool squares) {
+    const DetectorData& det = detectors_.at(detector);
+    const PreparedDetector& prepared = in_->detectors.at(detector);
+    const bool plate = prepared.plate == PreparedDetector::Plate::aperture;
+    SlotJob current;
+    const auto complete = [&](Slot& done) {
+      current = done.job;
+      PISCO_CUDA_CHECK(cudaStreamSynchronize(done.stream.get()));
+      if (norms) deliver(done.job, done.host_out.data());
+      return *done.host_pixels.data();
+    };
+    try {
+      for (std::size_t offset = 0; offset < pointing.size(); offset += capacity_) {
+        const std::size_t count = std::min(capacity_, pointing.size() - offset);
+        Slot& s = ring_.acquire(complete);
+        current = SlotJob{false, 0, detector, offset, pointing.size(), io.subspan(offset, count), false};
+        const PointingInput chunk = pointing.subspan(offset, count);
+        const cudaStream_t stream = s.stream.get();
+        stage(s, plate, chunk);
+        if (norms) {
+          const ChunkArgs args{s.dev_in.data(), chunk.quaternions, s.dev_in.data() + 4 * count, s.dev_out.data(),
+                               s.dev_pixels.data(), std::uint32_t(count)};
+          launch_norms(sky_, det.kernel, args, prepared.radial, plate, stream);
+          PISCO_CUDA_CHECK(cudaMemcpyAsync(s.host_out.data(), s.dev_out.data(), count * sizeof(double),
+                                           cudaMemcpyDeviceToHost, stream));
+        } else {
+          std::memcpy(s.host_values.data(), io.data() + offset, count * sizeof(double));
+          PISCO_CUDA_CHECK(cudaMemcpyAsync(s.dev_values.data(), s.host_values.data(), count * sizeof(double),
+                                           cudaMemcpyHostToDevice, stream));
+          const AdjointArgs args{s.dev_in.data(), chunk.quaternions, s.dev_in.data() + 4 * count, s.dev_values.data(),
+                                 sums_.data(), s.dev_pixels.data(), std::uint32_t(count)};
+          launch_scatter(sky_, det.kernel, args, prepared.radial, monopole_term_ || per_sample_, plate, squares, stream);
+        }
+        PISCO_CUDA_CHECK(cudaMemcpyAsync(s.host_pixels.data(), s.dev_pixels.data(), sizeof(unsigned long long),
+                                         cudaMemcpyDeviceToHost, stream));
+        s.job = current;
+        s.job.busy = true;
+      }
+      ring_.drain(std::numeric_limits<std::uint64_t>::max(), complete);
+    } catch (const Error& e) {
+      fail(current, e.what(), e.kind());
+    }
+    return ring_.take_pixels();
+  }
+
+  // Copies a chunk's pointing (4 doubles a sample) and plate angles to the slot's device buffer and
+  // clears its pixel counter.
+  void stage(Slot& s, bool plate, const PointingInput& pointing) {
     const cudaStream_t stream = s.stream.get();
     const std::size_t count = pointing.size();
     double* host = s.host_in.data();
@@ -164,6 +291,12 @@ class CudaBackend final : public Backend {
     const std::size_t doubles = (plate ? 5 : 4) * count;
     PISCO_CUDA_CHECK(cudaMemcpyAsync(s.dev_in.data(), host, doubles * sizeof(double), cudaMemcpyHostToDevice, stream));
     PISCO_CUDA_CHECK(cudaMemsetAsync(s.dev_pixels.data(), 0, sizeof(unsigned long long), stream));
+  }
+
+  void enqueue(Slot& s, const KernelDetector& det, bool radial, bool plate, const PointingInput& pointing) {
+    const cudaStream_t stream = s.stream.get();
+    const std::size_t count = pointing.size();
+    stage(s, plate, pointing);
     const ChunkArgs args{s.dev_in.data(), pointing.quaternions, s.dev_in.data() + 4 * count, s.dev_out.data(),
                          s.dev_pixels.data(), std::uint32_t(count)};
     launch_convolve(sky_, det, args, radial, monopole_term_, per_sample_, plate, stream);
@@ -184,6 +317,9 @@ class CudaBackend final : public Backend {
   std::size_t capacity_ = 0;
   std::vector<Slot> slots_;
   SlotRing<Slot> ring_;
+  DeviceArray<std::int64_t> sums_;      // the adjoint's fixed-point maps, 4 a pixel
+  PinnedArray<std::int64_t> host_sums_;
+  std::array<std::vector<double>, 4> maps_;  // the adjoint's float64 maps, I Q U V
 };
 
 }  // namespace

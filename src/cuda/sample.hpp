@@ -18,6 +18,8 @@
 // otherwise the whole evaluation is the arithmetic of shaders/pixel.glsl in float (core/contribution.hpp).
 #pragma once
 
+#include <cmath>
+#include <cstddef>
 #include <cstdint>
 
 #include "core/cap_boundary.hpp"
@@ -104,8 +106,37 @@ PISCO_HD void kahan_add(LaneSums& s, float value) { pisco::detail::kahan_add(s.s
 // A lane's compensated float32 total, the value that enters the warp reduction.
 PISCO_HD float lane_total(const LaneSums& s) { return s.sum - s.carry; }
 
-// The pixels of one batch that fall to `lane`: positions lane, lane + 32, ... of the concatenated
-// ranges [first[r], first[r] + offset[r+1] - offset[r]), r < count.
+// Pixel number j of a batch: position j of the concatenated ranges [first[r], first[r] + offset[r+1] -
+// offset[r]); r is the range of the lane's previous pixel (positions only grow) and is advanced.
+PISCO_HD std::uint32_t batch_pixel(const std::uint32_t* first, const std::uint32_t* offset, std::uint32_t j, int& r) {
+  while (j >= offset[r + 1]) ++r;
+  return first[r] + (j - offset[r]);
+}
+
+// Pixel p's float32 geometry g and weights w, w M(theta) behind an aperture plate (core/plate.hpp).
+// With Exact, the beam coordinates come from the float64 pixel vectors, which float32 pixel vectors
+// would carry only to ~1e-7 (the largest float32 error otherwise, on steep beams); they are returned
+// in x, y for the float64 sums.
+template <bool Radial, bool Exact, bool Plate>
+PISCO_HD Vec4<float> pixel_weights(const KernelSky& sky, const ArrayGrid<float>& grid, const SampleFrame<float>& f,
+                                   const SampleFrame<double>& fd, std::uint32_t p, const PixelRecord& px,
+                                   const PlateSample* plate, PixelGeometry<float>& g, double& x, double& y) {
+  const Vec3<float> k{px.kx, px.ky, px.kz};
+  g = pixel_geometry(f, k);
+  if constexpr (Exact) {
+    const double* kv = sky.vectors + 4 * std::size_t(p);
+    const Vec3<double> kd{kv[0], kv[1], kv[2]};
+    x = dot(kd, fd.theta_p);
+    y = dot(kd, fd.phi_p);
+    g.x = float(x);
+    g.y = float(y);
+  }
+  Vec4<float> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
+  if constexpr (Plate) w = effective_weights(w, plate->m);
+  return w;
+}
+
+// The pixels of one batch that fall to `lane`: positions lane, lane + 32, ... of the batch.
 template <bool Radial, bool Monopole, bool PerSample, bool Plate = false>
 PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
                             const SampleFrame<double>& fd, const std::uint32_t* first,
@@ -117,27 +148,12 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
   const ArrayGrid<double> plate_exact{det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
   int r = 0;
   for (std::uint32_t j = std::uint32_t(lane); j < total; j += warp_lanes) {
-    while (j >= offset[r + 1]) ++r;
-    const std::uint32_t p = first[r] + (j - offset[r]);
+    const std::uint32_t p = batch_pixel(first, offset, j, r);
     const PixelRecord px = sky.pixels[p];
-    const Vec3<float> k{px.kx, px.ky, px.kz};
     const Vec4<float> S{px.i, px.q, px.u, px.v};
-    PixelGeometry<float> g = pixel_geometry(f, k);
+    PixelGeometry<float> g;
     double x = 0.0, y = 0.0;
-    if constexpr (Monopole || PerSample) {
-      // The beam coordinates in float64, from the reference's pixel vectors: they give the float64
-      // sums their weights, and the float32 evaluation its (x, y), which float32 pixel vectors would
-      // only carry to ~1e-7 (the largest float32 error otherwise, on steep beams).
-      const double* kv = sky.vectors + 4 * std::size_t(p);
-      const Vec3<double> kd{kv[0], kv[1], kv[2]};
-      x = dot(kd, fd.theta_p);
-      y = dot(kd, fd.phi_p);
-      g.x = float(x);
-      g.y = float(y);
-    }
-    Vec4<float> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
-    // A plate at the aperture: the effective weights w M(theta) (core/plate.hpp).
-    if constexpr (Plate) w = effective_weights(w, plate->m);
+    const Vec4<float> w = pixel_weights<Radial, Monopole || PerSample, Plate>(sky, grid, f, fd, p, px, plate, g, x, y);
     kahan_add(acc, stokes_response(w, g.cos2chi, g.sin2chi, S));
     if constexpr (Monopole || PerSample) {
       const Vec4<double> we = Radial ? interpolate_radial(exact, x * x + y * y) : interpolate_weights(exact, x, y);
@@ -154,6 +170,43 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
         }
       }
       if constexpr (PerSample) acc.norm += we.y;
+    }
+  }
+}
+
+// The adjoint's contribution round(v g) as a 64-bit integer (gpu/fixed_point.hpp): v carries the
+// batch's scale. Round to nearest even on the device and on the host alike.
+PISCO_HD std::int64_t fixed_point(double v, float g) {
+#if defined(__CUDA_ARCH__)
+  return __double2ll_rn(v * double(g));
+#else
+  return std::llrint(v * double(g));
+#endif
+}
+
+// The adjoint (docs/cuda.md, "The adjoint"): the pixels of one batch that fall to `lane`, each adding
+// round(v g_c) for its Stokes components c, g = stokes_adjoint(w, chi) (g_c^2 with Squares, the diagonal
+// of A^T A), through add(4 p + c, q): an integer atomic on the device, so that the sums are the same
+// bits whatever the order of the warps. The geometry and weights are the forward's (Exact as the
+// forward's Monopole || PerSample).
+template <bool Radial, bool Exact, bool Plate, bool Squares, class Add>
+PISCO_HD void scatter_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
+                            const SampleFrame<double>& fd, const std::uint32_t* first, const std::uint32_t* offset,
+                            int count, int lane, double value, const PlateSample* plate, Add&& add) {
+  const std::uint32_t total = offset[count];
+  const ArrayGrid<float> grid{det.weights, det.grid_n, det.grid_a, det.grid_inv_step};
+  int r = 0;
+  for (std::uint32_t j = std::uint32_t(lane); j < total; j += warp_lanes) {
+    const std::uint32_t p = batch_pixel(first, offset, j, r);
+    PixelGeometry<float> g;
+    double x = 0.0, y = 0.0;
+    const Vec4<float> w = pixel_weights<Radial, Exact, Plate>(sky, grid, f, fd, p, sky.pixels[p], plate, g, x, y);
+    const Vec4<float> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
+    const float gs[4] = {a.x, a.y, a.z, a.w};
+    for (int c = 0; c < 4; ++c) {
+      const float gc = Squares ? gs[c] * gs[c] : gs[c];
+      if (gc == 0.0f) continue;
+      if (const std::int64_t q = fixed_point(value, gc)) add(4 * std::size_t(p) + std::size_t(c), q);
     }
   }
 }

@@ -350,7 +350,7 @@ def test_engine_errors_and_close():
     caps = {b.name: b.capabilities for b in pisco.devices() if b.available}
     assert caps["cpu"]["float64"] and caps["cpu"]["worker_threads"] and caps["cpu"]["device_memory"] == 0
     assert all(c["plates"] for c in caps.values())
-    assert all(c["adjoint"] == (name in ("cpu", "simd")) for name, c in caps.items())
+    assert all(c["adjoint"] for name, c in caps.items() if name != "vulkan")  # vulkan: with int64 atomics
     with pytest.raises(TypeError, match="beams: expected a pisco.Beamsor"):
         pisco.Engine(sky, [beam, "beam"], fp, backend="cpu")
     bad = pisco.FocalPlane()
