@@ -27,6 +27,11 @@ struct DeconvolutionOptions {
   // > 0: the solution also returned reconvolved with a circular Gaussian of this FWHM (radians), by
   // harmonic smoothing (HEALPix map2alm with 3 iterations, to 3 NSIDE - 1), for analysis.
   double target_fwhm = 0.0;
+  // Several processes, each with its own chunks of the survey: sums a buffer over the processes in
+  // place, the same bits on each (an MPI reduction and broadcast). solve() calls it on A^T d, the
+  // diagonal and every A^T A p, so that each process runs the same iterations on the whole survey's
+  // normal equations. Empty: one process.
+  std::function<void(std::span<double>)> reduce;
 };
 
 // One chunk of a survey as the solver replays it: a detector, its boresight pointing (angles or

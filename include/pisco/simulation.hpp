@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,9 @@ class RunContext {
   virtual double sum_of(double v) { return v; }
   // Adds every process's normal equations into the leader's map-maker; returns the bytes sent.
   virtual std::uint64_t reduce(BinnedMapmaker& /*mapper*/) { return 0; }
+  // Replaces `values` on every process by their sum over the processes, the same bits on each (the
+  // deconvolving map-maker's maps, DeconvolutionOptions::reduce).
+  virtual void sum_in_place(std::span<double> /*values*/) {}
   // For SharedTodOptions::mpi_communicator (tod_file.hpp): the communicator's address, or null.
   virtual const void* mpi_communicator() const { return nullptr; }
   // Early stop on an error elsewhere: post_check(failed) after each job of this process, stop() says
@@ -154,6 +158,9 @@ struct SimulationResult {
   std::filesystem::path tod_file;        // empty: no TOD file
   std::vector<std::filesystem::path> written;  // every file written, in order
   std::size_t solved_pixels = 0;
+  // [mapmaker] type = "deconvolve": its iterations and final ||r|| / ||A^T d||.
+  int deconvolution_iterations = 0;
+  double deconvolution_residual = 0.0;
   // Not empty when the maps solve no pixel: why (maps.fits is all UNSEEN; no spectra were made).
   std::string nothing_solved;
 };

@@ -107,6 +107,17 @@ struct OutputConfig {
   bool plots = true;             // for pisco-vk run's plotting tool; the library makes no plots
 };
 
+// [mapmaker] (docs/config.md): the binned map-maker (the default), or the beam-deconvolving one
+// (pisco::DeconvolvingMapmaker) with its options.
+enum class MapmakerKind { binned, deconvolve };
+struct MapmakerConfig {
+  MapmakerKind kind = MapmakerKind::binned;
+  int iterations = 40;          // deconvolve: the most conjugate-gradient iterations
+  double tolerance = 1e-6;      // deconvolve: ||r|| / ||A^T d|| to stop at
+  double regularization = 1e-3; // deconvolve: lambda as a fraction of A^T A's Rayleigh quotient
+  double target_fwhm = 0.0;     // deconvolve: radians; > 0: maps.fits reconvolved with this Gaussian
+};
+
 struct SimulationConfig {
   std::filesystem::path source;  // the simulation file ("" for built-in defaults)
   std::string text;              // its contents, recorded as provenance
@@ -118,6 +129,7 @@ struct SimulationConfig {
   ScanConfig scan;
   EngineConfig engine;
   OutputConfig output;
+  MapmakerConfig mapmaker;
 };
 
 // Reads and checks a simulation file (docs/config.md). Relative paths inside it are relative to its

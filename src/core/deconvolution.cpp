@@ -71,12 +71,24 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
                                             const std::function<void(const DeconvolutionProgress&)>& progress) {
   const auto t0 = std::chrono::steady_clock::now();
   const int nside = engine_.nside();
-  if (!any_) throw Error("deconvolution: no TOD was added; call add() for every chunk of the survey before solve()");
+  if (!any_ && !options_.reduce)
+    throw Error("deconvolution: no TOD was added; call add() for every chunk of the survey before solve()");
   Sky b(nside), x(nside), r(nside), p(nside), q(nside), z(nside), diagonal(nside);
-  engine_.take_adjoint(maps_of(b));
+  // The engine's adjoint maps, summed over the processes when there are several.
+  std::vector<double> buffer;
+  const auto take = [&](Sky& out) {
+    engine_.take_adjoint(maps_of(out));
+    if (!options_.reduce) return;
+    const std::size_t n = out.npix();
+    buffer.resize(4 * n);
+    for (int k = 0; k < 4; ++k) std::copy_n(out.stokes(StokesIndex(k)).begin(), n, buffer.begin() + std::ptrdiff_t(k * n));
+    options_.reduce(buffer);
+    for (int k = 0; k < 4; ++k) std::copy_n(buffer.begin() + std::ptrdiff_t(k * n), n, out.stokes(StokesIndex(k)).begin());
+  };
+  take(b);
   // The Jacobi preconditioner: the diagonal of A^T A (Engine::adjoint_diagonal), one more pass.
   survey([&](const SurveyChunk& c) { diagonal_chunk(engine_, c); });
-  engine_.take_adjoint(maps_of(diagonal));
+  take(diagonal);
   // Pixels no sample's disc reaches have a zero diagonal: they stay zero. Pixels that only the far
   // tails of the beams reach have a tiny one: the preconditioner's divisor is floored at 1e-3 of the
   // mean non-zero diagonal of its Stokes parameter (else it would multiply their residual by up to
@@ -110,7 +122,7 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
     });
     for (int k = 0; k < 4; ++k)
       for (double& v : result.stokes(StokesIndex(k))) v = 0.0;
-    engine_.take_adjoint(maps_of(result));
+    take(result);
   };
   // z = M^-1 r, M the diagonal (plus lambda); zero where the diagonal is.
   const auto precondition = [&](const Sky& in, Sky& result) {

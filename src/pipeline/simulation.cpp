@@ -17,6 +17,7 @@
 #include <thread>
 #include <unistd.h>
 
+#include "pisco/deconvolution.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/output_file.hpp"
@@ -317,14 +318,16 @@ std::size_t write_maps(const fs::path& dir, const BinnedMaps& maps, int nside, c
 
 // The spectra of the solved maps (spectra.txt, the windows divided out as [output] says) and of the input
 // sky (input_spectra.txt), in [output] dir.
-std::vector<fs::path> write_spectra_files(const SimulationConfig& c, const Sky& sky, const BinnedMaps& maps,
-                                          int maps_nside) {
+namespace {
+// The spectra files of maps I, Q, U: `note` says what the maps are, `fw` the Gaussian beam window
+// [output] deconvolve_beam divides out (none: nullopt).
+std::vector<fs::path> spectra_files(const SimulationConfig& c, const Sky& sky, const std::vector<double>& I,
+                                    const std::vector<double>& Q, const std::vector<double>& U, int maps_nside,
+                                    std::string note, std::optional<double> fw) {
   const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
   const int lmax_sky = std::min(lmax, 3 * sky.nside() - 1);
-  const pisco::Spectra out = pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax);
+  const pisco::Spectra out = pisco::anafast(I, Q, U, maps_nside, lmax);
   std::vector<double> bt, bp, pt, pp;
-  std::string note = "binned maps";
-  const auto fw = window_fwhm(c.beams[c.detectors.front().beam]);
   if (c.output.deconvolve_beam && fw) {
     bt = pisco::gaussian_beam_window(*fw, lmax, false);
     bp = pisco::gaussian_beam_window(*fw, lmax, true);
@@ -340,6 +343,13 @@ std::vector<fs::path> write_spectra_files(const SimulationConfig& c, const Sky& 
   write_spectra(input_path, pisco::anafast(sky.I(), sky.Q(), sky.U(), sky.nside(), lmax_sky), lmax_sky,
                 "input sky");
   return {spectra_path, input_path};
+}
+}  // namespace
+
+std::vector<fs::path> write_spectra_files(const SimulationConfig& c, const Sky& sky, const BinnedMaps& maps,
+                                          int maps_nside) {
+  return spectra_files(c, sky, maps.I, maps.Q, maps.U, maps_nside, "binned maps",
+                       window_fwhm(c.beams[c.detectors.front().beam]));
 }
 
 Simulation::Simulation(SimulationConfig config, SimulationOptions options)
@@ -431,15 +441,38 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     check_hwp_times(c, samples_per_detector);
   });
   const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
-  const int maps_nside = pisco::maps_nside(c, sky);
+  // [mapmaker] type = "deconvolve": maps at the engine's NSIDE, the sky's (binned ones too, for hits
+  // and comparison), solved after the run by conjugate gradients that replay the survey.
+  const bool deconvolving = c.output.maps && c.mapmaker.kind == MapmakerKind::deconvolve;
+  const int maps_nside = deconvolving ? sky.nside() : pisco::maps_nside(c, sky);
   say("scan: %s, %zu detectors x %zu samples\n", scan_kind_name(c.scan.kind), fp.size(), samples_per_detector);
 
   std::optional<pisco::BinnedMapmaker> mapper;
+  std::optional<pisco::DeconvolvingMapmaker> deconvolver;
   cl.step([&] {
+    if (deconvolving && c.output.maps_nside > 0 && c.output.maps_nside != sky.nside())
+      throw pisco::Error(c.source.string() + ": [output] maps_nside: [mapmaker] type = \"deconvolve\" solves for the sky at its NSIDE " +
+                         std::to_string(sky.nside()) + "; got " + std::to_string(c.output.maps_nside) +
+                         " (leave maps_nside out, or set it to the sky's)");
     if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
       throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
                          std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
     if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
+    if (deconvolving) {
+      for (const pisco::BackendInfo& b : pisco::Engine::backends())
+        if (b.name == engine.backend_name() && !b.capabilities.adjoint)
+          throw pisco::Error(c.source.string() + ": [mapmaker] type = \"deconvolve\" needs the adjoint, which the " +
+                                 engine.backend_name() + " backend on " + engine.device_name() +
+                                 " lacks; choose another [engine] backend",
+                             pisco::ErrorKind::unavailable);
+      pisco::DeconvolutionOptions o;
+      o.max_iterations = c.mapmaker.iterations;
+      o.tolerance = c.mapmaker.tolerance;
+      o.regularization = c.mapmaker.regularization;
+      o.target_fwhm = c.mapmaker.target_fwhm;
+      if (cl.parallel()) o.reduce = [&cl](std::span<double> v) { cl.sum_in_place(v); };
+      deconvolver.emplace(engine, o);
+    }
   });
   std::optional<pisco::TodWriter> tod_file;
   const fs::path tod_path = c.output.dir / "tod.h5";
@@ -588,6 +621,24 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
                              : flag_samples(j.detector, b.angles.view());
     }
     if (mapper) mapper->add(modelled[j.detector], detector_view, t, hwp_of(j), fl);
+    if (deconvolver) {  // the right-hand side A^T d, chunk by chunk
+      pisco::SurveyChunk chunk;
+      chunk.detector = j.detector;
+      chunk.hwp_angle = hwp_of(j);
+      const BoresightChunk& b = bore[j.bslot];
+      if (per_detector_file) {
+        chunk.angles = file_pointing[j.detector % 2].view().subspan(j.first, j.count);
+      } else {
+        chunk.quaternions = b.quaternions;
+        chunk.angles = b.angles.view();
+        chunk.quats = pisco::QuatPointingView{b.quats};
+      }
+      try {
+        deconvolver->add(chunk, t);
+      } catch (const pisco::Error& e) {
+        throw pisco::Error(c.source.string() + ": [mapmaker] type = \"deconvolve\": " + e.what(), e.kind());
+      }
+    }
     if (tod_file && c.output.tod_weights) {  // the map-maker's weights of each sample
       const std::span<const double> h = hwp_of(j);
       weights.resize(3 * j.count);
@@ -681,11 +732,95 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
         static_cast<unsigned long long>(flagged), static_cast<unsigned long long>(total),
         tod_file ? "; the TOD file's 'flags' datasets" : "");
 
+  // The deconvolving map-maker: every process replays its own jobs each iteration, and the maps are
+  // summed over the processes (RunContext::sum_in_place), so that all run the same iterations.
+  std::optional<pisco::DeconvolvedMaps> deconvolved;
+  if (deconvolver) {
+    say("mapmaker: deconvolving each detector's beam by conjugate gradients, at most %d iterations "
+        "(tolerance %g, regularization %g), reconvolved to a Gaussian of FWHM %g deg (0: not reconvolved)\n",
+        c.mapmaker.iterations, c.mapmaker.tolerance, c.mapmaker.regularization,
+        c.mapmaker.target_fwhm * 180 / std::numbers::pi);
+    const auto survey = [&](const std::function<void(const pisco::SurveyChunk&)>& visit) {
+      std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
+      BoresightChunk& b = bore[0];
+      std::vector<double>& h = file_hwp[0];
+      for (std::size_t i = my_first; i < my_end; ++i) {
+        const Span job = job_at(i);
+        pisco::SurveyChunk chunk;
+        chunk.detector = job.detector;
+        if (per_detector_file) {
+          pisco::Pointing& ptg = file_pointing[0];
+          if (job.detector != read_detector) ptg = pisco::read_pointing_hdf5(c.scan.file, fp[job.detector].name);
+          read_detector = job.detector;
+          chunk.angles = ptg.view().subspan(job.first, job.count);
+          if (fp[job.detector].hwp) {
+            c.hwp.stream.generate(job.first, job.count, h);
+            chunk.hwp_angle = h;
+          }
+        } else {
+          if (job.first != filled_first) {
+            boresight->fill(job.first, job.count, b);
+            filled_first = job.first;
+          }
+          chunk.quaternions = b.quaternions;
+          chunk.angles = b.angles.view();
+          chunk.quats = pisco::QuatPointingView{b.quats};
+          if (fp[job.detector].hwp) chunk.hwp_angle = b.hwp;
+        }
+        visit(chunk);
+      }
+    };
+    deconvolved = deconvolver->solve(survey, [&](const pisco::DeconvolutionProgress& p) {
+      say("mapmaker: iteration %d, residual %.3g of ||A^T d|| (%.1f s)\n", p.iteration, p.residual, p.seconds);
+    });
+    say("mapmaker: %s after %d iterations, %.2f s each\n", deconvolved->converged ? "converged" : "stopped",
+        deconvolved->iterations, deconvolved->seconds_per_iteration);
+    result.deconvolution_iterations = deconvolved->iterations;
+    result.deconvolution_residual = deconvolved->residuals.empty() ? 0.0 : deconvolved->residuals.back();
+  }
+
   // Maps and spectra: the leader's, from the normal equations of every process. A run whose maps solve
   // no pixel has no maps to speak of: no spectra (and pisco-vk makes no plots and exits with status 4).
   std::string nothing_solved;
   cl.step([&] {
-    if (mapper && cl.leader()) {
+    if (deconvolved && cl.leader()) {
+      // maps.fits: the solution, reconvolved with the target beam when one is given (then the solution
+      // itself in deconvolved.fits); binned_maps.fits and hits.fits from the binned map-maker beside it.
+      const pisco::DeconvolvedMaps& d = *deconvolved;
+      const bool target = !d.smoothed_I.empty();
+      const std::vector<double>& I = target ? d.smoothed_I : d.I;
+      const std::vector<double>& Q = target ? d.smoothed_Q : d.Q;
+      const std::vector<double>& U = target ? d.smoothed_U : d.U;
+      const fs::path maps_path = c.output.dir / "maps.fits", raw_path = c.output.dir / "deconvolved.fits";
+      write_healpix_map(maps_path, maps_nside, {{"I_STOKES", I}, {"Q_STOKES", Q}, {"U_STOKES", U}}, sky.units());
+      written.push_back(maps_path);
+      if (target) {
+        write_healpix_map(raw_path, maps_nside,
+                          {{"I_STOKES", d.I}, {"Q_STOKES", d.Q}, {"U_STOKES", d.U}, {"V_STOKES", d.V}}, sky.units());
+        written.push_back(raw_path);
+      }
+      const BinnedMaps binned = mapper->solve();
+      const fs::path binned_path = c.output.dir / "binned_maps.fits", hits_path = c.output.dir / "hits.fits";
+      write_healpix_map(binned_path, maps_nside, {{"I_STOKES", binned.I}, {"Q_STOKES", binned.Q}, {"U_STOKES", binned.U}},
+                        sky.units());
+      std::vector<double> hits(binned.hits.begin(), binned.hits.end());
+      write_healpix_map(hits_path, maps_nside, {{"HITS", hits}}, "samples");
+      written.push_back(binned_path);
+      written.push_back(hits_path);
+      const auto solved = static_cast<std::size_t>(std::count_if(I.begin(), I.end(), [](double v) { return v != unseen; }));
+      result.solved_pixels = solved;
+      say("maps: NSIDE %d, %zu of %zu pixels reached by the beams (deconvolved%s); binned_maps.fits beside them\n",
+          maps_nside, solved, I.size(), target ? ", reconvolved; deconvolved.fits holds the solution" : "");
+      if (solved == 0)
+        nothing_solved = "the deconvolved maps reach no pixel; maps.fits is all UNSEEN, and no spectra or plots were made";
+      if (c.output.spectra && nothing_solved.empty()) {
+        std::optional<double> fw;
+        if (target) fw = c.mapmaker.target_fwhm;
+        for (const auto& f : spectra_files(c, sky, I, Q, U, maps_nside,
+                                           target ? "deconvolved maps, reconvolved" : "deconvolved maps", fw))
+          written.push_back(f);
+      }
+    } else if (mapper && cl.leader()) {
       const BinnedMaps maps = mapper->solve();
       const std::size_t solved_pixels = write_maps(c.output.dir, maps, maps_nside, sky.units());
       const auto solved = static_cast<std::ptrdiff_t>(solved_pixels);

@@ -360,7 +360,20 @@ OutputConfig read_output(Table t) {
   return o;
 }
 
-
+// [mapmaker] (docs/config.md).
+MapmakerConfig read_mapmaker(Table t) {
+  MapmakerConfig m;
+  m.kind = t.choice("type", "binned", {"binned", "deconvolve"}) == "binned" ? MapmakerKind::binned : MapmakerKind::deconvolve;
+  const bool deconvolve = m.kind == MapmakerKind::deconvolve;
+  for (const char* key : {"iterations", "tolerance", "regularization", "target_fwhm_deg"})
+    if (!deconvolve && t.has(key)) t.fail(key, "only for type = \"deconvolve\"");
+  m.iterations = static_cast<int>(t.integer_in("iterations", 40, 1, 100000, "a number of iterations from 1 to 100000"));
+  m.tolerance = t.number_in("tolerance", 1e-6, 1e-15, 0.5, "a relative residual in [1e-15, 0.5]");
+  m.regularization = t.number_in("regularization", 1e-3, 0.0, 1.0, "a fraction of the Rayleigh quotient in [0, 1]");
+  m.target_fwhm = t.number_in("target_fwhm_deg", 0.0, 0.0, 90.0, "0 (none) or a FWHM in degrees below 90") * deg;
+  t.finish();
+  return m;
+}
 
 // [hwp] (docs/config.md): the plate model and its angle stream.
 HwpConfig read_hwp(Table t, const ScanConfig& scan) {
@@ -497,6 +510,18 @@ SimulationConfig read_simulation_file(const fs::path& file) {
   const toml::table* output = t.table("output");
   c.output = output ? read_output(Table(*output, "output", file)) : OutputConfig{};
   if (const toml::table* hwp = t.table("hwp")) c.hwp = read_hwp(Table(*hwp, "hwp", file), c.scan);
+  if (const toml::table* mapmaker = t.table("mapmaker")) {
+    Table mt(*mapmaker, "mapmaker", file);
+    c.mapmaker = read_mapmaker(mt);
+    if (c.mapmaker.kind == MapmakerKind::deconvolve) {
+      // What the deconvolving map-maker does not do, said where the file asks for it.
+      if (!c.output.maps) mt.fail("type", "\"deconvolve\" makes maps: set [output] maps = true");
+      if (c.sky.unseen == pisco::UnseenPolicy::flag)
+        mt.fail("type", "\"deconvolve\" models every sample; it cannot leave out the samples [sky] unseen = \"flag\" flags");
+      if (c.hwp.ideal_mapmaker)
+        mt.fail("type", "\"deconvolve\" models each detector's own plate; [hwp] mapmaker = \"ideal\" is for the binned map-maker");
+    }
+  }
   assign_plates(c, file);
   t.finish();
   return c;

@@ -50,6 +50,7 @@ double Cluster::max(double v) { return v; }
 std::uint64_t Cluster::sum(std::uint64_t v) { return v; }
 double Cluster::sum_of(double v) { return v; }
 std::uint64_t Cluster::reduce(pisco::BinnedMapmaker&) { return 0; }
+void Cluster::sum_in_place(std::span<double>) {}
 const void* Cluster::mpi_communicator() const { return nullptr; }
 void Cluster::post_check(bool) {}
 void Cluster::abort(int) {}
@@ -181,6 +182,25 @@ std::uint64_t Cluster::reduce(pisco::BinnedMapmaker& mapper) {
     }
   }
   return sent;
+}
+
+void Cluster::sum_in_place(std::span<double> values) {
+  if (!parallel()) return;
+  std::vector<double> other;
+  for (int step = 1; step < size_; step <<= 1) {
+    if (rank_ % (2 * step) == 0) {
+      const int from = rank_ + step;
+      if (from >= size_) continue;
+      other.resize(values.size());
+      recv_all(other.data(), other.size(), MPI_DOUBLE, from);
+      for (std::size_t i = 0; i < values.size(); ++i) values[i] += other[i];
+    } else {
+      send_all(values.data(), values.size(), MPI_DOUBLE, rank_ - step);
+      break;
+    }
+  }
+  for (std::size_t i = 0; i < values.size(); i += kPiece)
+    MPI_Bcast(values.data() + i, static_cast<int>(std::min(kPiece, values.size() - i)), MPI_DOUBLE, 0, MPI_COMM_WORLD);
 }
 
 const void* Cluster::mpi_communicator() const {

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 
@@ -58,6 +59,10 @@ class Cluster {
   // adds r + 1, r + 2, r + 4, ... in that order), so that the maps depend on nothing but the number
   // of processes; returns the bytes this process sent.
   std::uint64_t reduce(pisco::BinnedMapmaker& mapper);
+  // Replaces `values` on every process by their sum over the processes, added in the same fixed tree
+  // and broadcast from rank 0, so that every process has the same bits (the deconvolving map-maker's
+  // maps: every process runs the same conjugate-gradient steps).
+  void sum_in_place(std::span<double> values);
   // For pisco::SharedTodOptions::mpi_communicator: MPI_COMM_WORLD's address when parallel, else null.
   const void* mpi_communicator() const;
 

@@ -38,6 +38,7 @@ class ClusterContext final : public pisco::RunContext {
   std::uint64_t sum(std::uint64_t v) override { return cl_.sum(v); }
   double sum_of(double v) override { return cl_.sum_of(v); }
   std::uint64_t reduce(pisco::BinnedMapmaker& mapper) override { return cl_.reduce(mapper); }
+  void sum_in_place(std::span<double> values) override { cl_.sum_in_place(values); }
   const void* mpi_communicator() const override { return cl_.mpi_communicator(); }
   void post_check(bool failed) override { cl_.post_check(failed); }
   bool stop() override { return cl_.stop(); }
