@@ -704,6 +704,29 @@ TEST_F(Cli, GraspBeamExampleAsTheReadmeSays) {
   EXPECT_NE(output.find("turned by -90 deg"), std::string::npos) << output;
 }
 
+// assets/examples/deconvolve.toml, whole, as README.md says a user runs it: the deconvolving
+// map-maker's iterations, and its figure: the rms polarization the pair's beam mismatch leaks into
+// the maps, binned against deconvolved (reconvolved to the target beam), as README.md quotes it.
+TEST_F(Cli, DeconvolveExampleAsTheReadmeSays) {
+  const fs::path cfg = fs::path(PISCO_TEST_ASSETS_DIR) / "examples" / "deconvolve.toml";
+  const fs::path out = dir_ / "out";
+  const Result r = run("run " + cfg.string() + " -o " + out.string() + " --no-plots");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("mapmaker: iteration 40, residual"), std::string::npos) << r.output;
+  const pisco::Sky binned = pisco::Sky::read_fits(out / "binned_maps.fits", pisco::UnseenPolicy::flag);
+  const pisco::Sky maps = pisco::Sky::read_fits(out / "maps.fits", pisco::UnseenPolicy::flag);
+  const auto rms_p = [](const pisco::Sky& m) {
+    double s = 0;
+    for (std::size_t p = 0; p < m.npix(); ++p) s += m.Q()[p] * m.Q()[p] + m.U()[p] * m.U()[p];
+    return std::sqrt(s / double(m.npix()));
+  };
+  const double ratio = rms_p(binned) / rms_p(maps);
+  std::cout << "rms P binned " << rms_p(binned) << ", deconvolved " << rms_p(maps) << ": " << ratio << "x\n";
+  EXPECT_GT(ratio, 5.0);
+  const std::string quoted = std::to_string(int(ratio)) + "x below";
+  EXPECT_NE(readme_row("deconvolve.toml").find(quoted), std::string::npos) << quoted;
+}
+
 // assets/examples/hwp_satellite.toml, whole: the README's figures, and its leakage figure as README.md
 // and docs/validation.md (H4) quote it, to two digits.
 TEST_F(Cli, HwpSatelliteExampleAsTheReadmeSays) {

@@ -516,4 +516,5 @@ class Simulation:
     def run(self) -> dict[str, Any]:
         """Runs it (the GIL released): the TOD file, maps and spectra in the output directory. The dict:
         files, tod, samples, detectors, samples_per_detector, mean_disc_pixels, convolution_seconds,
-        seconds, backend, device, flagged, solved_pixels, nothing_solved, log."""
+        seconds, backend, device, flagged, solved_pixels, nothing_solved, log; with [mapmaker] type =
+        "deconvolve", also deconvolution_iterations and deconvolution_residual."""

@@ -44,6 +44,10 @@ nb::dict result_dict(const SimulationResult& r, std::vector<std::string> log) {
   d["device"] = r.device;
   d["flagged"] = r.flagged;
   d["solved_pixels"] = r.solved_pixels;
+  if (r.deconvolution_iterations > 0) {  // [mapmaker] type = "deconvolve"
+    d["deconvolution_iterations"] = r.deconvolution_iterations;
+    d["deconvolution_residual"] = r.deconvolution_residual;
+  }
   d["nothing_solved"] = r.nothing_solved.empty() ? nb::none() : nb::cast(r.nothing_solved);
   d["log"] = std::move(log);
   return d;
@@ -126,7 +130,8 @@ void bind_simulation(nb::module_& m) {
           "whole or not at all) and returns a dict: files (paths written, in order), tod (its path or None),\n"
           "samples, detectors, samples_per_detector, mean_disc_pixels, convolution_seconds, seconds, backend,\n"
           "device, flagged, solved_pixels, nothing_solved (None, or why the maps solve no pixel) and log (the\n"
-          "lines pisco-vk run prints).")
+          "lines pisco-vk run prints); with [mapmaker] type = \"deconvolve\", also deconvolution_iterations and\n"
+          "deconvolution_residual.")
       .def("__repr__", [](const Simulation& s) {
         return "pisco.Simulation('" + s.config().source.string() + "', output_dir='" + s.config().output.dir.string() +
                "')";

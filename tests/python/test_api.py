@@ -886,6 +886,23 @@ def test_simulation_errors(tmp_path):
     assert os.listdir(tmp_path / "out") == []  # nothing written
 
 
+def test_simulation_deconvolves_the_beams(tmp_path):
+    """[mapmaker] type = "deconvolve" through pisco.Simulation: the iterations in the dict and the log,
+    the deconvolved, reconvolved and binned maps written at the sky's NSIDE."""
+    path = write_simulation(tmp_path, "tod = false\n[mapmaker]\ntype = \"deconvolve\"\niterations = 5\n"
+                                      "target_fwhm_deg = 5.0\n")
+    result = pisco.Simulation(path, backend="simd").run()
+    assert result["deconvolution_iterations"] == 5
+    assert 0 < result["deconvolution_residual"] < 1
+    assert sum(line.startswith("mapmaker: iteration ") for line in result["log"]) == 5
+    names = {"maps.fits", "deconvolved.fits", "binned_maps.fits", "hits.fits", "spectra.txt", "input_spectra.txt"}
+    assert set(os.listdir(tmp_path / "out")) == names
+    assert any(line.startswith("maps: NSIDE 32, 12288 of 12288 pixels reached") for line in result["log"])
+    binned = tmp_path / "binned"
+    binned.mkdir()
+    assert "deconvolution_iterations" not in pisco.Simulation(write_simulation(binned)).run()
+
+
 def test_simulation_releases_the_gil(tmp_path):
     """Other Python threads run while a simulation runs."""
     sim = pisco.Simulation(write_simulation(tmp_path, "tod = false\nspectra = false\n"))
