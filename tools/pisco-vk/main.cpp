@@ -177,6 +177,8 @@ static int main_body(int argc, char** argv) {
   val->add_option("--f-pairs", vo.survey.pairs, "F: PSB pairs instead of the scale's (test 4, full 36).")->check(CLI::Range(1, 400));
   val->add_option("--f-nside", vo.survey.nside, "F: NSIDE of sky and maps instead of the scale's (test 64, full 128).")->check(CLI::IsMember({16, 32, 64, 128, 256, 512}));
   val->add_flag("--f-polarized", vo.survey.polarized, "F: run the polarized case at test scale too.");
+  val->add_option("--m-iterations", vo.survey.deconvolve_iterations, "M: conjugate-gradient iterations instead of the case's.")->check(CLI::Range(1, 100000));
+  val->add_option("--m-regularization", vo.survey.deconvolve_regularization, "M: the regularization instead of the case's.")->check(CLI::Range(0.0, 1.0));
   val->add_option("--spectra-python", vo.spectra_python, "F: the Python of the NaMaster environment (tools/spectra_env.py; default build/spectra-venv).");
 
   try {
