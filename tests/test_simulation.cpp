@@ -307,6 +307,8 @@ TEST_F(SimulationTest, DeconvolvingMapmakerTakesTheBeamMismatchOut) {
   fails("[mapmaker] iterations: only for type = \"deconvolve\"");
   write("[mapmaker]\ntype = \"deconvolved\"\n");
   fails("[mapmaker] type");
+  write("[mapmaker]\ntype = \"deconvolve\"\nregularize = \"polarisation\"\n");
+  fails("[mapmaker] regularize");
   write("[mapmaker]\ntype = \"deconvolve\"\n", "maps_nside = 8\n");
   fails("[output] maps_nside");
   pisco::Sky flat(16);

@@ -24,6 +24,13 @@ struct DeconvolutionOptions {
   // A^T d (a typical eigenvalue of A^T A); 0 (the default): none, the minimum-norm solution that
   // conjugate gradients from zero converge to, pixels out of every sample's disc left at zero.
   double regularization = 0.0;
+  // Which Stokes parameters lambda applies to: all (the default), or Q, U and V only
+  // (polarization), which leaves the temperature to the iterations. An unpolarized sky is then the
+  // exact solution of the regularized equations too, so the regularization cannot turn a pair's
+  // mismatch into polarization; it shrinks real polarization instead, where the data constrain it
+  // least (docs/physics.md, "Map-making with the beams").
+  enum class Regularize { all, polarization };
+  Regularize regularize = Regularize::all;
   // > 0: the solution also returned reconvolved with a circular Gaussian of this FWHM (radians), by
   // harmonic smoothing (HEALPix map2alm with 3 iterations, to 3 NSIDE - 1), for analysis.
   double target_fwhm = 0.0;

@@ -115,6 +115,7 @@ struct MapmakerConfig {
   int iterations = 40;          // deconvolve: the most conjugate-gradient iterations
   double tolerance = 1e-6;      // deconvolve: ||r|| / ||A^T d|| to stop at
   double regularization = 1e-3; // deconvolve: lambda as a fraction of A^T A's Rayleigh quotient
+  bool regularize_polarization_only = false;  // deconvolve: lambda on Q, U, V only
   double target_fwhm = 0.0;     // deconvolve: radians; > 0: maps.fits reconvolved with this Gaussian
 };
 

@@ -347,6 +347,7 @@ class DeconvolvingMapmaker:
         tolerance: float = 1e-6,
         regularization: float = 0.0,
         target_fwhm: float = 0.0,
+        regularize: Literal["all", "polarization"] = "all",
     ) -> None: ...
     def add(
         self,

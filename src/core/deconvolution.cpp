@@ -124,13 +124,15 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
       for (double& v : result.stokes(StokesIndex(k))) v = 0.0;
     take(result);
   };
-  // z = M^-1 r, M the diagonal (plus lambda); zero where the diagonal is.
+  const bool temperature_too = options_.regularize == DeconvolutionOptions::Regularize::all;
+  // z = M^-1 r, M the diagonal (plus lambda where it applies); zero where the diagonal is.
   const auto precondition = [&](const Sky& in, Sky& result) {
     for (int k = 0; k < 4; ++k) {
       const auto ds = diagonal.stokes(StokesIndex(k));
       const auto is = in.stokes(StokesIndex(k));
       const auto os = result.stokes(StokesIndex(k));
-      for (std::size_t i = 0; i < ds.size(); ++i) os[i] = ds[i] > 0.0 ? is[i] / (std::max(ds[i], floor[k]) + lambda) : 0.0;
+      const double lk = k == 0 && !temperature_too ? 0.0 : lambda;
+      for (std::size_t i = 0; i < ds.size(); ++i) os[i] = ds[i] > 0.0 ? is[i] / (std::max(ds[i], floor[k]) + lk) : 0.0;
     }
   };
   if (bb > 0.0) {
@@ -141,7 +143,12 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
     for (int it = 1; it <= options_.max_iterations; ++it) {
       apply(p, q);
       if (it == 1 && options_.regularization > 0.0) lambda = options_.regularization * dot(p, q) / dot(p, p);
-      if (lambda > 0.0) axpy(q, lambda, p);
+      if (lambda > 0.0)
+        for (int k = temperature_too ? 0 : 1; k < 4; ++k) {
+          const auto ps = p.stokes(StokesIndex(k));
+          const auto qs = q.stokes(StokesIndex(k));
+          for (std::size_t i = 0; i < ps.size(); ++i) qs[i] += lambda * ps[i];
+        }
       const double pq = dot(p, q);
       if (!(pq > 0.0)) break;  // A^T A p = 0: the Krylov space is exhausted
       const double alpha = rz / pq;

@@ -469,6 +469,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
       o.max_iterations = c.mapmaker.iterations;
       o.tolerance = c.mapmaker.tolerance;
       o.regularization = c.mapmaker.regularization;
+      if (c.mapmaker.regularize_polarization_only) o.regularize = pisco::DeconvolutionOptions::Regularize::polarization;
       o.target_fwhm = c.mapmaker.target_fwhm;
       if (cl.parallel()) o.reduce = [&cl](std::span<double> v) { cl.sum_in_place(v); };
       deconvolver.emplace(engine, o);

@@ -365,11 +365,12 @@ MapmakerConfig read_mapmaker(Table t) {
   MapmakerConfig m;
   m.kind = t.choice("type", "binned", {"binned", "deconvolve"}) == "binned" ? MapmakerKind::binned : MapmakerKind::deconvolve;
   const bool deconvolve = m.kind == MapmakerKind::deconvolve;
-  for (const char* key : {"iterations", "tolerance", "regularization", "target_fwhm_deg"})
+  for (const char* key : {"iterations", "tolerance", "regularization", "regularize", "target_fwhm_deg"})
     if (!deconvolve && t.has(key)) t.fail(key, "only for type = \"deconvolve\"");
   m.iterations = static_cast<int>(t.integer_in("iterations", 40, 1, 100000, "a number of iterations from 1 to 100000"));
   m.tolerance = t.number_in("tolerance", 1e-6, 1e-15, 0.5, "a relative residual in [1e-15, 0.5]");
   m.regularization = t.number_in("regularization", 1e-3, 0.0, 1.0, "a fraction of the Rayleigh quotient in [0, 1]");
+  m.regularize_polarization_only = t.choice("regularize", "all", {"all", "polarization"}) == "polarization";
   m.target_fwhm = t.number_in("target_fwhm_deg", 0.0, 0.0, 90.0, "0 (none) or a FWHM in degrees below 90") * deg;
   t.finish();
   return m;

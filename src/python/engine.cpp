@@ -495,13 +495,17 @@ class PyEngine {
 // a Python callable returning an iterable of chunks (dicts), called once an iteration.
 class PyMapmaker {
  public:
-  PyMapmaker(nb::object engine, int max_iterations, double tolerance, double regularization, double target_fwhm)
+  PyMapmaker(nb::object engine, int max_iterations, double tolerance, double regularization, double target_fwhm,
+             const std::string& regularize)
       : owner_(std::move(engine)), py_(nb::cast<PyEngine&>(owner_)) {
     DeconvolutionOptions o;
     o.max_iterations = max_iterations;
     o.tolerance = tolerance;
     o.regularization = regularization;
     o.target_fwhm = target_fwhm;
+    if (regularize == "polarization") o.regularize = DeconvolutionOptions::Regularize::polarization;
+    else if (regularize != "all")
+      throw nb::value_error(("DeconvolvingMapmaker: regularize = '" + regularize + "'; expected 'all' or 'polarization'").c_str());
     maker_ = std::make_unique<DeconvolvingMapmaker>(py_.engine(), o);
   }
 
@@ -608,14 +612,16 @@ void bind_engine(nb::module_& m) {
                          "The beam-deconvolving map-maker (docs/physics.md, 'Map-making with the beams'):\n"
                          "conjugate gradients on (A^T A + lambda) s = A^T d with each detector's own beam.\n\n"
                          "DeconvolvingMapmaker(engine, max_iterations=100, tolerance=1e-6, regularization=0.0,\n"
-                         "                     target_fwhm=0.0)\n\n"
+                         "                     target_fwhm=0.0, regularize='all')\n\n"
+                         "regularize: 'all' Stokes parameters, or 'polarization' (Q, U, V) only.\n"
                          "engine: a pisco.Engine whose backend has the adjoint; its sky is replaced as the solver\n"
                          "iterates (set_sky it again afterwards). add() each chunk's TOD, then solve(survey), survey\n"
                          "a callable returning the same chunks each time, as dicts: {'detector': ..., 'theta': ...,\n"
                          "'phi': ..., 'psi': ...} or {'detector': ..., 'boresight_quats': ...}, with 'hwp_angle'\n"
                          "for detectors with a plate.")
-      .def(nb::init<nb::object, int, double, double, double>(), "engine"_a, "max_iterations"_a = 100,
-           "tolerance"_a = 1e-6, "regularization"_a = 0.0, "target_fwhm"_a = 0.0)
+      .def(nb::init<nb::object, int, double, double, double, const std::string&>(), "engine"_a,
+           "max_iterations"_a = 100, "tolerance"_a = 1e-6, "regularization"_a = 0.0, "target_fwhm"_a = 0.0,
+           "regularize"_a = "all")
       .def("add", &PyMapmaker::add, "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "hwp_angle"_a = nb::none(),
            "Adds a chunk's TOD to the right-hand side A^T d.")

@@ -245,6 +245,9 @@ def test_deconvolving_mapmaker_recovers_a_mismatched_pair():
             maker.solve(lambda: [1])
         with pytest.raises(ValueError, match="tod has 3 samples"):
             maker.add(0, np.ones(3), c["theta"], c["phi"], c["psi"])
+        with pytest.raises(ValueError, match="regularize = 'polarisation'; expected 'all' or 'polarization'"):
+            pisco.DeconvolvingMapmaker(engine, regularize="polarisation")
+        assert pisco.DeconvolvingMapmaker(engine, regularization=1e-3, regularize="polarization") is not None
 
 
 def test_out_is_written_in_place_and_accumulates():
