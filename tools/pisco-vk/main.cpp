@@ -172,7 +172,7 @@ static int main_body(int argc, char** argv) {
   val->add_flag("--full", vo.full, "Paper scale (C at three beam resolutions, D and E with an NSIDE 512 sky, F a week of 36 pairs at NSIDE 128); hours on a CPU.");
   val->add_option("-b,--backend", vo.backend, "Backend the cases run through (default: cpu, the reference).");
   val->add_option("--case", vo.cases, "Only these cases (C, D, E, F, M; repeatable).");
-  val->add_option("--report-dir", vo.report_dir, "Where F writes its maps, spectra and report.md (default with --full: docs/validation).");
+  val->add_option("--report-dir", vo.report_dir, "Where F writes its maps, spectra and report.md, and M its spectra and report.md (default with --full: docs/validation).");
   val->add_option("--f-hours", vo.survey.hours, "F: hours of scan instead of the scale's (test 4, full 168).")->check(CLI::PositiveNumber);
   val->add_option("--f-pairs", vo.survey.pairs, "F: PSB pairs instead of the scale's (test 4, full 36).")->check(CLI::Range(1, 400));
   val->add_option("--f-nside", vo.survey.nside, "F: NSIDE of sky and maps instead of the scale's (test 64, full 128).")->check(CLI::IsMember({16, 32, 64, 128, 256, 512}));
