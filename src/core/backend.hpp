@@ -53,6 +53,16 @@ inline SampleFrame<double> detector_frame(const PointingInput& in, std::size_t i
                       theta, phi);
 }
 
+// take_adjoint's work for backends that keep the adjoint as four float64 maps (I, Q, U, V): adds them
+// into the caller's (those not empty) and frees them.
+inline void hand_over_adjoint(std::array<std::vector<double>, 4>& own, const std::array<std::span<double>, 4>& maps) {
+  for (int c = 0; c < 4; ++c) {
+    if (!maps[std::size_t(c)].empty())
+      for (std::size_t p = 0; p < own[std::size_t(c)].size(); ++p) maps[std::size_t(c)][p] += own[std::size_t(c)][p];
+    own[std::size_t(c)] = {};
+  }
+}
+
 class Backend {
  public:
   virtual ~Backend() = default;

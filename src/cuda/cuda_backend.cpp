@@ -126,49 +126,30 @@ class CudaBackend final : public Backend {
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override {
     make_current(device_);
-    const PreparedDetector& det = in_->detectors.at(detector);
     prepare_adjoint();
     if (maps_[0].empty())
       for (auto& m : maps_) m.assign(in_->sky.npix, 0.0);
-    double bound = adjoint_weight_bound(det);
-    if (squares) bound *= bound;
-    std::uint64_t pixels = 0;
-    std::vector<double> values, norms;
-    for (std::size_t b0 = 0; b0 < pointing.size(); b0 += fixed_point_batch) {
-      const std::size_t m = std::min(fixed_point_batch, pointing.size() - b0);
-      const PointingInput part = pointing.subspan(b0, m);
-      values.assign(tod.begin() + std::ptrdiff_t(b0), tod.begin() + std::ptrdiff_t(b0 + m));
-      if (per_sample_) {
-        norms.assign(m, 0.0);
-        adjoint_pass(detector, part, norms, true, squares);
-        for (std::size_t i = 0; i < m; ++i) values[i] = norms[i] > 0.0 ? values[i] / norms[i] : 0.0;
-      }
-      if (squares)
-        for (double& v : values) v *= v;
-      const double scale = fixed_point_scale(values, bound);
-      if (scale == 0.0) continue;
-      for (double& v : values) v *= scale;
-      pixels += adjoint_pass(detector, part, values, false, squares);
-      try {
-        const std::size_t bytes = 4 * in_->sky.npix * sizeof(std::int64_t);
-        PISCO_CUDA_CHECK(cudaMemcpy(host_sums_.data(), sums_.data(), bytes, cudaMemcpyDeviceToHost));
-        PISCO_CUDA_CHECK(cudaMemset(sums_.data(), 0, bytes));
-      } catch (const Error& e) {
-        throw SubmissionError(detector, std::string(e.what()) + " (device " + device_.description() + ", the adjoint's maps)", e.kind());
-      }
-      fold_fixed_point(host_sums_.data(), in_->sky.npix, scale, maps_);
-    }
-    return pixels;
+    return fixed_point_adjoint(
+        pointing, tod, adjoint_weight_bound(in_->detectors.at(detector)), squares, per_sample_,
+        [&](const PointingInput& part, std::span<double> norms) { adjoint_pass(detector, part, norms, true, squares); },
+        [&](const PointingInput& part, std::span<double> values) {
+          return adjoint_pass(detector, part, values, false, squares);
+        },
+        [&](double scale) {
+          try {
+            const std::size_t bytes = 4 * in_->sky.npix * sizeof(std::int64_t);
+            PISCO_CUDA_CHECK(cudaMemcpy(host_sums_.data(), sums_.data(), bytes, cudaMemcpyDeviceToHost));
+            PISCO_CUDA_CHECK(cudaMemset(sums_.data(), 0, bytes));
+          } catch (const Error& e) {
+            throw SubmissionError(detector, std::string(e.what()) + " (device " + device_.description() +
+                                                ", the adjoint's maps)",
+                                  e.kind());
+          }
+          fold_fixed_point(host_sums_.data(), in_->sky.npix, scale, maps_);
+        });
   }
 
-  void take_adjoint(const std::array<std::span<double>, 4>& maps) override {
-    if (maps_[0].empty()) return;
-    for (int c = 0; c < 4; ++c) {
-      if (!maps[c].empty())
-        for (std::size_t p = 0; p < in_->sky.npix; ++p) maps[c][p] += maps_[c][p];
-      maps_[c] = {};
-    }
-  }
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(maps_, maps); }
 
   std::uint64_t wait(std::uint64_t ticket) override {
     make_current(device_);

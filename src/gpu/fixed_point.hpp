@@ -16,6 +16,7 @@
 #include <span>
 #include <vector>
 
+#include "core/backend.hpp"
 #include "core/prepared.hpp"
 
 namespace pisco::detail {
@@ -61,6 +62,36 @@ inline void fold_fixed_point(const std::int64_t* sums, std::size_t npix, double 
   for (std::size_t p = 0; p < npix; ++p)
     for (int c = 0; c < 4; ++c)
       if (const std::int64_t q = sums[4 * p + std::size_t(c)]) maps[c][p] += double(q) * inv;
+}
+
+// A device backend's Backend::adjoint, batch by batch: each batch's values (the TOD, divided by each
+// sample's normalization where per_sample, from norms(part, out), as the forward computes it; squared
+// for the diagonal), its scale, then scatter(part, scaled values), which returns the pixels, and
+// fold(scale). `bound` is adjoint_weight_bound's.
+template <class Norms, class Scatter, class Fold>
+std::uint64_t fixed_point_adjoint(const PointingInput& pointing, std::span<const double> tod, double bound,
+                                  bool squares, bool per_sample, Norms&& norms, Scatter&& scatter, Fold&& fold) {
+  if (squares) bound *= bound;
+  std::uint64_t pixels = 0;
+  std::vector<double> values, n;
+  for (std::size_t b0 = 0; b0 < pointing.size(); b0 += fixed_point_batch) {
+    const std::size_t m = std::min(fixed_point_batch, pointing.size() - b0);
+    const PointingInput part = pointing.subspan(b0, m);
+    values.assign(tod.begin() + std::ptrdiff_t(b0), tod.begin() + std::ptrdiff_t(b0 + m));
+    if (per_sample) {
+      n.assign(m, 0.0);
+      norms(part, std::span<double>(n));
+      for (std::size_t i = 0; i < m; ++i) values[i] = n[i] > 0.0 ? values[i] / n[i] : 0.0;
+    }
+    if (squares)
+      for (double& v : values) v *= v;
+    const double scale = fixed_point_scale(values, bound);
+    if (scale == 0.0) continue;
+    for (double& v : values) v *= scale;
+    pixels += scatter(part, std::span<double>(values));
+    fold(scale);
+  }
+  return pixels;
 }
 
 }  // namespace pisco::detail

@@ -221,14 +221,7 @@ class SimdBackend final : public Backend {
     return pixels;
   }
 
-  void take_adjoint(const std::array<std::span<double>, 4>& maps) override {
-    if (adjoint_[0].empty()) return;
-    for (int c = 0; c < 4; ++c) {
-      if (!maps[c].empty())
-        for (std::size_t p = 0; p < in_->sky.npix; ++p) maps[c][p] += adjoint_[c][p];
-      adjoint_[c] = {};
-    }
-  }
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(adjoint_, maps); }
 
  private:
   // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).

@@ -88,6 +88,9 @@ class VulkanBackend final : public Backend {
   Buffer upload_records(std::size_t count, std::size_t record_bytes,
                         const std::function<void(std::size_t, std::size_t, void*)>& fill, const char* what);
   void make_slots(std::size_t chunk);
+  // The buffers of a slot's descriptor sets by binding: the first PISCO_BINDINGS the forward kernel's,
+  // all of them the adjoint's.
+  std::array<const Buffer*, PISCO_ADJOINT_BINDINGS> bindings(const Slot& s) const;
   double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
   vk::ComputePipeline::Specialization specialization(std::size_t detector) const;
   vk::PushConstants push_constants(std::size_t detector, bool quaternions) const;
@@ -280,6 +283,22 @@ Buffer VulkanBackend::upload_records(std::size_t count, std::size_t record_bytes
 }
 
 // Two slots of `chunk` samples; on out-of-memory, half the chunk, down to one sample.
+std::array<const Buffer*, PISCO_ADJOINT_BINDINGS> VulkanBackend::bindings(const Slot& s) const {
+  std::array<const Buffer*, PISCO_ADJOINT_BINDINGS> b{};
+  b[PISCO_BINDING_SKY] = &sky_;
+  b[PISCO_BINDING_SKY_LO] = &sky_lo_;
+  b[PISCO_BINDING_RINGS] = &rings_;
+  b[PISCO_BINDING_WEIGHTS] = &weights_;
+  b[PISCO_BINDING_WEIGHTS64] = &weights64_;
+  b[PISCO_BINDING_POINTING] = &s.pointing;
+  b[PISCO_BINDING_TOD] = &s.tod;
+  b[PISCO_BINDING_COUNT] = &s.counts;
+  b[PISCO_BINDING_PLATE] = &s.plate;
+  b[PISCO_BINDING_MAPS] = &adjoint_.sums;
+  b[PISCO_BINDING_VALUES] = &s.values;
+  return b;
+}
+
 void VulkanBackend::make_slots(std::size_t chunk) {
   const auto& fn = device_->fn();
   chunk = fit_chunk_halving<vk::OutOfMemory>(
@@ -306,17 +325,8 @@ void VulkanBackend::make_slots(std::size_t chunk) {
     PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &s.cmd));
     VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
     PISCO_VK(fn.vkCreateFence(device_->handle(), &fi, nullptr, &s.fence));
-    std::array<const Buffer*, PISCO_BINDINGS> b{};
-    b[PISCO_BINDING_SKY] = &sky_;
-    b[PISCO_BINDING_SKY_LO] = &sky_lo_;
-    b[PISCO_BINDING_RINGS] = &rings_;
-    b[PISCO_BINDING_WEIGHTS] = &weights_;
-    b[PISCO_BINDING_WEIGHTS64] = &weights64_;
-    b[PISCO_BINDING_POINTING] = &s.pointing;
-    b[PISCO_BINDING_TOD] = &s.tod;
-    b[PISCO_BINDING_COUNT] = &s.counts;
-    b[PISCO_BINDING_PLATE] = &s.plate;
-    s.set = pipeline_->make_set(b);
+    const auto all = bindings(s);
+    s.set = pipeline_->make_set(std::span<const Buffer* const>(all).first(PISCO_BINDINGS));
   }
 }
 
@@ -518,19 +528,8 @@ void VulkanBackend::prepare_adjoint() {
                 ErrorKind::device);
   }
   for (Slot& s : slots_) {
-    std::array<const Buffer*, PISCO_ADJOINT_BINDINGS> b{};
-    b[PISCO_BINDING_SKY] = &sky_;
-    b[PISCO_BINDING_SKY_LO] = &sky_lo_;
-    b[PISCO_BINDING_RINGS] = &rings_;
-    b[PISCO_BINDING_WEIGHTS] = &weights_;
-    b[PISCO_BINDING_WEIGHTS64] = &weights64_;
-    b[PISCO_BINDING_POINTING] = &s.pointing;
-    b[PISCO_BINDING_TOD] = &s.tod;
-    b[PISCO_BINDING_COUNT] = &s.counts;
-    b[PISCO_BINDING_PLATE] = &s.plate;
-    b[PISCO_BINDING_MAPS] = &adjoint_.sums;
-    b[PISCO_BINDING_VALUES] = &s.values;
-    s.adjoint_set = adjoint_.pipeline->make_set(b);
+    const auto all = bindings(s);
+    s.adjoint_set = adjoint_.pipeline->make_set(all);
   }
   VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
   ai.commandPool = pool_;
@@ -622,43 +621,19 @@ std::uint64_t VulkanBackend::adjoint_pass(std::size_t detector, const PointingIn
 // does, and the host divides the TOD by it before the scale is chosen.
 std::uint64_t VulkanBackend::adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                                      bool squares) {
-  const PreparedDetector& det = in_->detectors.at(detector);
   prepare_adjoint();
   if (adjoint_.maps[0].empty())
     for (auto& m : adjoint_.maps) m.assign(in_->sky.npix, 0.0);
-  double bound = adjoint_weight_bound(det);
-  if (squares) bound *= bound;
-  std::uint64_t pixels = 0;
-  std::vector<double> values, norms;
-  for (std::size_t b0 = 0; b0 < pointing.size(); b0 += fixed_point_batch) {
-    const std::size_t m = std::min(fixed_point_batch, pointing.size() - b0);
-    const PointingInput part = pointing.subspan(b0, m);
-    values.assign(tod.begin() + std::ptrdiff_t(b0), tod.begin() + std::ptrdiff_t(b0 + m));
-    if (mode_.per_sample) {
-      norms.assign(m, 0.0);
-      adjoint_pass(detector, part, norms, true, squares);
-      for (std::size_t i = 0; i < m; ++i) values[i] = norms[i] > 0.0 ? values[i] / norms[i] : 0.0;
-    }
-    if (squares)
-      for (double& v : values) v *= v;
-    const double scale = fixed_point_scale(values, bound);
-    if (scale == 0.0) continue;
-    for (double& v : values) v *= scale;
-    pixels += adjoint_pass(detector, part, values, false, squares);
-    fold(scale);
-  }
+  const std::uint64_t pixels = fixed_point_adjoint(
+      pointing, tod, adjoint_weight_bound(in_->detectors.at(detector)), squares, mode_.per_sample,
+      [&](const PointingInput& part, std::span<double> norms) { adjoint_pass(detector, part, norms, true, squares); },
+      [&](const PointingInput& part, std::span<double> values) { return adjoint_pass(detector, part, values, false, squares); },
+      [&](double scale) { fold(scale); });
   device_->check_validation("the adjoint");
   return pixels;
 }
 
-void VulkanBackend::take_adjoint(const std::array<std::span<double>, 4>& maps) {
-  if (adjoint_.maps[0].empty()) return;
-  for (int c = 0; c < 4; ++c) {
-    if (!maps[c].empty())
-      for (std::size_t p = 0; p < in_->sky.npix; ++p) maps[c][p] += adjoint_.maps[c][p];
-    adjoint_.maps[c] = {};
-  }
-}
+void VulkanBackend::take_adjoint(const std::array<std::span<double>, 4>& maps) { hand_over_adjoint(adjoint_.maps, maps); }
 
 }  // namespace
 
