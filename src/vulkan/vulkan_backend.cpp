@@ -91,6 +91,8 @@ class VulkanBackend final : public Backend {
   // The buffers of a slot's descriptor sets by binding: the first PISCO_BINDINGS the forward kernel's,
   // all of them the adjoint's.
   std::array<const Buffer*, PISCO_ADJOINT_BINDINGS> bindings(const Slot& s) const;
+  // A command buffer from the pool and an unsignalled fence for it.
+  void make_command(VkCommandBuffer& cmd, VkFence& fence);
   double disc_pixels(const PreparedDetector& det) const;  // about how many sky pixels a disc holds
   vk::ComputePipeline::Specialization specialization(std::size_t detector) const;
   vk::PushConstants push_constants(std::size_t detector, bool quaternions) const;
@@ -300,7 +302,6 @@ std::array<const Buffer*, PISCO_ADJOINT_BINDINGS> VulkanBackend::bindings(const 
 }
 
 void VulkanBackend::make_slots(std::size_t chunk) {
-  const auto& fn = device_->fn();
   chunk = fit_chunk_halving<vk::OutOfMemory>(
       chunk,
       [&](std::size_t n) {
@@ -318,13 +319,7 @@ void VulkanBackend::make_slots(std::size_t chunk) {
       "vulkan: " + device_->info().name);
   chunk_ = chunk;
   for (Slot& s : slots_) {
-    VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
-    ai.commandPool = pool_;
-    ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    ai.commandBufferCount = 1;
-    PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &s.cmd));
-    VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
-    PISCO_VK(fn.vkCreateFence(device_->handle(), &fi, nullptr, &s.fence));
+    make_command(s.cmd, s.fence);
     const auto all = bindings(s);
     s.set = pipeline_->make_set(std::span<const Buffer* const>(all).first(PISCO_BINDINGS));
   }
@@ -504,7 +499,6 @@ void VulkanBackend::prepare_adjoint() {
                     " lacks shaderInt64 or shaderBufferInt64Atomics, which the adjoint's deterministic fixed-point "
                     "sums need; use the cpu or simd backend for the adjoint",
                 ErrorKind::unavailable);
-  const auto& fn = device_->fn();
   const std::span<const std::uint32_t> spirv =
       mode_.ff ? std::span<const std::uint32_t>(pisco_spv_adjoint_ff, sizeof(pisco_spv_adjoint_ff) / sizeof(std::uint32_t))
                : std::span<const std::uint32_t>(pisco_spv_adjoint, sizeof(pisco_spv_adjoint) / sizeof(std::uint32_t));
@@ -531,14 +525,19 @@ void VulkanBackend::prepare_adjoint() {
     const auto all = bindings(s);
     s.adjoint_set = adjoint_.pipeline->make_set(all);
   }
+  make_command(adjoint_.cmd, adjoint_.fence);
+  fold(0.0);  // device memory starts undefined: clear the sums
+}
+
+void VulkanBackend::make_command(VkCommandBuffer& cmd, VkFence& fence) {
+  const auto& fn = device_->fn();
   VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
   ai.commandPool = pool_;
   ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
   ai.commandBufferCount = 1;
-  PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &adjoint_.cmd));
+  PISCO_VK(fn.vkAllocateCommandBuffers(device_->handle(), &ai, &cmd));
   VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
-  PISCO_VK(fn.vkCreateFence(device_->handle(), &fi, nullptr, &adjoint_.fence));
-  fold(0.0);  // device memory starts undefined: clear the sums
+  PISCO_VK(fn.vkCreateFence(device_->handle(), &fi, nullptr, &fence));
 }
 
 void VulkanBackend::fold(double scale) {
