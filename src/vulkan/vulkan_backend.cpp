@@ -111,7 +111,9 @@ class VulkanBackend final : public Backend {
                              bool squares);
   // Adds the fixed-point sums times 1/scale into the float64 maps and clears them.
   void fold(double scale);
-  // Abandons every slot in flight after an error, with the error's context.
+  // Forgets every slot in flight after an error, once the device has finished with them.
+  void abandon() noexcept;
+  // abandon(), then the error with its context.
   [[noreturn]] void fail(const SlotJob& job, const std::string& what, ErrorKind kind);
 
   std::shared_ptr<const EngineInputs> in_;
@@ -428,9 +430,13 @@ std::uint64_t VulkanBackend::collect(Slot& slot, bool results) {
   return pixels;
 }
 
-void VulkanBackend::fail(const SlotJob& job, const std::string& what, ErrorKind kind) {
+void VulkanBackend::abandon() noexcept {
   ring_.abandon();
   device_->fn().vkDeviceWaitIdle(device_->handle());
+}
+
+void VulkanBackend::fail(const SlotJob& job, const std::string& what, ErrorKind kind) {
+  abandon();
   throw SubmissionError(job.detector, what + " (device " + device_->info().name + ", detector " +
                                           std::to_string(job.detector) + ", samples " + std::to_string(job.first) +
                                           " to " + std::to_string(job.first + job.tod.size() - 1) + " of a chunk of " +
@@ -460,8 +466,7 @@ void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, 
   } catch (const Error& e) {
     fail(current, e.what(), e.kind());
   } catch (...) {
-    ring_.abandon();
-    device_->fn().vkDeviceWaitIdle(device_->handle());
+    abandon();
     throw;
   }
 }
@@ -476,8 +481,7 @@ std::uint64_t VulkanBackend::wait(std::uint64_t ticket) {
   } catch (const Error& e) {
     fail(current, e.what(), e.kind());
   } catch (...) {
-    ring_.abandon();
-    device_->fn().vkDeviceWaitIdle(device_->handle());
+    abandon();
     throw;
   }
   device_->check_validation("convolving");
@@ -608,8 +612,7 @@ std::uint64_t VulkanBackend::adjoint_pass(std::size_t detector, const PointingIn
   } catch (const Error& e) {
     fail(current, e.what(), e.kind());
   } catch (...) {
-    ring_.abandon();
-    device_->fn().vkDeviceWaitIdle(device_->handle());
+    abandon();
     throw;
   }
   return ring_.take_pixels();
