@@ -91,6 +91,17 @@ struct BoresightChunk {
   std::size_t size() const { return quaternions ? quats.size() : angles.size(); }
 };
 
+// A boresight chunk as the deconvolving map-maker replays it, for one detector.
+pisco::SurveyChunk survey_chunk(std::size_t detector, const BoresightChunk& b, std::span<const double> hwp_angle) {
+  pisco::SurveyChunk c;
+  c.detector = detector;
+  c.quaternions = b.quaternions;
+  c.angles = b.angles.view();
+  c.quats = pisco::QuatPointingView{b.quats};
+  c.hwp_angle = hwp_angle;
+  return c;
+}
+
 // The boresight pointing of the scan, produced chunk by chunk (a week of constant-elevation
 // scanning, a year of satellite scanning or a season's pointing file is never held in memory whole).
 class Boresight {
@@ -623,16 +634,10 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     }
     if (mapper) mapper->add(modelled[j.detector], detector_view, t, hwp_of(j), fl);
     if (deconvolver) {  // the right-hand side A^T d, chunk by chunk
-      pisco::SurveyChunk chunk;
-      chunk.detector = j.detector;
-      chunk.hwp_angle = hwp_of(j);
-      const BoresightChunk& b = bore[j.bslot];
+      pisco::SurveyChunk chunk = survey_chunk(j.detector, bore[j.bslot], hwp_of(j));
       if (per_detector_file) {
+        chunk.quaternions = false;
         chunk.angles = file_pointing[j.detector % 2].view().subspan(j.first, j.count);
-      } else {
-        chunk.quaternions = b.quaternions;
-        chunk.angles = b.angles.view();
-        chunk.quats = pisco::QuatPointingView{b.quats};
       }
       try {
         deconvolver->add(chunk, t);
@@ -763,10 +768,8 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
             boresight->fill(job.first, job.count, b);
             filled_first = job.first;
           }
-          chunk.quaternions = b.quaternions;
-          chunk.angles = b.angles.view();
-          chunk.quats = pisco::QuatPointingView{b.quats};
-          if (fp[job.detector].hwp) chunk.hwp_angle = b.hwp;
+          chunk = survey_chunk(job.detector, b, fp[job.detector].hwp ? std::span<const double>(b.hwp)
+                                                                      : std::span<const double>());
         }
         visit(chunk);
       }
