@@ -137,8 +137,8 @@ class SimdBackend final : public Backend {
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
   // The adjoint, a block of samples at a time: their frames, discs (and the per-sample
-  // normalization's norms) on all threads, then the scatter by slices of rings (cpu/ring_slices.hpp):
-  // deterministic.
+  // normalization's norms) on all threads, then the scatter by slices of rings (cpu/ring_slices.hpp),
+  // cut for each block so that each holds about the same share of its pixels: deterministic.
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override {
     const PreparedDetector& det = in_->detectors.at(detector);
@@ -146,13 +146,15 @@ class SimdBackend final : public Backend {
     const PreparedSky& sky = in_->sky;
     if (adjoint_[0].empty())
       for (auto& m : adjoint_) m.assign(sky.npix, 0.0);
-    if (slices_.empty()) slices_ = ring_slices(sky, std::size_t(pool_.size()) * 8);
+    if (work_.size() != sky.rings.size()) work_.assign(sky.rings.size(), 0.0);
     const bool plate = det.plate == PreparedDetector::Plate::aperture;
     struct Sample {
       SampleFrame<double> f;
       double theta, value;
       double m[16];  // the plate's M(theta), aperture plates only
       std::size_t first, count;  // its ranges in `ranges` of its task
+      std::uint32_t ring0, ring1;  // the first and last rings its disc touches
+      std::uint32_t pixels;
       unsigned task;
     };
     constexpr std::size_t block = 8192, task_samples = 256;
@@ -182,6 +184,13 @@ class SimdBackend final : public Backend {
                                                     det.rho_max, det.cos_rho_max, disc);
             r.insert(r.end(), disc.begin(), disc.begin() + std::ptrdiff_t(c));
             s.count = c;
+            if (c > 0) {
+              const auto [lo, hi] = std::minmax_element(disc.begin(), disc.begin() + std::ptrdiff_t(c));
+              s.ring0 = ring_of(sky, *lo);
+              s.ring1 = ring_of(sky, *hi - 1);
+              s.pixels = 0;
+              for (std::size_t q = 0; q < c; q += 2) s.pixels += disc[q + 1] - disc[q];
+            }
             if (per_sample_) {  // the norm as the forward computes it (its float64 path)
               const simd::SampleInput in{&s.f, disc.data(), c / 2, plate ? s.m : nullptr, false, true};
               simd::SampleSums sums;
@@ -191,6 +200,18 @@ class SimdBackend final : public Backend {
           }
         }
       });
+      // Each sample's pixels spread evenly over its rings: the estimate of the work that cuts the slices.
+      std::size_t ring_first = work_.size(), ring_last = 0;
+      for (std::size_t j = 0; j < n; ++j) {
+        const Sample& s = samples[j];
+        if (s.count == 0 || s.value == 0.0) continue;
+        const double share = double(s.pixels) / double(s.ring1 - s.ring0 + 1);
+        for (std::uint32_t k = s.ring0; k <= s.ring1; ++k) work_[k] += share;
+        ring_first = std::min<std::size_t>(ring_first, s.ring0);
+        ring_last = std::max<std::size_t>(ring_last, s.ring1);
+      }
+      work_slices(sky, work_, std::size_t(pool_.size()), slices_);
+      for (std::size_t k = ring_first; k <= ring_last && k < work_.size(); ++k) work_[k] = 0.0;
       pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> clipped;
         std::uint64_t count = 0;
@@ -198,18 +219,26 @@ class SimdBackend final : public Backend {
           const RingSlice& slice = slices_[k];
           for (std::size_t j = 0; j < n; ++j) {
             const Sample& s = samples[j];
-            if (s.count == 0 || s.value == 0.0 || slice.missed_by(s.theta, det.rho_max)) continue;
+            if (s.count == 0 || s.value == 0.0 || s.ring1 < slice.ring_lo || s.ring0 > slice.ring_hi) continue;
             const std::uint32_t* r = ranges[s.task].data() + s.first;
-            clipped.clear();
-            for (std::size_t q = 0; q < s.count; q += 2) {
-              const std::uint32_t lo = std::max(r[q], slice.lo), hi = std::min(r[q + 1], slice.hi);
-              if (lo >= hi) continue;
-              clipped.push_back(lo);
-              clipped.push_back(hi);
-              count += hi - lo;
+            const std::uint32_t* mine = r;  // its ranges in this slice: all of them, or clipped
+            std::size_t entries = s.count;
+            if (s.ring0 >= slice.ring_lo && s.ring1 <= slice.ring_hi) {
+              count += s.pixels;
+            } else {
+              clipped.clear();
+              for (std::size_t q = 0; q < s.count; q += 2) {
+                const std::uint32_t lo = std::max(r[q], slice.lo), hi = std::min(r[q + 1], slice.hi);
+                if (lo >= hi) continue;
+                clipped.push_back(lo);
+                clipped.push_back(hi);
+                count += hi - lo;
+              }
+              if (clipped.empty()) continue;
+              mine = clipped.data();
+              entries = clipped.size();
             }
-            if (clipped.empty()) continue;
-            const simd::ScatterInput in{&s.f, clipped.data(), clipped.size() / 2, plate ? s.m : nullptr, s.value, squares,
+            const simd::ScatterInput in{&s.f, mine, entries / 2, plate ? s.m : nullptr, s.value, squares,
                                         slice.hi,
                                         {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
             simd::scatter_sample(kernel_, sky_, kd, in);
@@ -298,7 +327,8 @@ class SimdBackend final : public Backend {
   std::vector<DetectorTables> tables_;
   std::uint64_t evaluated_ = 0;
   std::array<std::vector<double>, 4> adjoint_;  // I, Q, U, V
-  std::vector<RingSlice> slices_;                // the adjoint's (cpu/ring_slices.hpp)
+  std::vector<RingSlice> slices_;                // the adjoint's, for the block at hand (cpu/ring_slices.hpp)
+  std::vector<double> work_;                     // the block's pixels on each ring (an estimate)
 };
 
 }  // namespace
