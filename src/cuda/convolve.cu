@@ -17,32 +17,46 @@ __device__ __forceinline__ T warp_sum(T v) {
   return v;
 }
 
+// One warp's sample: its frames (float64, and float32 for the pixels), its plate's Mueller matrix,
+// and its disc walked a batch of ranges at a time in the warp's share of the block's shared arrays
+// (sample.hpp, walk_disc), with batch(f, fd, first, offset, count, plate) run by the whole warp on
+// each batch. Returns the disc's pixel count. Both kernels below start here.
+template <bool Plate, class Batch>
+__device__ __forceinline__ std::uint32_t walk_warp_sample(const KernelSky& sky, const KernelDetector& det,
+                                                          const double* pointing, bool quaternions,
+                                                          const double* plate_angle, std::size_t i, int warp,
+                                                          int lane, Batch&& batch) {
+  __shared__ std::uint32_t first[warps_per_block][batch_ranges];
+  __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
+  double theta = 0.0, phi = 0.0;
+  const SampleFrame<double> fd = sample_frame(pointing + 4 * i, quaternions, det, theta, phi);
+  const SampleFrame<float> f = to_float(fd);
+  PlateSample plate;
+  if constexpr (Plate) plate = plate_sample(det, plate_angle[i]);
+  std::uint32_t* my_first = first[warp];
+  std::uint32_t* my_offset = offset[warp];
+  return walk_disc(sky, det, theta, phi, my_first, my_offset, lane == 0, [&](int count) {
+    __syncwarp();  // the batch written by lane 0 is visible to the warp
+    batch(f, fd, my_first, my_offset, count, plate);
+    __syncwarp();  // every lane is done with it before lane 0 writes the next
+  });
+}
+
 // With Norms (the adjoint's first pass, PerSample and no Monopole), each sample's normalization is
 // written instead of its value.
 template <bool Radial, bool Monopole, bool PerSample, bool Plate, bool Norms = false>
 __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, KernelDetector det, ChunkArgs chunk) {
-  __shared__ std::uint32_t first[warps_per_block][batch_ranges];
-  __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
   const int warp = int(threadIdx.x) / warp_lanes;
   const int lane = int(threadIdx.x) % warp_lanes;
   const std::size_t i = std::size_t(blockIdx.x) * warps_per_block + warp;
   if (i >= chunk.count) return;  // whole warps only
 
-  double theta = 0.0, phi = 0.0;
-  const SampleFrame<double> fd = sample_frame(chunk.pointing + 4 * i, chunk.quaternions, det, theta, phi);
-  const SampleFrame<float> f = to_float(fd);
-  PlateSample plate;
-  if constexpr (Plate) plate = plate_sample(det, chunk.plate_angle[i]);
-  std::uint32_t* my_first = first[warp];
-  std::uint32_t* my_offset = offset[warp];
-
   LaneSums acc;
-  const std::uint32_t pixels =
-      walk_disc(sky, det, theta, phi, my_first, my_offset, lane == 0, [&](int count) {
-        __syncwarp();  // the batch written by lane 0 is visible to the warp
-        process_batch<Radial, Monopole, PerSample, Plate>(sky, det, f, fd, my_first, my_offset, count, lane, acc,
-                                                          &plate);
-        __syncwarp();  // every lane is done with it before lane 0 writes the next
+  const std::uint32_t pixels = walk_warp_sample<Plate>(
+      sky, det, chunk.pointing, chunk.quaternions, chunk.plate_angle, i, warp, lane,
+      [&](const SampleFrame<float>& f, const SampleFrame<double>& fd, const std::uint32_t* first,
+          const std::uint32_t* offset, int count, const PlateSample& plate) {
+        process_batch<Radial, Monopole, PerSample, Plate>(sky, det, f, fd, first, offset, count, lane, acc, &plate);
       });
 
   const float sum = warp_sum(lane_total(acc));
@@ -58,8 +72,6 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
 // adjoint weights added to the fixed-point maps with integer atomics.
 template <bool Radial, bool Exact, bool Plate, bool Squares>
 __global__ void __launch_bounds__(block_threads) scatter_kernel(KernelSky sky, KernelDetector det, AdjointArgs chunk) {
-  __shared__ std::uint32_t first[warps_per_block][batch_ranges];
-  __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
   const int warp = int(threadIdx.x) / warp_lanes;
   const int lane = int(threadIdx.x) % warp_lanes;
   const std::size_t i = std::size_t(blockIdx.x) * warps_per_block + warp;
@@ -67,22 +79,15 @@ __global__ void __launch_bounds__(block_threads) scatter_kernel(KernelSky sky, K
   const double value = chunk.values[i];
   if (value == 0.0) return;  // the whole warp: nothing to scatter
 
-  double theta = 0.0, phi = 0.0;
-  const SampleFrame<double> fd = sample_frame(chunk.pointing + 4 * i, chunk.quaternions, det, theta, phi);
-  const SampleFrame<float> f = to_float(fd);
-  PlateSample plate;
-  if constexpr (Plate) plate = plate_sample(det, chunk.plate_angle[i]);
-  std::uint32_t* my_first = first[warp];
-  std::uint32_t* my_offset = offset[warp];
   auto* sums = reinterpret_cast<unsigned long long*>(chunk.sums);
-  const std::uint32_t pixels = walk_disc(sky, det, theta, phi, my_first, my_offset, lane == 0, [&](int count) {
-    __syncwarp();
-    scatter_batch<Radial, Exact, Plate, Squares>(sky, det, f, fd, my_first, my_offset, count, lane, value, &plate,
-                                                 [&](std::size_t k, std::int64_t q) {
-                                                   atomicAdd(sums + k, static_cast<unsigned long long>(q));
-                                                 });
-    __syncwarp();
-  });
+  const std::uint32_t pixels = walk_warp_sample<Plate>(
+      sky, det, chunk.pointing, chunk.quaternions, chunk.plate_angle, i, warp, lane,
+      [&](const SampleFrame<float>& f, const SampleFrame<double>& fd, const std::uint32_t* first,
+          const std::uint32_t* offset, int count, const PlateSample& plate) {
+        scatter_batch<Radial, Exact, Plate, Squares>(
+            sky, det, f, fd, first, offset, count, lane, value, &plate,
+            [&](std::size_t k, std::int64_t q) { atomicAdd(sums + k, static_cast<unsigned long long>(q)); });
+      });
   if (lane == 0) atomicAdd(chunk.pixels, static_cast<unsigned long long>(pixels));
 }
 
