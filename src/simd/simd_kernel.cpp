@@ -483,62 +483,122 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
     SampleColumns<false>(sky, det, in, out);
 }
 
-// The adjoint of one sample: range by range, a vector of pixels at a time (the range's last vector
-// masked), the forward's float32 geometry and weights, stokes_adjoint, and d times each lane's four
-// weights added to its pixel in float64 vectors.
+// The adjoint of one sample: the forward's float32 geometry and weights, stokes_adjoint, and d times
+// each lane's four weights added to its pixel in float64 vectors. Whole vectors of a range come
+// straight from the sky, as in the forward kernel; the rest of each range (fewer than N pixels) joins
+// a staging vector, evaluated whenever it is full, whose lanes are then added to their ranges' pixels
+// one range's part at a time (rotated back to lane 0). A pixel's float32 weights do not depend on the
+// lane that computes them, so the maps are the same bits however the ranges are cut.
 template <bool Radial, int Columns, bool Plate>
 HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
   const DF df;
-  const std::size_t N = hn::Lanes(df);
   const SampleFrame<F> f = broadcast(*in.frame);
   Vec4<F> mcols[4];
   if constexpr (Plate) plate_columns(in.plate, mcols);
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step)};
-#if HWY_TARGET == HWY_SCALAR
-  HWY_ALIGN float out[4][max_lanes];
-#endif
   const double d = in.value;
+  // The four adjoint weights of a vector of pixels (unit vectors k).
+  auto weights = [&](const VF& kx, const VF& ky, const VF& kz) {
+    const PixelGeometry<F> g = pixel_geometry(f, Vec3<F>{F(kx), F(ky), F(kz)});
+    Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
+    if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
+    return stokes_adjoint(w, g.cos2chi, g.sin2chi);
+  };
+#if HWY_TARGET != HWY_SCALAR
+  const DI di;
+  const std::size_t N = hn::Lanes(df);
+  const hn::Half<DF> dh;
+  const hn::Rebind<double, hn::Half<DF>> dd;
+  const std::size_t H = hn::Lanes(dd);
+  const auto dv = hn::Set(dd, d);
+  // d a of lanes [0, count) added to pixels [p, p + count), the promoted lanes in float64 vectors
+  // (Mul, then Add: the same bits on every instruction set, with or without fused multiply-adds).
+  // The other lanes add zero to the pixels after them when those are the caller's own (below
+  // in.limit); otherwise the vector goes through a scratch copy of the pixels.
+  auto add = [&](const Vec4<F>& a, std::size_t p, std::size_t count) {
+    const MF mask = hn::FirstN(df, count);
+    const VF cols[4] = {hn::IfThenElseZero(mask, a.x.v), hn::IfThenElseZero(mask, a.y.v),
+                        hn::IfThenElseZero(mask, a.z.v), hn::IfThenElseZero(mask, a.w.v)};
+    const bool direct = p + N <= in.limit;
+    HWY_ALIGN double scratch[max_lanes];
+    for (int c = 0; c < 4; ++c) {
+      double* map = direct ? in.maps[c] + p : scratch;
+      if (!direct)
+        for (std::size_t l = 0; l < N; ++l) scratch[l] = l < count ? in.maps[c][p + l] : 0.0;
+      auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, cols[c])));
+      auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, cols[c])));
+      if (in.squares) {
+        lo = hn::Mul(lo, lo);
+        hi = hn::Mul(hi, hi);
+      }
+      hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
+      hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
+      if (!direct)
+        for (std::size_t l = 0; l < count; ++l) in.maps[c][p + l] = scratch[l];
+    }
+  };
+  // The staging vector's unit vectors, its fill, and the parts of ranges it holds: pixel, first lane,
+  // lanes. A part that overflows the vector goes on in the next one.
+  const VF zero = hn::Zero(df);
+  VF stage[3] = {zero, zero, zero};
+  std::size_t fill = 0, parts = 0;
+  std::size_t part_pixel[max_lanes + 1], part_lane[max_lanes + 1], part_lanes[max_lanes + 1];
+  const VI iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
+  auto flush = [&](const VF* k, std::size_t lanes) {
+    const Vec4<F> a = weights(k[0], k[1], k[2]);
+    for (std::size_t j = 0; j < parts; ++j) {
+      // Lane part_lane[j] rotated to lane 0.
+      const auto back = hn::IndicesFromVec(df, hn::And(hn::Add(iota, hn::Set(di, int(part_lane[j]))), lane_bits));
+      const std::size_t n = std::min(part_lanes[j], lanes - part_lane[j]);
+      add(Vec4<F>{F(hn::TableLookupLanes(a.x.v, back)), F(hn::TableLookupLanes(a.y.v, back)),
+                  F(hn::TableLookupLanes(a.z.v, back)), F(hn::TableLookupLanes(a.w.v, back))},
+          part_pixel[j], n);
+    }
+  };
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
-    for (std::size_t p = begin; p < end; p += N) {
-      const std::size_t live = std::min(N, end - p);
-      const Vec3<F> k{F(hn::LoadU(df, sky.kx + p)), F(hn::LoadU(df, sky.ky + p)), F(hn::LoadU(df, sky.kz + p))};
-      const PixelGeometry<F> g = pixel_geometry(f, k);
-      Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
-      if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
-      const Vec4<F> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
-#if HWY_TARGET != HWY_SCALAR
-      // The lanes promoted to float64 and added to the maps in vectors (Mul, then Add: the same bits on
-      // every instruction set, with or without fused multiply-adds). A range's last vector goes through
-      // a scratch copy of its pixels, unless the pixels past the range are the caller's own (below
-      // in.limit), to which its masked lanes then add zero.
-      const hn::Half<DF> dh;
-      const hn::Rebind<double, hn::Half<DF>> dd;
-      const std::size_t H = hn::Lanes(dd);
-      const auto dv = hn::Set(dd, d);
-      const MF mask = hn::FirstN(df, live);
-      const VF cols[4] = {hn::IfThenElseZero(mask, a.x.v), hn::IfThenElseZero(mask, a.y.v),
-                          hn::IfThenElseZero(mask, a.z.v), hn::IfThenElseZero(mask, a.w.v)};
-      const bool direct = p + N <= in.limit;
-      HWY_ALIGN double scratch[max_lanes];
-      for (int c = 0; c < 4; ++c) {
-        double* map = direct ? in.maps[c] + p : scratch;
-        if (!direct)
-          for (std::size_t l = 0; l < N; ++l) scratch[l] = l < live ? in.maps[c][p + l] : 0.0;
-        auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, cols[c])));
-        auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, cols[c])));
-        if (in.squares) {
-          lo = hn::Mul(lo, lo);
-          hi = hn::Mul(hi, hi);
-        }
-        hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
-        hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
-        if (!direct)
-          for (std::size_t l = 0; l < live; ++l) in.maps[c][p + l] = scratch[l];
+    std::size_t p = begin;
+    for (; p + N <= end; p += N)
+      add(weights(hn::LoadU(df, sky.kx + p), hn::LoadU(df, sky.ky + p), hn::LoadU(df, sky.kz + p)), p, N);
+    if (p == end) continue;
+    const std::size_t rest = end - p;
+    const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
+    const MF keep = hn::FirstN(df, fill);
+    const float* const columns[3] = {sky.kx, sky.ky, sky.kz};
+    VF q[3];
+    for (int c = 0; c < 3; ++c) {
+      const VF rotated = hn::TableLookupLanes(hn::LoadU(df, columns[c] + p), rotate);
+      q[c] = hn::IfThenElse(keep, stage[c], rotated);
+      stage[c] = rotated;
+    }
+    part_pixel[parts] = p;
+    part_lane[parts] = fill;
+    part_lanes[parts] = rest;
+    ++parts;
+    fill += rest;
+    if (fill >= N) {
+      flush(q, N);
+      fill -= N;
+      // The overflow, now at lanes [0, fill) of stage: the rest of the last part.
+      parts = 0;
+      if (fill > 0) {
+        part_pixel[0] = p + (rest - fill);
+        part_lane[0] = 0;
+        part_lanes[0] = fill;
+        parts = 1;
       }
+    } else {
+      for (int c = 0; c < 3; ++c) stage[c] = q[c];
+    }
+  }
+  if (fill > 0) flush(stage, fill);
 #else
-      (void)live;
+  HWY_ALIGN float out[4][max_lanes];
+  for (std::size_t r = 0; r < in.range_count; ++r) {
+    const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
+    for (std::size_t p = begin; p < end; ++p) {
+      const Vec4<F> a = weights(hn::LoadU(df, sky.kx + p), hn::LoadU(df, sky.ky + p), hn::LoadU(df, sky.kz + p));
       hn::Store(a.x.v, df, out[0]);
       hn::Store(a.y.v, df, out[1]);
       hn::Store(a.z.v, df, out[2]);
@@ -547,9 +607,9 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
         const double v = d * double(out[c][0]);
         in.maps[c][p] += in.squares ? v * v : v;
       }
-#endif
     }
   }
+#endif
 }
 
 template <bool Radial, int Columns>
