@@ -18,7 +18,7 @@ namespace pisco::detail {
 // if theta + rho >= theta_lo and theta - rho <= theta_hi.
 struct RingSlice {
   std::uint32_t lo = 0, hi = 0;
-  double theta_lo = 0.0, theta_hi = 0.0;
+  double theta_lo = 0.0, theta_hi = 0.0;  // set by ring_slices only (work_slices' users test rings)
   std::uint32_t ring_lo = 0, ring_hi = 0;  // its rings, [ring_lo, ring_hi] of sky.rings
   bool missed_by(double theta, double rho) const { return theta + rho < theta_lo || theta - rho > theta_hi; }
 };
