@@ -7,7 +7,7 @@
 //   template parameter T, double for the float64 reference, float for the CUDA kernels, a vector of
 //   float32 lanes for the simd backend (src/simd/simd_kernel.cpp), which includes it once per
 //   instruction set.
-// tests/test_shared_maths.cpp runs every function here through the GLSL-as-C++ build and the C++
+// tests/test_kernel_host.cpp runs every function here through the GLSL-as-C++ build and the C++
 // template build on random inputs and requires the same bits.
 //
 // The derivation of pixel_geometry is in src/core/contribution.hpp. Rules of the common subset
@@ -164,6 +164,13 @@ PISCO_TEMPLATE
 PISCO_FN PISCO_REAL stokes_response_iq(PISCO_IN(PISCO_V4) w, PISCO_REAL cos2chi, PISCO_REAL sin2chi,
                                        PISCO_IN(PISCO_V4) S) {
   return w.x * S.x + w.y * (S.y * cos2chi + S.z * sin2chi);
+}
+
+// stokes_adjoint with w_U = w_V = 0: the same I, Q, U weights (w_U terms are signed zeros, which
+// change no sum that starts at +0), and no V weight (zero).
+PISCO_TEMPLATE
+PISCO_FN PISCO_V3 stokes_adjoint_iq(PISCO_IN(PISCO_V4) w, PISCO_REAL cos2chi, PISCO_REAL sin2chi) {
+  return PISCO_VEC3(w.x, w.y * cos2chi, w.y * sin2chi);
 }
 
 // w M (a row vector times the plate's Mueller matrix, given by its columns c0 ... c3): a pixel's

@@ -1,10 +1,10 @@
 // The float64 ring arithmetic of the disc selection (docs/physics.md, "Disc selection"), written once
 // in the common subset of GLSL and C++: the shaders include it from disc.glsl, src/core/disc.hpp
 // includes it as C++ for the reference, the simd disc walk and the CUDA kernels, and
-// tests/test_shared_maths.cpp runs both builds on every ring of many NSIDE and requires the same bits.
+// tests/test_kernel_host.cpp runs both builds on every ring of many NSIDE and requires the same bits.
 // The disc must be HEALPix query_disc's pixel set exactly, so every product that feeds an addition
 // goes through mul_rn, rounded by itself: `precise` in GLSL, __dmul_rn on CUDA devices, and on the host
-// a product the compiler may not fuse (tests/test_shared_maths.cpp builds this file with contraction
+// a product the compiler may not fuse (tests/test_kernel_host.cpp builds this file with contraction
 // on to prove that nothing here depends on -ffp-contract=off). No `lf` literal: doubles are written
 // double(n) or double(m.5f), exact in both languages. The includer defines PISCO_PI (float64).
 #if defined(PISCO_TEMPLATE_TEXT) || !defined(PISCO_RINGS_GLSL)

@@ -402,6 +402,17 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
       const d::Vec4<float> ac = d::stokes_adjoint(wc, pc.cos2chi, pc.sin2chi);
       const float am[4] = {ac.x, ac.y, ac.z, ac.w};
       for (int m = 0; m < 4; ++m) ASSERT_EQ(bits(ag[m]), bits(am[m])) << "stokes_adjoint, case " << t;
+      // Without U, V weights: stokes_adjoint_iq gives stokes_adjoint's I, Q, U values.
+      const glm::vec4 w2(w.x, w.y, 0.0f, 0.0f);
+      const d::Vec4<float> wc2{w.x, w.y, 0.0f, 0.0f};
+      const glm::vec3 ig = glsl::stokes_adjoint_iq(w2, pg.cos2chi, pg.sin2chi);
+      const d::Vec3<float> ic = d::stokes_adjoint_iq(wc2, pc.cos2chi, pc.sin2chi);
+      const d::Vec4<float> full = d::stokes_adjoint(wc2, pc.cos2chi, pc.sin2chi);
+      const float im[3] = {ic.x, ic.y, ic.z}, fm[3] = {full.x, full.y, full.z};
+      for (int m = 0; m < 3; ++m) {
+        ASSERT_EQ(bits(ig[m]), bits(im[m])) << "stokes_adjoint_iq, case " << t;
+        ASSERT_EQ(im[m], fm[m]) << "stokes_adjoint_iq against stokes_adjoint, case " << t;
+      }
       const d::Vec4<double> wd{w.x, w.y, w.z, w.w}, Sd{S.x, S.y, S.z, S.w};
       const d::Vec4<double> ad = d::stokes_adjoint(wd, double(pc.cos2chi), double(pc.sin2chi));
       const double forward = d::stokes_response(wd, double(pc.cos2chi), double(pc.sin2chi), Sd);

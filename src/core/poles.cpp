@@ -53,7 +53,7 @@ Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, int iterations
     SkyAlm a = sky_from_alm_adjoint(weighed, polar_band_limit(maps.nside()));
     // The rotation's transpose is its inverse: Euler angles (-phi, -theta, -psi).
     rotate_alm(a.t, a.e, a.b, 0.0, -std::numbers::pi / 2, 0.0);
-    rotate_alm(a.v, 0.0, -std::numbers::pi / 2, 0.0);
+    if (a.has_v) rotate_alm(a.v, 0.0, -std::numbers::pi / 2, 0.0);
     return sky_alm_adjoint(a, maps.nside(), iterations, true, maps.units());
   } catch (const PlanckError& err) {
     throw Error(std::string("the adjoint of the sky's polar copy: HEALPix: ") + err.what());

@@ -83,10 +83,14 @@ void axpy(AlmD& y, double a, const AlmD& x) {
 
 SkyAlm sky_from_alm_adjoint(const SkyView& maps, int lmax) {
   const int nside = maps.nside();
-  SkyAlm a{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, true};
+  SkyAlm a{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, false};
   alm2map_pol_adjoint(healpix_map(maps.I(), nside), healpix_map(maps.Q(), nside), healpix_map(maps.U(), nside), a.t,
                       a.e, a.b);
-  alm2map_adjoint(healpix_map(maps.V(), nside), a.v);
+  a.has_v = std::any_of(maps.V().begin(), maps.V().end(), [](double x) { return x != 0.0; });
+  if (a.has_v)
+    alm2map_adjoint(healpix_map(maps.V(), nside), a.v);
+  else
+    a.v.SetToZero();
   return a;
 }
 
@@ -97,31 +101,39 @@ Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weight
   SkyAlm t = b, s = b;
   Healpix_Map<double> mt(nside, RING, SET_NSIDE), mq(nside, RING, SET_NSIDE), mu(nside, RING, SET_NSIDE),
       mv(nside, RING, SET_NSIDE);
+  // V's transforms only where its a_lm are not all zero (its maps are zero otherwise).
+  const bool v = b.has_v;
   for (int j = 0; j < iterations; ++j) {
     alm2map_pol(t.t, t.e, t.b, mt, mq, mu);
-    alm2map(t.v, mv);
-    for (Healpix_Map<double>* m : {&mt, &mq, &mu, &mv}) weigh_quadrature(*m, weight);
-    SkyAlm y{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, true};
+    if (v) alm2map(t.v, mv);
+    for (Healpix_Map<double>* m : {&mt, &mq, &mu, &mv})
+      if (v || m != &mv) weigh_quadrature(*m, weight);
+    SkyAlm y{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, v};
     alm2map_pol_adjoint(mt, mq, mu, y.t, y.e, y.b);
-    alm2map_adjoint(mv, y.v);
     axpy(t.t, -1.0, y.t);
     axpy(t.e, -1.0, y.e);
     axpy(t.b, -1.0, y.b);
-    axpy(t.v, -1.0, y.v);
     axpy(s.t, 1.0, t.t);
     axpy(s.e, 1.0, t.e);
     axpy(s.b, 1.0, t.b);
-    axpy(s.v, 1.0, t.v);
+    if (v) {
+      alm2map_adjoint(mv, y.v);
+      axpy(t.v, -1.0, y.v);
+      axpy(s.v, 1.0, t.v);
+    }
   }
   // D Y s.
   alm2map_pol(s.t, s.e, s.b, mt, mq, mu);
-  alm2map(s.v, mv);
-  for (Healpix_Map<double>* m : {&mt, &mq, &mu, &mv}) weigh_quadrature(*m, weight);
+  for (Healpix_Map<double>* m : {&mt, &mq, &mu}) weigh_quadrature(*m, weight);
   Sky out(nside, units);
   copy_map(mt, out.I());
   copy_map(mq, out.Q());
   copy_map(mu, out.U());
-  copy_map(mv, out.V());
+  if (v) {
+    alm2map(s.v, mv);
+    weigh_quadrature(mv, weight);
+    copy_map(mv, out.V());
+  }
   return out;
 }
 

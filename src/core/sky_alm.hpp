@@ -27,8 +27,8 @@ Sky sky_from_alm(const SkyAlm& a, int nside, const std::string& units);
 // sum_p m_p m'_p of maps and sum_l [a_l0 b_l0 + 2 sum_{m>0} Re(a_lm conj(b_lm))] of a_lm, in which
 // HEALPix's map2alm with ring weights is alm2map_adjoint of the map times the weights and pixel area:
 // sky_alm = P = sum_{j=0}^{n} (1 - W Y)^j W with Y = alm2map, W = Y^T D, D = the weights times
-// 4 pi / Npix, so P^T b = D Y sum_{j=0}^{n} (1 - Y^T D Y)^j b. V is always transformed (the forward
-// leaves it out only where it is zero, which is the same linear map).
+// 4 pi / Npix, so P^T b = D Y sum_{j=0}^{n} (1 - Y^T D Y)^j b. Both leave V out where it is zero
+// (has_v false: V's a_lm or maps all zero), as the forward does: the same linear map.
 // sky_from_alm_adjoint: Y^T of the maps, a_lm up to lmax.
 SkyAlm sky_from_alm_adjoint(const SkyView& maps, int lmax);
 // sky_alm_adjoint: P^T of `b` into maps at `nside`.

@@ -5,6 +5,7 @@
 // (simd_kernel.cpp, compiled per instruction set by Highway). Samples are spread over a thread pool
 // as in the float64 reference.
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -146,12 +147,14 @@ class SimdBackend final : public Backend {
     const PreparedSky& sky = in_->sky;
     if (adjoint_[0].empty())
       for (auto& m : adjoint_) m.assign(sky.npix, 0.0);
-    if (work_.size() != sky.rings.size()) work_.assign(sky.rings.size(), 0.0);
+    if (work_.size() != sky.rings.size()) {
+      work_.assign(sky.rings.size(), 0.0);
+      work_steps_.assign(sky.rings.size() + 1, 0.0);
+    }
     const bool plate = det.plate == PreparedDetector::Plate::aperture;
     struct Sample {
       SampleFrame<double> f;
       double theta, value;
-      double m[16];  // the plate's M(theta), aperture plates only
       std::size_t first, count;  // its ranges in `ranges` of its task
       std::uint32_t ring0, ring1;  // the first and last rings its disc touches
       std::uint32_t pixels;
@@ -159,6 +162,7 @@ class SimdBackend final : public Backend {
     };
     constexpr std::size_t block = 8192, task_samples = 256;
     std::vector<Sample> samples(std::min(block, pointing.size()));
+    std::vector<std::array<double, 16>> plates(plate ? samples.size() : 0);  // each sample's M(theta)
     std::vector<std::vector<std::uint32_t>> ranges((block + task_samples - 1) / task_samples);
     std::atomic<std::uint64_t> pixels{0};
     for (std::size_t b0 = 0; b0 < pointing.size(); b0 += block) {
@@ -179,7 +183,7 @@ class SimdBackend final : public Backend {
             s.count = 0;
             if (s.value == 0.0) continue;
             if (plate)
-              plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), s.m);
+              plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), plates[k].data());
             const std::size_t c = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta, phi,
                                                     det.rho_max, det.cos_rho_max, disc);
             r.insert(r.end(), disc.begin(), disc.begin() + std::ptrdiff_t(c));
@@ -192,7 +196,7 @@ class SimdBackend final : public Backend {
               for (std::size_t q = 0; q < c; q += 2) s.pixels += disc[q + 1] - disc[q];
             }
             if (per_sample_) {  // the norm as the forward computes it (its float64 path)
-              const simd::SampleInput in{&s.f, disc.data(), c / 2, plate ? s.m : nullptr, false, true};
+              const simd::SampleInput in{&s.f, disc.data(), c / 2, plate ? plates[k].data() : nullptr, false, true};
               simd::SampleSums sums;
               simd::convolve_sample(kernel_, sky_, kd, in, sums);
               s.value = sums.norm > 0 ? s.value / sums.norm : 0.0;
@@ -200,18 +204,27 @@ class SimdBackend final : public Backend {
           }
         }
       });
-      // Each sample's pixels spread evenly over its rings: the estimate of the work that cuts the slices.
+      // Each sample's pixels spread evenly over its rings: the estimate of the work that cuts the slices,
+      // as steps (its share starts at ring0 and stops after ring1) summed once over the rings.
       std::size_t ring_first = work_.size(), ring_last = 0;
       for (std::size_t j = 0; j < n; ++j) {
         const Sample& s = samples[j];
         if (s.count == 0 || s.value == 0.0) continue;
         const double share = double(s.pixels) / double(s.ring1 - s.ring0 + 1);
-        for (std::uint32_t k = s.ring0; k <= s.ring1; ++k) work_[k] += share;
+        work_steps_[s.ring0] += share;
+        work_steps_[s.ring1 + 1] -= share;
         ring_first = std::min<std::size_t>(ring_first, s.ring0);
         ring_last = std::max<std::size_t>(ring_last, s.ring1);
       }
+      double running = 0.0;
+      for (std::size_t k = ring_first; k <= ring_last; ++k) {
+        running += work_steps_[k];
+        work_[k] = std::max(running, 0.0);  // rounding may leave -1e-16 where no disc reaches
+        work_steps_[k] = 0.0;
+      }
+      if (ring_first <= ring_last) work_steps_[ring_last + 1] = 0.0;
       work_slices(sky, work_, std::size_t(pool_.size()), slices_);
-      for (std::size_t k = ring_first; k <= ring_last && k < work_.size(); ++k) work_[k] = 0.0;
+      for (std::size_t k = ring_first; k <= ring_last; ++k) work_[k] = 0.0;
       pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
         std::vector<std::uint32_t> clipped;
         std::uint64_t count = 0;
@@ -238,7 +251,7 @@ class SimdBackend final : public Backend {
               mine = clipped.data();
               entries = clipped.size();
             }
-            const simd::ScatterInput in{&s.f, mine, entries / 2, plate ? s.m : nullptr, s.value, squares,
+            const simd::ScatterInput in{&s.f, mine, entries / 2, plate ? plates[j].data() : nullptr, s.value, squares,
                                         slice.hi,
                                         {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
             simd::scatter_sample(kernel_, sky_, kd, in);
@@ -329,6 +342,7 @@ class SimdBackend final : public Backend {
   std::array<std::vector<double>, 4> adjoint_;  // I, Q, U, V
   std::vector<RingSlice> slices_;                // the adjoint's, for the block at hand (cpu/ring_slices.hpp)
   std::vector<double> work_;                     // the block's pixels on each ring (an estimate)
+  std::vector<double> work_steps_;               // its changes from ring to ring, one past the last ring
 };
 
 }  // namespace

@@ -498,12 +498,20 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step)};
   const double d = in.value;
-  // The four adjoint weights of a vector of pixels (unit vectors k).
+  // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
+  constexpr bool iq = Columns == 2 && !Plate;
+  constexpr int outputs = iq ? 3 : 4;
+  // The adjoint weights of a vector of pixels (unit vectors k); the fourth is zero where iq.
   auto weights = [&](const VF& kx, const VF& ky, const VF& kz) {
     const PixelGeometry<F> g = pixel_geometry(f, Vec3<F>{F(kx), F(ky), F(kz)});
     Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
     if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
-    return stokes_adjoint(w, g.cos2chi, g.sin2chi);
+    if constexpr (iq) {
+      const Vec3<F> a = stokes_adjoint_iq(w, g.cos2chi, g.sin2chi);
+      return Vec4<F>{a.x, a.y, a.z, F(0.0f)};
+    } else {
+      return stokes_adjoint(w, g.cos2chi, g.sin2chi);
+    }
   };
 #if HWY_TARGET != HWY_SCALAR
   const DI di;
@@ -512,28 +520,47 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   const hn::Rebind<double, hn::Half<DF>> dd;
   const std::size_t H = hn::Lanes(dd);
   const auto dv = hn::Set(dd, d);
-  // d a of lanes [0, count) added to pixels [p, p + count), the promoted lanes in float64 vectors
-  // (Mul, then Add: the same bits on every instruction set, with or without fused multiply-adds).
-  // The other lanes add zero to the pixels after them when those are the caller's own (below
-  // in.limit); otherwise the vector goes through a scratch copy of the pixels.
+  // d times one column's lanes added to map[0, N), the promoted lanes in float64 vectors (Mul, then
+  // Add: the same bits on every instruction set, with or without fused multiply-adds).
+  auto add_column = [&](const VF& col, double* map) {
+    auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, col)));
+    auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, col)));
+    if (in.squares) {
+      lo = hn::Mul(lo, lo);
+      hi = hn::Mul(hi, hi);
+    }
+    hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
+    hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
+  };
+  // A whole vector of a range: pixels [p, p + N), all the caller's own.
+  auto add_whole = [&](const Vec4<F>& a, std::size_t p) {
+    const VF cols[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
+    for (int c = 0; c < outputs; ++c) add_column(cols[c], in.maps[c] + p);
+  };
+  // The same for lanes [0, H) only, one float64 vector: a part of at most H pixels.
+  auto add_half = [&](const VF& col, double* map) {
+    auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, col)));
+    if (in.squares) lo = hn::Mul(lo, lo);
+    hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
+  };
+  // Lanes [0, count) added to pixels [p, p + count), in one float64 vector where count <= H. The
+  // other lanes add zero to the pixels after them when those are the caller's own (below in.limit);
+  // otherwise the vector goes through a scratch copy of the pixels.
   auto add = [&](const Vec4<F>& a, std::size_t p, std::size_t count) {
     const MF mask = hn::FirstN(df, count);
     const VF cols[4] = {hn::IfThenElseZero(mask, a.x.v), hn::IfThenElseZero(mask, a.y.v),
                         hn::IfThenElseZero(mask, a.z.v), hn::IfThenElseZero(mask, a.w.v)};
-    const bool direct = p + N <= in.limit;
+    const bool half = count <= H;
+    const bool direct = p + (half ? H : N) <= in.limit;
     HWY_ALIGN double scratch[max_lanes];
-    for (int c = 0; c < 4; ++c) {
+    for (int c = 0; c < outputs; ++c) {
       double* map = direct ? in.maps[c] + p : scratch;
       if (!direct)
         for (std::size_t l = 0; l < N; ++l) scratch[l] = l < count ? in.maps[c][p + l] : 0.0;
-      auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, cols[c])));
-      auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, cols[c])));
-      if (in.squares) {
-        lo = hn::Mul(lo, lo);
-        hi = hn::Mul(hi, hi);
-      }
-      hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
-      hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
+      if (half)
+        add_half(cols[c], map);
+      else
+        add_column(cols[c], map);
       if (!direct)
         for (std::size_t l = 0; l < count; ++l) in.maps[c][p + l] = scratch[l];
     }
@@ -560,7 +587,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
     std::size_t p = begin;
     for (; p + N <= end; p += N)
-      add(weights(hn::LoadU(df, sky.kx + p), hn::LoadU(df, sky.ky + p), hn::LoadU(df, sky.kz + p)), p, N);
+      add_whole(weights(hn::LoadU(df, sky.kx + p), hn::LoadU(df, sky.ky + p), hn::LoadU(df, sky.kz + p)), p);
     if (p == end) continue;
     const std::size_t rest = end - p;
     const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
@@ -603,7 +630,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       hn::Store(a.y.v, df, out[1]);
       hn::Store(a.z.v, df, out[2]);
       hn::Store(a.w.v, df, out[3]);
-      for (int c = 0; c < 4; ++c) {
+      for (int c = 0; c < outputs; ++c) {
         const double v = d * double(out[c][0]);
         in.maps[c][p] += in.squares ? v * v : v;
       }

@@ -21,6 +21,9 @@ struct BenchOptions {
   // Also time the adjoint (Engine::adjoint and take_adjoint) of the same TOD, and its ratio to the
   // forward path's time.
   bool adjoint = false;
+  // Times each path this many times, alternately, and reports the best (this shared machine's
+  // speed varies from run to run; the best of several is the code's own cost).
+  unsigned repeat = 1;
 };
 
 // The paper's Table 1 workload: a table of evaluations/s and the ratio to the paper's GTX 1080.

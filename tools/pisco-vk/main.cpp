@@ -166,6 +166,10 @@ static int main_body(int argc, char** argv) {
                   "Also time the adjoint (Engine::adjoint) of the same TOD and its ratio to the forward path.");
   bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
       ->check(CLI::IsMember({"aperture", "detector"}));
+  bench->add_option("--repeat", bench_options.repeat,
+                    "Time the forward path (and the adjoint) this many times, alternately, and report the best "
+                    "of each (default: 1).")
+      ->check(CLI::Range(1u, 1000u));
 
   auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E, F) and the deconvolving map-maker's (M), and print a pass/fail table.");
   ValidateOptions vo;
