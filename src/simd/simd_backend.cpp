@@ -183,7 +183,8 @@ class SimdBackend final : public Backend {
             s.count = 0;
             if (s.value == 0.0) continue;
             if (plate)
-              plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]), plates[k].data());
+              plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]),
+                       std::sin(2 * pointing.plate_angle[i]), plates[k].data());
             const std::size_t c = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta, phi,
                                                     det.rho_max, det.cos_rho_max, disc);
             r.insert(r.end(), disc.begin(), disc.begin() + std::ptrdiff_t(c));
