@@ -105,9 +105,7 @@ Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weight
   const bool v = b.has_v;
   for (int j = 0; j < iterations; ++j) {
     alm2map_pol(t.t, t.e, t.b, mt, mq, mu);
-    if (v) alm2map(t.v, mv);
-    for (Healpix_Map<double>* m : {&mt, &mq, &mu, &mv})
-      if (v || m != &mv) weigh_quadrature(*m, weight);
+    for (Healpix_Map<double>* m : {&mt, &mq, &mu}) weigh_quadrature(*m, weight);
     SkyAlm y{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, v};
     alm2map_pol_adjoint(mt, mq, mu, y.t, y.e, y.b);
     axpy(t.t, -1.0, y.t);
@@ -117,6 +115,8 @@ Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weight
     axpy(s.e, 1.0, t.e);
     axpy(s.b, 1.0, t.b);
     if (v) {
+      alm2map(t.v, mv);
+      weigh_quadrature(mv, weight);
       alm2map_adjoint(mv, y.v);
       axpy(t.v, -1.0, y.v);
       axpy(s.v, 1.0, t.v);

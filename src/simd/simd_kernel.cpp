@@ -520,28 +520,22 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   const hn::Rebind<double, hn::Half<DF>> dd;
   const std::size_t H = hn::Lanes(dd);
   const auto dv = hn::Set(dd, d);
-  // d times one column's lanes added to map[0, N), the promoted lanes in float64 vectors (Mul, then
-  // Add: the same bits on every instruction set, with or without fused multiply-adds).
-  auto add_column = [&](const VF& col, double* map) {
-    auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, col)));
-    auto hi = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, col)));
-    if (in.squares) {
-      lo = hn::Mul(lo, lo);
-      hi = hn::Mul(hi, hi);
-    }
-    hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
-    hn::StoreU(hn::Add(hn::LoadU(dd, map + H), hi), dd, map + H);
+  // d times one column's lanes added to map[0, N), or with lower_only to map[0, H) (a part of at most
+  // H pixels: one float64 vector), the promoted lanes in float64 vectors (Mul, then Add: the same bits
+  // on every instruction set, with or without fused multiply-adds).
+  auto add_column = [&](const VF& col, double* map, bool lower_only) {
+    const auto half = [&](auto lanes, double* at) {
+      auto v = hn::Mul(dv, hn::PromoteTo(dd, lanes));
+      if (in.squares) v = hn::Mul(v, v);
+      hn::StoreU(hn::Add(hn::LoadU(dd, at), v), dd, at);
+    };
+    half(hn::LowerHalf(dh, col), map);
+    if (!lower_only) half(hn::UpperHalf(dh, col), map + H);
   };
   // A whole vector of a range: pixels [p, p + N), all the caller's own.
   auto add_whole = [&](const Vec4<F>& a, std::size_t p) {
     const VF cols[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
-    for (int c = 0; c < outputs; ++c) add_column(cols[c], in.maps[c] + p);
-  };
-  // The same for lanes [0, H) only, one float64 vector: a part of at most H pixels.
-  auto add_half = [&](const VF& col, double* map) {
-    auto lo = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, col)));
-    if (in.squares) lo = hn::Mul(lo, lo);
-    hn::StoreU(hn::Add(hn::LoadU(dd, map), lo), dd, map);
+    for (int c = 0; c < outputs; ++c) add_column(cols[c], in.maps[c] + p, false);
   };
   // Lanes [0, count) added to pixels [p, p + count), in one float64 vector where count <= H. The
   // other lanes add zero to the pixels after them when those are the caller's own (below in.limit);
@@ -557,10 +551,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       double* map = direct ? in.maps[c] + p : scratch;
       if (!direct)
         for (std::size_t l = 0; l < N; ++l) scratch[l] = l < count ? in.maps[c][p + l] : 0.0;
-      if (half)
-        add_half(cols[c], map);
-      else
-        add_column(cols[c], map);
+      add_column(cols[c], map, half);
       if (!direct)
         for (std::size_t l = 0; l < count; ++l) in.maps[c][p + l] = scratch[l];
     }
