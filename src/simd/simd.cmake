@@ -32,6 +32,11 @@ set(PISCO_HAVE_SIMD ON CACHE INTERNAL "The simd backend is built")
 # as written, CMakeLists.txt): up to 1.07x faster on the Table 1 workload, 1.09x to 1.16x with a plate
 # (BENCHMARKS.md, 2026-11-24), within float32 rounding of the unfused arithmetic; the parity bars hold
 # either way.
-if(CMAKE_CXX_COMPILER_ID MATCHES "GNU|Clang")
+# GCC would also turn the adjoint's copies of a few vectors of unit vectors into calls of memmove
+# (simd_kernel.cpp, Scatter): 5% of its time at 5 deg.
+if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+  set_source_files_properties(simd/simd_kernel.cpp PROPERTIES COMPILE_OPTIONS
+                              "-ffp-contract=fast;-fno-tree-loop-distribute-patterns")
+elseif(CMAKE_CXX_COMPILER_ID MATCHES "Clang")
   set_source_files_properties(simd/simd_kernel.cpp PROPERTIES COMPILE_OPTIONS "-ffp-contract=fast")
 endif()

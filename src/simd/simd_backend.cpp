@@ -146,7 +146,7 @@ class SimdBackend final : public Backend {
     const KernelDetector& kd = tables_.at(detector).view;
     const PreparedSky& sky = in_->sky;
     if (adjoint_[0].empty())
-      for (auto& m : adjoint_) m.assign(sky.npix, 0.0);
+      for (auto& m : adjoint_) m.assign(simd::map_size(sky.npix, sky.rings.size()), 0.0);
     if (work_.size() != sky.rings.size()) {
       work_.assign(sky.rings.size(), 0.0);
       work_steps_.assign(sky.rings.size() + 1, 0.0);
@@ -163,7 +163,10 @@ class SimdBackend final : public Backend {
     constexpr std::size_t block = 8192, task_samples = 256;
     std::vector<Sample> samples(std::min(block, pointing.size()));
     std::vector<std::array<double, 16>> plates(plate ? samples.size() : 0);  // each sample's M(theta)
+    // Each task's samples' ranges, split where they cross from one ring to the next (a polar cap is
+    // one range of the disc), with each one's map_offset.
     std::vector<std::vector<std::uint32_t>> ranges((block + task_samples - 1) / task_samples);
+    std::vector<std::vector<std::uint32_t>> offsets(ranges.size());
     std::atomic<std::uint64_t> pixels{0};
     for (std::size_t b0 = 0; b0 < pointing.size(); b0 += block) {
       const std::size_t n = std::min(block, pointing.size() - b0);
@@ -171,7 +174,9 @@ class SimdBackend final : public Backend {
         std::vector<std::uint32_t> disc;
         for (std::size_t t = t0; t < t1; ++t) {
           std::vector<std::uint32_t>& r = ranges[t];
+          std::vector<std::uint32_t>& o = offsets[t];
           r.clear();
+          o.clear();
           for (std::size_t k = t * task_samples; k < std::min(n, (t + 1) * task_samples); ++k) {
             const std::size_t i = b0 + k;
             Sample& s = samples[k];
@@ -187,15 +192,37 @@ class SimdBackend final : public Backend {
                        std::sin(2 * pointing.plate_angle[i]), plates[k].data());
             const std::size_t c = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta, phi,
                                                     det.rho_max, det.cos_rho_max, disc);
-            r.insert(r.end(), disc.begin(), disc.begin() + std::ptrdiff_t(c));
-            s.count = c;
             if (c > 0) {
-              const auto [lo, hi] = std::minmax_element(disc.begin(), disc.begin() + std::ptrdiff_t(c));
-              s.ring0 = ring_of(sky, *lo);
-              s.ring1 = ring_of(sky, *hi - 1);
+              // The disc's ranges come ring by ring, northmost first: each is split where it crosses
+              // from one ring to the next (only a polar cap does) and given its ring's map_offset.
+              s.ring0 = ring_of(sky, disc[0]);
+              s.ring1 = ring_of(sky, disc[c - 1] - 1);
               s.pixels = 0;
-              for (std::size_t q = 0; q < c; q += 2) s.pixels += disc[q + 1] - disc[q];
+              const std::size_t at = r.size(), most = c / 2 + (s.ring1 - s.ring0 + 1);
+              r.resize(at + 2 * most);
+              o.resize(at / 2 + most);
+              std::uint32_t* rw = r.data() + at;
+              std::uint32_t* ow = o.data() + at / 2;
+              const RingEntry* ring = sky.rings.data() + s.ring0;
+              for (std::size_t q = 0; q < c; q += 2) {
+                std::uint32_t b = disc[q];
+                const std::uint32_t e = disc[q + 1];
+                s.pixels += e - b;
+                while (b >= ring->first + ring->count) ++ring;
+                for (;;) {
+                  const std::uint32_t stop = std::min(e, ring->first + ring->count);
+                  *rw++ = b;
+                  *rw++ = stop;
+                  *ow++ = std::uint32_t(simd::map_offset(std::size_t(ring - sky.rings.data())));
+                  if (stop == e) break;
+                  b = stop;
+                  ++ring;
+                }
+              }
+              r.resize(std::size_t(rw - r.data()));
+              o.resize(std::size_t(ow - o.data()));
             }
+            s.count = r.size() - s.first;
             if (per_sample_) {  // the norm as the forward computes it (its float64 path)
               const simd::SampleInput in{&s.f, disc.data(), c / 2, plate ? plates[k].data() : nullptr, false, true};
               simd::SampleSums sums;
@@ -227,7 +254,7 @@ class SimdBackend final : public Backend {
       work_slices(sky, work_, std::size_t(pool_.size()), slices_);
       for (std::size_t k = ring_first; k <= ring_last; ++k) work_[k] = 0.0;
       pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
-        std::vector<std::uint32_t> clipped;
+        std::vector<std::uint32_t> clipped, clipped_offsets;
         std::uint64_t count = 0;
         for (std::size_t k = begin; k < end; ++k) {
           const RingSlice& slice = slices_[k];
@@ -235,25 +262,31 @@ class SimdBackend final : public Backend {
             const Sample& s = samples[j];
             if (s.count == 0 || s.value == 0.0 || s.ring1 < slice.ring_lo || s.ring0 > slice.ring_hi) continue;
             const std::uint32_t* r = ranges[s.task].data() + s.first;
-            const std::uint32_t* mine = r;  // its ranges in this slice: all of them, or clipped
+            const std::uint32_t* o = offsets[s.task].data() + s.first / 2;
+            const std::uint32_t* mine = r;  // its ranges in this slice: all of them, or those of its rings
+            const std::uint32_t* mine_offsets = o;
             std::size_t entries = s.count;
             if (s.ring0 >= slice.ring_lo && s.ring1 <= slice.ring_hi) {
               count += s.pixels;
             } else {
               clipped.clear();
+              clipped_offsets.clear();
               for (std::size_t q = 0; q < s.count; q += 2) {
-                const std::uint32_t lo = std::max(r[q], slice.lo), hi = std::min(r[q + 1], slice.hi);
-                if (lo >= hi) continue;
-                clipped.push_back(lo);
-                clipped.push_back(hi);
-                count += hi - lo;
+                if (r[q] < slice.lo || r[q + 1] > slice.hi) continue;  // a range is on one ring
+                clipped.push_back(r[q]);
+                clipped.push_back(r[q + 1]);
+                clipped_offsets.push_back(o[q / 2]);
+                count += r[q + 1] - r[q];
               }
               if (clipped.empty()) continue;
               mine = clipped.data();
+              mine_offsets = clipped_offsets.data();
               entries = clipped.size();
             }
-            const simd::ScatterInput in{&s.f, mine, entries / 2, plate ? plates[j].data() : nullptr, s.value, squares,
-                                        slice.hi,
+            // The slice's map entries end where its last ring's gap does.
+            const std::size_t limit = slice.hi + simd::map_offset(slice.ring_hi + 1);
+            const simd::ScatterInput in{&s.f,    mine,    mine_offsets, entries / 2, plate ? plates[j].data() : nullptr,
+                                        s.value, squares, limit,
                                         {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
             simd::scatter_sample(kernel_, sky_, kd, in);
           }
@@ -264,7 +297,19 @@ class SimdBackend final : public Backend {
     return pixels;
   }
 
-  void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(adjoint_, maps); }
+  // The maps without their rings' gaps (simd::map_offset).
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override {
+    const PreparedSky& sky = in_->sky;
+    for (std::size_t c = 0; c < 4; ++c) {
+      if (!maps[c].empty() && !adjoint_[c].empty())
+        for (std::size_t k = 0; k < sky.rings.size(); ++k) {
+          const RingEntry& r = sky.rings[k];
+          const double* from = adjoint_[c].data() + r.first + simd::map_offset(k);
+          for (std::uint32_t q = 0; q < r.count; ++q) maps[c][r.first + q] += from[q];
+        }
+      adjoint_[c] = {};
+    }
+  }
 
  private:
   // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).

@@ -484,11 +484,11 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
 }
 
 // The adjoint of one sample: the forward's float32 geometry and weights, stokes_adjoint, and d times
-// each lane's four weights added to its pixel in float64 vectors. Whole vectors of a range come
-// straight from the sky, as in the forward kernel; the rest of each range (fewer than N pixels) joins
-// a staging vector, evaluated whenever it is full, whose lanes are then added to their ranges' pixels
-// one range's part at a time (rotated back to lane 0). A pixel's float32 weights do not depend on the
-// lane that computes them, so the maps are the same bits however the ranges are cut.
+// each pixel's weights added to it in float64. In two passes over a chunk of the disc's pixels at a
+// time: first the ranges' unit vectors are laid end to end in a buffer and evaluated a whole vector at
+// a time (the last one padded), d times the weights stored as float64; then each range adds its
+// stretch of those products to its pixels, float64 vector by vector. A pixel's float32 weights do not
+// depend on the lane that computes them, so the maps are the same bits however the ranges are cut.
 template <bool Radial, int Columns, bool Plate>
 HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
   const DF df;
@@ -514,103 +514,83 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     }
   };
 #if HWY_TARGET != HWY_SCALAR
-  const DI di;
   const std::size_t N = hn::Lanes(df);
   const hn::Half<DF> dh;
   const hn::Rebind<double, hn::Half<DF>> dd;
   const std::size_t H = hn::Lanes(dd);
   const auto dv = hn::Set(dd, d);
-  // d times one column's lanes added to map[0, N), or with lower_only to map[0, H) (a part of at most
-  // H pixels: one float64 vector), the promoted lanes in float64 vectors (Mul, then Add: the same bits
-  // on every instruction set, with or without fused multiply-adds).
-  auto add_column = [&](const VF& col, double* map, bool lower_only) {
-    const auto half = [&](auto lanes, double* at) {
-      auto v = hn::Mul(dv, hn::PromoteTo(dd, lanes));
-      if (in.squares) v = hn::Mul(v, v);
-      hn::StoreU(hn::Add(hn::LoadU(dd, at), v), dd, at);
-    };
-    half(hn::LowerHalf(dh, col), map);
-    if (!lower_only) half(hn::UpperHalf(dh, col), map + H);
+  // The chunk: unit vectors (a vector of padding past the last), the products d a by column (half a
+  // vector of padding: a range's last float64 vector is loaded whole and masked), and the stretches of
+  // ranges it holds (the first one's place in the maps, its position in the chunk, pixels).
+  constexpr std::size_t chunk = 2 * max_lanes;
+  HWY_ALIGN float k[3][chunk + max_lanes];
+  HWY_ALIGN double products[4][chunk + max_lanes];
+  struct Stretch {
+    std::uint32_t entry, at, count;
   };
-  // A whole vector of a range: pixels [p, p + N), all the caller's own.
-  auto add_whole = [&](const Vec4<F>& a, std::size_t p) {
-    const VF cols[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
-    for (int c = 0; c < outputs; ++c) add_column(cols[c], in.maps[c] + p, false);
-  };
-  // Lanes [0, count) added to pixels [p, p + count), in one float64 vector where count <= H. The
-  // other lanes add zero to the pixels after them when those are the caller's own (below in.limit);
-  // otherwise the vector goes through a scratch copy of the pixels.
-  auto add = [&](const Vec4<F>& a, std::size_t p, std::size_t count) {
-    const MF mask = hn::FirstN(df, count);
-    const VF cols[4] = {hn::IfThenElseZero(mask, a.x.v), hn::IfThenElseZero(mask, a.y.v),
-                        hn::IfThenElseZero(mask, a.z.v), hn::IfThenElseZero(mask, a.w.v)};
-    const bool half = count <= H;
-    const bool direct = p + (half ? H : N) <= in.limit;
-    HWY_ALIGN double scratch[max_lanes];
+  Stretch stretches[chunk];
+  std::size_t fill = 0, count = 0;
+  // Pass 2 for one stretch: its products added to its pixels, a float64 vector at a time (Mul, then
+  // Add in pass 1 and here: the same bits on every instruction set, with or without fused
+  // multiply-adds). The last vector's lanes past the stretch add zero to the pixels after it when
+  // those are the caller's own (below in.limit); otherwise it goes through a scratch copy of them.
+  auto add = [&](const Stretch& s) {
     for (int c = 0; c < outputs; ++c) {
-      double* map = direct ? in.maps[c] + p : scratch;
-      if (!direct)
-        for (std::size_t l = 0; l < N; ++l) scratch[l] = l < count ? in.maps[c][p + l] : 0.0;
-      add_column(cols[c], map, half);
-      if (!direct)
-        for (std::size_t l = 0; l < count; ++l) in.maps[c][p + l] = scratch[l];
-    }
-  };
-  // The staging vector's unit vectors, its fill, and the parts of ranges it holds: pixel, first lane,
-  // lanes. A part that overflows the vector goes on in the next one.
-  const VF zero = hn::Zero(df);
-  VF stage[3] = {zero, zero, zero};
-  std::size_t fill = 0, parts = 0;
-  std::size_t part_pixel[max_lanes + 1], part_lane[max_lanes + 1], part_lanes[max_lanes + 1];
-  const VI iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
-  auto flush = [&](const VF* k, std::size_t lanes) {
-    const Vec4<F> a = weights(k[0], k[1], k[2]);
-    for (std::size_t j = 0; j < parts; ++j) {
-      // Lane part_lane[j] rotated to lane 0.
-      const auto back = hn::IndicesFromVec(df, hn::And(hn::Add(iota, hn::Set(di, int(part_lane[j]))), lane_bits));
-      const std::size_t n = std::min(part_lanes[j], lanes - part_lane[j]);
-      add(Vec4<F>{F(hn::TableLookupLanes(a.x.v, back)), F(hn::TableLookupLanes(a.y.v, back)),
-                  F(hn::TableLookupLanes(a.z.v, back)), F(hn::TableLookupLanes(a.w.v, back))},
-          part_pixel[j], n);
-    }
-  };
-  for (std::size_t r = 0; r < in.range_count; ++r) {
-    const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
-    std::size_t p = begin;
-    for (; p + N <= end; p += N)
-      add_whole(weights(hn::LoadU(df, sky.kx + p), hn::LoadU(df, sky.ky + p), hn::LoadU(df, sky.kz + p)), p);
-    if (p == end) continue;
-    const std::size_t rest = end - p;
-    const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
-    const MF keep = hn::FirstN(df, fill);
-    const float* const columns[3] = {sky.kx, sky.ky, sky.kz};
-    VF q[3];
-    for (int c = 0; c < 3; ++c) {
-      const VF rotated = hn::TableLookupLanes(hn::LoadU(df, columns[c] + p), rotate);
-      q[c] = hn::IfThenElse(keep, stage[c], rotated);
-      stage[c] = rotated;
-    }
-    part_pixel[parts] = p;
-    part_lane[parts] = fill;
-    part_lanes[parts] = rest;
-    ++parts;
-    fill += rest;
-    if (fill >= N) {
-      flush(q, N);
-      fill -= N;
-      // The overflow, now at lanes [0, fill) of stage: the rest of the last part.
-      parts = 0;
-      if (fill > 0) {
-        part_pixel[0] = p + (rest - fill);
-        part_lane[0] = 0;
-        part_lanes[0] = fill;
-        parts = 1;
+      double* map = in.maps[c] + s.entry;
+      const double* from = products[c] + s.at;
+      std::size_t j = 0;
+      for (; j + H <= s.count; j += H) hn::StoreU(hn::Add(hn::LoadU(dd, map + j), hn::LoadU(dd, from + j)), dd, map + j);
+      if (j == s.count) continue;
+      const std::size_t rest = s.count - j;
+      const auto v = hn::IfThenElseZero(hn::FirstN(dd, rest), hn::LoadU(dd, from + j));
+      if (s.entry + j + H <= in.limit) {
+        hn::StoreU(hn::Add(hn::LoadU(dd, map + j), v), dd, map + j);
+      } else {
+        HWY_ALIGN double scratch[max_lanes];
+        for (std::size_t l = 0; l < H; ++l) scratch[l] = l < rest ? map[j + l] : 0.0;
+        hn::Store(hn::Add(hn::Load(dd, scratch), v), dd, scratch);
+        for (std::size_t l = 0; l < rest; ++l) map[j + l] = scratch[l];
       }
-    } else {
-      for (int c = 0; c < 3; ++c) stage[c] = q[c];
+    }
+  };
+  // Pass 1 for the chunk, then pass 2 for each of its stretches.
+  auto evaluate = [&] {
+    const std::size_t vectors = (fill + N - 1) / N;
+    for (int c = 0; c < 3; ++c) hn::StoreU(hn::Zero(df), df, k[c] + fill);  // the last vector's padding
+    for (std::size_t j = 0; j < vectors * N; j += N) {
+      const Vec4<F> a = weights(hn::Load(df, k[0] + j), hn::Load(df, k[1] + j), hn::Load(df, k[2] + j));
+      const VF columns[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
+      for (int c = 0; c < outputs; ++c) {
+        auto lower = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, columns[c])));
+        auto upper = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, columns[c])));
+        if (in.squares) {
+          lower = hn::Mul(lower, lower);
+          upper = hn::Mul(upper, upper);
+        }
+        hn::Store(lower, dd, products[c] + j);
+        hn::Store(upper, dd, products[c] + j + H);
+      }
+    }
+    for (std::size_t s = 0; s < count; ++s) add(stretches[s]);
+    fill = 0;
+    count = 0;
+  };
+  const float* const unit[3] = {sky.kx, sky.ky, sky.kz};
+  for (std::size_t r = 0; r < in.range_count; ++r) {
+    const std::size_t end = in.ranges[2 * r + 1];
+    for (std::size_t p = in.ranges[2 * r]; p < end;) {
+      const std::size_t take = std::min(end - p, chunk - fill);
+      // Whole vectors copied (the sky's arrays and the chunk are padded); the next stretch overwrites
+      // what lies past this one.
+      for (int c = 0; c < 3; ++c)
+        for (std::size_t j = 0; j < take; j += N) hn::StoreU(hn::LoadU(df, unit[c] + p + j), df, k[c] + fill + j);
+      stretches[count++] = {std::uint32_t(p + in.offsets[r]), std::uint32_t(fill), std::uint32_t(take)};
+      fill += take;
+      p += take;
+      if (fill == chunk) evaluate();
     }
   }
-  if (fill > 0) flush(stage, fill);
+  if (fill > 0) evaluate();
 #else
   HWY_ALIGN float out[4][max_lanes];
   for (std::size_t r = 0; r < in.range_count; ++r) {
@@ -623,7 +603,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       hn::Store(a.w.v, df, out[3]);
       for (int c = 0; c < outputs; ++c) {
         const double v = d * double(out[c][0]);
-        in.maps[c][p] += in.squares ? v * v : v;
+        in.maps[c][p + in.offsets[r]] += in.squares ? v * v : v;
       }
     }
   }
