@@ -254,7 +254,6 @@ class SimdBackend final : public Backend {
       work_slices(sky, work_, std::size_t(pool_.size()), slices_);
       for (std::size_t k = ring_first; k <= ring_last; ++k) work_[k] = 0.0;
       pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
-        std::vector<std::uint32_t> clipped, clipped_offsets;
         std::uint64_t count = 0;
         for (std::size_t k = begin; k < end; ++k) {
           const RingSlice& slice = slices_[k];
@@ -263,29 +262,26 @@ class SimdBackend final : public Backend {
             if (s.count == 0 || s.value == 0.0 || s.ring1 < slice.ring_lo || s.ring0 > slice.ring_hi) continue;
             const std::uint32_t* r = ranges[s.task].data() + s.first;
             const std::uint32_t* o = offsets[s.task].data() + s.first / 2;
-            const std::uint32_t* mine = r;  // its ranges in this slice: all of them, or those of its rings
-            const std::uint32_t* mine_offsets = o;
-            std::size_t entries = s.count;
+            std::size_t entries = s.count;  // its ranges in this slice: all of them, or those of its rings
             if (s.ring0 >= slice.ring_lo && s.ring1 <= slice.ring_hi) {
               count += s.pixels;
             } else {
-              clipped.clear();
-              clipped_offsets.clear();
-              for (std::size_t q = 0; q < s.count; q += 2) {
-                if (r[q] < slice.lo || r[q + 1] > slice.hi) continue;  // a range is on one ring
-                clipped.push_back(r[q]);
-                clipped.push_back(r[q + 1]);
-                clipped_offsets.push_back(o[q / 2]);
-                count += r[q + 1] - r[q];
+              // Each range lies on one ring and they come in order: the slice's are consecutive.
+              std::size_t q0 = 0;
+              while (q0 < s.count && r[q0] < slice.lo) q0 += 2;
+              std::size_t q1 = q0;
+              while (q1 < s.count && r[q1] < slice.hi) {
+                count += r[q1 + 1] - r[q1];
+                q1 += 2;
               }
-              if (clipped.empty()) continue;
-              mine = clipped.data();
-              mine_offsets = clipped_offsets.data();
-              entries = clipped.size();
+              if (q1 == q0) continue;
+              r += q0;
+              o += q0 / 2;
+              entries = q1 - q0;
             }
             // The slice's map entries end where its last ring's gap does.
             const std::size_t limit = slice.hi + simd::map_offset(slice.ring_hi + 1);
-            const simd::ScatterInput in{&s.f,    mine,    mine_offsets, entries / 2, plate ? plates[j].data() : nullptr,
+            const simd::ScatterInput in{&s.f,    r,       o,      entries / 2, plate ? plates[j].data() : nullptr,
                                         s.value, squares, limit,
                                         {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
             simd::scatter_sample(kernel_, sky_, kd, in);
