@@ -2,7 +2,9 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
+#include <filesystem>
 #include <functional>
 #include <string>
 
@@ -34,6 +36,17 @@ inline pisco::ErrorKind kind_of(const std::function<void()>& f) {
 }
 
 inline bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+// A new, empty directory for the running test, <temp>/pisco-<what>-<pid>-<test name>: a test's
+// fixture makes it in SetUp and removes it in TearDown.
+inline std::filesystem::path fresh_test_dir(const std::string& what) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("pisco-" + what + "-" + std::to_string(::getpid()) + "-" +
+                                                    ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
 
 // Runs f, expecting a pisco::Error whose message contains `needle`.
 inline void expect_error(const std::function<void()>& f, const std::string& needle) {

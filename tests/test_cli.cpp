@@ -25,6 +25,7 @@
 #include "beam_file_writers.hpp"
 #include "map_file_writers.hpp"
 #include "pisco/pisco.hpp"
+#include "support.hpp"
 
 namespace {
 
@@ -48,10 +49,7 @@ Result run(const std::string& args) {
 class Cli : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("pisco-cli-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = pisco_test::fresh_test_dir("cli");
   }
   void TearDown() override { fs::remove_all(dir_); }
 

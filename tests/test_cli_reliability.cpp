@@ -18,25 +18,22 @@
 
 #include "cli_runner.hpp"
 #include "pisco/pisco.hpp"
+#include "support.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using pisco_test::CliResult;
+using pisco_test::contains;
 using pisco_test::files_under;
 using pisco_test::joined;
 using pisco_test::run_cli;
 using pisco_test::temporaries_under;
 
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
-
 class Reliability : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("pisco-rel-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = pisco_test::fresh_test_dir("rel");
   }
   void TearDown() override { fs::remove_all(dir_); }
 

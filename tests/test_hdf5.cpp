@@ -42,10 +42,7 @@ void dataset(hid_t loc, const char* name, hid_t type, std::vector<hsize_t> dims,
 class Hdf5Layer : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("pisco-hdf5-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = pisco_test::fresh_test_dir("hdf5");
     file_ = dir_ / "layer.h5";
     // Root: attributes; group "fp" created with tracked link order, members z_table (2-D), a_column
     // (1-D float32), count (integer), sub (a group) and dangling (a soft link to nothing).

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "pisco/pisco.hpp"
+#include "support.hpp"
 
 namespace {
 
@@ -51,10 +52,7 @@ Result pisco(int ranks, const std::string& args, const std::string& env = "") {
 class Mpi : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("pisco-mpi-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = pisco_test::fresh_test_dir("mpi");
   }
   void TearDown() override { fs::remove_all(dir_); }
   fs::path write(const std::string& name, const std::string& text) {

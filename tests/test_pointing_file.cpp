@@ -24,10 +24,7 @@ using pisco_test::expect_error;
 class PointingFile : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("pisco-ptgfile-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = pisco_test::fresh_test_dir("ptgfile");
   }
   void TearDown() override { fs::remove_all(dir_); }
 

@@ -19,6 +19,7 @@
 
 #include "pisco/pisco.hpp"
 #include "pisco/simulation.hpp"
+#include "support.hpp"
 
 namespace {
 
@@ -54,10 +55,7 @@ class CountingContext final : public pisco::RunContext {
 class SimulationTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("pisco-simulation-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    dir_ = pisco_test::fresh_test_dir("simulation");
   }
   void TearDown() override { fs::remove_all(dir_); }
 
