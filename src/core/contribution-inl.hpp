@@ -146,9 +146,3 @@ PISCO_HD SampleFrame<T> make_frame(T cos_theta, T sin_theta, T cos_phi, T sin_ph
   return f;
 }
 
-// The effective weights w M of a pixel behind a plate, from M row-major (core/plate.hpp).
-template <class T>
-PISCO_HD Vec4<T> effective_weights(const Vec4<T>& w, const T* m) {
-  return effective_weights(w, Vec4<T>{m[0], m[4], m[8], m[12]}, Vec4<T>{m[1], m[5], m[9], m[13]},
-                           Vec4<T>{m[2], m[6], m[10], m[14]}, Vec4<T>{m[3], m[7], m[11], m[15]});
-}

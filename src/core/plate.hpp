@@ -30,7 +30,7 @@ PISCO_HD void plate_at(const double* m0, double c, double s, double* out) {
   }
 }
 
-// effective_weights (v = w M, a pixel's weights behind the plate) is in core/contribution-inl.hpp,
+// effective_weights (v = w M, a pixel's weights behind the plate, from M by columns) is in shaders/pixel.glsl,
 // with the other per-pixel formulas.
 
 }  // namespace pisco::detail

@@ -63,10 +63,10 @@ struct KernelDetector {
   double plate_mueller[16];  // aperture plates: M0, row-major
 };
 
-// One sample's plate (aperture plates): M(theta) row-major in float32 for the pixels' effective
+// One sample's plate (aperture plates): M(theta) by columns in float32 for the pixels' effective
 // weights, and its column 0 in float64 for the monopole's weight sum_a w_a M_a0.
 struct PlateSample {
-  float m[16];
+  Vec4<float> columns[4];  // M(theta) by columns, the form effective_weights takes
   double col0[4];
 };
 
@@ -74,7 +74,7 @@ PISCO_HD PlateSample plate_sample(const KernelDetector& det, double theta) {
   double m[16];
   plate_at(det.plate_mueller, cos(2.0 * theta), sin(2.0 * theta), m);
   PlateSample p;
-  for (int i = 0; i < 16; ++i) p.m[i] = float(m[i]);
+  for (int c = 0; c < 4; ++c) p.columns[c] = {float(m[c]), float(m[4 + c]), float(m[8 + c]), float(m[12 + c])};
   for (int a = 0; a < 4; ++a) p.col0[a] = m[4 * a];
   return p;
 }
@@ -132,7 +132,7 @@ PISCO_HD Vec4<float> pixel_weights(const KernelSky& sky, const ArrayGrid<float>&
     g.y = float(y);
   }
   Vec4<float> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
-  if constexpr (Plate) w = effective_weights(w, plate->m);
+  if constexpr (Plate) w = effective_weights(w, plate->columns[0], plate->columns[1], plate->columns[2], plate->columns[3]);
   return w;
 }
 
