@@ -91,7 +91,8 @@ struct SampleSums {
 // Pixel p of ring k (0-based) is at p + map_offset(k).
 constexpr std::uint32_t map_gap = 8;  // float64s: a 64-byte cache line
 inline std::size_t map_offset(std::size_t ring) { return map_gap * ring; }
-inline std::size_t map_size(std::size_t npix, std::size_t rings) { return npix + map_offset(rings) + 64; }
+// Writes stay below a slice's limit, at most map_offset(rings) past the last pixel (the last ring's gap).
+inline std::size_t map_size(std::size_t npix, std::size_t rings) { return npix + map_offset(rings); }
 
 struct ScatterInput {
   const SampleFrame<double>* frame;
