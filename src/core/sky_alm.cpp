@@ -1,6 +1,8 @@
 #include "core/sky_alm.hpp"
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <span>
 
 #include <alm_healpix_tools.h>
@@ -17,32 +19,51 @@ Healpix_Map<double> healpix_map(std::span<const double> v, int nside) {
 
 void copy_map(const Healpix_Map<double>& m, std::span<double> out) { std::copy(&m[0], &m[0] + m.Npix(), out.begin()); }
 
-// map2alm's ring weights (1 per ring of the northern half and the equator).
-arr<double> map2alm_weights(int nside, bool ring_weights) {
-  arr<double> weight(static_cast<tsize>(2 * nside), 1.0);
-  if (ring_weights) {
-    // Each iteration is about 20 times more accurate with them: 3 recover a sky band-limited to
-    // 2 NSIDE to 2e-7 of its largest a_lm, as 5 without them do.
+// map2alm's ring weights (1 per ring of the northern half and the equator) and the Jacobi
+// iterations that go with them. With healpy-data's weights each iteration is about 20 times more
+// accurate: 3 recover a sky band-limited to 2 NSIDE to 2e-7 of its largest a_lm, as 5 without them
+// do; where the file is missing (healpy-data elsewhere, PISCO_HEALPY_DATA_DIR unset) the unit weights
+// get two more iterations, so that the polar copy keeps its accuracy (tests/test_poles.cpp).
+struct Quadrature {
+  arr<double> weight;
+  int iterations = 0;
+};
+
+Quadrature map2alm_quadrature(int nside, bool ring_weights, int iterations) {
+  Quadrature q{arr<double>(static_cast<tsize>(2 * nside), 1.0), iterations};
+  if (!ring_weights) return q;
+  const std::filesystem::path dir = healpy_data_dir();
+  char name[40];
+  std::snprintf(name, sizeof name, "weight_ring_n%05d.fits", nside);
+  std::error_code ec;
+  if (std::filesystem::is_regular_file(dir / name, ec)) {
     try {
-      read_weight_ring(PISCO_HEALPY_DATA_DIR, nside, weight);
-      for (tsize i = 0; i < weight.size(); ++i) weight[i] += 1.0;  // the files hold w - 1
+      read_weight_ring(dir.string(), nside, q.weight);
+      for (tsize i = 0; i < q.weight.size(); ++i) q.weight[i] += 1.0;  // the files hold w - 1
+      return q;
     } catch (const PlanckError&) {
-      weight.alloc(static_cast<tsize>(2 * nside));
-      weight.fill(1.0);
+      q.weight.alloc(static_cast<tsize>(2 * nside));
+      q.weight.fill(1.0);
     }
   }
-  return weight;
+  q.iterations = iterations + 2;
+  return q;
 }
 }  // namespace
 
+std::filesystem::path healpy_data_dir() {
+  const char* env = std::getenv("PISCO_HEALPY_DATA_DIR");
+  return env && *env ? std::filesystem::path(env) : std::filesystem::path(PISCO_HEALPY_DATA_DIR);
+}
+
 SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights) {
   const int nside = sky.nside();
-  const arr<double> weight = map2alm_weights(nside, ring_weights);
+  const Quadrature q = map2alm_quadrature(nside, ring_weights, iterations);
   SkyAlm a{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, false};
   map2alm_pol_iter(healpix_map(sky.I(), nside), healpix_map(sky.Q(), nside), healpix_map(sky.U(), nside), a.t, a.e,
-                   a.b, iterations, weight);
+                   a.b, q.iterations, q.weight);
   a.has_v = std::any_of(sky.V().begin(), sky.V().end(), [](double x) { return x != 0.0; });
-  if (a.has_v) map2alm_iter(healpix_map(sky.V(), nside), a.v, iterations, weight);
+  if (a.has_v) map2alm_iter(healpix_map(sky.V(), nside), a.v, q.iterations, q.weight);
   return a;
 }
 
@@ -95,7 +116,8 @@ SkyAlm sky_from_alm_adjoint(const SkyView& maps, int lmax) {
 }
 
 Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weights, const std::string& units) {
-  const arr<double> weight = map2alm_weights(nside, ring_weights);
+  const Quadrature q = map2alm_quadrature(nside, ring_weights, iterations);
+  const arr<double>& weight = q.weight;
   const int lmax = b.t.Lmax();
   // s = sum_j (1 - Y^T D Y)^j b, term by term: t <- t - Y^T D Y t.
   SkyAlm t = b, s = b;
@@ -103,7 +125,7 @@ Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weight
       mv(nside, RING, SET_NSIDE);
   // V's transforms only where its a_lm are not all zero (its maps are zero otherwise).
   const bool v = b.has_v;
-  for (int j = 0; j < iterations; ++j) {
+  for (int j = 0; j < q.iterations; ++j) {
     alm2map_pol(t.t, t.e, t.b, mt, mq, mu);
     for (Healpix_Map<double>* m : {&mt, &mq, &mu}) weigh_quadrature(*m, weight);
     SkyAlm y{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, v};

@@ -2,6 +2,7 @@
 // sky (sidelobes.cpp) and the polar copy (poles.cpp) are made from.
 #pragma once
 
+#include <filesystem>
 #include <string>
 
 #include <alm.h>
@@ -16,9 +17,13 @@ struct SkyAlm {
   bool has_v = false;
 };
 
+// healpy-data's folder (totcls.dat, the pixel windows, the ring weights): the environment's
+// PISCO_HEALPY_DATA_DIR where set, else the build's (CMake's PISCO_HEALPY_DATA_DIR).
+std::filesystem::path healpy_data_dir();
+
 // The sky's a_lm up to lmax by HEALPix's map2alm with `iterations` Jacobi iterations; with
-// `ring_weights`, HEALPix's ring weights from healpy-data where it has them for the sky's NSIDE.
-// Throws PlanckError, which callers name.
+// `ring_weights`, HEALPix's ring weights from healpy-data, or two more iterations where it has no
+// file for the sky's NSIDE. Throws PlanckError, which callers name.
 SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights);
 // The maps of `a` at `nside` (alm2map_pol, and alm2map for V).
 Sky sky_from_alm(const SkyAlm& a, int nside, const std::string& units);

@@ -19,6 +19,7 @@
 #include <powspec.h>
 #include <xcomplex.h>
 
+#include "core/sky_alm.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
@@ -134,7 +135,7 @@ std::vector<double> cross_spectrum(const AlmD& a, const AlmD& b) {
 std::filesystem::path pixel_window_file(int nside) {
   char name[64];
   std::snprintf(name, sizeof name, "pixel_window_n%04d.fits", nside);
-  return std::filesystem::path(PISCO_HEALPY_DATA_DIR) / name;
+  return detail::healpy_data_dir() / name;
 }
 
 void check_window(const char* which, std::span<const double> w, std::size_t n) {
@@ -161,7 +162,7 @@ std::vector<double> divide(const std::vector<double>& cl, const std::vector<doub
 }  // namespace
 
 std::filesystem::path default_cl_file() {
-  return std::filesystem::path(PISCO_HEALPY_DATA_DIR) / "totcls.dat";
+  return detail::healpy_data_dir() / "totcls.dat";
 }
 
 Spectra read_cl_table(const std::filesystem::path& file, int lmax, bool bb_zero) {
