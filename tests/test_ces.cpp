@@ -10,6 +10,7 @@
 
 #include "core/contribution.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/scan.hpp"
 
 namespace {
 

@@ -24,7 +24,12 @@
 #include "backend_fixtures.hpp"
 #include "beam_file_writers.hpp"
 #include "map_file_writers.hpp"
+#include "pisco/mapmaker.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/pointing_file.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/spectra.hpp"
+#include "pisco/tod_file.hpp"
 #include "support.hpp"
 
 namespace {

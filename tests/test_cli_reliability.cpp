@@ -18,6 +18,8 @@
 
 #include "cli_runner.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/tod_file.hpp"
 #include "support.hpp"
 
 namespace {

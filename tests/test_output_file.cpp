@@ -10,7 +10,10 @@
 #include <fstream>
 #include <sstream>
 
+#include "pisco/output_file.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/pointing_file.hpp"
+#include "pisco/tod_file.hpp"
 #include "support.hpp"
 
 namespace {

@@ -16,6 +16,9 @@
 #include "cli_runner.hpp"
 #include "map_file_writers.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/pointing_file.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/tod_file.hpp"
 
 namespace {
 

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "pisco/pisco.hpp"
+#include "pisco/scan.hpp"
 
 namespace {
 

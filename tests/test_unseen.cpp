@@ -17,7 +17,10 @@
 #include <rangeset.h>
 
 #include "backend_fixtures.hpp"
+#include "pisco/mapmaker.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/tod_file.hpp"
 #include "support.hpp"
 
 namespace {

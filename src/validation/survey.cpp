@@ -18,7 +18,13 @@
 #include <rangeset.h>
 #include <xcomplex.h>
 
+#include "pisco/deconvolution.hpp"
+#include "pisco/mapmaker.hpp"
+#include "pisco/mismatch.hpp"
+#include "pisco/output_file.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/spectra.hpp"
 #include "validation/validation.hpp"
 
 namespace pisco::validation {

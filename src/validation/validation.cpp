@@ -13,7 +13,10 @@
 #include <pointing.h>
 #include <xcomplex.h>
 
+#include "pisco/mapmaker.hpp"
 #include "pisco/pisco.hpp"
+#include "pisco/scan.hpp"
+#include "pisco/spectra.hpp"
 
 namespace pisco::validation {
 namespace {

@@ -13,6 +13,7 @@
 #include <random>
 
 #include "pisco/pisco.hpp"
+#include "pisco/scan.hpp"
 
 namespace pisco_cli {
 namespace {

@@ -5,7 +5,19 @@
 #include <span>
 #include <vector>
 
-#include <pisco/pisco.hpp>  // the umbrella header: every installed header must compile from the prefix
+// Every installed header must compile from the prefix: the operator's umbrella, then the pipeline's.
+#include <pisco/pisco.hpp>
+#include <pisco/deconvolution.hpp>
+#include <pisco/mapmaker.hpp>
+#include <pisco/mismatch.hpp>
+#include <pisco/output_file.hpp>
+#include <pisco/pointing_file.hpp>
+#include <pisco/scan.hpp>
+#include <pisco/simulation.hpp>
+#include <pisco/simulation_config.hpp>
+#include <pisco/spectra.hpp>
+#include <pisco/time_ranges.hpp>
+#include <pisco/tod_file.hpp>
 
 int main() try {
   using pisco::deg;  // pisco/units.hpp: radians per degree
