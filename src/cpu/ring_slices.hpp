@@ -1,7 +1,8 @@
-// The host backends' adjoint (docs/physics.md, "The adjoint") spreads its scatter over threads by sky
-// pixels, not by samples: each thread owns slices of whole rings and adds every sample's contributions
-// to its own pixels only. No two threads write one pixel, and each pixel sums its samples in their
-// order, whatever the number of threads: the result is deterministic.
+// The float64 reference's adjoint (docs/physics.md, "The adjoint") spreads its scatter over threads by
+// sky pixels, not by samples: each thread owns slices of whole rings and adds every sample's
+// contributions to its own pixels only. No two threads write one pixel, and each pixel sums its
+// samples in their order, whatever the number of threads: the result is deterministic. ring_of also
+// lays out the simd adjoint's windows.
 #pragma once
 
 #include <algorithm>
@@ -18,7 +19,7 @@ namespace pisco::detail {
 // if theta + rho >= theta_lo and theta - rho <= theta_hi.
 struct RingSlice {
   std::uint32_t lo = 0, hi = 0;
-  double theta_lo = 0.0, theta_hi = 0.0;  // set by ring_slices only (work_slices' users test rings)
+  double theta_lo = 0.0, theta_hi = 0.0;
   std::uint32_t ring_lo = 0, ring_hi = 0;  // its rings, [ring_lo, ring_hi] of sky.rings
   bool missed_by(double theta, double rho) const { return theta + rho < theta_lo || theta - rho > theta_hi; }
 };
@@ -57,42 +58,6 @@ inline std::uint32_t ring_of(const PreparedSky& sky, std::uint32_t p) {
   const auto it = std::upper_bound(sky.rings.begin(), sky.rings.end(), p,
                                    [](std::uint32_t x, const RingEntry& r) { return x < r.first; });
   return std::uint32_t(it - sky.rings.begin()) - 1;
-}
-
-// Slices of consecutive whole rings for one block of samples, cut where the running sum of `work`
-// (the pixels the block scatters on each ring, or an estimate) crosses each of `count` equal shares,
-// from the first ring with work to the last. A block of a scan covers a band of the sky: slices of
-// equal pixel counts would leave all its work to one or two of them, and to one thread. Where the
-// slices fall does not change the result: each pixel still sums its samples in their order.
-inline void work_slices(const PreparedSky& sky, const std::vector<double>& work, std::size_t count,
-                        std::vector<RingSlice>& out) {
-  out.clear();
-  std::size_t first = 0, last = work.size();
-  while (first < last && work[first] <= 0.0) ++first;
-  while (last > first && work[last - 1] <= 0.0) --last;
-  double total = 0.0;
-  for (std::size_t k = first; k < last; ++k) total += work[k];
-  if (total <= 0.0) return;
-  const double share = total / double(std::max<std::size_t>(1, count));
-  double sum = 0.0, next = share;
-  RingSlice s;
-  bool open = false;
-  for (std::size_t k = first; k < last; ++k) {
-    const RingEntry& r = sky.rings[k];
-    if (!open) {
-      s.lo = r.first;
-      s.ring_lo = std::uint32_t(k);
-      open = true;
-    }
-    s.hi = r.first + r.count;
-    s.ring_hi = std::uint32_t(k);
-    sum += work[k];
-    if (sum >= next || k + 1 == last) {
-      out.push_back(s);
-      open = false;
-      while (next <= sum) next += share;
-    }
-  }
 }
 
 }  // namespace pisco::detail

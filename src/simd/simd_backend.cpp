@@ -20,7 +20,7 @@
 #include "core/disc.hpp"
 #include "core/frame.hpp"
 #include "core/plate.hpp"
-#include "cpu/ring_slices.hpp"
+#include "cpu/ring_slices.hpp"  // ring_of
 #include "cpu/thread_pool.hpp"
 #include "simd/simd_kernel.hpp"
 
@@ -101,6 +101,25 @@ DetectorTables detector_tables(const PreparedDetector& det, std::size_t index, b
   return t;
 }
 
+// One adjoint task's samples and the window they are scattered into (SimdBackend::adjoint).
+struct Window {
+  struct Sample {
+    SampleFrame<double> f;
+    double value = 0.0;
+    std::size_t first = 0, count = 0;  // its ranges: entries [first, first + count) of `ranges`
+    std::array<double, 16> plate{};    // M(theta) behind an aperture plate
+  };
+  struct Row {
+    std::uint32_t lo = 0, hi = 0;  // the ring's pixels [lo, hi) in the window
+    std::size_t at = 0;            // where they start in `maps`
+  };
+  std::vector<Sample> samples;
+  std::vector<std::uint32_t> disc, ranges, offsets;
+  std::uint32_t ring0 = 0;  // the first row's ring
+  std::vector<Row> rows;
+  std::array<std::vector<double>, 4> maps;  // I, Q, U, V
+};
+
 class SimdBackend final : public Backend {
  public:
   SimdBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options)
@@ -137,9 +156,13 @@ class SimdBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
-  // The adjoint, a block of samples at a time: their frames, discs (and the per-sample
-  // normalization's norms) on all threads, then the scatter by slices of rings (cpu/ring_slices.hpp),
-  // cut for each block so that each holds about the same share of its pixels: deterministic.
+  // The adjoint (docs/physics.md, "The adjoint"): tasks of 1024 consecutive samples, each scattered
+  // whole by one thread into a window of its own (on each ring its discs touch, the pixels from the
+  // first to the last any of them reaches), then the windows added into the maps ring by ring, in
+  // the tasks' order, on all threads. Each pixel receives each task's sum of its samples (in their
+  // order), task after task: the same bits whatever the number of threads. Waves of four tasks a
+  // thread bound the windows held at once. (Smaller tasks make larger windows in all: at 256 samples
+  // the windows' zeroing and adding cost 10% of the adjoint, at 1024 3%.)
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override {
     const PreparedDetector& det = in_->detectors.at(detector);
@@ -147,150 +170,43 @@ class SimdBackend final : public Backend {
     const PreparedSky& sky = in_->sky;
     if (adjoint_[0].empty())
       for (auto& m : adjoint_) m.assign(simd::map_size(sky.npix, sky.rings.size()), 0.0);
-    if (work_.size() != sky.rings.size()) {
-      work_.assign(sky.rings.size(), 0.0);
-      work_steps_.assign(sky.rings.size() + 1, 0.0);
-    }
     const bool plate = det.plate == PreparedDetector::Plate::aperture;
-    struct Sample {
-      SampleFrame<double> f;
-      double theta, value;
-      std::size_t first, count;  // its ranges in `ranges` of its task
-      std::uint32_t ring0, ring1;  // the first and last rings its disc touches
-      std::uint32_t pixels;
-      unsigned task;
-    };
-    // Blocks of 32768 samples: a block of a scan covers a band of rings, which the slices share out,
-    // and with many threads a narrow band leaves slices of one or two rings, every disc cut into as
-    // many parts (16 threads: 15 to 20% faster than blocks of 8192; BENCHMARKS.md, 2026-11-27).
-    constexpr std::size_t block = 32768, task_samples = 256;
-    std::vector<Sample> samples(std::min(block, pointing.size()));
-    std::vector<std::array<double, 16>> plates(plate ? samples.size() : 0);  // each sample's M(theta)
-    // Each task's samples' ranges, split where they cross from one ring to the next (a polar cap is
-    // one range of the disc), with each one's map_offset.
-    std::vector<std::vector<std::uint32_t>> ranges((block + task_samples - 1) / task_samples);
-    std::vector<std::vector<std::uint32_t>> offsets(ranges.size());
+    // Without U, V weights (two columns, no plate) the kernel leaves V alone (stokes_adjoint_iq).
+    const int outputs = kd.columns == 2 && !plate ? 3 : 4;
+    constexpr std::size_t task_samples = 1024;
+    const std::size_t tasks = (pointing.size() + task_samples - 1) / task_samples;
+    const std::size_t wave = std::max<std::size_t>(8, 4 * std::size_t(pool_.size()));
+    if (windows_.size() < wave) windows_.resize(wave);
     std::atomic<std::uint64_t> pixels{0};
-    for (std::size_t b0 = 0; b0 < pointing.size(); b0 += block) {
-      const std::size_t n = std::min(block, pointing.size() - b0);
-      pool_.parallel_for((n + task_samples - 1) / task_samples, 1, [&](std::size_t t0, std::size_t t1) {
-        std::vector<std::uint32_t> disc;
+    for (std::size_t w0 = 0; w0 < tasks; w0 += wave) {
+      const std::size_t count = std::min(wave, tasks - w0);
+      pool_.parallel_for(count, 1, [&](std::size_t t0, std::size_t t1) {
         for (std::size_t t = t0; t < t1; ++t) {
-          std::vector<std::uint32_t>& r = ranges[t];
-          std::vector<std::uint32_t>& o = offsets[t];
-          r.clear();
-          o.clear();
-          for (std::size_t k = t * task_samples; k < std::min(n, (t + 1) * task_samples); ++k) {
-            const std::size_t i = b0 + k;
-            Sample& s = samples[k];
-            double phi = 0.0;
-            s.f = detector_frame(pointing, i, det, s.theta, phi);
-            s.value = tod[i];
-            s.task = unsigned(t);
-            s.first = r.size();
-            s.count = 0;
-            if (s.value == 0.0) continue;
-            if (plate)
-              plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]),
-                       std::sin(2 * pointing.plate_angle[i]), plates[k].data());
-            const std::size_t c = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, s.theta, phi,
-                                                    det.rho_max, det.cos_rho_max, disc);
-            if (c > 0) {
-              // The disc's ranges come ring by ring, northmost first: each is split where it crosses
-              // from one ring to the next (only a polar cap does) and given its ring's map_offset.
-              s.ring0 = ring_of(sky, disc[0]);
-              s.ring1 = ring_of(sky, disc[c - 1] - 1);
-              s.pixels = 0;
-              const std::size_t at = r.size(), most = c / 2 + (s.ring1 - s.ring0 + 1);
-              r.resize(at + 2 * most);
-              o.resize(at / 2 + most);
-              std::uint32_t* rw = r.data() + at;
-              std::uint32_t* ow = o.data() + at / 2;
-              const RingEntry* ring = sky.rings.data() + s.ring0;
-              for (std::size_t q = 0; q < c; q += 2) {
-                std::uint32_t b = disc[q];
-                const std::uint32_t e = disc[q + 1];
-                s.pixels += e - b;
-                while (b >= ring->first + ring->count) ++ring;
-                for (;;) {
-                  const std::uint32_t stop = std::min(e, ring->first + ring->count);
-                  *rw++ = b;
-                  *rw++ = stop;
-                  *ow++ = std::uint32_t(simd::map_offset(std::size_t(ring - sky.rings.data())));
-                  if (stop == e) break;
-                  b = stop;
-                  ++ring;
-                }
-              }
-              r.resize(std::size_t(rw - r.data()));
-              o.resize(std::size_t(ow - o.data()));
-            }
-            s.count = r.size() - s.first;
-            if (per_sample_) {  // the norm as the forward computes it (its float64 path)
-              const simd::SampleInput in{&s.f, disc.data(), c / 2, plate ? plates[k].data() : nullptr, false, true};
-              simd::SampleSums sums;
-              simd::convolve_sample(kernel_, sky_, kd, in, sums);
-              s.value = sums.norm > 0 ? s.value / sums.norm : 0.0;
-            }
-          }
+          const std::size_t first = (w0 + t) * task_samples;
+          pixels += scatter_task(det, kd, pointing, tod, first, std::min(pointing.size(), first + task_samples),
+                                 plate, outputs, squares, windows_[t]);
         }
       });
-      // Each sample's pixels spread evenly over its rings: the estimate of the work that cuts the slices,
-      // as steps (its share starts at ring0 and stops after ring1) summed once over the rings.
-      std::size_t ring_first = work_.size(), ring_last = 0;
-      for (std::size_t j = 0; j < n; ++j) {
-        const Sample& s = samples[j];
-        if (s.count == 0 || s.value == 0.0) continue;
-        const double share = double(s.pixels) / double(s.ring1 - s.ring0 + 1);
-        work_steps_[s.ring0] += share;
-        work_steps_[s.ring1 + 1] -= share;
-        ring_first = std::min<std::size_t>(ring_first, s.ring0);
-        ring_last = std::max<std::size_t>(ring_last, s.ring1);
-      }
-      double running = 0.0;
-      for (std::size_t k = ring_first; k <= ring_last; ++k) {
-        running += work_steps_[k];
-        work_[k] = std::max(running, 0.0);  // rounding may leave -1e-16 where no disc reaches
-        work_steps_[k] = 0.0;
-      }
-      if (ring_first <= ring_last) work_steps_[ring_last + 1] = 0.0;
-      work_slices(sky, work_, std::size_t(pool_.size()), slices_);
-      for (std::size_t k = ring_first; k <= ring_last; ++k) work_[k] = 0.0;
-      pool_.parallel_for(slices_.size(), 1, [&](std::size_t begin, std::size_t end) {
-        std::uint64_t count = 0;
-        for (std::size_t k = begin; k < end; ++k) {
-          const RingSlice& slice = slices_[k];
-          for (std::size_t j = 0; j < n; ++j) {
-            const Sample& s = samples[j];
-            if (s.count == 0 || s.value == 0.0 || s.ring1 < slice.ring_lo || s.ring0 > slice.ring_hi) continue;
-            const std::uint32_t* r = ranges[s.task].data() + s.first;
-            const std::uint32_t* o = offsets[s.task].data() + s.first / 2;
-            std::size_t entries = s.count;  // its ranges in this slice: all of them, or those of its rings
-            if (s.ring0 >= slice.ring_lo && s.ring1 <= slice.ring_hi) {
-              count += s.pixels;
-            } else {
-              // Each range lies on one ring and they come in order: the slice's are consecutive.
-              std::size_t q0 = 0;
-              while (q0 < s.count && r[q0] < slice.lo) q0 += 2;
-              std::size_t q1 = q0;
-              while (q1 < s.count && r[q1] < slice.hi) {
-                count += r[q1 + 1] - r[q1];
-                q1 += 2;
-              }
-              if (q1 == q0) continue;
-              r += q0;
-              o += q0 / 2;
-              entries = q1 - q0;
-            }
-            // The slice's map entries end where its last ring's gap does.
-            const std::size_t limit = slice.hi + simd::map_offset(slice.ring_hi + 1);
-            const simd::ScatterInput in{&s.f,    r,       o,      entries / 2, plate ? plates[j].data() : nullptr,
-                                        s.value, squares, limit,
-                                        {adjoint_[0].data(), adjoint_[1].data(), adjoint_[2].data(), adjoint_[3].data()}};
-            simd::scatter_sample(kernel_, sky_, kd, in);
-          }
+      std::uint32_t ring_lo = std::numeric_limits<std::uint32_t>::max(), ring_hi = 0;
+      for (std::size_t t = 0; t < count; ++t)
+        if (!windows_[t].rows.empty()) {
+          ring_lo = std::min(ring_lo, windows_[t].ring0);
+          ring_hi = std::max(ring_hi, windows_[t].ring0 + std::uint32_t(windows_[t].rows.size()) - 1);
         }
-        pixels += count;
+      if (ring_lo > ring_hi) continue;
+      pool_.parallel_for(ring_hi - ring_lo + 1, 4, [&](std::size_t k0, std::size_t k1) {
+        for (std::size_t k = ring_lo + k0; k < ring_lo + k1; ++k)
+          for (std::size_t t = 0; t < count; ++t) {
+            const Window& w = windows_[t];
+            if (k < w.ring0 || k >= w.ring0 + w.rows.size()) continue;
+            const Window::Row& row = w.rows[k - w.ring0];
+            if (row.hi <= row.lo) continue;
+            for (int c = 0; c < outputs; ++c) {
+              double* to = adjoint_[c].data() + row.lo + simd::map_offset(k);
+              const double* from = w.maps[c].data() + row.at;
+              for (std::uint32_t j = 0; j < row.hi - row.lo; ++j) to[j] += from[j];
+            }
+          }
       });
     }
     return pixels;
@@ -345,6 +261,94 @@ class SimdBackend final : public Backend {
             boundary_};
   }
 
+  // One adjoint task: samples [begin, end) scattered into `w`, sized to their discs' rows. Returns
+  // the pixels scattered.
+  std::uint64_t scatter_task(const PreparedDetector& det, const KernelDetector& kd, const PointingInput& pointing,
+                             std::span<const double> tod, std::size_t begin, std::size_t end, bool plate,
+                             int outputs, bool squares, Window& w) const {
+    const PreparedSky& sky = in_->sky;
+    w.samples.clear();
+    w.ranges.clear();
+    w.offsets.clear();
+    w.rows.clear();
+    std::uint64_t count = 0;
+    std::uint32_t ring0 = std::numeric_limits<std::uint32_t>::max(), ring1 = 0;
+    // Each sample's frame, value and ranges, split where they cross from one ring to the next (only
+    // a polar cap does), with each range's ring in `offsets` until the window is laid out.
+    for (std::size_t i = begin; i < end; ++i) {
+      if (tod[i] == 0.0) continue;
+      Window::Sample s;
+      double theta = 0.0, phi = 0.0;
+      s.f = detector_frame(pointing, i, det, theta, phi);
+      s.value = tod[i];
+      if (plate)
+        plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]),
+                 s.plate.data());
+      const std::size_t c = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, theta, phi,
+                                              det.rho_max, det.cos_rho_max, w.disc);
+      if (c == 0) continue;
+      if (per_sample_) {  // the norm as the forward computes it (its float64 path)
+        const simd::SampleInput in{&s.f, w.disc.data(), c / 2, plate ? s.plate.data() : nullptr, false, true};
+        simd::SampleSums sums;
+        simd::convolve_sample(kernel_, sky_, kd, in, sums);
+        if (!(sums.norm > 0)) continue;
+        s.value /= sums.norm;
+      }
+      s.first = w.ranges.size();
+      std::uint32_t ring = ring_of(sky, w.disc[0]);
+      for (std::size_t q = 0; q < c; q += 2) {
+        std::uint32_t b = w.disc[q];
+        const std::uint32_t e = w.disc[q + 1];
+        count += e - b;
+        while (b >= sky.rings[ring].first + sky.rings[ring].count) ++ring;
+        for (;;) {
+          const std::uint32_t stop = std::min(e, sky.rings[ring].first + sky.rings[ring].count);
+          w.ranges.push_back(b);
+          w.ranges.push_back(stop);
+          w.offsets.push_back(ring);
+          ring0 = std::min(ring0, ring);
+          ring1 = std::max(ring1, ring);
+          if (stop == e) break;
+          b = stop;
+          ++ring;
+        }
+      }
+      s.count = w.ranges.size() - s.first;
+      w.samples.push_back(s);
+    }
+    if (w.samples.empty()) return count;
+    // The window: for each ring from ring0 to ring1, the pixels from the lowest to the highest any
+    // range reaches, one row after the other.
+    w.ring0 = ring0;
+    w.rows.assign(ring1 - ring0 + 1, Window::Row{std::numeric_limits<std::uint32_t>::max(), 0, 0});
+    for (std::size_t r = 0; r < w.offsets.size(); ++r) {
+      Window::Row& row = w.rows[w.offsets[r] - ring0];
+      row.lo = std::min(row.lo, w.ranges[2 * r]);
+      row.hi = std::max(row.hi, w.ranges[2 * r + 1]);
+    }
+    std::size_t size = 0;
+    for (Window::Row& row : w.rows) {
+      if (row.hi <= row.lo) row.lo = row.hi = 0;
+      row.at = size;
+      size += row.hi - row.lo;
+    }
+    // Pixel p of a range on ring k lands at p + offset = p - lo + at (modulo 2^32, as the kernel adds).
+    for (std::size_t r = 0; r < w.offsets.size(); ++r) {
+      const Window::Row& row = w.rows[w.offsets[r] - ring0];
+      w.offsets[r] = std::uint32_t(row.at) - row.lo;
+    }
+    // The whole window is this thread's: a range's last vector may add zeros into the next row.
+    const std::size_t limit = size;
+    for (int c = 0; c < outputs; ++c) w.maps[c].assign(size, 0.0);
+    for (const Window::Sample& s : w.samples) {
+      const simd::ScatterInput in{&s.f,    w.ranges.data() + s.first, w.offsets.data() + s.first / 2, s.count / 2,
+                                  plate ? s.plate.data() : nullptr,       s.value,  squares,  limit,
+                                  {w.maps[0].data(), w.maps[1].data(), w.maps[2].data(), w.maps[3].data()}};
+      simd::scatter_sample(kernel_, sky_, kd, in);
+    }
+    return count;
+  }
+
   // Samples [begin, end) of one chunk; returns the number of pixels evaluated. The frame and the
   // disc are the reference's (cpu_backend.cpp), in float64.
   std::uint64_t convolve_samples(const PreparedDetector& det, const KernelDetector& kd, const PointingInput& in,
@@ -385,9 +389,7 @@ class SimdBackend final : public Backend {
   std::vector<DetectorTables> tables_;
   std::uint64_t evaluated_ = 0;
   std::array<std::vector<double>, 4> adjoint_;  // I, Q, U, V
-  std::vector<RingSlice> slices_;                // the adjoint's, for the block at hand (cpu/ring_slices.hpp)
-  std::vector<double> work_;                     // the block's pixels on each ring (an estimate)
-  std::vector<double> work_steps_;               // its changes from ring to ring, one past the last ring
+  std::vector<Window> windows_;                  // the adjoint's, one a task of the wave at hand
 };
 
 }  // namespace

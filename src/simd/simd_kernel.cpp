@@ -603,7 +603,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       hn::Store(a.w.v, df, out[3]);
       for (int c = 0; c < outputs; ++c) {
         const double v = d * double(out[c][0]);
-        in.maps[c][p + in.offsets[r]] += in.squares ? v * v : v;
+        in.maps[c][std::uint32_t(p + in.offsets[r])] += in.squares ? v * v : v;
       }
     }
   }

@@ -82,13 +82,13 @@ struct SampleSums {
 };
 
 // The adjoint of one sample (docs/physics.md, "The adjoint"): its value d scattered onto the pixels
-// of its disc's ranges (already clipped to the caller's slice of the sky), each pixel's float32
-// weights (stokes_adjoint of the forward's own float32 evaluation) times d added in float64 to the
-// accumulated maps, structure of arrays.
-// The adjoint's maps are laid out ring by ring with a gap after each ring (map_offset): rings of 4
-// nside float64 pixels are a multiple of 4 KiB long from NSIDE 128 on, and a disc's ranges on
-// consecutive rings would otherwise fall on the same few sets of the processor's level-1 cache.
-// Pixel p of ring k (0-based) is at p + map_offset(k).
+// of its disc's ranges, each pixel's float32 weights (stokes_adjoint of the forward's own float32
+// evaluation) times d added in float64 to accumulators (the backend's task windows), structure of
+// arrays, pixel p of range r at p + offsets[r].
+// The backend's accumulated maps are laid out ring by ring with a gap after each ring (map_offset):
+// rings of 4 nside float64 pixels are a multiple of 4 KiB long from NSIDE 128 on, and a disc's
+// ranges on consecutive rings would otherwise fall on the same few sets of the processor's level-1
+// cache. Pixel p of ring k (0-based) is at p + map_offset(k).
 constexpr std::uint32_t map_gap = 8;  // float64s: a 64-byte cache line
 inline std::size_t map_offset(std::size_t ring) { return map_gap * ring; }
 // Writes stay below a slice's limit, at most map_offset(rings) past the last pixel (the last ring's gap).
@@ -97,14 +97,14 @@ inline std::size_t map_size(std::size_t npix, std::size_t rings) { return npix +
 struct ScatterInput {
   const SampleFrame<double>* frame;
   const std::uint32_t* ranges;   // begin, end pairs of sky pixels, each within one ring
-  const std::uint32_t* offsets;  // each range's map_offset: pixel p is at maps[c][p + offset]
+  const std::uint32_t* offsets;  // each range's: pixel p is at maps[c][p + offset] (modulo 2^32)
   std::size_t range_count;
   const double* plate;  // 16, row-major; null without an aperture plate
   double value;         // d (divided by its norm with the per-sample normalization)
   bool squares;         // add (d a)^2 instead of d a
   std::size_t limit;    // map entries below it belong to the caller's thread: a range's last vector
                         // may add zeros to those past the range (read and written back) below it
-  double* maps[4];      // I, Q, U, V accumulators, map_size(npix, rings) each
+  double* maps[4];      // I, Q, U, V accumulators (V untouched with two columns and no plate)
 };
 
 // The kernel compiled for one instruction set.
