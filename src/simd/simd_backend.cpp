@@ -117,7 +117,9 @@ struct Window {
   std::vector<std::uint32_t> disc, ranges, offsets;
   std::uint32_t ring0 = 0;  // the first row's ring
   std::vector<Row> rows;
+  std::size_t size = 0;                     // pixels of all rows
   std::array<std::vector<double>, 4> maps;  // I, Q, U, V
+  std::size_t bytes(int outputs) const { return samples.empty() ? 0 : size * sizeof(double) * std::size_t(outputs); }
 };
 
 class SimdBackend final : public Backend {
@@ -160,9 +162,10 @@ class SimdBackend final : public Backend {
   // whole by one thread into a window of its own (on each ring its discs touch, the pixels from the
   // first to the last any of them reaches), then the windows added into the maps ring by ring, in
   // the tasks' order, on all threads. Each pixel receives each task's sum of its samples (in their
-  // order), task after task: the same bits whatever the number of threads. Waves of four tasks a
-  // thread bound the windows held at once. (Smaller tasks make larger windows in all: at 256 samples
-  // the windows' zeroing and adding cost 10% of the adjoint, at 1024 3%.)
+  // order), task after task: the same bits whatever the number of threads. Tasks come in waves of
+  // four a thread, and a wave's windows are filled and added in runs of tasks that fit in
+  // window_budget together (one task at least). (Smaller tasks make larger windows in all: at 256
+  // samples the windows' zeroing and adding cost 10% of the adjoint, at 1024 3%.)
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override {
     const PreparedDetector& det = in_->detectors.at(detector);
@@ -174,6 +177,7 @@ class SimdBackend final : public Backend {
     // Without U, V weights (two columns, no plate) the kernel leaves V alone (stokes_adjoint_iq).
     const int outputs = kd.columns == 2 && !plate ? 3 : 4;
     constexpr std::size_t task_samples = 1024;
+    constexpr std::size_t window_budget = std::size_t(256) << 20;  // bytes of windows held at once
     const std::size_t tasks = (pointing.size() + task_samples - 1) / task_samples;
     const std::size_t wave = std::max<std::size_t>(8, 4 * std::size_t(pool_.size()));
     if (windows_.size() < wave) windows_.resize(wave);
@@ -183,33 +187,51 @@ class SimdBackend final : public Backend {
       pool_.parallel_for(count, 1, [&](std::size_t t0, std::size_t t1) {
         for (std::size_t t = t0; t < t1; ++t) {
           const std::size_t first = (w0 + t) * task_samples;
-          pixels += scatter_task(det, kd, pointing, tod, first, std::min(pointing.size(), first + task_samples),
-                                 plate, outputs, squares, windows_[t]);
+          pixels += plan_task(det, kd, pointing, tod, first, std::min(pointing.size(), first + task_samples), plate,
+                              windows_[t]);
         }
       });
-      std::uint32_t ring_lo = std::numeric_limits<std::uint32_t>::max(), ring_hi = 0;
-      for (std::size_t t = 0; t < count; ++t)
-        if (!windows_[t].rows.empty()) {
-          ring_lo = std::min(ring_lo, windows_[t].ring0);
-          ring_hi = std::max(ring_hi, windows_[t].ring0 + std::uint32_t(windows_[t].rows.size()) - 1);
-        }
-      if (ring_lo > ring_hi) continue;
-      pool_.parallel_for(ring_hi - ring_lo + 1, 4, [&](std::size_t k0, std::size_t k1) {
-        for (std::size_t k = ring_lo + k0; k < ring_lo + k1; ++k)
-          for (std::size_t t = 0; t < count; ++t) {
-            const Window& w = windows_[t];
-            if (k < w.ring0 || k >= w.ring0 + w.rows.size()) continue;
-            const Window::Row& row = w.rows[k - w.ring0];
-            if (row.hi <= row.lo) continue;
-            for (int c = 0; c < outputs; ++c) {
-              double* to = adjoint_[c].data() + row.lo + simd::map_offset(k);
-              const double* from = w.maps[c].data() + row.at;
-              for (std::uint32_t j = 0; j < row.hi - row.lo; ++j) to[j] += from[j];
-            }
-          }
-      });
+      for (std::size_t g0 = 0; g0 < count;) {
+        std::size_t g1 = g0, bytes = 0;
+        while (g1 < count && (g1 == g0 || bytes + windows_[g1].bytes(outputs) <= window_budget))
+          bytes += windows_[g1++].bytes(outputs);
+        pool_.parallel_for(g1 - g0, 1, [&](std::size_t t0, std::size_t t1) {
+          for (std::size_t t = g0 + t0; t < g0 + t1; ++t) fill_task(kd, plate, outputs, squares, windows_[t]);
+        });
+        add_windows(g0, g1, outputs);
+        // A window far above its share of the budget gives its memory back.
+        for (std::size_t t = g0; t < g1; ++t)
+          if (windows_[t].maps[0].capacity() * sizeof(double) * std::size_t(outputs) > window_budget / wave)
+            for (auto& m : windows_[t].maps) std::vector<double>().swap(m);
+        g0 = g1;
+      }
     }
     return pixels;
+  }
+
+  // Windows [t0, t1) added into the maps, ring by ring on all threads, each ring's in the tasks' order.
+  void add_windows(std::size_t t0, std::size_t t1, int outputs) {
+    std::uint32_t ring_lo = std::numeric_limits<std::uint32_t>::max(), ring_hi = 0;
+    for (std::size_t t = t0; t < t1; ++t)
+      if (!windows_[t].rows.empty()) {
+        ring_lo = std::min(ring_lo, windows_[t].ring0);
+        ring_hi = std::max(ring_hi, windows_[t].ring0 + std::uint32_t(windows_[t].rows.size()) - 1);
+      }
+    if (ring_lo > ring_hi) return;
+    pool_.parallel_for(ring_hi - ring_lo + 1, 4, [&](std::size_t k0, std::size_t k1) {
+      for (std::size_t k = ring_lo + k0; k < ring_lo + k1; ++k)
+        for (std::size_t t = t0; t < t1; ++t) {
+          const Window& w = windows_[t];
+          if (k < w.ring0 || k >= w.ring0 + w.rows.size()) continue;
+          const Window::Row& row = w.rows[k - w.ring0];
+          if (row.hi <= row.lo) continue;
+          for (int c = 0; c < outputs; ++c) {
+            double* to = adjoint_[c].data() + row.lo + simd::map_offset(k);
+            const double* from = w.maps[c].data() + row.at;
+            for (std::uint32_t j = 0; j < row.hi - row.lo; ++j) to[j] += from[j];
+          }
+        }
+    });
   }
 
   // The maps without their rings' gaps (simd::map_offset).
@@ -261,16 +283,17 @@ class SimdBackend final : public Backend {
             boundary_};
   }
 
-  // One adjoint task: samples [begin, end) scattered into `w`, sized to their discs' rows. Returns
-  // the pixels scattered.
-  std::uint64_t scatter_task(const PreparedDetector& det, const KernelDetector& kd, const PointingInput& pointing,
-                             std::span<const double> tod, std::size_t begin, std::size_t end, bool plate,
-                             int outputs, bool squares, Window& w) const {
+  // One adjoint task's plan: samples [begin, end)'s frames, values and ranges, and the window's rows
+  // sized to their discs. Returns the pixels they will scatter.
+  std::uint64_t plan_task(const PreparedDetector& det, const KernelDetector& kd, const PointingInput& pointing,
+                          std::span<const double> tod, std::size_t begin, std::size_t end, bool plate,
+                          Window& w) const {
     const PreparedSky& sky = in_->sky;
     w.samples.clear();
     w.ranges.clear();
     w.offsets.clear();
     w.rows.clear();
+    w.size = 0;
     std::uint64_t count = 0;
     std::uint32_t ring0 = std::numeric_limits<std::uint32_t>::max(), ring1 = 0;
     // Each sample's frame, value and ranges, split where they cross from one ring to the next (only
@@ -337,16 +360,21 @@ class SimdBackend final : public Backend {
       const Window::Row& row = w.rows[w.offsets[r] - ring0];
       w.offsets[r] = std::uint32_t(row.at) - row.lo;
     }
+    w.size = size;
+    return count;
+  }
+
+  // One adjoint task's scatter into its window, zeroed first.
+  void fill_task(const KernelDetector& kd, bool plate, int outputs, bool squares, Window& w) const {
+    if (w.samples.empty()) return;
     // The whole window is this thread's: a range's last vector may add zeros into the next row.
-    const std::size_t limit = size;
-    for (int c = 0; c < outputs; ++c) w.maps[c].assign(size, 0.0);
+    for (int c = 0; c < outputs; ++c) w.maps[c].assign(w.size, 0.0);
     for (const Window::Sample& s : w.samples) {
       const simd::ScatterInput in{&s.f,    w.ranges.data() + s.first, w.offsets.data() + s.first / 2, s.count / 2,
-                                  plate ? s.plate.data() : nullptr,       s.value,  squares,  limit,
+                                  plate ? s.plate.data() : nullptr,       s.value,  squares,  w.size,
                                   {w.maps[0].data(), w.maps[1].data(), w.maps[2].data(), w.maps[3].data()}};
       simd::scatter_sample(kernel_, sky_, kd, in);
     }
-    return count;
   }
 
   // Samples [begin, end) of one chunk; returns the number of pixels evaluated. The frame and the
