@@ -349,11 +349,13 @@ class SimdBackend final : public Backend {
       row.lo = std::min(row.lo, w.ranges[2 * r]);
       row.hi = std::max(row.hi, w.ranges[2 * r + 1]);
     }
+    // A gap of a cache line after each row, as in the maps (simd::map_offset): rows of whole rings
+    // of NSIDE 128 and more would otherwise lie a multiple of 4 KiB apart.
     std::size_t size = 0;
     for (Window::Row& row : w.rows) {
       if (row.hi <= row.lo) row.lo = row.hi = 0;
       row.at = size;
-      size += row.hi - row.lo;
+      size += row.hi - row.lo + simd::map_gap;
     }
     // Pixel p of a range on ring k lands at p + offset = p - lo + at (modulo 2^32, as the kernel adds).
     for (std::size_t r = 0; r < w.offsets.size(); ++r) {
