@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "pisco/pisco.hpp"
+#include "pisco/tod_file.hpp"
 #include "support.hpp"
 
 namespace {
