@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Everything to run on a machine with an NVIDIA GPU, as-is, from anywhere in the checkout:
 #   tools/gpu_steps.sh [LOG_DIR]
-# configures and builds with CUDA and Vulkan, runs the device tests (ctest -L 'cuda|vulkan'), the
-# Table 1 benchmark on both GPU backends, the ducc0 comparison and the crossover map (tools/crossover.py),
+# configures and builds with CUDA and Vulkan, runs the device tests (ctest -L 'cuda|vulkan', and the
+# unit label, which holds the adjoint's, the poles' and the sidelobes' tests on every backend), the
+# Table 1 benchmark with the adjoint on both GPU backends and on the host's simd backend over 1 to 16
+# threads, the ducc0 comparison and the crossover map (tools/crossover.py),
 # writing each step's output to
 # LOG_DIR (default gpu-logs-DATE/) and a summary at the end. Steps that fail are reported and the
 # script goes on; its exit status is non-zero if any failed.
@@ -51,7 +53,12 @@ step ctest-gpu ctest --test-dir "$build" -L 'cuda|vulkan' --output-on-failure -V
 step ctest-unit ctest --test-dir "$build" -L unit -j "$(nproc)" --output-on-failure
 for backend in cuda vulkan; do
   # shellcheck disable=SC2086
-  step "bench-$backend" "$build/tools/pisco-vk" bench -b "$backend" --rho-max $radii
+  step "bench-$backend" "$build/tools/pisco-vk" bench -b "$backend" --adjoint --repeat 2 --rho-max $radii
+done
+# The simd adjoint over the host's threads (its tasks and windows: docs/physics.md, "Determinism").
+for threads in 1 2 4 8 16; do
+  [ "$threads" -le "$(nproc)" ] && step "bench-simd-$threads" "$build/tools/pisco-vk" bench -b simd --adjoint --repeat 2 \
+    --rho-max 5 10 --threads "$threads"
 done
 step bench-cpu-5deg "$build/tools/pisco-vk" bench -b cpu --rho-max 5
 # shellcheck disable=SC2086
@@ -65,7 +72,7 @@ else
 fi
 
 echo | tee -a "$logs/summary.txt"
-for f in bench-cuda bench-vulkan ducc0; do
+for f in bench-cuda bench-vulkan bench-simd-1 bench-simd-2 bench-simd-4 bench-simd-8 bench-simd-16 ducc0; do
   [ -f "$logs/$f.log" ] && { echo "--- $f"; cat "$logs/$f.log"; } >>"$logs/summary.txt"
 done
 echo "logs in $logs"
