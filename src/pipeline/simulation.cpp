@@ -147,6 +147,69 @@ class Boresight {
 };
 
 
+// The jobs of a run (a detector's span of samples), in the order one process runs them: time spans
+// outermost (each boresight chunk made once for all detectors), or, with per-detector pointing files,
+// detectors outermost. Under MPI the spans are shortened until there are at least 4 jobs per rank,
+// and each rank takes a contiguous run of jobs of about equal cost, a job costing its samples times
+// its detector's disc pixels (disc(detector)). The jobs are never listed (a season is 1e9 of them):
+// job i of the run is at(i).
+struct JobPlan {
+  struct Span {
+    std::size_t detector = 0, first = 0, count = 0;
+  };
+  std::size_t ndet = 0, samples = 0, span = 0, spans = 0, njobs = 0;
+  bool detectors_outermost = false;
+  std::size_t my_first = 0, my_end = 0, rounds = 0;  // this rank's jobs [my_first, my_end); the most any rank has
+  Span at(std::size_t i) const {
+    const std::size_t d = detectors_outermost ? i / spans : i % ndet, s = detectors_outermost ? i % spans : i / ndet;
+    return Span{d, s * span, std::min(span, samples - s * span)};
+  }
+};
+
+JobPlan plan_jobs(std::size_t ndet, std::size_t samples, std::size_t chunk, bool detectors_outermost,
+                  const RunContext& cl, const std::function<double(std::size_t)>& disc) {
+  auto ceil_div = [](std::size_t a, std::size_t b) { return (a + b - 1) / b; };
+  JobPlan p;
+  p.ndet = ndet;
+  p.samples = samples;
+  p.detectors_outermost = detectors_outermost;
+  p.span = chunk;
+  if (cl.parallel() && samples > 0) {
+    const std::size_t spans_needed = ceil_div(4 * std::size_t(cl.size()), std::max<std::size_t>(ndet, 1));
+    p.span = std::max<std::size_t>(1, std::min(chunk, ceil_div(samples, spans_needed)));
+  }
+  p.spans = samples == 0 ? 0 : ceil_div(samples, p.span);
+  p.njobs = p.spans * ndet;
+  if (!cl.parallel()) {
+    p.my_end = p.rounds = p.njobs;
+    return p;
+  }
+  std::vector<double> cost_of(ndet);
+  for (std::size_t d = 0; d < ndet; ++d) cost_of[d] = disc(d);
+  double all = 0;
+  for (std::size_t i = 0; i < p.njobs; ++i) {
+    const JobPlan::Span j = p.at(i);
+    all += double(j.count) * cost_of[j.detector];
+  }
+  std::vector<std::size_t> per_rank(std::size_t(cl.size()), 0);
+  double before = 0;
+  p.my_first = p.njobs;
+  for (std::size_t i = 0; i < p.njobs; ++i) {
+    const JobPlan::Span j = p.at(i);
+    const double cost = double(j.count) * cost_of[j.detector];
+    const int owner = all > 0 ? std::min(cl.size() - 1, int((before + 0.5 * cost) / all * cl.size())) : 0;
+    before += cost;
+    ++per_rank[std::size_t(owner)];
+    if (owner == cl.rank()) {
+      p.my_first = std::min(p.my_first, i);
+      p.my_end = i + 1;
+    }
+  }
+  if (p.my_first > p.my_end) p.my_first = p.my_end;
+  p.rounds = *std::max_element(per_rank.begin(), per_rank.end());
+  return p;
+}
+
 std::string utc_now() {
   const std::time_t t = std::time(nullptr);
   char buf[32];
@@ -363,6 +426,51 @@ std::vector<fs::path> write_spectra_files(const SimulationConfig& c, const Sky& 
                        window_fwhm(c.beams[c.detectors.front().beam]));
 }
 
+// The TOD file (tod.h5) of a run: its attributes (units, NSIDE, beams, backend, device, version, time
+// and the simulation file's text) and, under MPI, one file for all ranks.
+std::optional<pisco::TodWriter> open_tod_file(const SimulationConfig& c, const fs::path& tod_path, const Sky& sky,
+                                              const SimulationBeams& made, const Engine& engine, const FocalPlane& fp,
+                                              std::size_t samples_per_detector, bool flagging, RunContext& cl) {
+  const std::vector<Beamsor>& beams = made.beams;
+  const std::vector<std::string>& beam_names = made.names;
+  std::optional<pisco::TodWriter> tod_file;
+  std::string beam_desc;
+  for (std::size_t i = 0; i < beams.size(); ++i)
+    beam_desc += (i ? "; " : "") + beam_names[i] + ": " + beams[i].description();
+  const std::map<std::string, std::string> attributes{{"units", sky.units()},
+                                                      {"nside", std::to_string(sky.nside())},
+                                                      {"beam", beam_desc},
+                                                      {"backend", engine.backend_name()},
+                                                      {"device", engine.device_name()},
+                                                      {"pisco_version", pisco::version},
+                                                      {"created", utc_now()},
+                                                      {"config", c.text}};
+  if (!cl.parallel()) {
+    tod_file.emplace(tod_path, fp, samples_per_detector, c.output.tod_precision, c.output.tod_pointing, attributes,
+                     flagging, c.output.tod_weights);
+  } else {
+    // One file for all ranks (parallel HDF5): rank 0 creates it whole, then every rank opens it and
+    // writes its own samples; rank 0 renames it once every rank has closed it.
+    pisco::SharedTodOptions shared;
+    shared.temporary_suffix = ".tmp-" + cl.broadcast(std::to_string(::getpid()));
+    shared.leader = cl.leader();
+    shared.mpi_communicator = cl.mpi_communicator();
+    shared.barrier = [&cl] { cl.barrier(); };
+    cl.step([&] {
+      if (cl.leader())
+        pisco::TodWriter::create_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
+                                        c.output.tod_pointing, attributes, flagging, shared.temporary_suffix,
+                                        c.output.tod_weights);
+    });
+    cl.step([&] {
+      tod_file.emplace(pisco::TodWriter::open_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
+                                                     c.output.tod_pointing, flagging, shared,
+                                                     c.output.tod_weights));
+    });
+  }
+  return tod_file;
+}
+
 Simulation::Simulation(SimulationConfig config, SimulationOptions options)
     : config_(std::move(config)), options_(std::move(options)) {}
 
@@ -399,7 +507,6 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   SimulationBeams made;
   cl.step([&] { made = make_beams(c, [&](const std::string& line) { if (cl.leader()) obs.log(line); }); });
   const std::vector<Beamsor>& beams = made.beams;
-  const std::vector<std::string>& beam_names = made.names;
   FocalPlane fp(made.detectors);
   std::optional<Engine> engine_holder;
   cl.step([&] { engine_holder.emplace(make_engine(sky, beams, fp, c, cl)); });
@@ -486,96 +593,19 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
       deconvolver.emplace(engine, o);
     }
   });
-  std::optional<pisco::TodWriter> tod_file;
   const fs::path tod_path = c.output.dir / "tod.h5";
-  if (c.output.tod) {
-    std::string beam_desc;
-    for (std::size_t i = 0; i < beams.size(); ++i)
-      beam_desc += (i ? "; " : "") + beam_names[i] + ": " + beams[i].description();
-    const std::map<std::string, std::string> attributes{{"units", sky.units()},
-                                                        {"nside", std::to_string(sky.nside())},
-                                                        {"beam", beam_desc},
-                                                        {"backend", engine.backend_name()},
-                                                        {"device", engine.device_name()},
-                                                        {"pisco_version", pisco::version},
-                                                        {"created", utc_now()},
-                                                        {"config", c.text}};
-    if (!cl.parallel()) {
-      tod_file.emplace(tod_path, fp, samples_per_detector, c.output.tod_precision, c.output.tod_pointing, attributes,
-                       flagging, c.output.tod_weights);
-    } else {
-      // One file for all ranks (parallel HDF5): rank 0 creates it whole, then every rank opens it and
-      // writes its own samples; rank 0 renames it once every rank has closed it.
-      pisco::SharedTodOptions shared;
-      shared.temporary_suffix = ".tmp-" + cl.broadcast(std::to_string(::getpid()));
-      shared.leader = cl.leader();
-      shared.mpi_communicator = cl.mpi_communicator();
-      shared.barrier = [&cl] { cl.barrier(); };
-      cl.step([&] {
-        if (cl.leader())
-          pisco::TodWriter::create_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
-                                          c.output.tod_pointing, attributes, flagging, shared.temporary_suffix,
-                                          c.output.tod_weights);
-      });
-      cl.step([&] {
-        tod_file.emplace(pisco::TodWriter::open_shared(tod_path, fp, samples_per_detector, c.output.tod_precision,
-                                                       c.output.tod_pointing, flagging, shared,
-                                                       c.output.tod_weights));
-      });
-    }
-  }
+  std::optional<pisco::TodWriter> tod_file;
+  if (c.output.tod) tod_file = open_tod_file(c, tod_path, sky, made, engine, fp, samples_per_detector, flagging, cl);
 
   const std::size_t chunk = std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1));
-  // The jobs of the run (a detector's span of samples), in the order one process runs them: time
-  // spans outermost (each boresight chunk made once for all detectors), or, with per-detector pointing
-  // files, detectors outermost. Under MPI the spans are shortened until there are at least 4 jobs per
-  // rank, and each rank takes a contiguous run of jobs of about equal cost, a job costing its samples
-  // times its detector's disc pixels (from its beam's rho_max and the sky's NSIDE).
-  // The jobs are never listed (a season is 1e9 of them): job i of the run is job_at(i).
-  struct Span {
-    std::size_t detector = 0, first = 0, count = 0;
-  };
   const std::size_t ndet = fp.size();
-  std::size_t span = chunk;
+  const JobPlan plan = plan_jobs(ndet, samples_per_detector, chunk, per_detector_file, cl, [&](std::size_t d) {
+    return disc_pixels(beams[fp[d].beam], sky.nside(), engine.sidelobe_nside());
+  });
+  using Span = JobPlan::Span;
+  const std::size_t my_first = plan.my_first, my_end = plan.my_end, rounds = plan.rounds;
+  auto job_at = [&plan](std::size_t i) { return plan.at(i); };
   auto ceil_div = [](std::size_t a, std::size_t b) { return (a + b - 1) / b; };
-  if (cl.parallel() && samples_per_detector > 0) {
-    const std::size_t spans_needed = ceil_div(4 * std::size_t(cl.size()), std::max<std::size_t>(ndet, 1));
-    span = std::max<std::size_t>(1, std::min(chunk, ceil_div(samples_per_detector, spans_needed)));
-  }
-  const std::size_t spans = samples_per_detector == 0 ? 0 : ceil_div(samples_per_detector, span);
-  const std::size_t njobs = spans * ndet;
-  auto job_at = [&](std::size_t i) {
-    const std::size_t d = per_detector_file ? i / spans : i % ndet, s = per_detector_file ? i % spans : i / ndet;
-    return Span{d, s * span, std::min(span, samples_per_detector - s * span)};
-  };
-  std::size_t my_first = 0, my_end = 0, rounds = 0;  // this rank's jobs [my_first, my_end); the most any rank has
-  if (!cl.parallel()) {
-    my_end = rounds = njobs;
-  } else {
-    std::vector<double> disc(ndet);
-    for (std::size_t d = 0; d < ndet; ++d) disc[d] = disc_pixels(beams[fp[d].beam], sky.nside(), engine.sidelobe_nside());
-    double all = 0;
-    for (std::size_t i = 0; i < njobs; ++i) {
-      const Span j = job_at(i);
-      all += double(j.count) * disc[j.detector];
-    }
-    std::vector<std::size_t> per_rank(std::size_t(cl.size()), 0);
-    double before = 0;
-    my_first = njobs;
-    for (std::size_t i = 0; i < njobs; ++i) {
-      const Span j = job_at(i);
-      const double cost = double(j.count) * disc[j.detector];
-      const int owner = all > 0 ? std::min(cl.size() - 1, int((before + 0.5 * cost) / all * cl.size())) : 0;
-      before += cost;
-      ++per_rank[std::size_t(owner)];
-      if (owner == cl.rank()) {
-        my_first = std::min(my_first, i);
-        my_end = i + 1;
-      }
-    }
-    if (my_first > my_end) my_first = my_end;
-    rounds = *std::max_element(per_rank.begin(), per_rank.end());
-  }
   // Checks for an error on another rank: after every check_every jobs, at most about 1000 in a run.
   const std::size_t check_every = std::max<std::size_t>(1, ceil_div(rounds, 1000));
   const std::size_t checks = ceil_div(rounds, check_every);
