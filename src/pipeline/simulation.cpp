@@ -426,6 +426,43 @@ std::vector<fs::path> write_spectra_files(const SimulationConfig& c, const Sky& 
                        window_fwhm(c.beams[c.detectors.front().beam]));
 }
 
+namespace {
+
+// The half-wave plate's figure of a run's binned maps: their polarization against their temperature
+// (on an unpolarized sky, the plate's leakage of temperature into polarization as the map-maker's
+// model leaves it), as a line of the run's account.
+std::string hwp_figure(const BinnedMaps& maps, std::size_t solved, const std::string& units, bool ideal_mapmaker) {
+  double ii = 0, qq = 0, uu = 0, mean_i = 0;
+  for (std::size_t p = 0; p < maps.I.size(); ++p)
+    if (maps.I[p] != pisco::unseen) mean_i += maps.I[p];
+  mean_i /= double(solved);
+  for (std::size_t p = 0; p < maps.I.size(); ++p)
+    if (maps.I[p] != pisco::unseen) {
+      ii += (maps.I[p] - mean_i) * (maps.I[p] - mean_i);
+      qq += maps.Q[p] * maps.Q[p];
+      uu += maps.U[p] * maps.U[p];
+    }
+  const double ri = std::sqrt(ii / double(solved)), rq = std::sqrt(qq / double(solved)), ru = std::sqrt(uu / double(solved));
+  return format("hwp: maps' rms Q %.3g, U %.3g, I (mean removed) %.3g %s: leakage figure rms P / rms I = %.3g%s\n", rq,
+                ru, ri, units.c_str(), std::hypot(rq, ru) / ri,
+                ideal_mapmaker ? " (maps binned with an ideal plate's model)" : "");
+}
+
+// Why binned maps that solve no pixel solve none: no sample reached them, or too few angles.
+std::string unsolved_reason(const BinnedMaps& maps, int maps_nside, bool flagging, double rcond_min) {
+  const auto hit = std::count_if(maps.hits.begin(), maps.hits.end(), [](std::uint32_t h) { return h > 0; });
+  const std::string outcome = "; maps.fits is all UNSEEN, and no spectra or plots were made";
+  if (hit == 0)
+    return std::string("the maps solve no pixel: ") + (flagging ? "every sample is flagged" : "no sample reached the maps") +
+           outcome;
+  return "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) + " NSIDE " +
+         std::to_string(maps_nside) + " pixels are hit" + (flagging ? " by unflagged samples" : "") +
+         ", none with rcond >= " + format("%g", rcond_min) +
+         " (each pixel needs three or more polarization angles: one detector or pair without a "
+         "half-wave plate or a boresight rotation cannot tell Q from U)" +
+         outcome;
+}
+
 // The TOD file (tod.h5) of a run: its attributes (units, NSIDE, beams, backend, device, version, time
 // and the simulation file's text) and, under MPI, one file for all ranks.
 std::optional<pisco::TodWriter> open_tod_file(const SimulationConfig& c, const fs::path& tod_path, const Sky& sky,
@@ -470,6 +507,8 @@ std::optional<pisco::TodWriter> open_tod_file(const SimulationConfig& c, const f
   }
   return tod_file;
 }
+
+}  // namespace
 
 Simulation::Simulation(SimulationConfig config, SimulationOptions options)
     : config_(std::move(config)), options_(std::move(options)) {}
@@ -863,38 +902,8 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
       result.solved_pixels = solved_pixels;
       say("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside, solved, maps.I.size(),
           c.output.rcond_min);
-      if (c.hwp.enabled && solved > 0) {
-        // The plate's figure: the polarization of the maps against their temperature (on an unpolarized
-        // sky, the plate's leakage of temperature into polarization as the map-maker's model leaves it).
-        double ii = 0, qq = 0, uu = 0, mean_i = 0;
-        for (std::size_t p = 0; p < maps.I.size(); ++p)
-          if (maps.I[p] != pisco::unseen) mean_i += maps.I[p];
-        mean_i /= double(solved);
-        for (std::size_t p = 0; p < maps.I.size(); ++p)
-          if (maps.I[p] != pisco::unseen) {
-            ii += (maps.I[p] - mean_i) * (maps.I[p] - mean_i);
-            qq += maps.Q[p] * maps.Q[p];
-            uu += maps.U[p] * maps.U[p];
-          }
-        const double ri = std::sqrt(ii / double(solved)), rq = std::sqrt(qq / double(solved)), ru = std::sqrt(uu / double(solved));
-        say("hwp: maps' rms Q %.3g, U %.3g, I (mean removed) %.3g %s: leakage figure rms P / rms I = %.3g%s\n", rq, ru, ri,
-            sky.units().c_str(), std::hypot(rq, ru) / ri,
-            c.hwp.ideal_mapmaker ? " (maps binned with an ideal plate's model)" : "");
-      }
-      if (solved == 0) {
-        const auto hit = std::count_if(maps.hits.begin(), maps.hits.end(), [](std::uint32_t h) { return h > 0; });
-        const std::string outcome = "; maps.fits is all UNSEEN, and no spectra or plots were made";
-        if (hit == 0)
-          nothing_solved = std::string("the maps solve no pixel: ") +
-                           (flagging ? "every sample is flagged" : "no sample reached the maps") + outcome;
-        else
-          nothing_solved = "the maps solve no pixel: " + std::to_string(hit) + " of " + std::to_string(maps.I.size()) +
-                           " NSIDE " + std::to_string(maps_nside) + " pixels are hit" +
-                           (flagging ? " by unflagged samples" : "") + ", none with rcond >= " +
-                           [](double v) { char b[32]; std::snprintf(b, sizeof b, "%g", v); return std::string(b); }(c.output.rcond_min) +
-                           " (each pixel needs three or more polarization angles: one detector or pair without a "
-                           "half-wave plate or a boresight rotation cannot tell Q from U)" + outcome;
-      }
+      if (c.hwp.enabled && solved > 0) say("%s", hwp_figure(maps, solved_pixels, sky.units(), c.hwp.ideal_mapmaker).c_str());
+      if (solved == 0) nothing_solved = unsolved_reason(maps, maps_nside, flagging, c.output.rcond_min);
 
       if (c.output.spectra && nothing_solved.empty())
         for (const auto& f : write_spectra_files(c, sky, maps, maps_nside)) written.push_back(f);
