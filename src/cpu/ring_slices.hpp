@@ -20,7 +20,6 @@ namespace pisco::detail {
 struct RingSlice {
   std::uint32_t lo = 0, hi = 0;
   double theta_lo = 0.0, theta_hi = 0.0;
-  std::uint32_t ring_lo = 0, ring_hi = 0;  // its rings, [ring_lo, ring_hi] of sky.rings
   bool missed_by(double theta, double rho) const { return theta + rho < theta_lo || theta - rho > theta_hi; }
 };
 
@@ -34,12 +33,11 @@ inline std::vector<RingSlice> ring_slices(const PreparedSky& sky, std::size_t co
     const RingEntry& r = sky.rings[k];
     const double theta = std::acos(std::clamp(r.z, -1.0, 1.0));
     if (!open) {
-      s = {r.first, r.first, theta, theta, k, k};
+      s = {r.first, r.first, theta, theta};
       open = true;
     }
     s.hi = r.first + r.count;
     s.theta_hi = theta;
-    s.ring_hi = k;
     if (s.hi - s.lo >= per) {
       slices.push_back(s);
       open = false;

@@ -172,7 +172,7 @@ class SimdBackend final : public Backend {
     const KernelDetector& kd = tables_.at(detector).view;
     const PreparedSky& sky = in_->sky;
     if (adjoint_[0].empty())
-      for (auto& m : adjoint_) m.assign(simd::map_size(sky.npix, sky.rings.size()), 0.0);
+      for (auto& m : adjoint_) m.assign(sky.npix, 0.0);
     const bool plate = det.plate == PreparedDetector::Plate::aperture;
     // Without U, V weights (two columns, no plate) the kernel leaves V alone (stokes_adjoint_iq).
     const int outputs = kd.columns == 2 && !plate ? 3 : 4;
@@ -226,7 +226,7 @@ class SimdBackend final : public Backend {
           const Window::Row& row = w.rows[k - w.ring0];
           if (row.hi <= row.lo) continue;
           for (int c = 0; c < outputs; ++c) {
-            double* to = adjoint_[c].data() + row.lo + simd::map_offset(k);
+            double* to = adjoint_[c].data() + row.lo;
             const double* from = w.maps[c].data() + row.at;
             for (std::uint32_t j = 0; j < row.hi - row.lo; ++j) to[j] += from[j];
           }
@@ -234,19 +234,7 @@ class SimdBackend final : public Backend {
     });
   }
 
-  // The maps without their rings' gaps (simd::map_offset).
-  void take_adjoint(const std::array<std::span<double>, 4>& maps) override {
-    const PreparedSky& sky = in_->sky;
-    for (std::size_t c = 0; c < 4; ++c) {
-      if (!maps[c].empty() && !adjoint_[c].empty())
-        for (std::size_t k = 0; k < sky.rings.size(); ++k) {
-          const RingEntry& r = sky.rings[k];
-          const double* from = adjoint_[c].data() + r.first + simd::map_offset(k);
-          for (std::uint32_t q = 0; q < r.count; ++q) maps[c][r.first + q] += from[q];
-        }
-      adjoint_[c] = {};
-    }
-  }
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(adjoint_, maps); }
 
  private:
   // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).
@@ -349,13 +337,13 @@ class SimdBackend final : public Backend {
       row.lo = std::min(row.lo, w.ranges[2 * r]);
       row.hi = std::max(row.hi, w.ranges[2 * r + 1]);
     }
-    // A gap of a cache line after each row, as in the maps (simd::map_offset): rows of whole rings
-    // of NSIDE 128 and more would otherwise lie a multiple of 4 KiB apart.
+    // A gap of a cache line after each row (simd::window_gap): rows of whole rings of NSIDE 128 and
+    // more would otherwise lie a multiple of 4 KiB apart.
     std::size_t size = 0;
     for (Window::Row& row : w.rows) {
       if (row.hi <= row.lo) row.lo = row.hi = 0;
       row.at = size;
-      size += row.hi - row.lo + simd::map_gap;
+      size += row.hi - row.lo + simd::window_gap;
     }
     // Pixel p of a range on ring k lands at p + offset = p - lo + at (modulo 2^32, as the kernel adds).
     for (std::size_t r = 0; r < w.offsets.size(); ++r) {

@@ -85,14 +85,10 @@ struct SampleSums {
 // of its disc's ranges, each pixel's float32 weights (stokes_adjoint of the forward's own float32
 // evaluation) times d added in float64 to accumulators (the backend's task windows), structure of
 // arrays, pixel p of range r at p + offsets[r].
-// The backend's accumulated maps are laid out ring by ring with a gap after each ring (map_offset):
-// rings of 4 nside float64 pixels are a multiple of 4 KiB long from NSIDE 128 on, and a disc's
-// ranges on consecutive rings would otherwise fall on the same few sets of the processor's level-1
-// cache. Pixel p of ring k (0-based) is at p + map_offset(k).
-constexpr std::uint32_t map_gap = 8;  // float64s: a 64-byte cache line
-inline std::size_t map_offset(std::size_t ring) { return map_gap * ring; }
-// Writes stay below a slice's limit, at most map_offset(rings) past the last pixel (the last ring's gap).
-inline std::size_t map_size(std::size_t npix, std::size_t rings) { return npix + map_offset(rings); }
+// The backend's task windows are laid out ring by ring with a gap after each row: rings of 4 nside
+// float64 pixels are a multiple of 4 KiB long from NSIDE 128 on, and a disc's ranges on consecutive
+// rings would otherwise fall on the same few sets of the processor's level-1 cache.
+constexpr std::uint32_t window_gap = 8;  // float64s: a 64-byte cache line
 
 struct ScatterInput {
   const SampleFrame<double>* frame;
