@@ -151,8 +151,8 @@ TEST_P(Adjoint, DotProductIdentity) {
       o.backend = GetParam();
       o.normalization = n;
       o.quadrature = q;
-      o.threads = 2;
-      o.arithmetic = a;
+      o.cpu.threads = o.simd.threads = 2;
+      o.vulkan.arithmetic = pisco::arithmetic_from(a);
       const DotTest t = dot_test(scene, o, p);
       std::cout << GetParam() << ", " << a << (n == pisco::Normalization::integral ? ", integral" : ", per-sample")
                 << (q == pisco::Quadrature::corrected ? ", corrected" : ", plain") << ": <As,d> = " << t.forward
@@ -178,7 +178,7 @@ TEST_P(Adjoint, DotProductIdentityWithSidelobes) {
   scene.focal_plane.add_pair("pair", 10 * deg, 0, 0);
   pisco::EngineOptions o;
   o.backend = GetParam();
-  o.threads = 2;
+  o.cpu.threads = o.simd.threads = 2;
   const DotTest t = dot_test(scene, o, pisco_test::random_pointing(300, 8));
   std::cout << GetParam() << ", split beam: difference / (||As|| ||d||) = " << t.relative() << "\n";
   EXPECT_LT(t.relative(), bar());
@@ -203,7 +203,7 @@ TEST_P(Adjoint, MatchesTheTransposeColumnByColumn) {
   const std::vector<double> h = plate_angles(p.size());
   pisco::EngineOptions o;
   o.backend = GetParam();
-  o.threads = 2;
+  o.cpu.threads = o.simd.threads = 2;
   // A^T d over every detector.
   pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
   std::vector<std::vector<double>> d;
@@ -244,8 +244,8 @@ TEST_P(Adjoint, DeterministicAcrossThreadsAndChunks) {
   const auto run = [&](unsigned threads, std::size_t chunk, std::size_t device_chunk = 0) {
     pisco::EngineOptions o;
     o.backend = GetParam();
-    o.threads = threads;
-    o.chunk_samples = device_chunk;
+    o.cpu.threads = o.simd.threads = threads;
+    o.vulkan.chunk_samples = o.cuda.chunk_samples = device_chunk;
     pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
     for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
       const std::vector<double> d = gaussian_tod(p.size(), det);
@@ -313,7 +313,7 @@ TEST_P(Adjoint, MatchesTheReference) {
   const auto run = [&](const std::string& backend, const std::string& arithmetic) {
     pisco::EngineOptions o;
     o.backend = backend;
-    o.arithmetic = arithmetic;
+    o.vulkan.arithmetic = pisco::arithmetic_from(arithmetic);
     pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
     for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
       std::vector<double> d = gaussian_tod(p.size(), 40 + det);

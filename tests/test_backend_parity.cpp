@@ -56,10 +56,10 @@ pisco::EngineOptions options(const std::string& name, std::size_t chunk = 0,
                              pisco::Normalization n = pisco::Normalization::integral) {
   pisco::EngineOptions o;
   o.backend = name;
-  o.chunk_samples = chunk;
+  o.vulkan.chunk_samples = o.cuda.chunk_samples = chunk;
   o.normalization = n;
 #ifdef PISCO_TEST_ARITHMETIC
-  o.arithmetic = PISCO_TEST_ARITHMETIC;  // the vulkan kernel without float64, on any device
+  o.vulkan.arithmetic = pisco::arithmetic_from(PISCO_TEST_ARITHMETIC);  // the vulkan kernel without float64, on any device
 #endif
   return o;
 }
@@ -310,9 +310,9 @@ TEST(BackendParity, UnknownDeviceIsAClearError) {
   SKIP_WITHOUT_DEVICE();
   const Scene s = scene(16);
   pisco::EngineOptions o = options(backend);
-  o.device = "no-such-device";
+  o.set_device("no-such-device");
   pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, o); }, "no-such-device");
-  o.device = "99";
+  o.set_device("99");
   pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, o); }, "99");
 }
 

@@ -412,6 +412,10 @@ TEST_F(Cli, ConfigErrors) {
   expect_error("run " + write("backend.toml", config() + "").string() + " --backend nosuch", "backend 'nosuch' is unknown");
   expect_error("run " + write("device.toml", config() + "").string() + " --backend vulkan --device nosuch",
                pisco_test::backend_unavailable("vulkan").empty() ? "no device named 'nosuch'" : "is not available");
+  expect_error("run " + write("cpu_device.toml", config() + "").string() + " --backend cpu --device 0",
+               "-d/--device: the cpu backend has no device setting (it applies to simd, vulkan and cuda)");
+  expect_error("bench -b vulkan --threads 2 --rho-max 5",
+               "--threads: the vulkan backend has no threads setting (it applies to cpu and simd)");
 }
 
 // A Gaussian of `fwhm` polarized along x as the frameworks' b_lm, in healpy's alm FITS layout, with

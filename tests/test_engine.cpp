@@ -115,7 +115,7 @@ struct Scene {
 
 TEST(Engine, ReferenceEqualsBruteForce) {
   Scene s;
-  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2, .quadrature = pisco::Quadrature::plain});
+  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}, .quadrature = pisco::Quadrature::plain});
   double worst = 0, rms = 0;
   for (std::size_t det = 0; det < s.fp.size(); ++det) {
     std::vector<double> tod(s.ptg.size(), NAN);
@@ -135,8 +135,8 @@ TEST(Engine, ReferenceEqualsBruteForce) {
 
 TEST(Engine, DeterministicAcrossThreadsAndChunks) {
   Scene s;
-  pisco::Engine one(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 1});
-  pisco::Engine two(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2});
+  pisco::Engine one(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 1}});
+  pisco::Engine two(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}});
   std::vector<double> a(s.ptg.size()), b(s.ptg.size(), NAN), c(s.ptg.size(), NAN);
   one.convolve(1, s.ptg, a);
   two.convolve(1, s.ptg, b);
@@ -254,11 +254,74 @@ double max_abs_diff(const std::vector<double>& a, const std::vector<double>& b) 
 // The engine owns the offsets: a detector off the boresight, given the boresight's pointing (as
 // angles or as quaternions), gets the TOD of its own pointing (expanded on the host and given to a
 // detector on the boresight), not the boresight's.
+// Each backend's own options, and the one-name settings of simulation files, the command line and
+// Python: on every backend that has them under "auto", on the named one otherwise, and an error
+// naming the setting's backends where the named backend has no such setting.
+TEST(EngineOptions, OneNameSettingsGoToTheBackendsThatHaveThem) {
+  pisco::EngineOptions all{.backend = "auto"};
+  all.set_device("1");
+  all.set_threads(3);
+  all.set_chunk_samples(100);
+  all.set_arithmetic(pisco::Arithmetic::float_float);
+  EXPECT_EQ(all.simd.instruction_set, "1");
+  EXPECT_EQ(all.vulkan.device, "1");
+  EXPECT_EQ(all.cuda.device, "1");
+  EXPECT_EQ(all.cpu.threads, 3u);
+  EXPECT_EQ(all.simd.threads, 3u);
+  EXPECT_EQ(all.vulkan.chunk_samples, 100u);
+  EXPECT_EQ(all.cuda.chunk_samples, 100u);
+  EXPECT_EQ(all.vulkan.arithmetic, pisco::Arithmetic::float_float);
+
+  pisco::EngineOptions vulkan{.backend = "vulkan"};
+  vulkan.set_device("0");
+  vulkan.set_threads(0);  // the default: nothing to say
+  EXPECT_EQ(vulkan.vulkan.device, "0");
+  EXPECT_EQ(vulkan.cuda.device, "auto");
+  EXPECT_EQ(vulkan.simd.instruction_set, "auto");
+  pisco_test::expect_error([&] { vulkan.set_threads(2); },
+                           "the vulkan backend has no threads setting (it applies to cpu and simd)");
+  EXPECT_EQ(vulkan.cpu.threads, 0u);
+
+  pisco::EngineOptions simd{.backend = "simd"};
+  simd.set_device("AVX2");
+  EXPECT_EQ(simd.simd.instruction_set, "AVX2");
+  EXPECT_EQ(simd.vulkan.device, "auto");
+  EXPECT_EQ(simd.device_of("simd"), &simd.simd.instruction_set);
+  EXPECT_EQ(simd.threads_of("simd"), &simd.simd.threads);
+  EXPECT_EQ(simd.threads_of("cuda"), nullptr);
+  EXPECT_EQ(simd.device_of("cpu"), nullptr);
+
+  pisco::EngineOptions cpu{.backend = "cpu"};
+  cpu.set_device("auto");
+  cpu.set_chunk_samples(0);
+  cpu.set_arithmetic(pisco::Arithmetic::automatic);
+  pisco_test::expect_error([&] { cpu.set_device("0"); },
+                           "the cpu backend has no device setting (it applies to simd, vulkan and cuda)");
+  pisco_test::expect_error([&] { cpu.set_chunk_samples(10); },
+                           "the cpu backend has no chunk_samples setting (it applies to vulkan and cuda)");
+  pisco_test::expect_error([&] { cpu.set_arithmetic(pisco::Arithmetic::float64); },
+                           "the cpu backend has no arithmetic setting (it applies to vulkan)");
+
+  // The simd backend takes its instruction set from its own options, not from another backend's device.
+  if (pisco_test::backend_unavailable("simd").empty()) {
+    const pisco::Sky sky(8);
+    pisco::FocalPlane fp;
+    fp.add_pair("p", 0, 0, 0);
+    pisco::BeamOptions o;
+    o.rho_max = 10 * pisco::deg;
+    const std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(4 * pisco::deg, o)};
+    pisco_test::expect_error(
+        [&] { pisco::Engine(sky, beams, fp, {.backend = "simd", .simd = {.instruction_set = "no-such-set"}}); },
+        "no-such-set");
+    EXPECT_NO_THROW(pisco::Engine(sky, beams, fp, {.backend = "simd", .vulkan = {.device = "no-such-set"}}));
+  }
+}
+
 TEST(Engine, OffsetDetectorsGetTheirOwnPointingInEveryForm) {
   Scene s;
   const pisco::FocalPlane moved = offset_focal_plane(s.fp);
-  pisco::Engine on_boresight(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2});
-  pisco::Engine offset(s.sky, s.beams, moved, {.backend = "cpu", .threads = 2});
+  pisco::Engine on_boresight(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}});
+  pisco::Engine offset(s.sky, s.beams, moved, {.backend = "cpu", .cpu = {.threads = 2}});
   std::vector<pisco::Quat> quats;
   for (std::size_t i = 0; i < s.ptg.size(); ++i)
     quats.push_back(pisco::quat_from_pointing(s.ptg.theta[i], s.ptg.phi[i], s.ptg.psi[i]));
@@ -285,7 +348,7 @@ TEST(Engine, OffsetDetectorsGetTheirOwnPointingInEveryForm) {
 
 TEST(Engine, AccumulateAddsIntoTheTod) {
   Scene s;
-  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .threads = 2});
+  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}});
   std::vector<double> d(s.ptg.size()), sum(s.ptg.size());
   engine.convolve(2, s.ptg, d);
   for (std::size_t i = 0; i < sum.size(); ++i) sum[i] = 0.25 * double(i) - 3;
@@ -300,7 +363,7 @@ TEST(Engine, AccumulateAddsIntoTheTod) {
 TEST(Engine, SubmitThenWaitEqualsConvolve) {
   Scene s;
   const pisco::FocalPlane moved = offset_focal_plane(s.fp);
-  pisco::Engine engine(s.sky, s.beams, moved, {.backend = "cpu", .threads = 2});
+  pisco::Engine engine(s.sky, s.beams, moved, {.backend = "cpu", .cpu = {.threads = 2}});
   std::vector<std::vector<double>> direct(moved.size()), queued(moved.size());
   for (std::size_t det = 0; det < moved.size(); ++det) {
     direct[det].assign(s.ptg.size(), NAN);
@@ -347,21 +410,21 @@ TEST(Engine, SkyViewOfTheCallersArrays) {
   Scene s;
   std::vector<double> I(s.sky.I().begin(), s.sky.I().end()), Q(s.sky.Q().begin(), s.sky.Q().end()),
       U(s.sky.U().begin(), s.sky.U().end()), V(s.sky.V().begin(), s.sky.V().end());
-  pisco::Engine from_sky(s.sky, s.beams, s.fp, {.threads = 2});
+  pisco::Engine from_sky(s.sky, s.beams, s.fp, {.cpu = {.threads = 2}});
   std::vector<double> want(s.ptg.size()), got(s.ptg.size());
   from_sky.convolve(1, s.ptg, want);
   for (const char* backend : {"cpu", "simd"}) {
     if (std::string(backend) == "simd" && !pisco_test::backend_unavailable("simd").empty()) continue;
     std::vector<double> i2 = I, q2 = Q, u2 = U, v2 = V;
     pisco::Engine from_view(pisco::SkyView(s.sky.nside(), i2, q2, u2, v2), s.beams, s.fp,
-                            {.backend = backend, .threads = 2});
+                            {.backend = backend, .cpu = {.threads = 2}, .simd = {.threads = 2}});
     std::fill(i2.begin(), i2.end(), 1e30);  // the engine holds its own copy
     std::fill(q2.begin(), q2.end(), 1e30);
     from_view.convolve(1, s.ptg, got);
     if (std::string(backend) == "cpu") {
       EXPECT_EQ(got, want);
     } else {
-      pisco::Engine simd_sky(s.sky, s.beams, s.fp, {.backend = "simd", .threads = 2});
+      pisco::Engine simd_sky(s.sky, s.beams, s.fp, {.backend = "simd", .simd = {.threads = 2}});
       std::vector<double> simd_want(s.ptg.size());
       simd_sky.convolve(1, s.ptg, simd_want);
       EXPECT_EQ(got, simd_want);
@@ -370,8 +433,8 @@ TEST(Engine, SkyViewOfTheCallersArrays) {
   // No V: zero, as a Sky's V of zeros.
   pisco::Sky no_v = s.sky;
   std::fill(no_v.V().begin(), no_v.V().end(), 0.0);
-  pisco::Engine a(no_v, s.beams, s.fp, {.threads = 2});
-  pisco::Engine b(pisco::SkyView(s.sky.nside(), I, Q, U), s.beams, s.fp, {.threads = 2});
+  pisco::Engine a(no_v, s.beams, s.fp, {.cpu = {.threads = 2}});
+  pisco::Engine b(pisco::SkyView(s.sky.nside(), I, Q, U), s.beams, s.fp, {.cpu = {.threads = 2}});
   std::vector<double> ta(s.ptg.size()), tb(s.ptg.size());
   a.convolve(0, s.ptg, ta);
   b.convolve(0, s.ptg, tb);

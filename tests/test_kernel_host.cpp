@@ -306,16 +306,20 @@ TEST(KernelOnHost, DiscsArePixelForPixelQueryDisc) {
 }
 
 // The arithmetic a device gets: float-float where it lacks float64 or where asked for; float64 asked
-// of a device without it, or an unknown name, is an error naming what was asked.
+// of a device without it is an error naming the device, and an unknown name one naming the choices.
 TEST(KernelArithmetic, ChosenByTheDeviceOrAskedFor) {
-  EXPECT_FALSE(vk::use_float_float(true, "gpu", "auto"));
-  EXPECT_TRUE(vk::use_float_float(false, "gpu", "auto"));
-  EXPECT_TRUE(vk::use_float_float(true, "gpu", "float-float"));
-  EXPECT_TRUE(vk::use_float_float(false, "gpu", "float-float"));
-  EXPECT_FALSE(vk::use_float_float(true, "gpu", "float64"));
-  pisco_test::expect_error([] { vk::use_float_float(false, "Apple M2", "float64"); },
+  using pisco::arithmetic_from;
+  EXPECT_FALSE(vk::use_float_float(true, "gpu", arithmetic_from("auto")));
+  EXPECT_TRUE(vk::use_float_float(false, "gpu", arithmetic_from("auto")));
+  EXPECT_TRUE(vk::use_float_float(true, "gpu", arithmetic_from("float-float")));
+  EXPECT_TRUE(vk::use_float_float(false, "gpu", arithmetic_from("float-float")));
+  EXPECT_FALSE(vk::use_float_float(true, "gpu", arithmetic_from("float64")));
+  pisco_test::expect_error([] { vk::use_float_float(false, "Apple M2", pisco::Arithmetic::float64); },
                            "Apple M2 lacks shaderFloat64");
-  pisco_test::expect_error([] { vk::use_float_float(true, "gpu", "double"); }, "unknown arithmetic \"double\"");
+  pisco_test::expect_error([] { arithmetic_from("double"); },
+                           "arithmetic: expected \"auto\", \"float64\" or \"float-float\", got \"double\"");
+  for (const auto a : {pisco::Arithmetic::automatic, pisco::Arithmetic::float64, pisco::Arithmetic::float_float})
+    EXPECT_EQ(arithmetic_from(pisco::arithmetic_name(a)), a);
 }
 
 // One text for the maths (shaders/pixel.glsl, shaders/rings.glsl): every shared function, run through

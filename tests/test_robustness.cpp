@@ -538,6 +538,13 @@ TEST_F(Robustness, MessagesNameWhatIsWrong) {
       {without_table(c, "[scan]") + "[scna]\ntype = \"pixel_centres\"\n", "unknown key 'scna' (did you mean 'scan'?)"},
       {with_key(c, "[output]", "plots_x", "false"), "unknown key 'plots_x' (did you mean 'plots'?)"},
       {with_key(c, "[output]", "colour", "1"), "[output] unknown key 'colour'"},
+      // A setting the named backend does not have (base_config's backend is cpu).
+      {with_key(c, "[engine]", "device", "\"0\""),
+       "[engine] device: the cpu backend has no device setting (it applies to simd, vulkan and cuda)"},
+      {with_key(c, "[engine]", "arithmetic", "\"float64\""),
+       "[engine] arithmetic: the cpu backend has no arithmetic setting (it applies to vulkan)"},
+      {with_table(c, "[engine]", "backend = \"vulkan\"\nthreads = 2\n"),
+       "[engine] threads: the vulkan backend has no threads setting (it applies to cpu and simd)"},
   };
   for (const auto& [text, needle] : cases) expect_clean_error(needle, text, needle);
 

@@ -34,8 +34,8 @@ std::vector<std::string> instruction_sets() {
 pisco::EngineOptions on(const std::string& backend, const std::string& target, pisco::Normalization n) {
   pisco::EngineOptions o;
   o.backend = backend;
-  o.device = target;
-  o.threads = 2;
+  o.simd.instruction_set = target;
+  o.simd.threads = 2;
   o.normalization = n;
   return o;
 }

@@ -277,8 +277,12 @@ TEST(EngineLimits, ThreadsAndEfficiencies) {
   fp.add_pair("p", 0, 0, 0);
   const auto bs = beams();
   EXPECT_EQ(pisco::Engine::max_threads(), 64 * std::max(1u, std::thread::hardware_concurrency()));
-  EXPECT_TRUE(contains(error_of([&] { pisco::Engine(sky, bs, fp, {.threads = pisco::Engine::max_threads() + 1}); }),
-                       "EngineOptions::threads"));
+  EXPECT_TRUE(contains(error_of([&] { pisco::Engine(sky, bs, fp, {.cpu = {.threads = pisco::Engine::max_threads() + 1}}); }),
+                       "EngineOptions::cpu.threads = "));
+  EXPECT_TRUE(contains(error_of([&] {
+                         pisco::Engine(sky, bs, fp, {.backend = "simd", .simd = {.threads = pisco::Engine::max_threads() + 1}});
+                       }),
+                       "EngineOptions::simd.threads = "));
   for (double eps : {-0.01, 1.5}) {
     pisco::FocalPlane bad;
     bad.add({"leaky", 0.0, eps, 1.0, 0});

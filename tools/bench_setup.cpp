@@ -59,7 +59,9 @@ int main(int argc, char** argv) {
     fp.add_pair("p", 0.0, 0, 0);
     const double before = peak_gib();
     const auto t0 = std::chrono::steady_clock::now();
-    pisco::Engine engine(sky, beams, fp, {.backend = backend, .device = device});
+    pisco::EngineOptions options{.backend = backend};
+    options.set_device(device);
+    pisco::Engine engine(sky, beams, fp, options);
     const double setup = seconds_since(t0);
     const double after_setup = peak_gib();
     pisco::Pointing p;

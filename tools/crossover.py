@@ -150,7 +150,9 @@ def time_pisco(pisco, backend, maps, kind, fwhm, rho_max, plate, scan, repeat_de
             fp.add(f"d{k}", beam=k, hwp=hwp)
         return fp
 
-    options = dict(backend=backend, threads=1)
+    # One thread where the backend runs host threads of its own (its capabilities say so).
+    caps = next(b.capabilities for b in pisco.devices() if b.name == backend)
+    options = dict(backend=backend, threads=1) if caps["worker_threads"] else dict(backend=backend)
     t0 = time.perf_counter()
     one = pisco.Engine(sky, beams[:1], focal_plane(1), **options)
     t1 = time.perf_counter()

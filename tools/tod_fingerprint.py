@@ -46,8 +46,8 @@ def record(path):
                 for norm in ("integral", "per_sample"):
                     for be in backends:
                         for ar in (["auto", "float-float"] if be == "vulkan" else ["auto"]):
-                            e = pisco.Engine(sky, [beam], fp, backend=be, normalization=norm, arithmetic=ar,
-                                             threads=2)
+                            host = dict(threads=2) if be in ("cpu", "simd") else {}  # the host backends' threads
+                            e = pisco.Engine(sky, [beam], fp, backend=be, normalization=norm, arithmetic=ar, **host)
                             for d in ("a", "b"):
                                 kw = dict(hwp_angle=angle) if plate else {}
                                 key = f"m{mono}_b{bi}_{plate}_{norm}_{be}_{ar}_{d}"

@@ -30,17 +30,47 @@ enum class Quadrature {
   plain,  // the equal-weight pixel sum everywhere (the paper's)
 };
 
+// The kernel's float64 work on the vulkan backend (frame, disc selection, monopole and
+// normalization): float64 on devices with shaderFloat64, float_float (pairs of float32) on any
+// device, or automatic: float64 where the device has it, float-float elsewhere.
+enum class Arithmetic { automatic, float64, float_float };
+
+// "auto", "float64" or "float-float" (the names of simulation files, the command line and Python);
+// throws pisco::Error (ErrorKind::input) naming them for any other.
+Arithmetic arithmetic_from(const std::string& name);
+std::string arithmetic_name(Arithmetic a);
+
+// Each backend's own settings (EngineOptions). threads: worker threads, 0 = all hardware threads,
+// at most Engine::max_threads(). device: a device index, or part of its name; "auto" prefers a
+// discrete GPU (BackendInfo::devices). chunk_samples: samples per device chunk; 0 = fitted to the
+// device's limits.
+struct CpuOptions {
+  unsigned threads = 0;
+};
+struct SimdOptions {
+  unsigned threads = 0;
+  // A Highway target name, case-insensitive ("AVX3", "AVX2", "SSE4", "NEON", ...), or "auto": the best
+  // the processor supports (or the environment's PISCO_SIMD_TARGET).
+  std::string instruction_set = "auto";
+};
+struct VulkanOptions {
+  std::string device = "auto";
+  std::size_t chunk_samples = 0;
+  Arithmetic arithmetic = Arithmetic::automatic;
+};
+struct CudaOptions {
+  std::string device = "auto";
+  std::size_t chunk_samples = 0;
+};
+
 struct EngineOptions {
   std::string backend = "cpu";  // "cpu", "simd", "vulkan", "cuda" or "auto" (the fastest backend compiled in and present)
-  std::string device = "auto";  // vulkan/cuda: device index, or part of its name; "auto" prefers a discrete GPU;
-                                // simd: instruction set ("AVX3", "AVX2", "SSE4", "NEON", ...; "auto": the best)
-  std::size_t chunk_samples = 0;  // vulkan/cuda: samples per device chunk; 0 = fitted to the device's limits
+  // Each backend reads its own; with "auto" the chosen one's apply.
+  CpuOptions cpu;
+  SimdOptions simd;
+  VulkanOptions vulkan;
+  CudaOptions cuda;
   Normalization normalization = Normalization::integral;
-  unsigned threads = 0;         // cpu and simd backends: worker threads, 0 = all hardware threads; at most max_threads()
-  // vulkan: the arithmetic of the kernel's float64 work (frame, disc selection, monopole and
-  // normalization): "float64" (devices with shaderFloat64), "float-float" (pairs of float32, any
-  // device), or "auto": float64 where the device has it, float-float elsewhere.
-  std::string arithmetic = "auto";
   // UNSEEN pixels of the sky (a masked map, Sky::read_fits with UnseenPolicy::flag): an error by
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
   // hold one.
@@ -50,6 +80,19 @@ struct EngineOptions {
   // limit 2 NSIDE (7 s at NSIDE 512 on two cores, 55 s at 1024), and the backend holds a second sky.
   // A masked sky (UNSEEN pixels) has no band-limited copy: its polar samples stay plain.
   Quadrature quadrature = Quadrature::corrected;
+
+  // The settings that a simulation file's [engine] table, the command line and Python give by one
+  // name for whichever backend runs, set on each backend they apply to: device (vulkan and cuda; the
+  // simd backend's instruction set), threads (cpu, simd), chunk_samples (vulkan, cuda), arithmetic
+  // (vulkan). With backend "auto" they go to all of those; a named backend they do not apply to, given
+  // a value other than the default ("auto", 0), is an input error naming the setting and the backend.
+  void set_device(const std::string& device);
+  void set_threads(unsigned threads);
+  void set_chunk_samples(std::size_t samples);
+  void set_arithmetic(Arithmetic arithmetic);
+  // The backend `name`'s threads, device (its instruction set for simd), or null where it has none.
+  unsigned* threads_of(const std::string& name);
+  std::string* device_of(const std::string& name);
 };
 
 // What a backend can do, so that a caller (a framework, the simulation pipeline) decides by

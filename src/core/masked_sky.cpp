@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <string>
 #include <thread>
+#include <utility>
 
 #include "core/disc.hpp"
 #include "core/frame.hpp"
@@ -87,10 +88,11 @@ std::size_t flag_discs(const PreparedSky& sky, const PreparedDetector& det, cons
 }
 
 void check_engine_options(const EngineOptions& options) {
-  if (options.threads > Engine::max_threads())
-    throw Error("EngineOptions::threads = " + std::to_string(options.threads) + " is more than " +
-                std::to_string(Engine::max_threads()) +
-                " (64 per hardware thread of this machine; expected 0 for all hardware threads, or at most that)");
+  for (const auto& [threads, name] : {std::pair{options.cpu.threads, "cpu"}, {options.simd.threads, "simd"}})
+    if (threads > Engine::max_threads())
+      throw Error("EngineOptions::" + std::string(name) + ".threads = " + std::to_string(threads) + " is more than " +
+                  std::to_string(Engine::max_threads()) +
+                  " (64 per hardware thread of this machine; expected 0 for all hardware threads, or at most that)");
 }
 
 }  // namespace detail

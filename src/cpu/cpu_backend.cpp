@@ -265,7 +265,7 @@ BackendEntry cpu_backend_entry() {
             return info;
           },
           [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<CpuBackend>(std::move(in), sky, o.threads);
+            return std::make_unique<CpuBackend>(std::move(in), sky, o.cpu.threads);
           }};
 }
 

@@ -50,7 +50,7 @@ struct Slot {
 class CudaBackend final : public Backend {
  public:
   CudaBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& maps, const EngineOptions& options)
-      : in_(std::move(inputs)), device_(open_device(options.device)) {
+      : in_(std::move(inputs)), device_(open_device(options.cuda.device)) {
     check_kernel_image(device_.description());
     const PreparedSky& sky = in_->sky;
     per_sample_ = in_->normalization == Normalization::per_sample;
@@ -76,7 +76,7 @@ class CudaBackend final : public Backend {
 
     std::size_t free_bytes = 0, total_bytes = 0;
     PISCO_CUDA_CHECK(cudaMemGetInfo(&free_bytes, &total_bytes));
-    capacity_ = fit_chunk(options.chunk_samples, free_bytes);
+    capacity_ = fit_chunk(options.cuda.chunk_samples, free_bytes);
     slots_.reserve(chunk_slots);
     capacity_ = fit_chunk_halving<DeviceOutOfMemory>(
         capacity_,

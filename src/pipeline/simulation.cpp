@@ -322,16 +322,23 @@ Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const 
                    const RunContext& cl) {
   EngineOptions engine_options = c.engine.options;
   engine_options.unseen = c.sky.unseen;
+  // Each process of a node takes its share of the host's threads, or its own device; true if that
+  // changed the options.
   auto share_out = [&](const std::string& backend, pisco::EngineOptions& o) {
-    if (cl.node_size() <= 1) return;
+    if (cl.node_size() <= 1) return false;
     for (const auto& b : pisco::Engine::backends()) {
       if (b.name != backend) continue;
       if (b.capabilities.worker_threads) {  // the host's threads are what the processes share
-        if (o.threads == 0) o.threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
-      } else if ((o.device == "auto" || o.device.empty()) && !b.devices.empty()) {
-        o.device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
+        if (unsigned* threads = o.threads_of(backend); threads && *threads == 0) {
+          *threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
+          return true;
+        }
+      } else if (std::string* device = o.device_of(backend); device && (*device == "auto" || device->empty()) && !b.devices.empty()) {
+        *device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
+        return true;
       }
     }
+    return false;
   };
   pisco::EngineOptions o = engine_options;
   if (o.backend != "auto") share_out(o.backend, o);
@@ -339,8 +346,7 @@ Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const 
   engine_holder.emplace(sky, beams, fp, o);
   if (engine_options.backend == "auto") {
     o.backend = engine_holder->backend_name();
-    share_out(o.backend, o);
-    if (o.threads != engine_options.threads || o.device != engine_options.device) {
+    if (share_out(o.backend, o)) {
       engine_holder.reset();
       engine_holder.emplace(sky, beams, fp, o);
     }

@@ -312,8 +312,20 @@ constexpr std::int64_t max_chunk_samples = std::int64_t(1) << 24;
 EngineConfig read_engine(Table t) {
   EngineConfig e;
   e.options.backend = t.string("backend", "auto");
-  e.options.device = t.string("device", "auto");
-  e.options.arithmetic = t.choice("arithmetic", "auto", {"auto", "float64", "float-float"});
+  // One name each for whichever backend runs (EngineOptions::set_device and the others); a setting
+  // the named backend does not have is an error.
+  const auto route = [&](const char* key, auto set) {
+    try {
+      set();
+    } catch (const pisco::Error& err) {
+      t.fail(key, err.what());
+    }
+  };
+  const std::string device = t.string("device", "auto");
+  route("device", [&] { e.options.set_device(device); });
+  const pisco::Arithmetic arithmetic =
+      pisco::arithmetic_from(t.choice("arithmetic", "auto", {"auto", "float64", "float-float"}));
+  route("arithmetic", [&] { e.options.set_arithmetic(arithmetic); });
   e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
                                 ? pisco::Normalization::integral
                                 : pisco::Normalization::per_sample;
@@ -321,10 +333,11 @@ EngineConfig read_engine(Table t) {
                              ? pisco::Quadrature::corrected
                              : pisco::Quadrature::plain;
   const unsigned max_threads = pisco::Engine::max_threads();
-  e.options.threads = static_cast<unsigned>(t.integer_in(
+  const auto threads = static_cast<unsigned>(t.integer_in(
       "threads", 0, 0, max_threads,
       "0 (all hardware threads) or a number of threads up to " + std::to_string(max_threads) +
           " (64 per hardware thread of this machine)"));
+  route("threads", [&] { e.options.set_threads(threads); });
   const auto chunk = t.integer_in("chunk_samples", 1 << 16, 1, max_chunk_samples,
                                   "a number of samples from 1 to " + std::to_string(max_chunk_samples));
   e.chunk_samples = static_cast<std::size_t>(chunk);

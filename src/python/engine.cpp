@@ -178,11 +178,20 @@ class PyEngine {
     }
     EngineOptions options;
     options.backend = backend;
-    options.device = device;
-    options.chunk_samples = unsigned_arg<std::size_t>(chunk_samples, "chunk_samples");
+    // Each keyword on the backends it applies to (EngineOptions::set_device and the others).
+    const auto route = [](const char* keyword, auto set) {
+      try {
+        set();
+      } catch (const Error& e) {
+        throw Error(std::string(keyword) + ": " + e.what(), e.kind());
+      }
+    };
+    const Arithmetic kernel_arithmetic = arithmetic_from(arithmetic);
+    route("device", [&] { options.set_device(device); });
+    route("chunk_samples", [&] { options.set_chunk_samples(unsigned_arg<std::size_t>(chunk_samples, "chunk_samples")); });
+    route("threads", [&] { options.set_threads(unsigned_arg<unsigned>(threads, "threads")); });
+    route("arithmetic", [&] { options.set_arithmetic(kernel_arithmetic); });
     options.normalization = normalization_from(normalization);
-    options.threads = unsigned_arg<unsigned>(threads, "threads");
-    options.arithmetic = arithmetic;
     options.unseen = unseen_policy_from(unseen);
     options.quadrature = quadrature_from(quadrature);
     for (const auto& d : focal_plane.detectors()) names_.push_back(d.name);

@@ -11,6 +11,8 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include "pisco/engine.hpp"
+#include "pisco/error.hpp"
 #include "pisco/simulation.hpp"
 
 namespace nb = nanobind;
@@ -61,7 +63,13 @@ void apply(Simulation& s, const std::optional<std::filesystem::path>& output_dir
     s.config().output.dir = *output_dir;
   }
   if (backend) s.config().engine.options.backend = *backend;
-  if (device) s.config().engine.options.device = *device;
+  if (device) {
+    try {
+      s.config().engine.options.set_device(*device);
+    } catch (const pisco::Error& e) {
+      throw pisco::Error(std::string("device: ") + e.what(), e.kind());
+    }
+  }
 }
 
 Simulation from_file(const std::filesystem::path& path, const std::optional<std::filesystem::path>& output_dir,

@@ -126,8 +126,8 @@ class SimdBackend final : public Backend {
  public:
   SimdBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options)
       : in_(std::move(inputs)),
-        pool_(options.threads ? options.threads : hardware_threads()),
-        kernel_(simd::choose_kernel(requested_target(options.device))),
+        pool_(options.simd.threads ? options.simd.threads : hardware_threads()),
+        kernel_(simd::choose_kernel(requested_target(options.simd.instruction_set))),
         ring_columns_(in_->sky.rings) {
     monopole_ = float32_monopole(sky);
     boundary_ = cap_boundary(sky.nside(), in_->quadrature);

@@ -43,16 +43,17 @@ double from_ff_bits(double bits) {
   return double(pair[0]) + double(pair[1]);
 }
 
-bool use_float_float(bool device_float64, const std::string& device_name, const std::string& arithmetic) {
-  if (arithmetic == "auto") return !device_float64;
-  if (arithmetic == "float-float") return true;
-  if (arithmetic == "float64") {
-    if (!device_float64)
-      throw Error("vulkan: arithmetic \"float64\" was asked for, but " + device_name +
-                  " lacks shaderFloat64; use \"float-float\" or \"auto\"");
-    return false;
+bool use_float_float(bool device_float64, const std::string& device_name, Arithmetic arithmetic) {
+  switch (arithmetic) {
+    case Arithmetic::float_float: return true;
+    case Arithmetic::float64:
+      if (!device_float64)
+        throw Error("vulkan: arithmetic \"float64\" was asked for, but " + device_name +
+                    " lacks shaderFloat64; use \"float-float\" or \"auto\"");
+      return false;
+    case Arithmetic::automatic: break;
   }
-  throw Error("vulkan: unknown arithmetic \"" + arithmetic + "\" (expected \"auto\", \"float64\" or \"float-float\")");
+  return !device_float64;
 }
 
 KernelMode kernel_mode(const EngineInputs& in, const SkyView& sky, bool ff) {

@@ -27,7 +27,7 @@ double from_ff_bits(double bits);
 // shaderFloat64) for EngineOptions::arithmetic: "auto" (float-float only where float64 is missing),
 // "float-float" or "float64". Throws pisco::Error naming the device for float64 on a device without it,
 // and for an unknown value.
-bool use_float_float(bool device_float64, const std::string& device_name, const std::string& arithmetic);
+bool use_float_float(bool device_float64, const std::string& device_name, Arithmetic arithmetic);
 
 // How the kernel runs for a set of inputs.
 struct KernelMode {

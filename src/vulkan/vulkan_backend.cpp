@@ -134,7 +134,7 @@ class VulkanBackend final : public Backend {
 VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options)
     : in_(std::move(inputs)) {
   auto instance = vk::Instance::get();
-  const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), options.device);
+  const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), options.vulkan.device);
   device_ = std::make_unique<vk::Device>(std::move(instance), info);
   try {
     setup(info, sky, options);
@@ -154,7 +154,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, c
   pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
   pi.queueFamilyIndex = info.queue_family;
   PISCO_VK(fn.vkCreateCommandPool(device_->handle(), &pi, nullptr, &pool_));
-  const bool ff = vk::use_float_float(info.float64, info.name, options.arithmetic);
+  const bool ff = vk::use_float_float(info.float64, info.name, options.vulkan.arithmetic);
   const std::span<const std::uint32_t> spirv =
       ff ? std::span<const std::uint32_t>(pisco_spv_convolve_ff, sizeof(pisco_spv_convolve_ff) / sizeof(std::uint32_t))
          : std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t));
@@ -216,7 +216,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, c
   // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
   const std::size_t by_range = info.max_storage_buffer_range / (4 * sizeof(double));
   const std::size_t by_groups = std::size_t(info.max_groups_x) * info.max_groups_y;  // one sample per group at worst
-  std::size_t chunk = options.chunk_samples ? options.chunk_samples : default_chunk;
+  std::size_t chunk = options.vulkan.chunk_samples ? options.vulkan.chunk_samples : default_chunk;
   chunk = std::max<std::size_t>(1, std::min({chunk, by_range, by_groups}));
   make_slots(chunk);
   // Compile, at set-up, the pipelines the detectors will use.

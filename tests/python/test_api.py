@@ -428,7 +428,7 @@ def test_vulkan_backend_agrees_with_the_reference():
             for engine in (vk, ff):
                 b = engine.convolve(det, theta, phi, psi)
                 assert np.sqrt(np.mean((a - b) ** 2) / np.mean(a**2)) < 1e-5
-    with pytest.raises(pisco.Error, match="unknown arithmetic"):
+    with pytest.raises(pisco.InputError, match='arithmetic: expected "auto", "float64" or "float-float", got "float128"'):
         pisco.Engine(sky, beam, fp, backend="vulkan", arithmetic="float128")
 
 
@@ -460,6 +460,23 @@ def test_vulkan_device_by_index_and_name():
         pisco.Engine(sky, beam, fp, backend="vulkan", device="no-such-gpu")
     with pytest.raises(pisco.Error, match="vulkan: device index 999 is out of range"):
         pisco.Engine(sky, beam, fp, backend="vulkan", device="999")
+
+
+def test_settings_the_named_backend_lacks_are_errors():
+    """device, threads, chunk_samples and arithmetic go to the backends that have them; on a named backend
+    without the setting, a value other than the default is an InputError naming it."""
+    sky, beam, fp = small_setup()
+    with pisco.Engine(sky, beam, fp, backend="cpu", device="auto", threads=1, chunk_samples=0) as engine:
+        assert engine.backend == "cpu"
+    cases = [
+        (dict(backend="cpu", device="0"), "device: the cpu backend has no device setting (it applies to simd, vulkan and cuda)"),
+        (dict(backend="cpu", chunk_samples=10), "chunk_samples: the cpu backend has no chunk_samples setting"),
+        (dict(backend="cpu", arithmetic="float64"), "arithmetic: the cpu backend has no arithmetic setting (it applies to vulkan)"),
+        (dict(backend="vulkan", threads=2), "threads: the vulkan backend has no threads setting (it applies to cpu and simd)"),
+    ]
+    for kwargs, message in cases:
+        with pytest.raises(pisco.InputError, match=re.escape(message)):
+            pisco.Engine(sky, beam, fp, **kwargs)
 
 
 # --- masked skies --------------------------------------------------------------------------------

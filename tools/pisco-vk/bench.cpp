@@ -33,7 +33,19 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 int run_bench(const BenchOptions& options) {
   const std::vector<double>& radii = options.rho_max_deg;
-  const unsigned threads = options.threads;
+  // The one-name settings of the command line, on the backend they apply to (an error for one without them).
+  pisco::EngineOptions engine_options{.backend = options.backend};
+  const auto route = [](const char* flag, auto set) {
+    try {
+      set();
+    } catch (const pisco::Error& e) {
+      throw pisco::Error(std::string(flag) + ": " + e.what());
+    }
+  };
+  route("-d/--device", [&] { engine_options.set_device(options.device); });
+  route("--threads", [&] { engine_options.set_threads(options.threads); });
+  const pisco::Arithmetic arithmetic = pisco::arithmetic_from(options.arithmetic);
+  route("--arithmetic", [&] { engine_options.set_arithmetic(arithmetic); });
 
   const int nside = 128;
   pisco::Sky sky(nside, "uK_CMB");
@@ -89,9 +101,7 @@ int run_bench(const BenchOptions& options) {
     o.rho_max = rho * deg;
     o.grid_step = beam_step;
     std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(1.5 * deg, o)};
-    pisco::Engine engine(sky, beams, fp,
-                         {.backend = options.backend, .device = options.device, .threads = threads,
-                          .arithmetic = options.arithmetic});
+    pisco::Engine engine(sky, beams, fp, engine_options);
     const double setup = seconds_since(t0);
     std::vector<double> tod(scan.size());
     // The best of `repeat` runs of each path, the two alternating. conv: the convolution alone (Table

@@ -203,7 +203,13 @@ static int main_body(int argc, char** argv) {
     cluster.step([&] { config = pisco::read_simulation_file(config_file); });
     if (!output_dir.empty()) config.output.dir = output_dir;
     if (!backend.empty()) config.engine.options.backend = backend;
-    if (!device.empty()) config.engine.options.device = device;
+    if (!device.empty()) {
+      try {
+        config.engine.options.set_device(device);
+      } catch (const pisco::Error& e) {
+        throw pisco::Error(std::string("-d/--device: ") + e.what());
+      }
+    }
     pisco_cli::RunOptions options;
     options.quiet = quiet;
     options.plots = !no_plots;
