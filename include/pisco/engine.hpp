@@ -66,10 +66,10 @@ struct CudaOptions {
 struct EngineOptions {
   std::string backend = "cpu";  // "cpu", "simd", "vulkan", "cuda" or "auto" (the fastest backend compiled in and present)
   // Each backend reads its own; with "auto" the chosen one's apply.
-  CpuOptions cpu;
-  SimdOptions simd;
-  VulkanOptions vulkan;
-  CudaOptions cuda;
+  CpuOptions cpu{};
+  SimdOptions simd{};
+  VulkanOptions vulkan{};
+  CudaOptions cuda{};
   Normalization normalization = Normalization::integral;
   // UNSEEN pixels of the sky (a masked map, Sky::read_fits with UnseenPolicy::flag): an error by
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs

@@ -514,6 +514,346 @@ std::optional<pisco::TodWriter> open_tod_file(const SimulationConfig& c, const f
   return tod_file;
 }
 
+// The maps of a run as written: the files, the pixels solved, and why none was ("" when some were).
+struct MapOutputs {
+  std::vector<fs::path> written;
+  std::size_t solved = 0;
+  std::string nothing_solved;
+};
+
+// The deconvolving map-maker's maps: maps.fits holds the solution, reconvolved with the target beam
+// when one is given (then the solution itself in deconvolved.fits); binned_maps.fits and hits.fits
+// from the binned map-maker beside it; the spectra of maps.fits.
+MapOutputs write_deconvolved_maps(const SimulationConfig& c, const Sky& sky, int maps_nside, const pisco::DeconvolvedMaps& d,
+                                  pisco::BinnedMapmaker& binned_mapmaker,
+                                  const std::function<void(const std::string&)>& log) {
+  MapOutputs out;
+  const bool target = !d.smoothed_I.empty();
+  const std::vector<double>& I = target ? d.smoothed_I : d.I;
+  const std::vector<double>& Q = target ? d.smoothed_Q : d.Q;
+  const std::vector<double>& U = target ? d.smoothed_U : d.U;
+  const fs::path maps_path = c.output.dir / "maps.fits", raw_path = c.output.dir / "deconvolved.fits";
+  write_healpix_map(maps_path, maps_nside, {{"I_STOKES", I}, {"Q_STOKES", Q}, {"U_STOKES", U}}, sky.units());
+  out.written.push_back(maps_path);
+  if (target) {
+    write_healpix_map(raw_path, maps_nside, {{"I_STOKES", d.I}, {"Q_STOKES", d.Q}, {"U_STOKES", d.U}, {"V_STOKES", d.V}},
+                      sky.units());
+    out.written.push_back(raw_path);
+  }
+  const BinnedMaps binned = binned_mapmaker.solve();
+  const fs::path binned_path = c.output.dir / "binned_maps.fits", hits_path = c.output.dir / "hits.fits";
+  write_healpix_map(binned_path, maps_nside, {{"I_STOKES", binned.I}, {"Q_STOKES", binned.Q}, {"U_STOKES", binned.U}},
+                    sky.units());
+  std::vector<double> hits(binned.hits.begin(), binned.hits.end());
+  write_healpix_map(hits_path, maps_nside, {{"HITS", hits}}, "samples");
+  out.written.push_back(binned_path);
+  out.written.push_back(hits_path);
+  out.solved = static_cast<std::size_t>(std::count_if(I.begin(), I.end(), [](double v) { return v != unseen; }));
+  log(format("maps: NSIDE %d, %zu of %zu pixels reached by the beams (deconvolved%s); binned_maps.fits beside them\n",
+             maps_nside, out.solved, I.size(), target ? ", reconvolved; deconvolved.fits holds the solution" : ""));
+  if (out.solved == 0)
+    out.nothing_solved = "the deconvolved maps reach no pixel; maps.fits is all UNSEEN, and no spectra or plots were made";
+  if (c.output.spectra && out.nothing_solved.empty()) {
+    std::optional<double> fw;
+    if (target) fw = c.mapmaker.target_fwhm;
+    for (const auto& f :
+         spectra_files(c, sky, I, Q, U, maps_nside, target ? "deconvolved maps, reconvolved" : "deconvolved maps", fw))
+      out.written.push_back(f);
+  }
+  return out;
+}
+
+// The binned map-maker's maps (maps.fits, hits.fits), the plate's figure and the spectra.
+MapOutputs write_binned_maps(const SimulationConfig& c, const Sky& sky, int maps_nside, pisco::BinnedMapmaker& mapmaker,
+                             bool flagging, const std::function<void(const std::string&)>& log) {
+  MapOutputs out;
+  const BinnedMaps maps = mapmaker.solve();
+  out.solved = write_maps(c.output.dir, maps, maps_nside, sky.units());
+  out.written.push_back(c.output.dir / "maps.fits");
+  out.written.push_back(c.output.dir / "hits.fits");
+  log(format("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside,
+             static_cast<std::ptrdiff_t>(out.solved), maps.I.size(), c.output.rcond_min));
+  if (c.hwp.enabled && out.solved > 0) log(hwp_figure(maps, out.solved, sky.units(), c.hwp.ideal_mapmaker));
+  if (out.solved == 0) out.nothing_solved = unsolved_reason(maps, maps_nside, flagging, c.output.rcond_min);
+  if (c.output.spectra && out.nothing_solved.empty())
+    for (const auto& f : write_spectra_files(c, sky, maps, maps_nside)) out.written.push_back(f);
+  return out;
+}
+
+// The scan's pointing: the boresight (generated, or a boresight pointing file) chunk by chunk, or a
+// file of each detector's own angles (per-detector groups), read a detector at a time; such a file's
+// detectors have no offsets and the same number of samples.
+class ScanSource {
+ public:
+  ScanSource(const SimulationConfig& c, const FocalPlane& fp)
+      : c_(c), fp_(fp), per_detector_(c.scan.kind == ScanKind::file && !pisco::BoresightFile::holds_boresight(c.scan.file)) {
+    if (per_detector_) {
+      const std::string* first = nullptr;  // the detector whose sample count the others must match
+      for (const auto& d : fp.detectors()) {
+        if (d.has_offset())
+          throw pisco::Error(c.scan.file.string() + ": the file gives detector '" + d.name +
+                             "' its own pointing, but the focal plane also gives it an offset from the boresight " +
+                             "(expected a boresight pointing file, or detectors without offsets)");
+        const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
+        if (!first) {
+          first = &d.name;
+          samples_ = n;
+        } else if (n != samples_) {
+          throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
+                             " samples, detector '" + *first + "' " + std::to_string(samples_) +
+                             " (expected the same number of samples for every detector)");
+        }
+      }
+    } else {
+      boresight_.emplace(c.scan, c.hwp);
+      samples_ = boresight_->size();
+    }
+    check_hwp_times(c, samples_);
+  }
+  bool per_detector() const { return per_detector_; }
+  std::size_t samples_per_detector() const { return samples_; }
+  // The boresight's samples [first, first + count).
+  void fill(std::size_t first, std::size_t count, BoresightChunk& out) const { boresight_->fill(first, count, out); }
+  // A per-detector file's pointing of detector d, whole.
+  pisco::Pointing detector_pointing(std::size_t d) const { return pisco::read_pointing_hdf5(c_.scan.file, fp_[d].name); }
+
+ private:
+  const SimulationConfig& c_;
+  const FocalPlane& fp_;
+  bool per_detector_;
+  std::optional<Boresight> boresight_;
+  std::size_t samples_ = 0;
+};
+
+// What the TOD streams into: the map-makers and the TOD file (each absent when not asked for).
+struct StreamSinks {
+  pisco::BinnedMapmaker* binned = nullptr;
+  pisco::DeconvolvingMapmaker* deconvolver = nullptr;  // its right-hand side A^T d
+  pisco::TodWriter* tod = nullptr;
+};
+
+// The run as a stream of jobs (a detector's chunk), two in flight: while the engine convolves job
+// j, job j - 1 is binned and written and job j + 1's pointing is prepared, so that the device never
+// waits for the host (Engine::submit). Jobs alternate between two TOD buffers, and time chunks
+// between two boresight buffers: the pending job is never more than one behind.
+class JobStream {
+ public:
+  JobStream(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan, Engine& engine, StreamSinks sinks,
+            bool flagging, std::size_t chunk, RunObserver& obs)
+      : c_(c), fp_(fp), scan_(scan), engine_(engine), sinks_(sinks), flagging_(flagging), obs_(obs),
+        modelled_(fp.detectors()) {
+    for (auto& t : tod_) t.resize(chunk);
+    // The detectors as the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in
+    // place of the real one).
+    if (c.hwp.ideal_mapmaker)
+      for (auto& d : modelled_)
+        if (d.hwp) d.hwp->mueller = pisco::ideal_hwp_mueller();
+  }
+
+  // This process's jobs of `plan`. Under MPI, a check for an error on another process after every
+  // check_every jobs (at most about 1000 in a run), and an error here shared with the others.
+  void run(const JobPlan& plan, RunContext& cl) {
+    auto ceil_div = [](std::size_t a, std::size_t b) { return (a + b - 1) / b; };
+    const std::size_t check_every = std::max<std::size_t>(1, ceil_div(plan.rounds, 1000));
+    const std::size_t checks = ceil_div(plan.rounds, check_every);
+    if (!cl.parallel()) {
+      run_jobs(plan, cl, check_every);
+      return;
+    }
+    std::optional<std::string> failure;
+    try {
+      run_jobs(plan, cl, check_every);
+    } catch (const std::exception& e) {
+      failure = e.what();
+    }
+    engine_.wait();  // after a failure or a stop, nothing in flight writes into the buffers any more
+    cl.finish_checks(checks, failure.has_value());
+    cl.agree(failure);
+  }
+
+  std::uint64_t flagged() const { return flagged_; }
+
+  // After an error, nothing still in flight may write into the buffers once they are gone.
+  ~JobStream() {
+    try {
+      engine_.wait();
+    } catch (...) {  // the error that ended the run is already on its way
+    }
+  }
+  JobStream(const JobStream&) = delete;
+  JobStream& operator=(const JobStream&) = delete;
+
+ private:
+  struct Job {
+    std::size_t detector = 0, first = 0, count = 0;
+    int bslot = 0;  // its boresight chunk
+    int slot = 0;   // its TOD buffer
+    std::uint64_t ticket = 0;
+  };
+
+  void run_jobs(const JobPlan& plan, RunContext& cl, std::size_t check_every) {
+    // Fault injection for the tests (docs/scaling.md): a process told to fails after its first job, as
+    // one whose device or disk fails mid-run would.
+    const bool inject_failure = cl.parallel() && cl.inject_failure();
+    std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
+    int bslot = 1;
+    for (std::size_t i = plan.my_first; i < plan.my_end; ++i) {
+      const JobPlan::Span job = plan.at(i);
+      const std::size_t d = job.detector, off = job.first, n = job.count;
+      if (scan_.per_detector()) {
+        pisco::Pointing& ptg = file_pointing_[d % 2];
+        if (d != read_detector) ptg = scan_.detector_pointing(d);
+        read_detector = d;
+        submit(Job{d, off, n}, [&](std::span<double> t, std::span<const double> h) {
+          return engine_.submit(d, ptg.view().subspan(off, n), t, false, h);
+        });
+      } else {
+        if (off != filled_first) {  // a new time span: its boresight chunk, in the buffer not pending
+          bslot ^= 1;
+          scan_.fill(off, n, bore_[bslot]);
+          filled_first = off;
+        }
+        BoresightChunk& b = bore_[bslot];
+        submit(Job{d, off, n, bslot}, [&](std::span<double> t, std::span<const double> h) {
+          return b.quaternions ? engine_.submit(d, pisco::QuatPointingView{b.quats}, t, false, h)
+                               : engine_.submit(d, b.angles.view(), t, false, h);
+        });
+      }
+      if (inject_failure && i > plan.my_first)
+        throw pisco::Error("injected failure on rank " + std::to_string(cl.rank()) + " (PISCO_TEST_RANK_FAIL)");
+      if ((i - plan.my_first + 1) % check_every == 0) {
+        cl.post_check(false);
+        if (cl.stop()) return;  // another rank failed
+      }
+    }
+    if (pending_) finish(*pending_);
+  }
+
+  template <class SubmitView>
+  void submit(Job j, SubmitView submit_view) {
+    j.slot = next_slot_;
+    next_slot_ ^= 1;
+    if (scan_.per_detector() && c_.hwp.enabled) c_.hwp.stream.generate(j.first, j.count, file_hwp_[j.slot]);
+    j.ticket = submit_view(std::span<double>(tod_[j.slot].data(), j.count), hwp_of(j));
+    if (pending_) finish(*pending_);
+    pending_ = j;
+  }
+
+  // The half-wave plate's angles of a job (empty for detectors without a plate).
+  std::span<const double> hwp_of(const Job& j) const {
+    if (!fp_[j.detector].hwp) return {};
+    return scan_.per_detector() ? std::span<const double>(file_hwp_[j.slot]) : std::span<const double>(bore_[j.bslot].hwp);
+  }
+
+  // [sky] unseen = "flag": the samples whose disc holds an UNSEEN pixel.
+  template <class View>
+  std::span<const std::uint8_t> flag_samples(std::size_t detector, const View& boresight_view) {
+    flags_.resize(boresight_view.size());
+    flagged_ += engine_.flag_samples(detector, boresight_view, flags_);
+    return std::span<const std::uint8_t>(flags_);
+  }
+
+  void finish(const Job& j) {
+    engine_.wait(j.ticket);
+    const std::span<double> t(tod_[j.slot].data(), j.count);
+    const pisco::Detector& det = fp_[j.detector];
+    const bool per_detector = scan_.per_detector();
+    const BoresightChunk& b = bore_[j.bslot];
+    if (sinks_.binned || (sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights))) {
+      if (per_detector)
+        pisco::detector_pointing(file_pointing_[j.detector % 2].view().subspan(j.first, j.count), det.offset, own_);
+      else if (b.quaternions)
+        pisco::detector_pointing(pisco::QuatPointingView{b.quats}, det.offset, own_);
+      else
+        pisco::detector_pointing(b.angles.view(), det.offset, own_);
+    }
+    const pisco::PointingView detector_view = own_.view();
+    std::span<const std::uint8_t> fl;
+    if (flagging_) {
+      fl = per_detector ? flag_samples(j.detector, file_pointing_[j.detector % 2].view().subspan(j.first, j.count))
+           : b.quaternions ? flag_samples(j.detector, pisco::QuatPointingView{b.quats})
+                           : flag_samples(j.detector, b.angles.view());
+    }
+    if (sinks_.binned) sinks_.binned->add(modelled_[j.detector], detector_view, t, hwp_of(j), fl);
+    if (sinks_.deconvolver) {  // the right-hand side A^T d, chunk by chunk
+      pisco::SurveyChunk chunk = survey_chunk(j.detector, b, hwp_of(j));
+      if (per_detector) {
+        chunk.quaternions = false;
+        chunk.angles = file_pointing_[j.detector % 2].view().subspan(j.first, j.count);
+      }
+      try {
+        sinks_.deconvolver->add(chunk, t);
+      } catch (const pisco::Error& e) {
+        throw pisco::Error(c_.source.string() + ": [mapmaker] type = \"deconvolve\": " + e.what(), e.kind());
+      }
+    }
+    if (sinks_.tod && c_.output.tod_weights) {  // the map-maker's weights of each sample
+      const std::span<const double> h = hwp_of(j);
+      weights_.resize(3 * j.count);
+      for (std::size_t i = 0; i < j.count; ++i) {
+        const std::array<double, 3> a = pisco::stokes_weights(modelled_[j.detector], detector_view.psi[i],
+                                                              h.empty() ? 0.0 : h[i]);
+        std::copy(a.begin(), a.end(), weights_.begin() + std::ptrdiff_t(3 * i));
+      }
+    }
+    if (sinks_.tod)
+      sinks_.tod->write(j.detector, j.first, t, c_.output.tod_pointing ? &detector_view : nullptr, fl,
+                        c_.output.tod_weights ? std::span<const double>(weights_) : std::span<const double>());
+    obs_.advance(j.count);
+  }
+
+  const SimulationConfig& c_;
+  const FocalPlane& fp_;
+  const ScanSource& scan_;
+  Engine& engine_;
+  StreamSinks sinks_;
+  bool flagging_;
+  RunObserver& obs_;
+  std::vector<pisco::Detector> modelled_;
+  std::array<std::vector<double>, 2> tod_;
+  std::array<BoresightChunk, 2> bore_;
+  std::array<pisco::Pointing, 2> file_pointing_;  // per-detector files: the detector's pointing, whole
+  std::array<std::vector<double>, 2> file_hwp_;   // per-detector files: a job's plate angles, by TOD buffer
+  std::optional<Job> pending_;
+  int next_slot_ = 0;
+  pisco::Pointing own_;
+  std::vector<double> weights_;
+  std::vector<std::uint8_t> flags_;
+  std::uint64_t flagged_ = 0;
+};
+
+// The survey as the deconvolving map-maker replays it each iteration: this process's jobs of `plan`,
+// in order, a chunk at a time.
+void replay_survey(const JobPlan& plan, const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan,
+                   const std::function<void(const pisco::SurveyChunk&)>& visit) {
+  std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
+  BoresightChunk b;
+  std::vector<double> h;
+  pisco::Pointing ptg;
+  for (std::size_t i = plan.my_first; i < plan.my_end; ++i) {
+    const JobPlan::Span job = plan.at(i);
+    pisco::SurveyChunk chunk;
+    chunk.detector = job.detector;
+    if (scan.per_detector()) {
+      if (job.detector != read_detector) ptg = scan.detector_pointing(job.detector);
+      read_detector = job.detector;
+      chunk.angles = ptg.view().subspan(job.first, job.count);
+      if (fp[job.detector].hwp) {
+        c.hwp.stream.generate(job.first, job.count, h);
+        chunk.hwp_angle = h;
+      }
+    } else {
+      if (job.first != filled_first) {
+        scan.fill(job.first, job.count, b);
+        filled_first = job.first;
+      }
+      chunk = survey_chunk(job.detector, b, fp[job.detector].hwp ? std::span<const double>(b.hwp)
+                                                                  : std::span<const double>());
+    }
+    visit(chunk);
+  }
+}
+
 }  // namespace
 
 Simulation::Simulation(SimulationConfig config, SimulationOptions options)
@@ -566,43 +906,10 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   if (engine.unseen_pixels() > 0)
     say("sky: %zu UNSEEN pixels taken as 0%s\n", engine.unseen_pixels(),
         flagging ? "; samples whose disc holds one are flagged and left out of the maps" : " ([sky] unseen = \"zero\")");
-  std::vector<std::uint8_t> flags;
-  std::uint64_t flagged = 0;
-  auto flag_samples = [&](std::size_t detector, const auto& boresight_view) {
-    flags.resize(boresight_view.size());
-    flagged += engine.flag_samples(detector, boresight_view, flags);
-    return std::span<const std::uint8_t>(flags);
-  };
-
-  // Pointing files hold either boresight quaternions (the engine applies each detector's offset) or
-  // each detector's own angles (per-detector groups, read whole).
-  const bool per_detector_file = c.scan.kind == ScanKind::file && !pisco::BoresightFile::holds_boresight(c.scan.file);
-  std::optional<Boresight> boresight;
-  std::size_t samples_per_detector = 0;
-  cl.step([&] {
-    if (per_detector_file) {
-      const std::string* first = nullptr;  // the detector whose sample count the others must match
-      for (const auto& d : fp.detectors()) {
-        if (d.has_offset())
-          throw pisco::Error(c.scan.file.string() + ": the file gives detector '" + d.name +
-                             "' its own pointing, but the focal plane also gives it an offset from the boresight " +
-                             "(expected a boresight pointing file, or detectors without offsets)");
-        const std::size_t n = pisco::read_pointing_hdf5(c.scan.file, d.name).size();
-        if (!first) {
-          first = &d.name;
-          samples_per_detector = n;
-        } else if (n != samples_per_detector) {
-          throw pisco::Error(c.scan.file.string() + ": detector '" + d.name + "' has " + std::to_string(n) +
-                             " samples, detector '" + *first + "' " + std::to_string(samples_per_detector) +
-                             " (expected the same number of samples for every detector)");
-        }
-      }
-    } else {
-      boresight.emplace(c.scan, c.hwp);
-      samples_per_detector = boresight->size();
-    }
-    check_hwp_times(c, samples_per_detector);
-  });
+  std::optional<ScanSource> scan;
+  cl.step([&] { scan.emplace(c, fp); });
+  const bool per_detector_file = scan->per_detector();
+  const std::size_t samples_per_detector = scan->samples_per_detector();
   const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
   // [mapmaker] type = "deconvolve": maps at the engine's NSIDE, the sky's (binned ones too, for hits
   // and comparison), solved after the run by conjugate gradients that replay the survey.
@@ -647,151 +954,17 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   const JobPlan plan = plan_jobs(ndet, samples_per_detector, chunk, per_detector_file, cl, [&](std::size_t d) {
     return disc_pixels(beams[fp[d].beam], sky.nside(), engine.sidelobe_nside());
   });
-  using Span = JobPlan::Span;
-  const std::size_t my_first = plan.my_first, my_end = plan.my_end, rounds = plan.rounds;
-  auto job_at = [&plan](std::size_t i) { return plan.at(i); };
-  auto ceil_div = [](std::size_t a, std::size_t b) { return (a + b - 1) / b; };
-  // Checks for an error on another rank: after every check_every jobs, at most about 1000 in a run.
-  const std::size_t check_every = std::max<std::size_t>(1, ceil_div(rounds, 1000));
-  const std::size_t checks = ceil_div(rounds, check_every);
   std::uint64_t my_samples = 0;
-  for (std::size_t i = my_first; i < my_end; ++i) my_samples += job_at(i).count;
+  for (std::size_t i = plan.my_first; i < plan.my_end; ++i) my_samples += plan.at(i).count;
   obs.begin_convolution(my_samples);
   const auto tc = std::chrono::steady_clock::now();
-  // The run as a stream of jobs (a detector's chunk), two in flight: while the engine convolves job
-  // j, job j - 1 is binned and written and job j + 1's pointing is prepared, so that the device never
-  // waits for the host (Engine::submit). Jobs alternate between two TOD buffers, and time chunks
-  // between two boresight buffers: the pending job is never more than one behind.
-  struct Job {
-    std::size_t detector = 0, first = 0, count = 0;
-    int bslot = 0;  // its boresight chunk
-    int slot = 0;   // its TOD buffer
-    std::uint64_t ticket = 0;
-  };
-  std::array<std::vector<double>, 2> tod;
-  for (auto& t : tod) t.resize(chunk);
-  std::array<BoresightChunk, 2> bore;
-  std::array<pisco::Pointing, 2> file_pointing;  // per-detector files: the detector's pointing, whole
-  std::array<std::vector<double>, 2> file_hwp;   // per-detector files: a job's plate angles, by TOD buffer
-  std::optional<Job> pending;
-  // The half-wave plate's angles of a job (empty for detectors without a plate), and the detectors as
-  // the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in place of the real one).
-  auto hwp_of = [&](const Job& j) -> std::span<const double> {
-    if (!fp[j.detector].hwp) return {};
-    return per_detector_file ? std::span<const double>(file_hwp[j.slot]) : std::span<const double>(bore[j.bslot].hwp);
-  };
-  std::vector<pisco::Detector> modelled = fp.detectors();
-  if (c.hwp.ideal_mapmaker)
-    for (auto& d : modelled)
-      if (d.hwp) d.hwp->mueller = pisco::ideal_hwp_mueller();
-  pisco::Pointing own;
-  std::vector<double> weights;
-  auto finish = [&](const Job& j) {
-    engine.wait(j.ticket);
-    const std::span<double> t(tod[j.slot].data(), j.count);
-    const pisco::Detector& det = fp[j.detector];
-    if (mapper || (tod_file && (c.output.tod_pointing || c.output.tod_weights))) {
-      const BoresightChunk& b = bore[j.bslot];
-      if (per_detector_file)
-        pisco::detector_pointing(file_pointing[j.detector % 2].view().subspan(j.first, j.count), det.offset, own);
-      else if (b.quaternions)
-        pisco::detector_pointing(pisco::QuatPointingView{b.quats}, det.offset, own);
-      else
-        pisco::detector_pointing(b.angles.view(), det.offset, own);
-    }
-    const pisco::PointingView detector_view = own.view();
-    std::span<const std::uint8_t> fl;  // [sky] unseen = "flag": the samples whose disc holds an UNSEEN pixel
-    if (flagging) {
-      const BoresightChunk& b = bore[j.bslot];
-      fl = per_detector_file ? flag_samples(j.detector, file_pointing[j.detector % 2].view().subspan(j.first, j.count))
-           : b.quaternions   ? flag_samples(j.detector, pisco::QuatPointingView{b.quats})
-                             : flag_samples(j.detector, b.angles.view());
-    }
-    if (mapper) mapper->add(modelled[j.detector], detector_view, t, hwp_of(j), fl);
-    if (deconvolver) {  // the right-hand side A^T d, chunk by chunk
-      pisco::SurveyChunk chunk = survey_chunk(j.detector, bore[j.bslot], hwp_of(j));
-      if (per_detector_file) {
-        chunk.quaternions = false;
-        chunk.angles = file_pointing[j.detector % 2].view().subspan(j.first, j.count);
-      }
-      try {
-        deconvolver->add(chunk, t);
-      } catch (const pisco::Error& e) {
-        throw pisco::Error(c.source.string() + ": [mapmaker] type = \"deconvolve\": " + e.what(), e.kind());
-      }
-    }
-    if (tod_file && c.output.tod_weights) {  // the map-maker's weights of each sample
-      const std::span<const double> h = hwp_of(j);
-      weights.resize(3 * j.count);
-      for (std::size_t i = 0; i < j.count; ++i) {
-        const std::array<double, 3> a = pisco::stokes_weights(modelled[j.detector], detector_view.psi[i],
-                                                              h.empty() ? 0.0 : h[i]);
-        std::copy(a.begin(), a.end(), weights.begin() + std::ptrdiff_t(3 * i));
-      }
-    }
-    if (tod_file)
-      tod_file->write(j.detector, j.first, t, c.output.tod_pointing ? &detector_view : nullptr, fl,
-                      c.output.tod_weights ? std::span<const double>(weights) : std::span<const double>());
-    obs.advance(j.count);
-  };
-  int next_slot = 0;
-  auto submit = [&](Job j, auto submit_view) {
-    j.slot = next_slot;
-    next_slot ^= 1;
-    if (per_detector_file && c.hwp.enabled) c.hwp.stream.generate(j.first, j.count, file_hwp[j.slot]);
-    j.ticket = submit_view(std::span<double>(tod[j.slot].data(), j.count), hwp_of(j));
-    if (pending) finish(*pending);
-    pending = j;
-  };
-  // Fault injection for the tests (docs/scaling.md): a process told to fails after its first job, as
-  // one whose device or disk fails mid-run would.
-  const bool inject_failure = cl.parallel() && cl.inject_failure();
-  auto run_jobs = [&] {
-    std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
-    int bslot = 1;
-    for (std::size_t i = my_first; i < my_end; ++i) {
-      const Span job = job_at(i);
-      const std::size_t d = job.detector, off = job.first, n = job.count;
-      if (per_detector_file) {
-        pisco::Pointing& ptg = file_pointing[d % 2];
-        if (d != read_detector) ptg = pisco::read_pointing_hdf5(c.scan.file, fp[d].name);
-        read_detector = d;
-        submit(Job{d, off, n}, [&](std::span<double> t, std::span<const double> h) {
-          return engine.submit(d, ptg.view().subspan(off, n), t, false, h);
-        });
-      } else {
-        if (off != filled_first) {  // a new time span: its boresight chunk, in the buffer not pending
-          bslot ^= 1;
-          boresight->fill(off, n, bore[bslot]);
-          filled_first = off;
-        }
-        BoresightChunk& b = bore[bslot];
-        submit(Job{d, off, n, bslot}, [&](std::span<double> t, std::span<const double> h) {
-          return b.quaternions ? engine.submit(d, pisco::QuatPointingView{b.quats}, t, false, h)
-                               : engine.submit(d, b.angles.view(), t, false, h);
-        });
-      }
-      if (inject_failure && i > my_first)
-        throw pisco::Error("injected failure on rank " + std::to_string(cl.rank()) + " (PISCO_TEST_RANK_FAIL)");
-      if ((i - my_first + 1) % check_every == 0) {
-        cl.post_check(false);
-        if (cl.stop()) return;  // another rank failed
-      }
-    }
-    if (pending) finish(*pending);
-  };
-  if (!cl.parallel()) {
-    run_jobs();
-  } else {
-    std::optional<std::string> failure;
-    try {
-      run_jobs();
-    } catch (const std::exception& e) {
-      failure = e.what();
-    }
-    engine.wait();  // after a failure or a stop, nothing in flight writes into the buffers any more
-    cl.finish_checks(checks, failure.has_value());
-    cl.agree(failure);
+  std::uint64_t flagged = 0;
+  {
+    JobStream stream(c, fp, *scan, engine,
+                     {mapper ? &*mapper : nullptr, deconvolver ? &*deconvolver : nullptr, tod_file ? &*tod_file : nullptr},
+                     flagging, chunk, obs);
+    stream.run(plan, cl);
+    flagged = stream.flagged();
   }
   obs.end_convolution();
   const double my_conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
@@ -822,32 +995,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
         c.mapmaker.iterations, c.mapmaker.tolerance, c.mapmaker.regularization,
         c.mapmaker.target_fwhm * 180 / std::numbers::pi);
     const auto survey = [&](const std::function<void(const pisco::SurveyChunk&)>& visit) {
-      std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
-      BoresightChunk& b = bore[0];
-      std::vector<double>& h = file_hwp[0];
-      for (std::size_t i = my_first; i < my_end; ++i) {
-        const Span job = job_at(i);
-        pisco::SurveyChunk chunk;
-        chunk.detector = job.detector;
-        if (per_detector_file) {
-          pisco::Pointing& ptg = file_pointing[0];
-          if (job.detector != read_detector) ptg = pisco::read_pointing_hdf5(c.scan.file, fp[job.detector].name);
-          read_detector = job.detector;
-          chunk.angles = ptg.view().subspan(job.first, job.count);
-          if (fp[job.detector].hwp) {
-            c.hwp.stream.generate(job.first, job.count, h);
-            chunk.hwp_angle = h;
-          }
-        } else {
-          if (job.first != filled_first) {
-            boresight->fill(job.first, job.count, b);
-            filled_first = job.first;
-          }
-          chunk = survey_chunk(job.detector, b, fp[job.detector].hwp ? std::span<const double>(b.hwp)
-                                                                      : std::span<const double>());
-        }
-        visit(chunk);
-      }
+      replay_survey(plan, c, fp, *scan, visit);
     };
     deconvolved = deconvolver->solve(survey, [&](const pisco::DeconvolutionProgress& p) {
       say("mapmaker: iteration %d, residual %.3g of ||A^T d|| (%.1f s)\n", p.iteration, p.residual, p.seconds);
@@ -862,58 +1010,13 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   // no pixel has no maps to speak of: no spectra (and pisco-vk makes no plots and exits with status 4).
   std::string nothing_solved;
   cl.step([&] {
-    if (deconvolved && cl.leader()) {
-      // maps.fits: the solution, reconvolved with the target beam when one is given (then the solution
-      // itself in deconvolved.fits); binned_maps.fits and hits.fits from the binned map-maker beside it.
-      const pisco::DeconvolvedMaps& d = *deconvolved;
-      const bool target = !d.smoothed_I.empty();
-      const std::vector<double>& I = target ? d.smoothed_I : d.I;
-      const std::vector<double>& Q = target ? d.smoothed_Q : d.Q;
-      const std::vector<double>& U = target ? d.smoothed_U : d.U;
-      const fs::path maps_path = c.output.dir / "maps.fits", raw_path = c.output.dir / "deconvolved.fits";
-      write_healpix_map(maps_path, maps_nside, {{"I_STOKES", I}, {"Q_STOKES", Q}, {"U_STOKES", U}}, sky.units());
-      written.push_back(maps_path);
-      if (target) {
-        write_healpix_map(raw_path, maps_nside,
-                          {{"I_STOKES", d.I}, {"Q_STOKES", d.Q}, {"U_STOKES", d.U}, {"V_STOKES", d.V}}, sky.units());
-        written.push_back(raw_path);
-      }
-      const BinnedMaps binned = mapper->solve();
-      const fs::path binned_path = c.output.dir / "binned_maps.fits", hits_path = c.output.dir / "hits.fits";
-      write_healpix_map(binned_path, maps_nside, {{"I_STOKES", binned.I}, {"Q_STOKES", binned.Q}, {"U_STOKES", binned.U}},
-                        sky.units());
-      std::vector<double> hits(binned.hits.begin(), binned.hits.end());
-      write_healpix_map(hits_path, maps_nside, {{"HITS", hits}}, "samples");
-      written.push_back(binned_path);
-      written.push_back(hits_path);
-      const auto solved = static_cast<std::size_t>(std::count_if(I.begin(), I.end(), [](double v) { return v != unseen; }));
-      result.solved_pixels = solved;
-      say("maps: NSIDE %d, %zu of %zu pixels reached by the beams (deconvolved%s); binned_maps.fits beside them\n",
-          maps_nside, solved, I.size(), target ? ", reconvolved; deconvolved.fits holds the solution" : "");
-      if (solved == 0)
-        nothing_solved = "the deconvolved maps reach no pixel; maps.fits is all UNSEEN, and no spectra or plots were made";
-      if (c.output.spectra && nothing_solved.empty()) {
-        std::optional<double> fw;
-        if (target) fw = c.mapmaker.target_fwhm;
-        for (const auto& f : spectra_files(c, sky, I, Q, U, maps_nside,
-                                           target ? "deconvolved maps, reconvolved" : "deconvolved maps", fw))
-          written.push_back(f);
-      }
-    } else if (mapper && cl.leader()) {
-      const BinnedMaps maps = mapper->solve();
-      const std::size_t solved_pixels = write_maps(c.output.dir, maps, maps_nside, sky.units());
-      const auto solved = static_cast<std::ptrdiff_t>(solved_pixels);
-      written.push_back(c.output.dir / "maps.fits");
-      written.push_back(c.output.dir / "hits.fits");
-      result.solved_pixels = solved_pixels;
-      say("maps: NSIDE %d, %td of %zu pixels solved (rcond >= %g)\n", maps_nside, solved, maps.I.size(),
-          c.output.rcond_min);
-      if (c.hwp.enabled && solved > 0) say("%s", hwp_figure(maps, solved_pixels, sky.units(), c.hwp.ideal_mapmaker).c_str());
-      if (solved == 0) nothing_solved = unsolved_reason(maps, maps_nside, flagging, c.output.rcond_min);
-
-      if (c.output.spectra && nothing_solved.empty())
-        for (const auto& f : write_spectra_files(c, sky, maps, maps_nside)) written.push_back(f);
-    }
+    if (!cl.leader() || !mapper) return;
+    const auto log = [&](const std::string& line) { obs.log(line); };
+    const MapOutputs out = deconvolved ? write_deconvolved_maps(c, sky, maps_nside, *deconvolved, *mapper, log)
+                                       : write_binned_maps(c, sky, maps_nside, *mapper, flagging, log);
+    written.insert(written.end(), out.written.begin(), out.written.end());
+    result.solved_pixels = out.solved;
+    nothing_solved = out.nothing_solved;
   });
   nothing_solved = cl.broadcast(nothing_solved);
 
