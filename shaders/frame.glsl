@@ -1,53 +1,75 @@
 // One sample's antenna basis in float64, from boresight angles or a boresight quaternion, with the
-// detector's offset applied: src/core/frame.hpp line for line (docs/physics.md, "Pointing as a
-// rotation"). Without float64 (PISCO_FF), the same from a boresight quaternion in float-float (the
-// host turns angles into quaternions for that path). Written in the common subset of GLSL and C++
-// (common.glsl) so that tests/test_frame.cpp and tests/test_kernel_host.cpp run this very file as C++.
-#ifndef PISCO_FRAME_GLSL
+// detector's offset applied (docs/physics.md, "Pointing as a rotation"), written once in the common
+// subset of GLSL and C++: the shaders include it, and src/core/frame.hpp includes its float64 part as
+// C++ (PISCO_TEMPLATE_TEXT, with the C library's sine, cosine and arctangent) for the float64
+// reference, the simd backend's frames and the CUDA kernels; tests/test_frame.cpp runs the shader
+// build (its own sine, cosine and arctangent, fp64.glsl) against it. Without float64 (PISCO_FF), the
+// same from a boresight quaternion in float-float (the host turns angles into quaternions for that
+// path). The includer of the template text defines PISCO_D3, PISCO_D4 (vector and quaternion types
+// with x, y, z(, w)), PISCO_DVEC3, PISCO_DVEC4 (their constructors), PISCO_COS, PISCO_SIN and
+// PISCO_ATAN2_NONNEG_Y (atan2 for y >= 0) and PISCO_TWO_PI (2 pi in float64). No `lf` literal:
+// doubles are written double(n), exact in both languages.
+#if defined(PISCO_TEMPLATE_TEXT) || !defined(PISCO_FRAME_GLSL)
+#ifndef PISCO_TEMPLATE_TEXT
 #define PISCO_FRAME_GLSL
 
 #include "common.glsl"
 
 #if !PISCO_FF
-
 #include "fp64.glsl"
+#define PISCO_D3 dvec3
+#define PISCO_D4 dvec4
+#define PISCO_DVEC3(a, b, c) dvec3(a, b, c)
+#define PISCO_DVEC4(a, b, c, d) dvec4(a, b, c, d)
+#define PISCO_COS pisco_cos
+#define PISCO_SIN pisco_sin
+#define PISCO_ATAN2_NONNEG_Y pisco_atan2_nonneg_y
+#define PISCO_TWO_PI 6.283185307179586476925286766559lf
+#endif
+#endif
+
+#if defined(PISCO_TEMPLATE_TEXT) || !PISCO_FF
 
 // q a b: the rotation b, then a (quaternions as (x, y, z, w), scalar last).
-PISCO_FN dvec4 pisco_quat_mul(dvec4 a, dvec4 b) {
-  return dvec4(a.w * b.x + b.w * a.x + (a.y * b.z - a.z * b.y), a.w * b.y + b.w * a.y + (a.z * b.x - a.x * b.z),
-               a.w * b.z + b.w * a.z + (a.x * b.y - a.y * b.x), a.w * b.w - (a.x * b.x + a.y * b.y + a.z * b.z));
+PISCO_FN PISCO_D4 pisco_quat_mul(PISCO_D4 a, PISCO_D4 b) {
+  return PISCO_DVEC4(a.w * b.x + b.w * a.x + (a.y * b.z - a.z * b.y), a.w * b.y + b.w * a.y + (a.z * b.x - a.x * b.z),
+                     a.w * b.z + b.w * a.z + (a.x * b.y - a.y * b.x), a.w * b.w - (a.x * b.x + a.y * b.y + a.z * b.z));
 }
 
-// The columns of q's rotation matrix, exact for any norm of q (s = 2 / |q|^2).
-PISCO_FN void pisco_rotation(dvec4 q, PISCO_OUT(dvec3) ex, PISCO_OUT(dvec3) ey, PISCO_OUT(dvec3) ez) {
-  const double s = 2.0lf / (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
+// The columns of q's rotation matrix, q x^ q*, q y^ q*, q z^ q*. With s = 2 / |q|^2 the matrix is
+// orthonormal for any non-zero q, so a quaternion a few ulp off the unit sphere needs no
+// renormalization (and a unit one gets exactly the textbook matrix).
+PISCO_FN void pisco_rotation(PISCO_D4 q, PISCO_OUT(PISCO_D3) ex, PISCO_OUT(PISCO_D3) ey, PISCO_OUT(PISCO_D3) ez) {
+  const double s = double(2) / (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w);
   const double xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
   const double xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;
   const double wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
-  ex = dvec3(1.0lf - s * (yy + zz), s * (xy + wz), s * (xz - wy));
-  ey = dvec3(s * (xy - wz), 1.0lf - s * (xx + zz), s * (yz + wx));
-  ez = dvec3(s * (xz + wy), s * (yz - wx), 1.0lf - s * (xx + yy));
+  ex = PISCO_DVEC3(double(1) - s * (yy + zz), s * (xy + wz), s * (xz - wy));
+  ey = PISCO_DVEC3(s * (xy - wz), double(1) - s * (xx + zz), s * (yz + wx));
+  ez = PISCO_DVEC3(s * (xz + wy), s * (yz - wx), double(1) - s * (xx + yy));
 }
 
 // c's components taken in the basis (a, b, p): c.x a + c.y b + c.z p.
-PISCO_FN dvec3 pisco_in_basis(dvec3 c, dvec3 a, dvec3 b, dvec3 p) {
-  return dvec3(c.x * a.x + c.y * b.x + c.z * p.x, c.x * a.y + c.y * b.y + c.z * p.y, c.x * a.z + c.y * b.z + c.z * p.z);
+PISCO_FN PISCO_D3 pisco_in_basis(PISCO_D3 c, PISCO_D3 a, PISCO_D3 b, PISCO_D3 p) {
+  return PISCO_DVEC3(c.x * a.x + c.y * b.x + c.z * p.x, c.x * a.y + c.y * b.y + c.z * p.y,
+                     c.x * a.z + c.y * b.z + c.z * p.z);
 }
 
 // theta in [0, pi] and phi in [0, 2 pi) of the unit vector p.
-PISCO_FN void pisco_direction_angles(dvec3 p, PISCO_OUT(double) theta, PISCO_OUT(double) phi) {
-  const double twopi = 6.283185307179586476925286766559lf;
-  theta = pisco_atan2_nonneg_y(sqrt(p.x * p.x + p.y * p.y), p.z);
-  phi = p.y >= 0.0lf ? pisco_atan2_nonneg_y(p.y, p.x) : twopi - pisco_atan2_nonneg_y(-p.y, p.x);
-  if (phi >= twopi) phi = 0.0lf;
+PISCO_FN void pisco_direction_angles(PISCO_D3 p, PISCO_OUT(double) theta, PISCO_OUT(double) phi) {
+  const double twopi = PISCO_TWO_PI;
+  theta = PISCO_ATAN2_NONNEG_Y(sqrt(p.x * p.x + p.y * p.y), p.z);
+  phi = p.y >= double(0) ? PISCO_ATAN2_NONNEG_Y(p.y, p.x) : twopi - PISCO_ATAN2_NONNEG_Y(-p.y, p.x);
+  if (phi >= twopi) phi = double(0);
 }
 
 // The detector basis (theta', phi', p') and line of sight of one sample. quaternion: the boresight
 // is b (x, y, z, w) and the basis is the columns of b * offset. Otherwise b is (theta, phi, psi, 0),
-// phi in [0, 2 pi), and the offset, when `offset`, turns the basis from trigonometry.
-PISCO_FN void pisco_sample_frame(bool quaternion, bool offset, dvec4 b, dvec4 offset_quat, PISCO_OUT(dvec3) theta_p,
-                                 PISCO_OUT(dvec3) phi_p, PISCO_OUT(dvec3) p, PISCO_OUT(double) theta,
-                                 PISCO_OUT(double) phi) {
+// phi in [0, 2 pi), the basis comes from trigonometry, and the offset, when `offset`, turns it: column
+// c of the offset's rotation matrix holds the detector's basis vector c in the boresight's basis.
+PISCO_FN void pisco_sample_frame(bool quaternion, bool offset, PISCO_D4 b, PISCO_D4 offset_quat,
+                                 PISCO_OUT(PISCO_D3) theta_p, PISCO_OUT(PISCO_D3) phi_p, PISCO_OUT(PISCO_D3) p,
+                                 PISCO_OUT(double) theta, PISCO_OUT(double) phi) {
   if (quaternion) {
     pisco_rotation(pisco_quat_mul(b, offset_quat), theta_p, phi_p, p);
     pisco_direction_angles(p, theta, phi);
@@ -55,20 +77,20 @@ PISCO_FN void pisco_sample_frame(bool quaternion, bool offset, dvec4 b, dvec4 of
   }
   theta = b.x;
   phi = b.y;
-  const double ct = pisco_cos(b.x), st = pisco_sin(b.x);
-  const double cp = pisco_cos(b.y), sp = pisco_sin(b.y);
-  const double cs = pisco_cos(b.z), ss = pisco_sin(b.z);
-  const dvec3 th = dvec3(ct * cp, ct * sp, -st);
-  const dvec3 ph = dvec3(-sp, cp, 0.0lf);
-  theta_p = dvec3(cs * th.x + ss * ph.x, cs * th.y + ss * ph.y, cs * th.z + ss * ph.z);
-  phi_p = dvec3(-ss * th.x + cs * ph.x, -ss * th.y + cs * ph.y, -ss * th.z + cs * ph.z);
-  p = dvec3(st * cp, st * sp, ct);
+  const double ct = PISCO_COS(b.x), st = PISCO_SIN(b.x);
+  const double cp = PISCO_COS(b.y), sp = PISCO_SIN(b.y);
+  const double cs = PISCO_COS(b.z), ss = PISCO_SIN(b.z);
+  const PISCO_D3 th = PISCO_DVEC3(ct * cp, ct * sp, -st);
+  const PISCO_D3 ph = PISCO_DVEC3(-sp, cp, double(0));
+  theta_p = PISCO_DVEC3(cs * th.x + ss * ph.x, cs * th.y + ss * ph.y, cs * th.z + ss * ph.z);
+  phi_p = PISCO_DVEC3(-ss * th.x + cs * ph.x, -ss * th.y + cs * ph.y, -ss * th.z + cs * ph.z);
+  p = PISCO_DVEC3(st * cp, st * sp, ct);
   if (offset) {
-    dvec3 mx, my, mz;
+    PISCO_D3 mx, my, mz;
     pisco_rotation(offset_quat, mx, my, mz);
-    const dvec3 t = pisco_in_basis(mx, theta_p, phi_p, p);
-    const dvec3 f = pisco_in_basis(my, theta_p, phi_p, p);
-    const dvec3 d = pisco_in_basis(mz, theta_p, phi_p, p);
+    const PISCO_D3 t = pisco_in_basis(mx, theta_p, phi_p, p);
+    const PISCO_D3 f = pisco_in_basis(my, theta_p, phi_p, p);
+    const PISCO_D3 d = pisco_in_basis(mz, theta_p, phi_p, p);
     theta_p = t;
     phi_p = f;
     p = d;
@@ -76,7 +98,10 @@ PISCO_FN void pisco_sample_frame(bool quaternion, bool offset, dvec4 b, dvec4 of
   }
 }
 
-#else  // PISCO_FF
+#endif
+
+#ifndef PISCO_TEMPLATE_TEXT
+#if PISCO_FF
 
 #include "ff.glsl"
 
@@ -121,4 +146,5 @@ PISCO_FN void ff_sample_frame(bool offset, ffquat b, ffquat offset_quat, PISCO_O
 
 #endif
 
+#endif
 #endif
