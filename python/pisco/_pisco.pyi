@@ -57,7 +57,7 @@ class BackendInfo:
         """What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own host threads: `threads` applies), device_memory (bytes of the device auto picks; 0: host memory)."""
 
 def devices() -> list[BackendInfo]:
-    """The backends compiled in ('cpu', 'vulkan', 'cuda'), with availability and device or reason."""
+    """The backends compiled in ('cpu', 'simd', 'vulkan', 'cuda'), with availability and device or reason."""
 
 def offset_quat(xi: float, eta: float, gamma: float) -> Float64Array:
     """The offset quaternion (x, y, z, w) of focal-plane coordinates (xi, eta, gamma), radians."""

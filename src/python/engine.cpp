@@ -645,10 +645,12 @@ void bind_engine(nb::module_& m) {
                        "Engine(sky, beams, focal_plane, backend='auto', device='auto', chunk_samples=0,\n"
                        "       normalization='integral', threads=0, arithmetic='auto', unseen='error',\n"
                        "       quadrature='corrected')\n\n"
-                       "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'vulkan',\n"
-                       "'cuda' or 'auto' (the best present: pisco.devices()). device: an index or part of a name.\n"
-                       "arithmetic (vulkan): 'auto', 'float64' or 'float-float', the kernel's float64 work; 'auto'\n"
-                       "takes float-float on devices without float64.\n"
+                       "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'simd',\n"
+                       "'vulkan', 'cuda' or 'auto' (the best present: pisco.devices()). device (vulkan, cuda): an\n"
+                       "index or part of a name; simd: its instruction set. threads (cpu, simd): 0 for all.\n"
+                       "chunk_samples (vulkan, cuda): 0 fits the device. arithmetic (vulkan): 'auto', 'float64' or\n"
+                       "'float-float', the kernel's float64 work; 'auto' takes float-float on devices without float64.\n"
+                       "A setting other than its default for a named backend without it is a pisco.InputError.\n"
                        "unseen: the sky's UNSEEN pixels (a masked map): 'error' (the default: pisco.Error naming\n"
                        "their number and the first), 'zero' (taken as 0), or 'flag' (taken as 0, and\n"
                        "flag_samples() tells which samples' discs hold one).\n"
@@ -713,7 +715,7 @@ void bind_engine(nb::module_& m) {
            "Waits for submission `ticket` and every earlier one (all, without a ticket).")
       .def("close", &PyEngine::close, "Frees the engine (its device memory); later calls raise ValueError.")
       .def_prop_ro("closed", &PyEngine::closed)
-      .def_prop_ro("backend", &PyEngine::backend_name, "The backend in use ('cpu', 'vulkan', 'cuda').")
+      .def_prop_ro("backend", &PyEngine::backend_name, "The backend in use ('cpu', 'simd', 'vulkan', 'cuda').")
       .def_prop_ro("device", &PyEngine::device_name, "The device in use.")
       .def_prop_ro("sidelobe_nside", &PyEngine::sidelobe_nside,
                    "The NSIDE of the band-limited sky the split beams' outer parts are summed on (0: no split beam).")
