@@ -134,7 +134,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
     bool any = false;
     for (const detail::PreparedDetector& d : inputs_->detectors) {
       polar_cut_.push_back(detail::polar_cut(d.rho_max, sky.nside()));
-      const double z = d.offset.active ? d.offset.matrix.ez.z : 1.0;
+      const double z = d.offset.active ? detail::rotation_matrix(d.offset.quat).ez.z : 1.0;
       offset_angle_.push_back(std::acos(std::clamp(z, -1.0, 1.0)) + 1e-9);
       any = any || polar_cut_.back() > 0.0;
     }

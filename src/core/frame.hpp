@@ -80,7 +80,7 @@ PISCO_HD Vec3<double> quat_rotate(const Q4& q, const Vec3<double>& v) {
 }
 
 PISCO_HD SampleFrame<double> frame_with_zeta(const Vec3<double>& theta_p, const Vec3<double>& phi_p,
-                                                    const Vec3<double>& p, double cos_zeta, double sin_zeta) {
+                                             const Vec3<double>& p, double cos_zeta, double sin_zeta) {
   SampleFrame<double> f;
   f.theta_p = theta_p;
   f.phi_p = phi_p;
@@ -109,26 +109,24 @@ PISCO_HD double position_angle(const Vec3<double>& theta_p, double theta, double
   return atan2(along_phi, along_theta);
 }
 
-// A detector's offset as the kernels use it: its quaternion (composed with boresight quaternions)
-// and its rotation matrix (applied to bases from angles).
+// A detector's offset as the kernels use it: its quaternion, composed with boresight quaternions, and
+// whose rotation matrix turns bases from angles (pisco_sample_frame).
 struct DetectorOffset {
   bool active = false;  // false: on the boresight
   Q4 quat{0.0, 0.0, 0.0, 1.0};
-  Rotation matrix{{1.0, 0.0, 0.0}, {0.0, 1.0, 0.0}, {0.0, 0.0, 1.0}};
 };
 
 PISCO_HD DetectorOffset make_offset(const Q4& q) {
   DetectorOffset o;
   o.active = q.x != 0.0 || q.y != 0.0 || q.z != 0.0;
   o.quat = q;
-  o.matrix = rotation_matrix(q);
   return o;
 }
 
 // One sample's detector basis and line of sight (theta, phi in [0, 2 pi)) from boresight angles.
 // On the boresight the angles pass through untouched (phi wrapped), as they always have.
 PISCO_HD SampleFrame<double> angle_sample(double theta, double phi, double psi, const DetectorOffset& o,
-                                                 double cos_zeta, double sin_zeta, double& theta_out, double& phi_out) {
+                                          double cos_zeta, double sin_zeta, double& theta_out, double& phi_out) {
   Vec3<double> theta_p, phi_p, p;
   pisco_sample_frame(false, o.active, Q4{theta, wrap_phi(phi), psi, 0.0}, o.quat, theta_p, phi_p, p, theta_out, phi_out);
   return frame_with_zeta(theta_p, phi_p, p, cos_zeta, sin_zeta);
@@ -136,7 +134,7 @@ PISCO_HD SampleFrame<double> angle_sample(double theta, double phi, double psi, 
 
 // The same from a boresight quaternion: q = q_boresight q_offset, then the rotation's columns.
 PISCO_HD SampleFrame<double> quat_sample(const Q4& boresight, const DetectorOffset& o, double cos_zeta,
-                                                double sin_zeta, double& theta_out, double& phi_out) {
+                                         double sin_zeta, double& theta_out, double& phi_out) {
   Vec3<double> theta_p, phi_p, p;
   pisco_sample_frame(true, o.active, boresight, o.quat, theta_p, phi_p, p, theta_out, phi_out);
   return frame_with_zeta(theta_p, phi_p, p, cos_zeta, sin_zeta);
