@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""TOD fingerprints: every kernel path of every backend present, bit for bit, before and after a change.
+"""TOD and adjoint fingerprints: every kernel path of every backend present, bit for bit, before and
+after a change.
 
 A change that should move no number (a refactoring, a file moved) is checked by running
   tod_fingerprint.py record before.npz      (on the old build)
@@ -9,7 +10,9 @@ with the package importable (PYTHONPATH=build/python build/python-venv/bin/pytho
 skies without and with a 2.725 K monopole, a round (radial) and an elliptical (grid) beam, without and
 with a generic plate at the aperture, integral and per-sample normalization, two detectors (one off
 the boresight), pointing as angles and as quaternions, 400 samples of which 200 lie within 0.15 rad
-of the poles; on cpu, simd, vulkan (and vulkan in float-float). compare exits 1 when any array differs.
+of the poles; on cpu, simd, vulkan (and vulkan in float-float). Each TOD is also scattered back
+(engine.adjoint, on the backends that have it) and each detector's adjoint_diagonal taken: the maps
+are fingerprinted too. compare exits 1 when any array differs.
 """
 import sys
 
@@ -32,7 +35,9 @@ def record(path):
     angle = rng.uniform(0, 2 * np.pi, n)
     m0 = np.eye(4) * np.array([1, 1, -1, -1]) * 0.98 + rng.normal(0, 0.005, (4, 4))
     out = {}
-    backends = [b.name for b in pisco.devices() if b.available and b.name != "cuda"]
+    devices = [b for b in pisco.devices() if b.available and b.name != "cuda"]
+    backends = [b.name for b in devices]
+    adjoint = {b.name: b.capabilities["adjoint"] for b in devices}
     for mono in (0.0, 2.725):
         sky = pisco.Sky.from_maps([base[0] + mono, base[1], base[2], base[3]])
         beams = [pisco.Beamsor.gaussian(np.radians(8.0), np.radians(20.0)),
@@ -53,6 +58,11 @@ def record(path):
                                 key = f"m{mono}_b{bi}_{plate}_{norm}_{be}_{ar}_{d}"
                                 out[key + "_ang"] = e.convolve(d, theta, phi, psi, **kw)
                                 out[key + "_quat"] = e.convolve(d, boresight_quats=quats, **kw)
+                                if adjoint[be]:
+                                    out[key + "_adj_ang"] = e.adjoint(d, out[key + "_ang"], theta, phi, psi, **kw)
+                                    out[key + "_adj_quat"] = e.adjoint(d, out[key + "_quat"], boresight_quats=quats,
+                                                                       **kw)
+                                    out[key + "_diag"] = e.adjoint_diagonal(d, theta, phi, psi, **kw)
                             e.close()
     np.savez(path, **out)
     print(f"{path}: {len(out)} arrays ({', '.join(backends)})")

@@ -106,15 +106,19 @@ struct Window {
   struct Sample {
     SampleFrame<double> f;
     double value = 0.0;
-    std::size_t first = 0, count = 0;  // its ranges: entries [first, first + count) of `ranges`
-    std::array<double, 16> plate{};    // M(theta) behind an aperture plate
+    std::uint32_t first = 0, count = 0;  // its ranges: entries [first, first + count) of `ranges`
   };
   struct Row {
     std::uint32_t lo = 0, hi = 0;  // the ring's pixels [lo, hi) in the window
     std::size_t at = 0;            // where they start in `maps`
   };
   std::vector<Sample> samples;
-  std::vector<std::uint32_t> disc, ranges, offsets;
+  std::vector<std::array<double, 16>> plates;  // each sample's M(theta) behind an aperture plate
+  std::vector<std::uint32_t> disc;
+  // The samples' ranges (begin, end pairs, each within one ring) and each range's offset into the
+  // window; buffers, grown and never shrunk: `ranges_used` entries of `ranges` are the task's.
+  std::vector<std::uint32_t> ranges, offsets;
+  std::size_t ranges_used = 0;
   std::uint32_t ring0 = 0;  // the first row's ring
   std::vector<Row> rows;
   std::size_t size = 0;                     // pixels of all rows
@@ -277,10 +281,11 @@ class SimdBackend final : public Backend {
                           std::span<const double> tod, std::size_t begin, std::size_t end, bool plate,
                           Window& w) const {
     const PreparedSky& sky = in_->sky;
+    const RingEntry* const rings = sky.rings.data();
     w.samples.clear();
-    w.ranges.clear();
-    w.offsets.clear();
+    w.plates.clear();
     w.rows.clear();
+    w.ranges_used = 0;
     w.size = 0;
     std::uint64_t count = 0;
     std::uint32_t ring0 = std::numeric_limits<std::uint32_t>::max(), ring1 = 0;
@@ -292,47 +297,66 @@ class SimdBackend final : public Backend {
       double theta = 0.0, phi = 0.0;
       s.f = detector_frame(pointing, i, det, theta, phi);
       s.value = tod[i];
+      double m[16];
       if (plate)
         plate_at(&det.plate_mueller[0][0], std::cos(2 * pointing.plate_angle[i]), std::sin(2 * pointing.plate_angle[i]),
-                 s.plate.data());
-      const std::size_t c = simd::disc_ranges(kernel_, sky.rings.data(), ring_columns_, sky.nside, theta, phi,
-                                              det.rho_max, det.cos_rho_max, w.disc);
+                 m);
+      const std::size_t c = simd::disc_ranges(kernel_, rings, ring_columns_, sky.nside, theta, phi, det.rho_max,
+                                              det.cos_rho_max, w.disc);
       if (c == 0) continue;
       if (per_sample_) {  // the norm as the forward computes it (its float64 path)
-        const simd::SampleInput in{&s.f, w.disc.data(), c / 2, plate ? s.plate.data() : nullptr, false, true};
+        const simd::SampleInput in{&s.f, w.disc.data(), c / 2, plate ? m : nullptr, false, true};
         simd::SampleSums sums;
         simd::convolve_sample(kernel_, sky_, kd, in, sums);
         if (!(sums.norm > 0)) continue;
         s.value /= sums.norm;
       }
-      s.first = w.ranges.size();
-      std::uint32_t ring = ring_of(sky, w.disc[0]);
+      // The ranges are in increasing pixel order, so their rings are too: at most one a range and
+      // one a ring they span.
+      const std::uint32_t first_ring = ring_of(sky, w.disc[0]), last_ring = ring_of(sky, w.disc[c - 1] - 1);
+      const std::size_t most = c + 2 * std::size_t(last_ring - first_ring + 1);
+      if (w.ranges.size() < w.ranges_used + most) {
+        w.ranges.resize(std::max(w.ranges_used + most, 2 * w.ranges.size()));
+        w.offsets.resize(w.ranges.size() / 2);
+      }
+      std::uint32_t* out = w.ranges.data() + w.ranges_used;
+      std::uint32_t* out_ring = w.offsets.data() + w.ranges_used / 2;
+      std::uint32_t ring = first_ring, ring_end = rings[ring].first + rings[ring].count;
       for (std::size_t q = 0; q < c; q += 2) {
         std::uint32_t b = w.disc[q];
         const std::uint32_t e = w.disc[q + 1];
         count += e - b;
-        while (b >= sky.rings[ring].first + sky.rings[ring].count) ++ring;
+        while (b >= ring_end) {
+          ++ring;
+          ring_end = rings[ring].first + rings[ring].count;
+        }
         for (;;) {
-          const std::uint32_t stop = std::min(e, sky.rings[ring].first + sky.rings[ring].count);
-          w.ranges.push_back(b);
-          w.ranges.push_back(stop);
-          w.offsets.push_back(ring);
-          ring0 = std::min(ring0, ring);
-          ring1 = std::max(ring1, ring);
+          const std::uint32_t stop = std::min(e, ring_end);
+          out[0] = b;
+          out[1] = stop;
+          out += 2;
+          *out_ring++ = ring;
           if (stop == e) break;
           b = stop;
           ++ring;
+          ring_end = rings[ring].first + rings[ring].count;
         }
       }
-      s.count = w.ranges.size() - s.first;
+      ring0 = std::min(ring0, first_ring);
+      ring1 = std::max(ring1, last_ring);
+      s.first = std::uint32_t(w.ranges_used);
+      w.ranges_used = std::size_t(out - w.ranges.data());
+      s.count = std::uint32_t(w.ranges_used - s.first);
       w.samples.push_back(s);
+      if (plate) std::copy_n(m, 16, w.plates.emplace_back().data());
     }
     if (w.samples.empty()) return count;
     // The window: for each ring from ring0 to ring1, the pixels from the lowest to the highest any
     // range reaches, one row after the other.
     w.ring0 = ring0;
     w.rows.assign(ring1 - ring0 + 1, Window::Row{std::numeric_limits<std::uint32_t>::max(), 0, 0});
-    for (std::size_t r = 0; r < w.offsets.size(); ++r) {
+    const std::size_t n = w.ranges_used / 2;
+    for (std::size_t r = 0; r < n; ++r) {
       Window::Row& row = w.rows[w.offsets[r] - ring0];
       row.lo = std::min(row.lo, w.ranges[2 * r]);
       row.hi = std::max(row.hi, w.ranges[2 * r + 1]);
@@ -346,7 +370,7 @@ class SimdBackend final : public Backend {
       size += row.hi - row.lo + simd::window_gap;
     }
     // Pixel p of a range on ring k lands at p + offset = p - lo + at (modulo 2^32, as the kernel adds).
-    for (std::size_t r = 0; r < w.offsets.size(); ++r) {
+    for (std::size_t r = 0; r < n; ++r) {
       const Window::Row& row = w.rows[w.offsets[r] - ring0];
       w.offsets[r] = std::uint32_t(row.at) - row.lo;
     }
@@ -359,9 +383,10 @@ class SimdBackend final : public Backend {
     if (w.samples.empty()) return;
     // The whole window is this thread's: a range's last vector may add zeros into the next row.
     for (int c = 0; c < outputs; ++c) w.maps[c].assign(w.size, 0.0);
-    for (const Window::Sample& s : w.samples) {
+    for (std::size_t k = 0; k < w.samples.size(); ++k) {
+      const Window::Sample& s = w.samples[k];
       const simd::ScatterInput in{&s.f,    w.ranges.data() + s.first, w.offsets.data() + s.first / 2, s.count / 2,
-                                  plate ? s.plate.data() : nullptr,       s.value,  squares,  w.size,
+                                  plate ? w.plates[k].data() : nullptr,   s.value,  squares,  w.size,
                                   {w.maps[0].data(), w.maps[1].data(), w.maps[2].data(), w.maps[3].data()}};
       simd::scatter_sample(kernel_, sky_, kd, in);
     }

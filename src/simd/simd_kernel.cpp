@@ -485,10 +485,10 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
 
 // The adjoint of one sample: the forward's float32 geometry and weights, stokes_adjoint, and d times
 // each pixel's weights added to it in float64. In two passes over a chunk of the disc's pixels at a
-// time: first the ranges' unit vectors are laid end to end in a buffer and evaluated a whole vector at
-// a time (the last one padded), d times the weights stored as float64; then each range adds its
-// stretch of those products to its pixels, float64 vector by vector. A pixel's float32 weights do not
-// depend on the lane that computes them, so the maps are the same bits however the ranges are cut.
+// time: first the pixels are evaluated a whole vector at a time as the forward evaluates them, their
+// float32 weights stored by column; then each range adds d times its stretch of those weights to its
+// pixels, float64 vector by vector. A pixel's float32 weights do not depend on the lane that computes
+// them, so the maps are the same bits however the ranges are cut.
 template <bool Radial, int Columns, bool Plate>
 HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
   const DF df;
@@ -519,78 +519,124 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   const hn::Rebind<double, hn::Half<DF>> dd;
   const std::size_t H = hn::Lanes(dd);
   const auto dv = hn::Set(dd, d);
-  // The chunk: unit vectors (a vector of padding past the last), the products d a by column (half a
-  // vector of padding: a range's last float64 vector is loaded whole and masked), and the stretches of
-  // ranges it holds (the first one's place in the maps, its position in the chunk, pixels).
+  const hn::RebindToSigned<DF> di;
+  // Pass 1 evaluates the disc's pixels as the forward does: a range's whole vectors straight from the
+  // sky, the rest of it (fewer than N pixels) joined to a staging vector held in registers (rotated
+  // by the staging's fill and blended in), evaluated whenever it is full. Their float32 weights a go,
+  // by column, to two buffers: `whole` a vector after the other, `staged` one staging vector after the
+  // other (so that a range's rest, split between two staging vectors, lies in one stretch). Stretches
+  // of ranges (a place in the maps, a buffer, a position in it, pixels) record where. When a buffer
+  // is full, pass 2 adds d times each stretch's weights to its pixels.
   constexpr std::size_t chunk = 2 * max_lanes;
-  HWY_ALIGN float k[3][chunk + max_lanes];
-  HWY_ALIGN double products[4][chunk + max_lanes];
+  HWY_ALIGN float whole[4][chunk + max_lanes];
+  HWY_ALIGN float staged[4][chunk + max_lanes];
+  float* const whole_at[4] = {whole[0], whole[1], whole[2], whole[3]};
+  float* const staged_at[4] = {staged[0], staged[1], staged[2], staged[3]};
+  for (int c = 0; c < outputs; ++c) {  // the padding a stretch's last float64 vector reads
+    std::fill_n(whole[c] + chunk, max_lanes, 0.0f);
+    std::fill_n(staged[c] + chunk, max_lanes, 0.0f);
+  }
   struct Stretch {
     std::uint32_t entry, at, count;
+    bool staged;
   };
-  Stretch stretches[chunk];
-  std::size_t fill = 0, count = 0;
-  // Pass 2 for one stretch: its products added to its pixels, a float64 vector at a time (Mul, then
-  // Add in pass 1 and here: the same bits on every instruction set, with or without fused
-  // multiply-adds). The last vector's lanes past the stretch add zero to the pixels after it when
-  // those are the caller's own (below in.limit); otherwise it goes through a scratch copy of them.
+  constexpr std::size_t max_stretches = 2 * chunk;
+  Stretch stretches[max_stretches];
+  std::size_t whole_fill = 0, staged_fill = 0, count = 0, fill = 0;  // fill: the staging vector's lanes
+  // Pass 2 for one stretch: d times its weights (Mul, squared for the diagonal) added to its pixels,
+  // a float64 vector at a time (Mul, then Add: the same bits on every instruction set, with or
+  // without fused multiply-adds). A pixel's float32 weights do not depend on the lane that computes
+  // them, and each pixel of a disc is added once, so the order of the stretches changes no bit. The
+  // last vector's lanes past the stretch add zero to the pixels after it when those are the caller's
+  // own (below in.limit); otherwise it goes through a scratch copy of them.
+  auto product = [&](const float* from) {
+    auto v = hn::Mul(dv, hn::PromoteTo(dd, hn::LoadU(dh, from)));
+    return in.squares ? hn::Mul(v, v) : v;
+  };
   auto add = [&](const Stretch& s) {
-    for (int c = 0; c < outputs; ++c) {
-      double* map = in.maps[c] + s.entry;
-      const double* from = products[c] + s.at;
-      std::size_t j = 0;
-      for (; j + H <= s.count; j += H) hn::StoreU(hn::Add(hn::LoadU(dd, map + j), hn::LoadU(dd, from + j)), dd, map + j);
-      if (j == s.count) continue;
-      const std::size_t rest = s.count - j;
-      const auto v = hn::IfThenElseZero(hn::FirstN(dd, rest), hn::LoadU(dd, from + j));
-      if (s.entry + j + H <= in.limit) {
-        hn::StoreU(hn::Add(hn::LoadU(dd, map + j), v), dd, map + j);
-      } else {
-        HWY_ALIGN double scratch[max_lanes];
-        for (std::size_t l = 0; l < H; ++l) scratch[l] = l < rest ? map[j + l] : 0.0;
-        hn::Store(hn::Add(hn::Load(dd, scratch), v), dd, scratch);
-        for (std::size_t l = 0; l < rest; ++l) map[j + l] = scratch[l];
+    float* const* from = s.staged ? staged_at : whole_at;
+    std::size_t j = 0;
+    for (; j + H <= s.count; j += H)
+      for (int c = 0; c < outputs; ++c) {
+        double* map = in.maps[c] + s.entry + j;
+        hn::StoreU(hn::Add(hn::LoadU(dd, map), product(from[c] + s.at + j)), dd, map);
       }
+    if (j == s.count) return;
+    const std::size_t rest = s.count - j;
+    const auto live = hn::FirstN(dd, rest);
+    if (s.entry + j + H <= in.limit) {
+      for (int c = 0; c < outputs; ++c) {
+        double* map = in.maps[c] + s.entry + j;
+        hn::StoreU(hn::Add(hn::LoadU(dd, map), hn::IfThenElseZero(live, product(from[c] + s.at + j))), dd, map);
+      }
+      return;
+    }
+    for (int c = 0; c < outputs; ++c) {
+      double* map = in.maps[c] + s.entry + j;
+      HWY_ALIGN double scratch[max_lanes];
+      for (std::size_t l = 0; l < H; ++l) scratch[l] = l < rest ? map[l] : 0.0;
+      hn::Store(hn::Add(hn::Load(dd, scratch), hn::IfThenElseZero(live, product(from[c] + s.at + j))), dd, scratch);
+      for (std::size_t l = 0; l < rest; ++l) map[l] = scratch[l];
     }
   };
-  // Pass 1 for the chunk, then pass 2 for each of its stretches.
-  auto evaluate = [&] {
-    const std::size_t vectors = (fill + N - 1) / N;
-    for (int c = 0; c < 3; ++c) hn::StoreU(hn::Zero(df), df, k[c] + fill);  // the last vector's padding
-    for (std::size_t j = 0; j < vectors * N; j += N) {
-      const Vec4<F> a = weights(hn::Load(df, k[0] + j), hn::Load(df, k[1] + j), hn::Load(df, k[2] + j));
-      const VF columns[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
-      for (int c = 0; c < outputs; ++c) {
-        auto lower = hn::Mul(dv, hn::PromoteTo(dd, hn::LowerHalf(dh, columns[c])));
-        auto upper = hn::Mul(dv, hn::PromoteTo(dd, hn::UpperHalf(dh, columns[c])));
-        if (in.squares) {
-          lower = hn::Mul(lower, lower);
-          upper = hn::Mul(upper, upper);
-        }
-        hn::Store(lower, dd, products[c] + j);
-        hn::Store(upper, dd, products[c] + j + H);
-      }
-    }
-    for (std::size_t s = 0; s < count; ++s) add(stretches[s]);
-    fill = 0;
-    count = 0;
+  // The weights of one vector of pixels stored at `to` (by column).
+  auto evaluate = [&](const VF& kx, const VF& ky, const VF& kz, float (*to)[chunk + max_lanes], std::size_t at) {
+    const Vec4<F> a = weights(kx, ky, kz);
+    const VF columns[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
+    for (int c = 0; c < outputs; ++c) hn::Store(columns[c], df, to[c] + at);
   };
   const float* const unit[3] = {sky.kx, sky.ky, sky.kz};
+  VF stage[3], q[3];
+  for (int c = 0; c < 3; ++c) stage[c] = q[c] = hn::Zero(df);
+  // Pass 2 for every stretch so far; the staging vector's lanes so far (fill) evaluated first.
+  auto flush = [&] {
+    if (fill > 0) {
+      evaluate(stage[0], stage[1], stage[2], staged, staged_fill);
+      staged_fill += N;
+      fill = 0;
+    }
+    for (std::size_t s = 0; s < count; ++s) add(stretches[s]);
+    whole_fill = staged_fill = count = 0;
+  };
+  const hn::Vec<decltype(di)> iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t end = in.ranges[2 * r + 1];
-    for (std::size_t p = in.ranges[2 * r]; p < end;) {
-      const std::size_t take = std::min(end - p, chunk - fill);
-      // Whole vectors copied (the sky's arrays and the chunk are padded); the next stretch overwrites
-      // what lies past this one.
-      for (int c = 0; c < 3; ++c)
-        for (std::size_t j = 0; j < take; j += N) hn::StoreU(hn::LoadU(df, unit[c] + p + j), df, k[c] + fill + j);
-      stretches[count++] = {std::uint32_t(p + in.offsets[r]), std::uint32_t(fill), std::uint32_t(take)};
-      fill += take;
-      p += take;
-      if (fill == chunk) evaluate();
+    const std::uint32_t offset = in.offsets[r];
+    std::size_t p = in.ranges[2 * r];
+    for (; p + N <= end; p += N) {
+      if (whole_fill + N > chunk || count + 2 > max_stretches) flush();
+      Stretch* last = count ? &stretches[count - 1] : nullptr;
+      if (last && !last->staged && last->entry + last->count == std::uint32_t(p + offset) &&
+          last->at + last->count == whole_fill)
+        last->count += std::uint32_t(N);
+      else
+        stretches[count++] = {std::uint32_t(p + offset), std::uint32_t(whole_fill), std::uint32_t(N), false};
+      evaluate(hn::LoadU(df, unit[0] + p), hn::LoadU(df, unit[1] + p), hn::LoadU(df, unit[2] + p), whole, whole_fill);
+      whole_fill += N;
+    }
+    if (p == end) continue;
+    // The rest: lanes [fill, fill + rest) of this staging vector and the next, which follow each other
+    // in `staged`.
+    if (staged_fill + 2 * N > chunk || count + 2 > max_stretches) flush();
+    const std::size_t rest = end - p;
+    stretches[count++] = {std::uint32_t(p + offset), std::uint32_t(staged_fill + fill), std::uint32_t(rest), true};
+    const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
+    const MF keep = hn::FirstN(df, fill);
+    for (int c = 0; c < 3; ++c) {
+      const VF rotated = hn::TableLookupLanes(hn::LoadU(df, unit[c] + p), rotate);
+      q[c] = hn::IfThenElse(keep, stage[c], rotated);
+      stage[c] = rotated;
+    }
+    fill += rest;
+    if (fill >= N) {
+      evaluate(q[0], q[1], q[2], staged, staged_fill);
+      staged_fill += N;
+      fill -= N;
+    } else {
+      for (int c = 0; c < 3; ++c) stage[c] = q[c];
     }
   }
-  if (fill > 0) evaluate();
+  flush();
 #else
   HWY_ALIGN float out[4][max_lanes];
   for (std::size_t r = 0; r < in.range_count; ++r) {
