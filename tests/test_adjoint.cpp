@@ -343,6 +343,51 @@ TEST_P(Adjoint, MatchesTheReference) {
   }
 }
 
+// Wide discs at a high enough NSIDE make the simd backend's tasks smaller than 1024 samples (60 deg at
+// NSIDE 64: 815), so that a task's plan stays near 2 MiB: their maps are still the same bits on any
+// number of threads, and the reference's to the float32 bars.
+TEST(SimdAdjointWideDiscs, SmallerTasksKeepTheBitsAndTheReference) {
+  const std::string why = pisco_test::backend_unavailable("simd");
+  if (!why.empty()) GTEST_SKIP() << "simd: " << why;
+  const int nside = 64;
+  pisco::BeamOptions wide;
+  wide.rho_max = 60 * deg;
+  wide.cross_polar = 0.03;
+  wide.cross_polar_pattern = pisco::CrossPolarPattern::uniform;
+  pisco::FocalPlane fp;
+  fp.add({"wide", 10 * deg, 0.01, 1.0, 0});
+  pisco::Detector plate{"wide_plate", 35 * deg, 0.0, 1.0, 0};
+  plate.hwp = pisco::HalfWavePlate{pisco_test::generic_plate(), pisco::HwpPlacement::aperture, 0.2};
+  fp.add(plate);
+  const pisco::Sky sky = random_sky(nside, 5);
+  const std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(20 * deg, wide)};
+  const pisco::Pointing p = pisco_test::random_pointing(1500, 21);
+  const std::vector<double> h = plate_angles(p.size());
+  const auto run = [&](const std::string& backend, unsigned threads) {
+    pisco::EngineOptions o;
+    o.backend = backend;
+    o.cpu.threads = o.simd.threads = threads;
+    pisco::Engine engine(sky, beams, fp, o);
+    for (std::size_t det = 0; det < fp.size(); ++det)
+      engine.adjoint(det, p.view(), gaussian_tod(p.size(), 60 + det),
+                     fp[det].hwp ? std::span<const double>(h) : std::span<const double>());
+    pisco::Sky back(nside);
+    engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+    return back;
+  };
+  const pisco::Sky one = run("simd", 1), three = run("simd", 3), ref = run("cpu", 2);
+  for (int c = 0; c < 4; ++c) {
+    const auto a = one.stokes(pisco::StokesIndex(c)), b = three.stokes(pisco::StokesIndex(c)),
+               r = ref.stokes(pisco::StokesIndex(c));
+    for (std::size_t k = 0; k < a.size(); ++k) ASSERT_EQ(a[k], b[k]) << "IQUV"[c] << " pixel " << k;
+    const pisco_test::Stats st =
+        pisco_test::compare(std::vector<double>(r.begin(), r.end()), std::vector<double>(a.begin(), a.end()));
+    EXPECT_GT(st.rms_ref, 0.0) << "IQUV"[c];
+    EXPECT_LT(st.rms_err, 1e-5 * st.rms_ref) << "IQUV"[c];
+    EXPECT_EQ(st.non_finite, 0u);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, Adjoint, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
                          [](const auto& info) { return info.param; });
 

@@ -162,12 +162,28 @@ class SimdBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
-  // The adjoint (docs/physics.md, "The adjoint"): tasks of 1024 consecutive samples, each scattered
-  // whole by one thread into a window of its own (on each ring its discs touch, the pixels from the
-  // first to the last any of them reaches), then the windows added into the maps ring by ring, in
-  // the tasks' order, on all threads. Each pixel receives each task's sum of its samples (in their
-  // order), task after task: the same bits whatever the number of threads. Tasks come in waves of
-  // four a thread, and a wave's windows are filled and added in runs of tasks that fit in
+  // A task's plan (its samples' frames, ranges and offsets): about 12 bytes a range of the sample's
+  // disc, which crosses at most 3 rho NSIDE + 1 rings (their spacing in colatitude is 2 / (3 NSIDE)
+  // or more), one range each (two where it wraps round phi = 0, rarely).
+  static std::size_t plan_bytes_per_sample(double rho, std::int64_t nside) {
+    return sizeof(Window::Sample) + 3 * sizeof(std::uint32_t) * std::size_t(3.0 * rho * double(nside) + 4.0);
+  }
+  // Samples a task: 1024, or fewer (64 at least) where that keeps a task's plan near 2 MiB (wide discs
+  // at high NSIDE: 30 deg at NSIDE 1024 makes tasks of 107). A function of the disc alone, not of the
+  // threads, so that the maps are the same bits on any number of them.
+  static std::size_t adjoint_task_samples(double rho, std::int64_t nside) {
+    constexpr std::size_t plan_task_bytes = std::size_t(2) << 20;
+    return std::clamp<std::size_t>(plan_task_bytes / plan_bytes_per_sample(rho, nside), 64, 1024);
+  }
+  static constexpr std::size_t plan_budget = std::size_t(128) << 20;  // bytes of the plans of a wave
+
+  // The adjoint (docs/physics.md, "The adjoint"): tasks of consecutive samples (adjoint_task_samples),
+  // each scattered whole by one thread into a window of its own (on each ring its discs touch, the
+  // pixels from the first to the last any of them reaches), then the windows added into the maps
+  // ring by ring, in the tasks' order, on all threads. Each pixel receives each task's sum of its
+  // samples (in their order), task after task: the same bits whatever the number of threads. Tasks
+  // come in waves of four a thread (fewer, one a thread at least, where their plans would pass
+  // plan_budget: wide discs), and a wave's windows are filled and added in runs of tasks that fit in
   // window_budget together (one task at least). (Smaller tasks make larger windows in all: at 256
   // samples the windows' zeroing and adding cost 10% of the adjoint, at 1024 3%.)
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
@@ -180,10 +196,12 @@ class SimdBackend final : public Backend {
     const bool plate = det.plate == PreparedDetector::Plate::aperture;
     // Without U, V weights (two columns, no plate) the kernel leaves V alone (stokes_adjoint_iq).
     const int outputs = kd.columns == 2 && !plate ? 3 : 4;
-    constexpr std::size_t task_samples = 1024;
     constexpr std::size_t window_budget = std::size_t(256) << 20;  // bytes of windows held at once
+    const std::size_t task_samples = adjoint_task_samples(det.rho_max, sky.nside);
     const std::size_t tasks = (pointing.size() + task_samples - 1) / task_samples;
-    const std::size_t wave = std::max<std::size_t>(8, 4 * std::size_t(pool_.size()));
+    const std::size_t threads = pool_.size();
+    const std::size_t plans = plan_budget / (task_samples * plan_bytes_per_sample(det.rho_max, sky.nside));
+    const std::size_t wave = std::max(threads, std::min(std::max<std::size_t>(8, 4 * threads), plans));
     if (windows_.size() < wave) windows_.resize(wave);
     std::atomic<std::uint64_t> pixels{0};
     for (std::size_t w0 = 0; w0 < tasks; w0 += wave) {
