@@ -115,10 +115,14 @@ struct Window {
   std::vector<Sample> samples;
   std::vector<std::array<double, 16>> plates;  // each sample's M(theta) behind an aperture plate
   std::vector<std::uint32_t> disc;
-  // The samples' ranges (begin, end pairs, each within one ring) and each range's offset into the
-  // window; buffers, grown and never shrunk: `ranges_used` entries of `ranges` are the task's.
-  std::vector<std::uint32_t> ranges, offsets;
+  // The samples' ranges (begin, end pairs, each within one ring) and each range's ring; buffers,
+  // grown and never shrunk: `ranges_used` entries of `ranges` are the task's.
+  std::vector<std::uint32_t> ranges, rings;
   std::size_t ranges_used = 0;
+  // By ring (entry k for ring k): the pixels [lo, hi) the task's ranges reach on it while it is
+  // planned (lo = 2^32 - 1, hi = 0 where none, and again once laid out), and where its row starts, as
+  // the offset that takes a pixel of the ring to its place in the window (p + offset modulo 2^32).
+  std::vector<std::uint32_t> ring_lo, ring_hi, ring_offset;
   std::uint32_t ring0 = 0;  // the first row's ring
   std::vector<Row> rows;
   std::size_t size = 0;                     // pixels of all rows
@@ -162,7 +166,7 @@ class SimdBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
-  // A task's plan (its samples' frames, ranges and offsets): about 12 bytes a range of the sample's
+  // A task's plan (its samples' frames, ranges and their rings): about 12 bytes a range of the sample's
   // disc, which crosses at most 3 rho NSIDE + 1 rings (their spacing in colatitude is 2 / (3 NSIDE)
   // or more), one range each (two where it wraps round phi = 0, rarely).
   static std::size_t plan_bytes_per_sample(double rho, std::int64_t nside) {
@@ -305,10 +309,17 @@ class SimdBackend final : public Backend {
     w.rows.clear();
     w.ranges_used = 0;
     w.size = 0;
+    if (w.ring_lo.size() != sky.rings.size() + 1) {
+      w.ring_lo.assign(sky.rings.size() + 1, std::numeric_limits<std::uint32_t>::max());
+      w.ring_hi.assign(sky.rings.size() + 1, 0);
+      w.ring_offset.assign(sky.rings.size() + 1, 0);
+    }
+    std::uint32_t* const lo = w.ring_lo.data();
+    std::uint32_t* const hi = w.ring_hi.data();
     std::uint64_t count = 0;
     std::uint32_t ring0 = std::numeric_limits<std::uint32_t>::max(), ring1 = 0;
     // Each sample's frame, value and ranges, split where they cross from one ring to the next (only
-    // a polar cap does), with each range's ring in `offsets` until the window is laid out.
+    // a polar cap does), each range's ring, and each ring's reach.
     for (std::size_t i = begin; i < end; ++i) {
       if (tod[i] == 0.0) continue;
       Window::Sample s;
@@ -335,10 +346,10 @@ class SimdBackend final : public Backend {
       const std::size_t most = c + 2 * std::size_t(last_ring - first_ring + 1);
       if (w.ranges.size() < w.ranges_used + most) {
         w.ranges.resize(std::max(w.ranges_used + most, 2 * w.ranges.size()));
-        w.offsets.resize(w.ranges.size() / 2);
+        w.rings.resize(w.ranges.size() / 2);
       }
       std::uint32_t* out = w.ranges.data() + w.ranges_used;
-      std::uint32_t* out_ring = w.offsets.data() + w.ranges_used / 2;
+      std::uint32_t* out_ring = w.rings.data() + w.ranges_used / 2;
       std::uint32_t ring = first_ring, ring_end = rings[ring].first + rings[ring].count;
       for (std::size_t q = 0; q < c; q += 2) {
         std::uint32_t b = w.disc[q];
@@ -354,6 +365,8 @@ class SimdBackend final : public Backend {
           out[1] = stop;
           out += 2;
           *out_ring++ = ring;
+          lo[ring] = std::min(lo[ring], b);
+          hi[ring] = std::max(hi[ring], stop);
           if (stop == e) break;
           b = stop;
           ++ring;
@@ -370,27 +383,19 @@ class SimdBackend final : public Backend {
     }
     if (w.samples.empty()) return count;
     // The window: for each ring from ring0 to ring1, the pixels from the lowest to the highest any
-    // range reaches, one row after the other.
+    // range reaches, one row after the other, with a gap of a cache line after each
+    // (simd::window_gap): rows of whole rings of NSIDE 128 and more would otherwise lie a multiple of
+    // 4 KiB apart. Pixel p of ring k lands at p + offset = p - lo + at (modulo 2^32, as the kernel adds).
     w.ring0 = ring0;
-    w.rows.assign(ring1 - ring0 + 1, Window::Row{std::numeric_limits<std::uint32_t>::max(), 0, 0});
-    const std::size_t n = w.ranges_used / 2;
-    for (std::size_t r = 0; r < n; ++r) {
-      Window::Row& row = w.rows[w.offsets[r] - ring0];
-      row.lo = std::min(row.lo, w.ranges[2 * r]);
-      row.hi = std::max(row.hi, w.ranges[2 * r + 1]);
-    }
-    // A gap of a cache line after each row (simd::window_gap): rows of whole rings of NSIDE 128 and
-    // more would otherwise lie a multiple of 4 KiB apart.
+    w.rows.resize(ring1 - ring0 + 1);
     std::size_t size = 0;
-    for (Window::Row& row : w.rows) {
-      if (row.hi <= row.lo) row.lo = row.hi = 0;
-      row.at = size;
+    for (std::uint32_t k = ring0; k <= ring1; ++k) {
+      Window::Row& row = w.rows[k - ring0];
+      row = hi[k] > lo[k] ? Window::Row{lo[k], hi[k], size} : Window::Row{0, 0, size};
+      w.ring_offset[k] = std::uint32_t(row.at) - row.lo;
       size += row.hi - row.lo + simd::window_gap;
-    }
-    // Pixel p of a range on ring k lands at p + offset = p - lo + at (modulo 2^32, as the kernel adds).
-    for (std::size_t r = 0; r < n; ++r) {
-      const Window::Row& row = w.rows[w.offsets[r] - ring0];
-      w.offsets[r] = std::uint32_t(row.at) - row.lo;
+      lo[k] = std::numeric_limits<std::uint32_t>::max();
+      hi[k] = 0;
     }
     w.size = size;
     return count;
@@ -403,8 +408,8 @@ class SimdBackend final : public Backend {
     for (int c = 0; c < outputs; ++c) w.maps[c].assign(w.size, 0.0);
     for (std::size_t k = 0; k < w.samples.size(); ++k) {
       const Window::Sample& s = w.samples[k];
-      const simd::ScatterInput in{&s.f,    w.ranges.data() + s.first, w.offsets.data() + s.first / 2, s.count / 2,
-                                  plate ? w.plates[k].data() : nullptr,   s.value,  squares,  w.size,
+      const simd::ScatterInput in{&s.f,    w.ranges.data() + s.first, w.rings.data() + s.first / 2, w.ring_offset.data(),
+                                  s.count / 2, plate ? w.plates[k].data() : nullptr, s.value, squares, w.size,
                                   {w.maps[0].data(), w.maps[1].data(), w.maps[2].data(), w.maps[3].data()}};
       simd::scatter_sample(kernel_, sky_, kd, in);
     }

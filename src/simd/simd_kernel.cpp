@@ -601,7 +601,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   const hn::Vec<decltype(di)> iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t end = in.ranges[2 * r + 1];
-    const std::uint32_t offset = in.offsets[r];
+    const std::uint32_t offset = in.ring_offset[in.rings[r]];
     std::size_t p = in.ranges[2 * r];
     for (; p + N <= end; p += N) {
       if (whole_fill + N > chunk || count + 2 > max_stretches) flush();
@@ -649,7 +649,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       hn::Store(a.w.v, df, out[3]);
       for (int c = 0; c < outputs; ++c) {
         const double v = d * double(out[c][0]);
-        in.maps[c][std::uint32_t(p + in.offsets[r])] += in.squares ? v * v : v;
+        in.maps[c][std::uint32_t(p + in.ring_offset[in.rings[r]])] += in.squares ? v * v : v;
       }
     }
   }

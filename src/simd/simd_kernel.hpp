@@ -84,7 +84,7 @@ struct SampleSums {
 // The adjoint of one sample (docs/physics.md, "The adjoint"): its value d scattered onto the pixels
 // of its disc's ranges, each pixel's float32 weights (stokes_adjoint of the forward's own float32
 // evaluation) times d added in float64 to accumulators (the backend's task windows), structure of
-// arrays, pixel p of range r at p + offsets[r].
+// arrays, pixel p of range r (on ring k = rings[r]) at p + ring_offset[k].
 // The backend's task windows are laid out ring by ring with a gap after each row: rings of 4 nside
 // float64 pixels are a multiple of 4 KiB long from NSIDE 128 on, and a disc's ranges on consecutive
 // rings would otherwise fall on the same few sets of the processor's level-1 cache.
@@ -93,7 +93,8 @@ constexpr std::uint32_t window_gap = 8;  // float64s: a 64-byte cache line
 struct ScatterInput {
   const SampleFrame<double>* frame;
   const std::uint32_t* ranges;   // begin, end pairs of sky pixels, each within one ring
-  const std::uint32_t* offsets;  // each range's: pixel p is at maps[c][p + offset] (modulo 2^32)
+  const std::uint32_t* rings;        // each range's ring
+  const std::uint32_t* ring_offset;  // by ring: pixel p of that ring is at maps[c][p + offset] (modulo 2^32)
   std::size_t range_count;
   const double* plate;  // 16, row-major; null without an aperture plate
   double value;         // d (divided by its norm with the per-sample normalization)
