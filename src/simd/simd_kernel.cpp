@@ -107,6 +107,29 @@ HWY_INLINE SampleFrame<F> broadcast(const detail::SampleFrame<double>& fd) {
   return f;
 }
 
+// A range's rest (fewer than N pixels) joining the staging vector of the forward and the adjoint,
+// which holds `fill` lanes: each quantity of the rest is rotated by fill lanes (one table lookup) and
+// blended in. join() gives the staging vector completed with the rest's first lanes, and leaves in
+// `stage` the rest rotated, whose lanes turned round to the front are the overflow that starts the
+// next staging vector.
+class RestStaging {
+ public:
+  explicit RestStaging(std::size_t fill)
+      : rotate_(hn::IndicesFromVec(DF(), hn::And(hn::Sub(hn::Iota(DI(), 0), hn::Set(DI(), int(fill))),
+                                                   hn::Set(DI(), int(hn::Lanes(DF()) - 1))))),
+        keep_(hn::FirstN(DF(), fill)) {}
+  HWY_INLINE VF join(const VF& rest, VF& stage) const {
+    const VF rotated = hn::TableLookupLanes(rest, rotate_);
+    const VF joined = hn::IfThenElse(keep_, stage, rotated);
+    stage = rotated;
+    return joined;
+  }
+
+ private:
+  decltype(hn::IndicesFromVec(DF(), hn::Zero(DI()))) rotate_;
+  MF keep_;
+};
+
 HWY_INLINE void plate_columns(const double* m, Vec4<F> columns[4]) {
   for (int c = 0; c < 4; ++c) columns[c] = {F(float(m[c])), F(float(m[4 + c])), F(float(m[8 + c])), F(float(m[12 + c]))};
 }
@@ -235,7 +258,6 @@ HWY_INLINE void lookup_pairs(DD dd, const double* table, hn::Vec<hn::RebindToSig
 template <bool Radial, int Columns, bool Plate, bool Exact>
 HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
   const DF df;
-  const DI di;
   const std::size_t N = hn::Lanes(df);
   const detail::SampleFrame<double>& fd = *in.frame;
   const SampleFrame<F> f = broadcast(fd);
@@ -407,7 +429,6 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   for (int c = 0; c < 9; ++c) stage[c] = q[c] = zero;
   std::size_t fill = 0;
   const MF all = hn::FirstN(df, N);
-  const VI iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
     std::size_t p = begin;
@@ -423,14 +444,10 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
     if (p == end) continue;
     const std::size_t rest = end - p;
     if constexpr (Exact) exact(p, rest, xs, ys);
-    const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
-    const MF keep = hn::FirstN(df, fill);
+    const RestStaging staging(fill);
     for (int c = 0; c < staged; ++c) {
       if (c >= quantities && c < 7) continue;
-      const VF v = c < 7 ? hn::LoadU(df, columns[c] + p) : hn::Load(df, c == 7 ? xs : ys);
-      const VF rotated = hn::TableLookupLanes(v, rotate);
-      q[c] = hn::IfThenElse(keep, stage[c], rotated);
-      stage[c] = rotated;
+      q[c] = staging.join(c < 7 ? hn::LoadU(df, columns[c] + p) : hn::Load(df, c == 7 ? xs : ys), stage[c]);
     }
     fill += rest;
     if (fill >= N) {
@@ -519,10 +536,9 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   const hn::Rebind<double, hn::Half<DF>> dd;
   const std::size_t H = hn::Lanes(dd);
   const auto dv = hn::Set(dd, d);
-  const hn::RebindToSigned<DF> di;
   // Pass 1 evaluates the disc's pixels as the forward does: a range's whole vectors straight from the
-  // sky, the rest of it (fewer than N pixels) joined to a staging vector held in registers (rotated
-  // by the staging's fill and blended in), evaluated whenever it is full. Their float32 weights a go,
+  // sky, the rest of it (fewer than N pixels) joined to a staging vector held in registers
+  // (RestStaging), evaluated whenever it is full. Their float32 weights a go,
   // by column, to two buffers: `whole` a vector after the other, `staged` one staging vector after the
   // other (so that a range's rest, split between two staging vectors, lies in one stretch). Stretches
   // of ranges (a place in the maps, a buffer, a position in it, pixels) record where. When a buffer
@@ -598,7 +614,6 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     for (std::size_t s = 0; s < count; ++s) add(stretches[s]);
     whole_fill = staged_fill = count = 0;
   };
-  const hn::Vec<decltype(di)> iota = hn::Iota(di, 0), lane_bits = hn::Set(di, int(N - 1));
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t end = in.ranges[2 * r + 1];
     const std::uint32_t offset = in.ring_offset[in.rings[r]];
@@ -620,13 +635,8 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     if (staged_fill + 2 * N > chunk || count + 2 > max_stretches) flush();
     const std::size_t rest = end - p;
     stretches[count++] = {std::uint32_t(p + offset), std::uint32_t(staged_fill + fill), std::uint32_t(rest), true};
-    const auto rotate = hn::IndicesFromVec(df, hn::And(hn::Sub(iota, hn::Set(di, int(fill))), lane_bits));
-    const MF keep = hn::FirstN(df, fill);
-    for (int c = 0; c < 3; ++c) {
-      const VF rotated = hn::TableLookupLanes(hn::LoadU(df, unit[c] + p), rotate);
-      q[c] = hn::IfThenElse(keep, stage[c], rotated);
-      stage[c] = rotated;
-    }
+    const RestStaging staging(fill);
+    for (int c = 0; c < 3; ++c) q[c] = staging.join(hn::LoadU(df, unit[c] + p), stage[c]);
     fill += rest;
     if (fill >= N) {
       evaluate(q[0], q[1], q[2], staged, staged_fill);
