@@ -91,17 +91,6 @@ struct BoresightChunk {
   std::size_t size() const { return quaternions ? quats.size() : angles.size(); }
 };
 
-// A boresight chunk as the deconvolving map-maker replays it, for one detector.
-pisco::SurveyChunk survey_chunk(std::size_t detector, const BoresightChunk& b, std::span<const double> hwp_angle) {
-  pisco::SurveyChunk c;
-  c.detector = detector;
-  c.quaternions = b.quaternions;
-  c.angles = b.angles.view();
-  c.quats = pisco::QuatPointingView{b.quats};
-  c.hwp_angle = hwp_angle;
-  return c;
-}
-
 // The boresight pointing of the scan, produced chunk by chunk (a week of constant-elevation
 // scanning, a year of satellite scanning or a season's pointing file is never held in memory whole).
 class Boresight {
@@ -625,6 +614,60 @@ class ScanSource {
   std::size_t samples_ = 0;
 };
 
+// The pointing of a run's jobs (a detector's chunk), loaded only when it changes: a per-detector
+// file's detector read whole when the detector changes, the boresight's chunk filled when the time
+// span changes. Each load goes into the other of two buffers, so that the job before keeps its own
+// (JobStream's pending job): a job's views stay valid until the load after next.
+class JobPointing {
+ public:
+  JobPointing(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan) : c_(c), fp_(fp), scan_(scan) {}
+
+  // Job's pointing and its detector's plate angles (none without a plate); a per-detector file's
+  // plate angles are generated into `hwp`, which must outlive the views as well.
+  pisco::SurveyChunk load(const JobPlan::Span& job, std::vector<double>& hwp) {
+    const bool per_detector = scan_.per_detector();
+    const std::size_t key = per_detector ? job.detector : job.first;
+    if (key != loaded_) {
+      slot_ ^= 1;
+      if (per_detector) file_[slot_] = scan_.detector_pointing(job.detector);
+      else scan_.fill(job.first, job.count, bore_[slot_]);
+      loaded_ = key;
+    }
+    pisco::SurveyChunk chunk;
+    chunk.detector = job.detector;
+    const bool plate = fp_[job.detector].hwp.has_value();
+    if (per_detector) {
+      chunk.angles = file_[slot_].view().subspan(job.first, job.count);
+      if (plate) {
+        c_.hwp.stream.generate(job.first, job.count, hwp);
+        chunk.hwp_angle = hwp;
+      }
+    } else {
+      const BoresightChunk& b = bore_[slot_];
+      chunk.quaternions = b.quaternions;
+      chunk.angles = b.angles.view();
+      chunk.quats = pisco::QuatPointingView{b.quats};
+      if (plate) chunk.hwp_angle = b.hwp;
+    }
+    return chunk;
+  }
+
+ private:
+  const SimulationConfig& c_;
+  const FocalPlane& fp_;
+  const ScanSource& scan_;
+  std::array<BoresightChunk, 2> bore_;
+  std::array<pisco::Pointing, 2> file_;
+  std::size_t loaded_ = static_cast<std::size_t>(-1);  // the detector or the first sample loaded last
+  int slot_ = 1;
+};
+
+// Calls f with a job's pointing view, angles or quaternions.
+template <class F>
+decltype(auto) with_view(const pisco::SurveyChunk& chunk, F&& f) {
+  return chunk.quaternions ? f(chunk.quats) : f(chunk.angles);
+}
+
 // What the TOD streams into: the map-makers and the TOD file (each absent when not asked for).
 struct StreamSinks {
   pisco::BinnedMapmaker* binned = nullptr;
@@ -640,8 +683,8 @@ class JobStream {
  public:
   JobStream(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan, Engine& engine, StreamSinks sinks,
             bool flagging, std::size_t chunk, RunObserver& obs)
-      : c_(c), fp_(fp), scan_(scan), engine_(engine), sinks_(sinks), flagging_(flagging), obs_(obs),
-        modelled_(fp.detectors()) {
+      : c_(c), fp_(fp), engine_(engine), sinks_(sinks), flagging_(flagging), obs_(obs),
+        modelled_(fp.detectors()), pointing_(c, fp, scan) {
     for (auto& t : tod_) t.resize(chunk);
     // The detectors as the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in
     // place of the real one).
@@ -685,9 +728,9 @@ class JobStream {
 
  private:
   struct Job {
-    std::size_t detector = 0, first = 0, count = 0;
-    int bslot = 0;  // its boresight chunk
-    int slot = 0;   // its TOD buffer
+    std::size_t first = 0;
+    pisco::SurveyChunk chunk;  // its pointing and plate angles (JobPointing)
+    int slot = 0;              // its TOD buffer
     std::uint64_t ticket = 0;
   };
 
@@ -695,30 +738,19 @@ class JobStream {
     // Fault injection for the tests (docs/scaling.md): a process told to fails after its first job, as
     // one whose device or disk fails mid-run would.
     const bool inject_failure = cl.parallel() && cl.inject_failure();
-    std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
-    int bslot = 1;
     for (std::size_t i = plan.my_first; i < plan.my_end; ++i) {
-      const JobPlan::Span job = plan.at(i);
-      const std::size_t d = job.detector, off = job.first, n = job.count;
-      if (scan_.per_detector()) {
-        pisco::Pointing& ptg = file_pointing_[d % 2];
-        if (d != read_detector) ptg = scan_.detector_pointing(d);
-        read_detector = d;
-        submit(Job{d, off, n}, [&](std::span<double> t, std::span<const double> h) {
-          return engine_.submit(d, ptg.view().subspan(off, n), t, false, h);
-        });
-      } else {
-        if (off != filled_first) {  // a new time span: its boresight chunk, in the buffer not pending
-          bslot ^= 1;
-          scan_.fill(off, n, bore_[bslot]);
-          filled_first = off;
-        }
-        BoresightChunk& b = bore_[bslot];
-        submit(Job{d, off, n, bslot}, [&](std::span<double> t, std::span<const double> h) {
-          return b.quaternions ? engine_.submit(d, pisco::QuatPointingView{b.quats}, t, false, h)
-                               : engine_.submit(d, b.angles.view(), t, false, h);
-        });
-      }
+      const JobPlan::Span span = plan.at(i);
+      Job j;
+      j.first = span.first;
+      j.slot = next_slot_;
+      next_slot_ ^= 1;
+      j.chunk = pointing_.load(span, hwp_[j.slot]);
+      const std::span<double> t(tod_[j.slot].data(), span.count);
+      j.ticket = with_view(j.chunk, [&](const auto& view) {
+        return engine_.submit(span.detector, view, t, false, j.chunk.hwp_angle);
+      });
+      if (pending_) finish(*pending_);
+      pending_ = j;
       if (inject_failure && i > plan.my_first)
         throw pisco::Error("injected failure on rank " + std::to_string(cl.rank()) + " (PISCO_TEST_RANK_FAIL)");
       if ((i - plan.my_first + 1) % check_every == 0) {
@@ -729,58 +761,25 @@ class JobStream {
     if (pending_) finish(*pending_);
   }
 
-  template <class SubmitView>
-  void submit(Job j, SubmitView submit_view) {
-    j.slot = next_slot_;
-    next_slot_ ^= 1;
-    if (scan_.per_detector() && c_.hwp.enabled) c_.hwp.stream.generate(j.first, j.count, file_hwp_[j.slot]);
-    j.ticket = submit_view(std::span<double>(tod_[j.slot].data(), j.count), hwp_of(j));
-    if (pending_) finish(*pending_);
-    pending_ = j;
-  }
-
-  // The half-wave plate's angles of a job (empty for detectors without a plate).
-  std::span<const double> hwp_of(const Job& j) const {
-    if (!fp_[j.detector].hwp) return {};
-    return scan_.per_detector() ? std::span<const double>(file_hwp_[j.slot]) : std::span<const double>(bore_[j.bslot].hwp);
-  }
-
   // [sky] unseen = "flag": the samples whose disc holds an UNSEEN pixel.
-  template <class View>
-  std::span<const std::uint8_t> flag_samples(std::size_t detector, const View& boresight_view) {
-    flags_.resize(boresight_view.size());
-    flagged_ += engine_.flag_samples(detector, boresight_view, flags_);
+  std::span<const std::uint8_t> flag_samples(const pisco::SurveyChunk& chunk) {
+    flags_.resize(chunk.size());
+    flagged_ += with_view(chunk, [&](const auto& view) { return engine_.flag_samples(chunk.detector, view, flags_); });
     return std::span<const std::uint8_t>(flags_);
   }
 
   void finish(const Job& j) {
     engine_.wait(j.ticket);
-    const std::span<double> t(tod_[j.slot].data(), j.count);
-    const pisco::Detector& det = fp_[j.detector];
-    const bool per_detector = scan_.per_detector();
-    const BoresightChunk& b = bore_[j.bslot];
-    if (sinks_.binned || (sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights))) {
-      if (per_detector)
-        pisco::detector_pointing(file_pointing_[j.detector % 2].view().subspan(j.first, j.count), det.offset, own_);
-      else if (b.quaternions)
-        pisco::detector_pointing(pisco::QuatPointingView{b.quats}, det.offset, own_);
-      else
-        pisco::detector_pointing(b.angles.view(), det.offset, own_);
-    }
+    const pisco::SurveyChunk& chunk = j.chunk;
+    const std::size_t count = chunk.size();
+    const std::span<double> t(tod_[j.slot].data(), count);
+    if (sinks_.binned || (sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights)))
+      with_view(chunk, [&](const auto& view) { pisco::detector_pointing(view, fp_[chunk.detector].offset, own_); });
     const pisco::PointingView detector_view = own_.view();
     std::span<const std::uint8_t> fl;
-    if (flagging_) {
-      fl = per_detector ? flag_samples(j.detector, file_pointing_[j.detector % 2].view().subspan(j.first, j.count))
-           : b.quaternions ? flag_samples(j.detector, pisco::QuatPointingView{b.quats})
-                           : flag_samples(j.detector, b.angles.view());
-    }
-    if (sinks_.binned) sinks_.binned->add(modelled_[j.detector], detector_view, t, hwp_of(j), fl);
+    if (flagging_) fl = flag_samples(chunk);
+    if (sinks_.binned) sinks_.binned->add(modelled_[chunk.detector], detector_view, t, chunk.hwp_angle, fl);
     if (sinks_.deconvolver) {  // the right-hand side A^T d, chunk by chunk
-      pisco::SurveyChunk chunk = survey_chunk(j.detector, b, hwp_of(j));
-      if (per_detector) {
-        chunk.quaternions = false;
-        chunk.angles = file_pointing_[j.detector % 2].view().subspan(j.first, j.count);
-      }
       try {
         sinks_.deconvolver->add(chunk, t);
       } catch (const pisco::Error& e) {
@@ -788,32 +787,30 @@ class JobStream {
       }
     }
     if (sinks_.tod && c_.output.tod_weights) {  // the map-maker's weights of each sample
-      const std::span<const double> h = hwp_of(j);
-      weights_.resize(3 * j.count);
-      for (std::size_t i = 0; i < j.count; ++i) {
-        const std::array<double, 3> a = pisco::stokes_weights(modelled_[j.detector], detector_view.psi[i],
+      const std::span<const double> h = chunk.hwp_angle;
+      weights_.resize(3 * count);
+      for (std::size_t i = 0; i < count; ++i) {
+        const std::array<double, 3> a = pisco::stokes_weights(modelled_[chunk.detector], detector_view.psi[i],
                                                               h.empty() ? 0.0 : h[i]);
         std::copy(a.begin(), a.end(), weights_.begin() + std::ptrdiff_t(3 * i));
       }
     }
     if (sinks_.tod)
-      sinks_.tod->write(j.detector, j.first, t, c_.output.tod_pointing ? &detector_view : nullptr, fl,
+      sinks_.tod->write(chunk.detector, j.first, t, c_.output.tod_pointing ? &detector_view : nullptr, fl,
                         c_.output.tod_weights ? std::span<const double>(weights_) : std::span<const double>());
-    obs_.advance(j.count);
+    obs_.advance(count);
   }
 
   const SimulationConfig& c_;
   const FocalPlane& fp_;
-  const ScanSource& scan_;
   Engine& engine_;
   StreamSinks sinks_;
   bool flagging_;
   RunObserver& obs_;
   std::vector<pisco::Detector> modelled_;
+  JobPointing pointing_;
   std::array<std::vector<double>, 2> tod_;
-  std::array<BoresightChunk, 2> bore_;
-  std::array<pisco::Pointing, 2> file_pointing_;  // per-detector files: the detector's pointing, whole
-  std::array<std::vector<double>, 2> file_hwp_;   // per-detector files: a job's plate angles, by TOD buffer
+  std::array<std::vector<double>, 2> hwp_;  // per-detector files: a job's plate angles, by TOD buffer
   std::optional<Job> pending_;
   int next_slot_ = 0;
   pisco::Pointing own_;
@@ -826,32 +823,9 @@ class JobStream {
 // in order, a chunk at a time.
 void replay_survey(const JobPlan& plan, const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan,
                    const std::function<void(const pisco::SurveyChunk&)>& visit) {
-  std::size_t read_detector = static_cast<std::size_t>(-1), filled_first = static_cast<std::size_t>(-1);
-  BoresightChunk b;
-  std::vector<double> h;
-  pisco::Pointing ptg;
-  for (std::size_t i = plan.my_first; i < plan.my_end; ++i) {
-    const JobPlan::Span job = plan.at(i);
-    pisco::SurveyChunk chunk;
-    chunk.detector = job.detector;
-    if (scan.per_detector()) {
-      if (job.detector != read_detector) ptg = scan.detector_pointing(job.detector);
-      read_detector = job.detector;
-      chunk.angles = ptg.view().subspan(job.first, job.count);
-      if (fp[job.detector].hwp) {
-        c.hwp.stream.generate(job.first, job.count, h);
-        chunk.hwp_angle = h;
-      }
-    } else {
-      if (job.first != filled_first) {
-        scan.fill(job.first, job.count, b);
-        filled_first = job.first;
-      }
-      chunk = survey_chunk(job.detector, b, fp[job.detector].hwp ? std::span<const double>(b.hwp)
-                                                                  : std::span<const double>());
-    }
-    visit(chunk);
-  }
+  JobPointing pointing(c, fp, scan);
+  std::vector<double> hwp;
+  for (std::size_t i = plan.my_first; i < plan.my_end; ++i) visit(pointing.load(plan.at(i), hwp));
 }
 
 }  // namespace
