@@ -8,7 +8,7 @@
 #include "core/masked_sky.hpp"
 #include "core/poles.hpp"
 #include "core/prepared.hpp"
-#include "core/sidelobes.hpp"
+#include "beams/sidelobes.hpp"
 #include "core/text.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/error.hpp"
