@@ -343,6 +343,71 @@ TEST_P(Adjoint, MatchesTheReference) {
   }
 }
 
+// Engine::normal is convolve followed by adjoint of the same TOD: the same bits where it runs the two
+// passes (the reference and the device backends; simd on its float64 path, a sky whose monopole it
+// takes out; plates between the optics and the detector), and within float32 rounding where the simd
+// backend evaluates each disc once (its maps differ from the two passes' only in how the compiler
+// fuses the forward's multiply-adds). Every detector kind of adjoint_scene, samples across both
+// poles (the corrected quadrature's polar copy), angles and quaternions; a sky with a monopole and a
+// dipole, and the same sky with the monopole removed (the dipole kept), which simd sums in float32.
+TEST_P(Adjoint, NormalIsConvolveThenAdjoint) {
+  const pisco_test::Scene scene = adjoint_scene(16);
+  const pisco::Pointing p = pisco_test::random_pointing(500, 13);
+  std::vector<pisco::Quat> quats;
+  for (std::size_t i = 0; i < p.size(); ++i) quats.push_back(pisco::quat_from_pointing(p.theta[i], p.phi[i], p.psi[i]));
+  const std::vector<double> h = plate_angles(p.size());
+  pisco::Sky no_monopole = scene.sky;
+  double mean = 0;
+  for (double x : no_monopole.I()) mean += x / double(no_monopole.npix());
+  for (double& x : no_monopole.I()) x -= mean;
+  for (const bool monopole : {true, false}) {
+    const pisco::Sky& sky = monopole ? scene.sky : no_monopole;
+    const auto run = [&](bool fused, unsigned threads) {
+      pisco::EngineOptions o;
+      o.backend = GetParam();
+      o.cpu.threads = o.simd.threads = threads;
+      pisco::Engine engine(sky, scene.beams, scene.focal_plane, o);
+      for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
+        const std::span<const double> angles =
+            scene.focal_plane[det].hwp ? std::span<const double>(h) : std::span<const double>();
+        const auto each = [&](const auto& view) {
+          if (fused) {
+            engine.normal(det, view, angles);
+          } else {
+            std::vector<double> tod(p.size());
+            engine.convolve(det, view, tod, false, angles);
+            engine.adjoint(det, view, tod, angles);
+          }
+        };
+        if (det % 2 == 0) each(p.view());
+        else each(pisco::QuatPointingView{quats});
+      }
+      pisco::Sky back(16);
+      engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+      return back;
+    };
+    const pisco::Sky two = run(false, 2), one = run(true, 2), again = run(true, 3);
+    // Bits: where the engine runs the two passes, and across threads.
+    const bool same_bits = GetParam() != "simd" || monopole;
+    for (int c = 0; c < 4; ++c) {
+      const auto a = two.stokes(pisco::StokesIndex(c)), b = one.stokes(pisco::StokesIndex(c)),
+                 t = again.stokes(pisco::StokesIndex(c));
+      double largest = 0, worst = 0;
+      for (std::size_t k = 0; k < a.size(); ++k) {
+        ASSERT_EQ(b[k], t[k]) << (monopole ? "monopole sky, " : "") << "IQUV"[c] << " pixel " << k << ", 2 and 3 threads";
+        if (same_bits) ASSERT_EQ(a[k], b[k]) << (monopole ? "monopole sky, " : "") << "IQUV"[c] << " pixel " << k;
+        largest = std::max(largest, std::abs(a[k]));
+        worst = std::max(worst, std::abs(a[k] - b[k]));
+      }
+      std::cout << GetParam() << (monopole ? ", monopole sky, " : ", no monopole, ") << "IQUV"[c]
+                << ": largest |A^T A s| " << largest << ", normal - two passes at most " << worst << "\n";
+      EXPECT_GT(largest, 0.0);
+      EXPECT_LE(worst, 1e-5 * largest) << "IQUV"[c];
+    }
+  }
+}
+
+
 // Wide discs at a high enough NSIDE make the simd backend's tasks smaller than 1024 samples (60 deg at
 // NSIDE 64: 815), so that a task's plan stays near 2 MiB: their maps are still the same bits on any
 // number of threads, and the reference's to the float32 bars.

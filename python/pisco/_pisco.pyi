@@ -430,6 +430,21 @@ class Engine:
         hwp_angle: Float64Array | None = None,
     ) -> Float64Array:
         """The diagonal of A^T A for these samples, added into out ((4, npix)) or new zeros."""
+    def normal(
+        self,
+        detector: int | str,
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        out: Float64Array | None = None,
+        hwp_angle: Float64Array | None = None,
+    ) -> Float64Array:
+        """A^T A sky for these samples (adjoint of convolve of the engine's sky), added into out ((4, npix)) or new zeros.
+
+        One pass over each disc where the backend can (simd); the same result as convolve() then adjoint().
+        """
     def set_sky(self, sky: Sky) -> None:
         """Replaces the sky (the same NSIDE), keeping beams, detectors and options."""
     @property

@@ -39,6 +39,7 @@ std::uint64_t Backend::adjoint(std::size_t detector, const PointingInput&, std::
 }
 
 void Backend::take_adjoint(const std::array<std::span<double>, 4>&) {}
+bool Backend::normal(std::size_t, const PointingInput&, std::span<const double>, std::uint64_t&) { return false; }
 
 namespace {
 const BackendEntry& choose_backend(const std::string& name) {
@@ -509,6 +510,69 @@ void Engine::adjoint_diagonal(std::size_t detector, const QuatPointingView& bore
                               std::span<const double> hwp_angle) {
   const std::vector<double> ones(boresight.size(), 1.0);
   adjoint_view(detector, boresight, ones, hwp_angle, true);
+}
+
+template <class View>
+void Engine::normal_view(std::size_t detector, const View& boresight, std::span<const double> hwp_angle) {
+  std::vector<double> plate_angle;
+  check_submission("normal", detector, boresight, boresight.size(), hwp_angle, plate_angle);
+  wait();
+  const detail::PreparedDetector& det = inputs_->detectors.at(detector);
+  const bool split = !split_.empty() && split_[detector];
+  // The two passes, where a sample's value comes from more than one backend's sum (a split beam's
+  // outer part, a plate's four row detectors) or a backend has no normal pass.
+  const auto two_passes = [&] {
+    std::vector<double> tod(boresight.size());
+    convolve(detector, boresight, tod, false, hwp_angle);
+    adjoint_view(detector, boresight, tod, hwp_angle, false);
+  };
+  if (split || det.plate == detail::PreparedDetector::Plate::detector) return two_passes();
+  detail::PointingInput input = input_of(boresight);
+  if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
+  detail::PolarSamples polar_samples;
+  const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
+                                                                polar_cut_.at(detector), polar_samples);
+  if (polar) make_polar_backend();
+  // The samples near the poles are the polar copy's, the rest the main backend's, as convolve has them.
+  std::vector<double> main(boresight.size(), 1.0);
+  for (const std::size_t i : polar_samples.index) main[i] = 0.0;
+  std::uint64_t pixels = 0, polar_pixels = 0;
+  try {
+    // A backend without the pass has done nothing: the two passes then give every sample.
+    if (!backend_->normal(detector, input, main, pixels)) return two_passes();
+    adjoint_main_ = true;
+    if (polar) {
+      const detail::PointingInput turned = polar_samples.input();
+      const std::vector<double> all(turned.size(), 1.0);
+      if (!polar_backend_->normal(detector, turned, all, polar_pixels)) {
+        std::vector<double> tod(turned.size());
+        const std::uint64_t t = polar_ticket_++;
+        polar_backend_->submit(detector, turned, tod, false, t);
+        polar_pixels = polar_backend_->wait(t);
+        for (std::size_t k = 0; k < tod.size(); ++k)
+          if (!std::isfinite(tod[k]))
+            throw Error("sample " + std::to_string(polar_samples.index[k]) + " of the convolution is " +
+                        detail::number_text(tod[k]) + " (expected a finite value)");
+        polar_pixels += polar_backend_->adjoint(detector, turned, tod);
+      }
+      adjoint_polar_ = true;
+      polar_samples_ += polar_samples.index.size();
+    }
+  } catch (const detail::SubmissionError& e) {
+    throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
+  } catch (const Error& e) {
+    throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
+  }
+  pixels_ += pixels + polar_pixels;
+  samples_ += boresight.size();
+}
+
+void Engine::normal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle) {
+  normal_view(detector, boresight, hwp_angle);
+}
+
+void Engine::normal(std::size_t detector, const QuatPointingView& boresight, std::span<const double> hwp_angle) {
+  normal_view(detector, boresight, hwp_angle);
 }
 
 std::size_t Engine::npix() const noexcept { return inputs_->sky.npix; }

@@ -32,9 +32,9 @@ void axpy(Sky& y, double a, const Sky& x) {
 
 StokesMaps maps_of(Sky& s) { return {s.I(), s.Q(), s.U(), s.V()}; }
 
-void convolve_chunk(Engine& engine, const SurveyChunk& c, std::span<double> tod) {
-  if (c.quaternions) engine.convolve(c.detector, c.quats, tod, false, c.hwp_angle);
-  else engine.convolve(c.detector, c.angles, tod, false, c.hwp_angle);
+void normal_chunk(Engine& engine, const SurveyChunk& c) {
+  if (c.quaternions) engine.normal(c.detector, c.quats, c.hwp_angle);
+  else engine.normal(c.detector, c.angles, c.hwp_angle);
 }
 
 void adjoint_chunk(Engine& engine, const SurveyChunk& c, std::span<const double> tod) {
@@ -110,16 +110,12 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
   const double bb = dot(b, b);
   DeconvolvedMaps out;
   out.nside = nside;
-  // q = (A^T A + lambda) p: the survey convolved with the sky p, then its adjoint.
-  std::vector<double> tod;
+  // q = (A^T A + lambda) p: the survey convolved with the sky p, then its adjoint (Engine::normal:
+  // in one pass over each disc where the backend can).
   double lambda = 0.0;
   const auto apply = [&](const Sky& in, Sky& result) {
     engine_.set_sky(in);
-    survey([&](const SurveyChunk& c) {
-      tod.resize(c.size());
-      convolve_chunk(engine_, c, tod);
-      adjoint_chunk(engine_, c, tod);
-    });
+    survey([&](const SurveyChunk& c) { normal_chunk(engine_, c); });
     for (int k = 0; k < 4; ++k)
       for (double& v : result.stokes(StokesIndex(k))) v = 0.0;
     take(result);

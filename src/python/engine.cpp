@@ -259,15 +259,17 @@ class PyEngine {
     return result;
   }
 
-  // A^T tod of one detector, added into `out` ((4, npix) float64: I, Q, U, V), or into new zeros.
+  // A^T tod of one detector (Scatter::adjoint), the diagonal of A^T A (diagonal) or A^T A s for the
+  // engine's sky s (normal), added into `out` ((4, npix) float64: I, Q, U, V), or into new zeros.
+  enum class Scatter { adjoint, diagonal, normal };
   nb::object adjoint(nb::handle detector, nb::handle tod_arg, nb::handle theta, nb::handle phi, nb::handle psi,
-                     nb::handle quats, nb::handle out, nb::handle hwp_angle, bool diagonal) {
+                     nb::handle quats, nb::handle out, nb::handle hwp_angle, Scatter what) {
     const std::size_t d = detector_index(detector);
-    const char* call = diagonal ? "adjoint_diagonal" : "adjoint";
+    const char* call = what == Scatter::diagonal ? "adjoint_diagonal" : what == Scatter::normal ? "normal" : "adjoint";
     const PointingArgs p = pointing_args(theta, phi, psi, quats, call);
     const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
     std::optional<ConstVector> tod;
-    if (!diagonal) {
+    if (what == Scatter::adjoint) {
       tod = const_vector(tod_arg, "tod");
       if (tod->shape(0) != p.size)
         throw nb::value_error(("adjoint: tod has " + std::to_string(tod->shape(0)) + " samples, but the pointing has " +
@@ -300,9 +302,12 @@ class PyEngine {
         std::lock_guard lock(mutex_);
         Engine& e = open();
         try {
-          if (diagonal) {
+          if (what == Scatter::diagonal) {
             if (p.theta) e.adjoint_diagonal(d, p.angles(), span_of(h));
             else e.adjoint_diagonal(d, p.quaternions(), span_of(h));
+          } else if (what == Scatter::normal) {
+            if (p.theta) e.normal(d, p.angles(), span_of(h));
+            else e.normal(d, p.quaternions(), span_of(h));
           } else {
             const std::span<const double> t{tod->data(), p.size};
             if (p.theta) e.adjoint(d, p.angles(), t, span_of(h));
@@ -678,7 +683,7 @@ void bind_engine(nb::module_& m) {
       .def("adjoint",
            [](PyEngine& e, nb::handle detector, nb::handle tod, nb::handle theta, nb::handle phi, nb::handle psi,
               nb::handle quats, nb::handle out, nb::handle hwp) {
-             return e.adjoint(detector, tod, theta, phi, psi, quats, out, hwp, false);
+             return e.adjoint(detector, tod, theta, phi, psi, quats, out, hwp, PyEngine::Scatter::adjoint);
            },
            "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
            "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
@@ -690,12 +695,22 @@ void bind_engine(nb::module_& m) {
       .def("adjoint_diagonal",
            [](PyEngine& e, nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
               nb::handle out, nb::handle hwp) {
-             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, true);
+             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, PyEngine::Scatter::diagonal);
            },
            "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
            "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
            "The diagonal of A^T A for these samples (squared scatter weights per pixel and Stokes parameter),\n"
            "added into out ((4, npix)) or new zeros: a preconditioner for iterative map-making.")
+      .def("normal",
+           [](PyEngine& e, nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
+              nb::handle out, nb::handle hwp) {
+             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, PyEngine::Scatter::normal);
+           },
+           "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
+           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "A^T A sky for these samples: adjoint(convolve(...)) of the engine's sky (set_sky's), added into\n"
+           "out ((4, npix)) or new zeros; one pass over each disc where the backend can (simd), the same\n"
+           "result as the two calls. An iterative map-maker's step.")
       .def("set_sky", &PyEngine::set_sky, "sky"_a,
            "Replaces the sky (the same NSIDE), keeping beams, detectors and options.")
       .def_prop_ro("npix", [](PyEngine& e) { return e.npix(); }, "Pixels of the engine's sky (12 NSIDE^2).")

@@ -107,6 +107,7 @@ struct Window {
     SampleFrame<double> f;
     double value = 0.0;
     std::uint32_t first = 0, count = 0;  // its ranges: entries [first, first + count) of `ranges`
+    std::uint32_t pixels = 0;            // its disc's
   };
   struct Row {
     std::uint32_t lo = 0, hi = 0;  // the ring's pixels [lo, hi) in the window
@@ -127,6 +128,7 @@ struct Window {
   std::vector<Row> rows;
   std::size_t size = 0;                     // pixels of all rows
   std::array<std::vector<double>, 4> maps;  // I, Q, U, V
+  std::vector<float> scratch;               // the normal pass's (simd::normal_scratch_floats)
   std::size_t bytes(int outputs) const { return samples.empty() ? 0 : size * sizeof(double) * std::size_t(outputs); }
 };
 
@@ -192,6 +194,27 @@ class SimdBackend final : public Backend {
   // samples the windows' zeroing and adding cost 10% of the adjoint, at 1024 3%.)
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override {
+    return scatter(detector, pointing, tod, squares ? Pass::squares : Pass::adjoint);
+  }
+
+  // The normal pass: the adjoint's tasks and windows, each selected sample's value its own forward
+  // value, summed by the scatter kernel from the weights it scatters (ScatterInput::normal). Not on
+  // the float64 path (a monopole or the per-sample normalization): that one sums the forward in
+  // other arithmetic, and the engine convolves and scatters in two passes instead.
+  bool normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select,
+              std::uint64_t& pixels) override {
+    if (exact_) return false;
+    pixels = scatter(detector, pointing, select, Pass::normal);
+    return true;
+  }
+
+  void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(adjoint_, maps); }
+
+ private:
+  enum class Pass { adjoint, squares, normal };
+
+  std::uint64_t scatter(std::size_t detector, const PointingInput& pointing, std::span<const double> tod, Pass pass) {
+    const bool squares = pass == Pass::squares, normal = pass == Pass::normal;
     const PreparedDetector& det = in_->detectors.at(detector);
     const KernelDetector& kd = tables_.at(detector).view;
     const PreparedSky& sky = in_->sky;
@@ -222,7 +245,7 @@ class SimdBackend final : public Backend {
         while (g1 < count && (g1 == g0 || bytes + windows_[g1].bytes(outputs) <= window_budget))
           bytes += windows_[g1++].bytes(outputs);
         pool_.parallel_for(g1 - g0, 1, [&](std::size_t t0, std::size_t t1) {
-          for (std::size_t t = g0 + t0; t < g0 + t1; ++t) fill_task(kd, plate, outputs, squares, windows_[t]);
+          for (std::size_t t = g0 + t0; t < g0 + t1; ++t) fill_task(kd, plate, outputs, squares, normal, windows_[t]);
         });
         add_windows(g0, g1, outputs);
         // A window far above its share of the budget gives its memory back.
@@ -260,9 +283,6 @@ class SimdBackend final : public Backend {
     });
   }
 
-  void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(adjoint_, maps); }
-
- private:
   // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).
   void pack_sky(const SkyView& sky) {
     const std::size_t npix = sky.npix();
@@ -351,6 +371,7 @@ class SimdBackend final : public Backend {
       std::uint32_t* out = w.ranges.data() + w.ranges_used;
       std::uint32_t* out_ring = w.rings.data() + w.ranges_used / 2;
       std::uint32_t ring = first_ring, ring_end = rings[ring].first + rings[ring].count;
+      const std::uint64_t before = count;
       for (std::size_t q = 0; q < c; q += 2) {
         std::uint32_t b = w.disc[q];
         const std::uint32_t e = w.disc[q + 1];
@@ -378,6 +399,7 @@ class SimdBackend final : public Backend {
       s.first = std::uint32_t(w.ranges_used);
       w.ranges_used = std::size_t(out - w.ranges.data());
       s.count = std::uint32_t(w.ranges_used - s.first);
+      s.pixels = std::uint32_t(count - before);
       w.samples.push_back(s);
       if (plate) std::copy_n(m, 16, w.plates.emplace_back().data());
     }
@@ -401,16 +423,30 @@ class SimdBackend final : public Backend {
     return count;
   }
 
-  // One adjoint task's scatter into its window, zeroed first.
-  void fill_task(const KernelDetector& kd, bool plate, int outputs, bool squares, Window& w) const {
+  // One adjoint task's scatter into its window, zeroed first (with `normal`, the normal pass's).
+  void fill_task(const KernelDetector& kd, bool plate, int outputs, bool squares, bool normal, Window& w) const {
     if (w.samples.empty()) return;
     // The whole window is this thread's: a range's last vector may add zeros into the next row.
     for (int c = 0; c < outputs; ++c) w.maps[c].assign(w.size, 0.0);
+    if (normal) {  // room for the task's largest disc
+      std::size_t pixels = 0, ranges = 0;
+      for (const Window::Sample& s : w.samples) {
+        pixels = std::max<std::size_t>(pixels, s.pixels);
+        ranges = std::max<std::size_t>(ranges, s.count / 2);
+      }
+      if (w.scratch.size() < simd::normal_scratch_floats(pixels, ranges))
+        w.scratch.resize(simd::normal_scratch_floats(pixels, ranges));
+    }
     for (std::size_t k = 0; k < w.samples.size(); ++k) {
       const Window::Sample& s = w.samples[k];
-      const simd::ScatterInput in{&s.f,    w.ranges.data() + s.first, w.rings.data() + s.first / 2, w.ring_offset.data(),
-                                  s.count / 2, plate ? w.plates[k].data() : nullptr, s.value, squares, w.size,
-                                  {w.maps[0].data(), w.maps[1].data(), w.maps[2].data(), w.maps[3].data()}};
+      simd::ScatterInput in{&s.f,    w.ranges.data() + s.first, w.rings.data() + s.first / 2, w.ring_offset.data(),
+                            s.count / 2, plate ? w.plates[k].data() : nullptr, s.value, squares, w.size,
+                            {w.maps[0].data(), w.maps[1].data(), w.maps[2].data(), w.maps[3].data()}};
+      if (normal) {
+        in.normal = true;
+        in.pixels = s.pixels;
+        in.scratch = w.scratch.data();
+      }
       simd::scatter_sample(kernel_, sky_, kd, in);
     }
   }

@@ -514,15 +514,28 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   if constexpr (Plate) plate_columns(in.plate, mcols);
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step)};
-  const double d = in.value;
+  double d = in.value;
   // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
   constexpr bool iq = Columns == 2 && !Plate;
   constexpr int outputs = iq ? 3 : 4;
-  // The adjoint weights of a vector of pixels (unit vectors k); the fourth is zero where iq.
-  auto weights = [&](const VF& kx, const VF& ky, const VF& kz) {
+  // The normal pass (ScatterInput::normal): d is the forward's sum of the same pixels, summed here
+  // as Sample sums it (Kahan-compensated float32 lanes), from the sky's I - I0, Q, U (and V where a
+  // weight multiplies it).
+  const bool normal = in.normal;
+  constexpr int stokes_in = (Columns == 4 || Plate) ? 4 : 3;
+  F sum(hn::Zero(df)), carry(hn::Zero(df));
+  // The adjoint weights of a vector of pixels (unit vectors k); the fourth is zero where iq. With S
+  // (the normal pass), the forward's response of the lanes in `live` joins the sum.
+  auto weights = [&](const VF& kx, const VF& ky, const VF& kz, const VF* S = nullptr, MF live = MF()) {
     const PixelGeometry<F> g = pixel_geometry(f, Vec3<F>{F(kx), F(ky), F(kz)});
     Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
     if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
+    if (S) {
+      const Vec4<F> stokes{F(S[0]), F(S[1]), F(S[2]), F(stokes_in == 4 ? S[3] : hn::Zero(df))};
+      const F response = iq ? stokes_response_iq(w, g.cos2chi, g.sin2chi, stokes)
+                            : stokes_response(w, g.cos2chi, g.sin2chi, stokes);
+      kahan_add(sum, carry, F(hn::IfThenElseZero(live, response.v)));
+    }
     if constexpr (iq) {
       const Vec3<F> a = stokes_adjoint_iq(w, g.cos2chi, g.sin2chi);
       return Vec4<F>{a.x, a.y, a.z, F(0.0f)};
@@ -535,7 +548,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   const hn::Half<DF> dh;
   const hn::Rebind<double, hn::Half<DF>> dd;
   const std::size_t H = hn::Lanes(dd);
-  const auto dv = hn::Set(dd, d);
+  auto dv = hn::Set(dd, d);
   // Pass 1 evaluates the disc's pixels as the forward does: a range's whole vectors straight from the
   // sky, the rest of it (fewer than N pixels) joined to a staging vector held in registers
   // (RestStaging), evaluated whenever it is full. Their float32 weights a go,
@@ -543,21 +556,32 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   // other (so that a range's rest, split between two staging vectors, lies in one stretch). Stretches
   // of ranges (a place in the maps, a buffer, a position in it, pixels) record where. When a buffer
   // is full, pass 2 adds d times each stretch's weights to its pixels.
-  constexpr std::size_t chunk = 2 * max_lanes;
-  HWY_ALIGN float whole[4][chunk + max_lanes];
-  HWY_ALIGN float staged[4][chunk + max_lanes];
-  float* const whole_at[4] = {whole[0], whole[1], whole[2], whole[3]};
-  float* const staged_at[4] = {staged[0], staged[1], staged[2], staged[3]};
-  for (int c = 0; c < outputs; ++c) {  // the padding a stretch's last float64 vector reads
-    std::fill_n(whole[c] + chunk, max_lanes, 0.0f);
-    std::fill_n(staged[c] + chunk, max_lanes, 0.0f);
-  }
+  // The normal pass keeps the whole disc's weights (in.scratch: normal_scratch_floats), since d is
+  // known only once every pixel is evaluated.
   struct Stretch {
-    std::uint32_t entry, at, count;
-    bool staged;
+    std::uint32_t entry, at, count, staged;
   };
-  constexpr std::size_t max_stretches = 2 * chunk;
-  Stretch stretches[max_stretches];
+  std::size_t chunk = 2 * max_lanes;
+  HWY_ALIGN float whole[4][2 * max_lanes + max_lanes];
+  HWY_ALIGN float staged[4][2 * max_lanes + max_lanes];
+  Stretch own_stretches[4 * max_lanes];
+  float* whole_at[4] = {whole[0], whole[1], whole[2], whole[3]};
+  float* staged_at[4] = {staged[0], staged[1], staged[2], staged[3]};
+  Stretch* stretches = own_stretches;
+  std::size_t max_stretches = 2 * chunk;
+  if (normal) {
+    chunk = in.pixels + 2 * max_lanes;
+    const std::size_t column = (chunk + max_lanes + 15) & ~std::size_t(15);  // 64-byte aligned columns
+    float* at = reinterpret_cast<float*>((reinterpret_cast<std::uintptr_t>(in.scratch) + 63) & ~std::uintptr_t(63));
+    for (int c = 0; c < 4; ++c, at += column) whole_at[c] = at;
+    for (int c = 0; c < 4; ++c, at += column) staged_at[c] = at;
+    stretches = reinterpret_cast<Stretch*>(at);
+    max_stretches = 2 * in.range_count + 2;
+  }
+  for (int c = 0; c < outputs; ++c) {  // the padding a stretch's last float64 vector reads
+    std::fill_n(whole_at[c] + chunk, max_lanes, 0.0f);
+    std::fill_n(staged_at[c] + chunk, max_lanes, 0.0f);
+  }
   std::size_t whole_fill = 0, staged_fill = 0, count = 0, fill = 0;  // fill: the staging vector's lanes
   // Pass 2 for one stretch: d times its weights (Mul, squared for the diagonal) added to its pixels,
   // a float64 vector at a time (Mul, then Add: the same bits on every instruction set, with or
@@ -570,7 +594,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     return in.squares ? hn::Mul(v, v) : v;
   };
   auto add = [&](const Stretch& s) {
-    float* const* from = s.staged ? staged_at : whole_at;
+    float* const* from = s.staged ? staged_at : whole_at;  // NOLINT
     std::size_t j = 0;
     for (; j + H <= s.count; j += H)
       for (int c = 0; c < outputs; ++c) {
@@ -595,21 +619,34 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       for (std::size_t l = 0; l < rest; ++l) map[l] = scratch[l];
     }
   };
-  // The weights of one vector of pixels stored at `to` (by column).
-  auto evaluate = [&](const VF& kx, const VF& ky, const VF& kz, float (*to)[chunk + max_lanes], std::size_t at) {
-    const Vec4<F> a = weights(kx, ky, kz);
+  // The weights of one vector of pixels (q: kx, ky, kz, then the normal pass's I - I0, Q, U, V)
+  // stored at `to` (by column).
+  const MF all = hn::FirstN(df, N);
+  auto evaluate = [&](const VF* v, MF live, float* const* to, std::size_t at) {
+    const Vec4<F> a = weights(v[0], v[1], v[2], normal ? v + 3 : nullptr, live);
     const VF columns[4] = {a.x.v, a.y.v, a.z.v, a.w.v};
     for (int c = 0; c < outputs; ++c) hn::Store(columns[c], df, to[c] + at);
   };
-  const float* const unit[3] = {sky.kx, sky.ky, sky.kz};
-  VF stage[3], q[3];
-  for (int c = 0; c < 3; ++c) stage[c] = q[c] = hn::Zero(df);
-  // Pass 2 for every stretch so far; the staging vector's lanes so far (fill) evaluated first.
+  const float* const unit[7] = {sky.kx, sky.ky, sky.kz, sky.i, sky.q, sky.u, sky.v};
+  const int quantities = normal ? 3 + stokes_in : 3;
+  VF stage[7], q[7];
+  for (int c = 0; c < 7; ++c) stage[c] = q[c] = hn::Zero(df);
+  // Pass 2 for every stretch so far; the staging vector's lanes so far (fill) evaluated first. The
+  // normal pass flushes once, at the end of the disc, and takes d from its sum first, as the forward
+  // does (its lanes' compensated totals added in float64 in lane order).
   auto flush = [&] {
     if (fill > 0) {
-      evaluate(stage[0], stage[1], stage[2], staged, staged_fill);
+      evaluate(stage, hn::FirstN(df, fill), staged_at, staged_fill);
       staged_fill += N;
       fill = 0;
+    }
+    if (normal) {
+      HWY_ALIGN float totals[max_lanes];
+      hn::Store(hn::Sub(sum.v, carry.v), df, totals);
+      double total = 0.0;
+      for (std::size_t l = 0; l < N; ++l) total += double(totals[l]);
+      d = total + sky.monopole * 0.0;  // the forward's d without the float64 path (no monopole term)
+      dv = hn::Set(dd, d);
     }
     for (std::size_t s = 0; s < count; ++s) add(stretches[s]);
     whole_fill = staged_fill = count = 0;
@@ -625,8 +662,9 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
           last->at + last->count == whole_fill)
         last->count += std::uint32_t(N);
       else
-        stretches[count++] = {std::uint32_t(p + offset), std::uint32_t(whole_fill), std::uint32_t(N), false};
-      evaluate(hn::LoadU(df, unit[0] + p), hn::LoadU(df, unit[1] + p), hn::LoadU(df, unit[2] + p), whole, whole_fill);
+        stretches[count++] = {std::uint32_t(p + offset), std::uint32_t(whole_fill), std::uint32_t(N), 0};
+      for (int c = 0; c < quantities; ++c) q[c] = hn::LoadU(df, unit[c] + p);
+      evaluate(q, all, whole_at, whole_fill);
       whole_fill += N;
     }
     if (p == end) continue;
@@ -634,21 +672,33 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     // in `staged`.
     if (staged_fill + 2 * N > chunk || count + 2 > max_stretches) flush();
     const std::size_t rest = end - p;
-    stretches[count++] = {std::uint32_t(p + offset), std::uint32_t(staged_fill + fill), std::uint32_t(rest), true};
+    stretches[count++] = {std::uint32_t(p + offset), std::uint32_t(staged_fill + fill), std::uint32_t(rest), 1};
     const RestStaging staging(fill);
-    for (int c = 0; c < 3; ++c) q[c] = staging.join(hn::LoadU(df, unit[c] + p), stage[c]);
+    for (int c = 0; c < quantities; ++c) q[c] = staging.join(hn::LoadU(df, unit[c] + p), stage[c]);
     fill += rest;
     if (fill >= N) {
-      evaluate(q[0], q[1], q[2], staged, staged_fill);
+      evaluate(q, all, staged_at, staged_fill);
       staged_fill += N;
       fill -= N;
     } else {
-      for (int c = 0; c < 3; ++c) stage[c] = q[c];
+      for (int c = 0; c < quantities; ++c) stage[c] = q[c];
     }
   }
   flush();
 #else
   HWY_ALIGN float out[4][max_lanes];
+  if (normal) {  // d first: the forward's sum of the disc, a pixel at a time
+    const MF one = hn::FirstN(df, 1);
+    for (std::size_t r = 0; r < in.range_count; ++r)
+      for (std::size_t p = in.ranges[2 * r]; p < in.ranges[2 * r + 1]; ++p) {
+        const VF S[4] = {hn::LoadU(df, sky.i + p), hn::LoadU(df, sky.q + p), hn::LoadU(df, sky.u + p),
+                         hn::LoadU(df, sky.v + p)};
+        weights(hn::LoadU(df, sky.kx + p), hn::LoadU(df, sky.ky + p), hn::LoadU(df, sky.kz + p), S, one);
+      }
+    HWY_ALIGN float totals[max_lanes];
+    hn::Store(hn::Sub(sum.v, carry.v), df, totals);
+    d = double(totals[0]) + sky.monopole * 0.0;
+  }
   for (std::size_t r = 0; r < in.range_count; ++r) {
     const std::size_t begin = in.ranges[2 * r], end = in.ranges[2 * r + 1];
     for (std::size_t p = begin; p < end; ++p) {

@@ -102,7 +102,20 @@ struct ScatterInput {
   std::size_t limit;    // map entries below it belong to the caller's thread: a range's last vector
                         // may add zeros to those past the range (read and written back) below it
   double* maps[4];      // I, Q, U, V accumulators (V untouched with two columns and no plate)
+  // The normal pass (the backend's normal, Engine::normal): d is not `value` but the sample's own
+  // forward value, the sum of the same pixels' responses as the forward kernel sums them, computed
+  // here from the same weights (float32 lanes, Kahan-compensated, without the float64 path). The
+  // disc's `pixels` weights wait in `scratch` (normal_scratch_floats) until d is known.
+  bool normal = false;
+  std::size_t pixels = 0;
+  float* scratch = nullptr;
 };
+
+// The floats of the normal pass's scratch for a disc of `pixels` pixels in `ranges` ranges: eight
+// columns of weights with their padding, the stretches of ranges, and room to align them.
+constexpr std::size_t normal_scratch_floats(std::size_t pixels, std::size_t ranges) {
+  return 8 * (pixels + 3 * 64 + 16) + 4 * (2 * ranges + 2) + 16;
+}
 
 // The kernel compiled for one instruction set.
 struct Kernel {

@@ -201,6 +201,41 @@ def test_adjoint_is_the_transpose_of_convolve():
                 assert np.array_equal(engine.convolve(1, theta, phi, psi), fresh.convolve(1, theta, phi, psi))
 
 
+def test_normal_is_the_adjoint_of_the_convolution():
+    # engine.normal(...) = engine.adjoint(convolve(...)) of the engine's sky, with samples at the poles
+    # and a plate; on simd without a monopole on the sky (one pass over each disc) and with one (its
+    # float64 path: two passes), and on the reference; angles and quaternions; out accumulates.
+    sky, beam, fp = small_setup(nside=16, fwhm=4 * deg)
+    fp.add("plated", zeta=0.2, hwp=pisco.HalfWavePlate(gamma=0.1))
+    theta, phi, psi = pointing(300)
+    theta[:15] = np.linspace(0, 0.02, 15)
+    h = np.arange(300) * 0.3
+    quats = np.array([pisco.quat_from_pointing(t, p, s) for t, p, s in zip(theta, phi, psi)])
+    base = np.array([sky.I, sky.Q, sky.U]) + 0.0
+    for monopole in [0.0, 2.725]:
+        maps = base.copy()
+        maps[0] += monopole + 3e-3 * np.cos(np.linspace(0, np.pi, maps.shape[1]))
+        s = pisco.Sky.from_maps(maps, units="uK_CMB")
+        for backend in [b.name for b in pisco.devices() if b.available and b.capabilities["adjoint"]]:
+            with pisco.Engine(s, beam, fp, backend=backend) as engine:
+                for det in range(len(fp)):
+                    hw = h if det == len(fp) - 1 else None
+                    tod = engine.convolve(det, theta, phi, psi, hwp_angle=hw)
+                    two = engine.adjoint(det, tod, theta, phi, psi, hwp_angle=hw)
+                    one = engine.normal(det, boresight_quats=quats, hwp_angle=hw)
+                    assert np.any(two[0] != 0)
+                    assert np.abs(one - two).max() <= 1e-5 * np.abs(two).max(), (backend, monopole, det)
+                    out = one.copy()
+                    engine.normal(det, boresight_quats=quats, hwp_angle=hw, out=out)
+                    # (the main and polar parts are added into out one after the other)
+                    assert np.abs(out - 2 * one).max() <= 1e-12 * np.abs(one).max()
+    with pisco.Engine(s, beam, fp, backend="cpu") as engine:
+        with pytest.raises(ValueError, match="different lengths"):
+            engine.normal(0, theta[:3], phi, psi)
+        with pytest.raises(pisco.Error, match="hwp_angle"):
+            engine.normal(len(fp) - 1, theta, phi, psi)
+
+
 def test_deconvolving_mapmaker_recovers_a_mismatched_pair():
     # A pair with mismatched elliptical beams and offsets over the whole sphere: the deconvolving
     # map-maker's solution, reconvolved, against the sky smoothed the same way, and its progress.

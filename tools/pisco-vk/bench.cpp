@@ -109,14 +109,15 @@ int run_bench(const BenchOptions& options) {
     // sky and the polar copy's transform, made at the first convolution that needs it), as the
     // adjoint path includes take_adjoint (the polar copy's transpose): a map-maker's iteration runs both.
     const double inf = std::numeric_limits<double>::infinity();
-    double conv = inf, forward = inf, adjoint = inf, take = inf;
+    double conv = inf, forward = inf, adjoint = inf, take = inf, normal = inf, iteration = inf;
     for (unsigned rep = 0; rep < options.repeat; ++rep) {
       const auto t0 = std::chrono::steady_clock::now();
       if (options.adjoint) engine.set_sky(sky);
       const auto t1 = std::chrono::steady_clock::now();
       for (std::size_t d = 0; d < fp.size(); ++d) engine.convolve(d, scan, tod, false, hwp_angle);
       conv = std::min(conv, seconds_since(t1));
-      forward = std::min(forward, seconds_since(t0));
+      const double f = seconds_since(t0);
+      forward = std::min(forward, f);
       if (!options.adjoint) continue;
       pisco::Sky back(nside);
       double a = 0.0;
@@ -133,6 +134,13 @@ int run_bench(const BenchOptions& options) {
         adjoint = a + t;
         take = t;
       }
+      iteration = std::min(iteration, f + a + t);
+      // The same iteration through Engine::normal (one pass where the backend evaluates each disc once).
+      const auto t5 = std::chrono::steady_clock::now();
+      engine.set_sky(sky);
+      for (std::size_t d = 0; d < fp.size(); ++d) engine.normal(d, scan, hwp_angle);
+      engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+      normal = std::min(normal, seconds_since(t5));
     }
     const double evals = engine.mean_disc_pixels() * double(samples);
     const auto it = paper.find(rho);
@@ -147,6 +155,10 @@ int run_bench(const BenchOptions& options) {
       std::printf("         adjoint: %.3f s (take_adjoint %.3f s), %.3e evals/s; forward path with set_sky: %.3f s; "
                   "adjoint / forward: %.2f\n",
                   adjoint, take, evals / adjoint, forward, adjoint / forward);
+    if (options.adjoint)
+      std::printf("         map-maker iteration (set_sky, then A^T A s): normal pass %.3f s; forward path, then "
+                  "adjoint: %.3f s; normal / two passes: %.2f\n",
+                  normal, iteration, normal / iteration);
     std::printf("         device: %s\n", engine.device_name().c_str());
   }
   return 0;
