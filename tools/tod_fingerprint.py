@@ -11,8 +11,8 @@ skies without and with a 2.725 K monopole, a round (radial) and an elliptical (g
 with a generic plate at the aperture, integral and per-sample normalization, two detectors (one off
 the boresight), pointing as angles and as quaternions, 400 samples of which 200 lie within 0.15 rad
 of the poles; on cpu, simd, vulkan (and vulkan in float-float). Each TOD is also scattered back
-(engine.adjoint, on the backends that have it) and each detector's adjoint_diagonal taken: the maps
-are fingerprinted too. compare exits 1 when any array differs.
+(engine.adjoint, on the backends that have it), each detector's adjoint_diagonal taken, and its normal
+pass (engine.normal, A^T A of the sky): the maps are fingerprinted too. compare exits 1 when any array differs.
 """
 import sys
 
@@ -63,6 +63,7 @@ def record(path):
                                     out[key + "_adj_quat"] = e.adjoint(d, out[key + "_quat"], boresight_quats=quats,
                                                                        **kw)
                                     out[key + "_diag"] = e.adjoint_diagonal(d, theta, phi, psi, **kw)
+                                    out[key + "_normal"] = e.normal(d, theta, phi, psi, **kw)
                             e.close()
     np.savez(path, **out)
     print(f"{path}: {len(out)} arrays ({', '.join(backends)})")
