@@ -206,13 +206,12 @@ class Engine {
   void adjoint_diagonal(std::size_t detector, const QuatPointingView& boresight,
                         std::span<const double> hwp_angle = {});
   // A^T A s for the engine's sky s (set_sky's, or the constructor's): adds the adjoint of the
-  // detector's own convolution of s into the same maps, what convolve() into a TOD followed by
-  // adjoint() of that TOD adds (an iteration of DeconvolvingMapmaker), equal to it to float32
-  // rounding. Where the backend can (simd without its float64 path: no monopole taken out of the
-  // sky, no per-sample normalization), each sample's disc is evaluated once instead of twice
-  // (docs/physics.md, "Map-making with the beams"); elsewhere, and for split beams and plates between
-  // the optics and the detector, it convolves and scatters in two passes, the same bits as the two
-  // calls. Errors as adjoint().
+  // detector's own convolution of s into the same maps: what convolve() into a TOD followed by
+  // adjoint() of that TOD adds (an iteration of DeconvolvingMapmaker), the same bits. Where the
+  // backend can (simd without its float64 path: no monopole taken out of the sky, no per-sample
+  // normalization), each sample's disc is evaluated once instead of twice (docs/physics.md,
+  // "Map-making with the beams"); elsewhere, and for split beams and plates between the optics and
+  // the detector, it convolves and scatters in two passes. Errors as adjoint().
   void normal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle = {});
   void normal(std::size_t detector, const QuatPointingView& boresight, std::span<const double> hwp_angle = {});
   // maps.I, Q, U (and V unless empty) must have npix() samples each.

@@ -89,8 +89,8 @@ class Backend {
                                 bool squares = false);
   // The normal pass: adds A^T A s for the backend's own sky s into the accumulated maps, for the
   // samples i of `pointing` with select[i] != 0 (the others left out): each sample's forward value
-  // scattered back as adjoint() scatters it, equal to submit() followed by adjoint() of its TOD to
-  // float32 rounding, with each pixel's weights computed once. Returns false, having done nothing,
+  // scattered back as adjoint() scatters it, the same bits as submit() followed by adjoint() of its
+  // TOD, with each pixel's weights computed once. Returns false, having done nothing,
   // where the backend has no such pass (the engine then runs the two); sets `pixels` otherwise.
   virtual bool normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select,
                       std::uint64_t& pixels);

@@ -104,7 +104,9 @@ struct ScatterInput {
   double* maps[4];      // I, Q, U, V accumulators (V untouched with two columns and no plate)
   // The normal pass (the backend's normal, Engine::normal): d is not `value` but the sample's own
   // forward value, the sum of the same pixels' responses as the forward kernel sums them, computed
-  // here from the same weights (float32 lanes, Kahan-compensated, without the float64 path). The
+  // here from the same weights (float32 lanes, Kahan-compensated, without the float64 path): the
+  // forward's bits when the ranges are the forward's own (a polar cap split by ring would group its
+  // pixels into other vectors; the driver sums such discs with the forward kernel instead). The
   // disc's `pixels` weights wait in `scratch` (normal_scratch_floats) until d is known.
   bool normal = false;
   std::size_t pixels = 0;
