@@ -130,7 +130,7 @@ struct EngineInputs;
 }  // namespace detail
 
 // Thread safety: one Engine is used by one thread at a time. Its members that change it (convolve,
-// submit, wait, adjoint, adjoint_diagonal, take_adjoint, set_sky, and moving it) must not run
+// submit, wait, adjoint, adjoint_diagonal, normal, take_adjoint, set_sky, and moving it) must not run
 // concurrently with any other member; guard a shared engine
 // with a mutex, or give each thread its own. Distinct engines may run concurrently in one process, on
 // the same device or not (each holds its own device state; the Vulkan instance they share is made once,
