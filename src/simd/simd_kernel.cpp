@@ -506,7 +506,7 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
 // float32 weights stored by column; then each range adds d times its stretch of those weights to its
 // pixels, float64 vector by vector. A pixel's float32 weights do not depend on the lane that computes
 // them, so the maps are the same bits however the ranges are cut.
-template <bool Radial, int Columns, bool Plate>
+template <bool Radial, int Columns, bool Plate, bool Normal>
 HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
   const DF df;
   const SampleFrame<F> f = broadcast(*in.frame);
@@ -521,7 +521,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   // The normal pass (ScatterInput::normal): d is the forward's sum of the same pixels, summed here
   // as Sample sums it (Kahan-compensated float32 lanes), from the sky's I - I0, Q, U (and V where a
   // weight multiplies it).
-  const bool normal = in.normal;
+  constexpr bool normal = Normal;  // a template parameter: the adjoint's own code has none of it
   constexpr int stokes_in = (Columns == 4 || Plate) ? 4 : 3;
   F sum(hn::Zero(df)), carry(hn::Zero(df));
   // The adjoint weights of a vector of pixels (unit vectors k); the fourth is zero where iq. With S
@@ -569,7 +569,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   float* staged_at[4] = {staged[0], staged[1], staged[2], staged[3]};
   Stretch* stretches = own_stretches;
   std::size_t max_stretches = 2 * chunk;
-  if (normal) {
+  if constexpr (normal) {
     chunk = in.pixels + 2 * max_lanes;
     const std::size_t column = (chunk + max_lanes + 15) & ~std::size_t(15);  // 64-byte aligned columns
     float* at = reinterpret_cast<float*>((reinterpret_cast<std::uintptr_t>(in.scratch) + 63) & ~std::uintptr_t(63));
@@ -594,7 +594,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     return in.squares ? hn::Mul(v, v) : v;
   };
   auto add = [&](const Stretch& s) {
-    float* const* from = s.staged ? staged_at : whole_at;  // NOLINT
+    float* const* from = s.staged ? staged_at : whole_at;
     std::size_t j = 0;
     for (; j + H <= s.count; j += H)
       for (int c = 0; c < outputs; ++c) {
@@ -628,7 +628,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     for (int c = 0; c < outputs; ++c) hn::Store(columns[c], df, to[c] + at);
   };
   const float* const unit[7] = {sky.kx, sky.ky, sky.kz, sky.i, sky.q, sky.u, sky.v};
-  const int quantities = normal ? 3 + stokes_in : 3;
+  constexpr int quantities = normal ? 3 + stokes_in : 3;
   VF stage[7], q[7];
   for (int c = 0; c < 7; ++c) stage[c] = q[c] = hn::Zero(df);
   // Pass 2 for every stretch so far; the staging vector's lanes so far (fill) evaluated first. The
@@ -640,7 +640,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       staged_fill += N;
       fill = 0;
     }
-    if (normal) {
+    if constexpr (normal) {
       HWY_ALIGN float totals[max_lanes];
       hn::Store(hn::Sub(sum.v, carry.v), df, totals);
       double total = 0.0;
@@ -687,7 +687,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   flush();
 #else
   HWY_ALIGN float out[4][max_lanes];
-  if (normal) {  // d first: the forward's sum of the disc, a pixel at a time
+  if constexpr (normal) {  // d first: the forward's sum of the disc, a pixel at a time
     const MF one = hn::FirstN(df, 1);
     for (std::size_t r = 0; r < in.range_count; ++r)
       for (std::size_t p = in.ranges[2 * r]; p < in.ranges[2 * r + 1]; ++p) {
@@ -716,12 +716,20 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
 #endif
 }
 
+template <bool Radial, int Columns, bool Plate>
+HWY_INLINE void ScatterPass(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
+  if (in.normal)
+    Scatter<Radial, Columns, Plate, true>(sky, det, in);
+  else
+    Scatter<Radial, Columns, Plate, false>(sky, det, in);
+}
+
 template <bool Radial, int Columns>
 HWY_INLINE void ScatterPlate(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
   if (in.plate)
-    Scatter<Radial, Columns, true>(sky, det, in);
+    ScatterPass<Radial, Columns, true>(sky, det, in);
   else
-    Scatter<Radial, Columns, false>(sky, det, in);
+    ScatterPass<Radial, Columns, false>(sky, det, in);
 }
 
 void ScatterSample(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
