@@ -90,10 +90,10 @@ class Backend {
   // The normal pass: adds A^T A s for the backend's own sky s into the accumulated maps, for the
   // samples i of `pointing` with select[i] != 0 (the others left out): each sample's forward value
   // scattered back as adjoint() scatters it, the same bits as submit() followed by adjoint() of its
-  // TOD, with each pixel's weights computed once. Returns false, having done nothing,
-  // where the backend has no such pass (the engine then runs the two); sets `pixels` otherwise.
-  virtual bool normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select,
-                      std::uint64_t& pixels);
+  // TOD, with each pixel's weights computed once. Only where has_normal() (elsewhere the engine
+  // runs the two); returns the number of sky pixels evaluated.
+  virtual bool has_normal() const { return false; }
+  virtual std::uint64_t normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select);
   // Adds the accumulated maps into maps[0..3] (npix each) and clears them.
   virtual void take_adjoint(const std::array<std::span<double>, 4>& maps);
 };

@@ -39,7 +39,9 @@ std::uint64_t Backend::adjoint(std::size_t detector, const PointingInput&, std::
 }
 
 void Backend::take_adjoint(const std::array<std::span<double>, 4>&) {}
-bool Backend::normal(std::size_t, const PointingInput&, std::span<const double>, std::uint64_t&) { return false; }
+std::uint64_t Backend::normal(std::size_t detector, const PointingInput&, std::span<const double>) {
+  throw SubmissionError(detector, "the " + name() + " backend has no normal pass", ErrorKind::unavailable);
+}
 
 namespace {
 const BackendEntry& choose_backend(const std::string& name) {
@@ -519,42 +521,31 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
   wait();
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   const bool split = !split_.empty() && split_[detector];
-  // The two passes, where a sample's value comes from more than one backend's sum (a split beam's
-  // outer part, a plate's four row detectors) or a backend has no normal pass.
-  const auto two_passes = [&] {
-    std::vector<double> tod(boresight.size());
-    convolve(detector, boresight, tod, false, hwp_angle);
-    adjoint_view(detector, boresight, tod, hwp_angle, false);
-  };
-  if (split || det.plate == detail::PreparedDetector::Plate::detector) return two_passes();
   detail::PointingInput input = input_of(boresight);
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
   detail::PolarSamples polar_samples;
   const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
                                                                 polar_cut_.at(detector), polar_samples);
   if (polar) make_polar_backend();
+  // The two passes where a sample's value comes from more than one backend's sum (a split beam's
+  // outer part, a plate's four row detectors) or a backend it uses has no normal pass.
+  if (split || det.plate == detail::PreparedDetector::Plate::detector || !backend_->has_normal() ||
+      (polar && !polar_backend_->has_normal())) {
+    std::vector<double> tod(boresight.size());
+    convolve(detector, boresight, tod, false, hwp_angle);
+    adjoint_view(detector, boresight, tod, hwp_angle, false);
+    return;
+  }
   // The samples near the poles are the polar copy's, the rest the main backend's, as convolve has them.
   std::vector<double> main(boresight.size(), 1.0);
   for (const std::size_t i : polar_samples.index) main[i] = 0.0;
-  std::uint64_t pixels = 0, polar_pixels = 0;
+  std::uint64_t pixels = 0;
   try {
-    // A backend without the pass has done nothing: the two passes then give every sample.
-    if (!backend_->normal(detector, input, main, pixels)) return two_passes();
+    pixels += backend_->normal(detector, input, main);
     adjoint_main_ = true;
     if (polar) {
       const detail::PointingInput turned = polar_samples.input();
-      const std::vector<double> all(turned.size(), 1.0);
-      if (!polar_backend_->normal(detector, turned, all, polar_pixels)) {
-        std::vector<double> tod(turned.size());
-        const std::uint64_t t = polar_ticket_++;
-        polar_backend_->submit(detector, turned, tod, false, t);
-        polar_pixels = polar_backend_->wait(t);
-        for (std::size_t k = 0; k < tod.size(); ++k)
-          if (!std::isfinite(tod[k]))
-            throw Error("sample " + std::to_string(polar_samples.index[k]) + " of the convolution is " +
-                        detail::number_text(tod[k]) + " (expected a finite value)");
-        polar_pixels += polar_backend_->adjoint(detector, turned, tod);
-      }
+      pixels += polar_backend_->normal(detector, turned, std::vector<double>(turned.size(), 1.0));
       adjoint_polar_ = true;
       polar_samples_ += polar_samples.index.size();
     }
@@ -563,7 +554,7 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
   } catch (const Error& e) {
     throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
   }
-  pixels_ += pixels + polar_pixels;
+  pixels_ += pixels;
   samples_ += boresight.size();
 }
 

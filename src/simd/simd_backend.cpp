@@ -201,11 +201,9 @@ class SimdBackend final : public Backend {
   // value, summed by the scatter kernel from the weights it scatters (ScatterInput::normal). Not on
   // the float64 path (a monopole or the per-sample normalization): that one sums the forward in
   // other arithmetic, and the engine convolves and scatters in two passes instead.
-  bool normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select,
-              std::uint64_t& pixels) override {
-    if (exact_) return false;
-    pixels = scatter(detector, pointing, select, Pass::normal);
-    return true;
+  bool has_normal() const override { return !exact_; }
+  std::uint64_t normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select) override {
+    return scatter(detector, pointing, select, Pass::normal);
   }
 
   void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(adjoint_, maps); }
