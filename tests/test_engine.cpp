@@ -15,6 +15,7 @@
 #include "backend_fixtures.hpp"
 #include "support.hpp"
 #include "pisco/engine.hpp"
+#include "pisco/hwp.hpp"
 #include "pisco/error.hpp"
 #include "pisco/units.hpp"
 
@@ -378,6 +379,49 @@ TEST(Engine, SubmitThenWaitEqualsConvolve) {
     }
   engine.wait(last);
   for (std::size_t det = 0; det < moved.size(); ++det) EXPECT_EQ(queued[det], direct[det]) << "detector " << det;
+}
+
+// Every part of a submission (the main sum, the polar copy's samples, a split beam's outer part, a
+// plate's row detectors) is queued before any wait, and the polar copy is made at set-up
+// (Engine::prepare) or, without it, by the first submission that needs it: the same bits as
+// convolving detector by detector, on every backend here.
+TEST(Engine, EveryPartQueuedBeforeAnyWaitAndPreparedAtSetUp) {
+  Scene s;
+  pisco::BeamOptions o;
+  o.rho_max = 12 * deg;
+  o.split.rho_main = 6 * deg;
+  s.beams.push_back(pisco::Beamsor::gaussian(2.5 * deg, o));
+  std::vector<pisco::Detector> dets = offset_focal_plane(s.fp).detectors();
+  dets.push_back({"split", 30 * deg, 0.02, 1.0, 3});
+  dets.push_back({"plated", -20 * deg, 0.01, 0.9, 0});
+  dets.back().hwp = pisco::HalfWavePlate{pisco::ideal_hwp_mueller(), pisco::HwpPlacement::detector, dets.back().zeta};
+  const pisco::FocalPlane fp(dets);
+  std::vector<double> hwp(s.ptg.size());
+  for (std::size_t i = 0; i < hwp.size(); ++i) hwp[i] = 0.37 * double(i);
+  const auto angles = [&](std::size_t det) { return dets[det].hwp ? std::span<const double>(hwp) : std::span<const double>(); };
+  for (const std::string backend : {"cpu", "simd", "vulkan"}) {
+    if (const std::string why = pisco_test::backend_unavailable(backend); !why.empty()) {
+      ADD_FAILURE() << backend << " is not available: " << why;
+      continue;
+    }
+    const pisco::EngineOptions options{.backend = backend};
+    std::vector<std::vector<double>> direct(fp.size(), std::vector<double>(s.ptg.size(), NAN));
+    pisco::Engine one_by_one(s.sky, s.beams, fp, options);
+    for (std::size_t det = 0; det < fp.size(); ++det) one_by_one.convolve(det, s.ptg, direct[det], false, angles(det));
+    for (const bool prepare : {true, false}) {
+      pisco::Engine engine(s.sky, s.beams, fp, options);
+      EXPECT_TRUE(engine.polar_copy());
+      EXPECT_GT(engine.sidelobe_nside(), 0);
+      if (prepare) engine.prepare();
+      std::vector<std::vector<double>> queued(fp.size(), std::vector<double>(s.ptg.size(), NAN));
+      for (std::size_t det = 0; det < fp.size(); ++det) engine.submit(det, s.ptg, queued[det], false, angles(det));
+      engine.wait();
+      for (std::size_t det = 0; det < fp.size(); ++det)
+        EXPECT_EQ(queued[det], direct[det]) << backend << ", detector " << fp[det].name << (prepare ? ", prepared" : "");
+      EXPECT_GT(engine.polar_samples(), 0u) << backend;
+      EXPECT_EQ(engine.polar_samples(), one_by_one.polar_samples()) << backend;
+    }
+  }
 }
 
 TEST(Engine, BadQuaternionsAndOffsetsAreNamed) {

@@ -8,7 +8,12 @@
 #include <string>
 
 #include "support.hpp"
+#include "core/detector_pointing.hpp"
+#include "cpu/thread_pool.hpp"
 #include "pisco/error.hpp"
+#include "pisco/focal_plane.hpp"
+#include "pisco/hwp.hpp"
+#include "pisco/quaternion.hpp"
 #include "pisco/mapmaker.hpp"
 #include "pisco/scan.hpp"
 #include "pisco/units.hpp"
@@ -252,6 +257,94 @@ TEST(Mapmaker, BadInputsAreReportedAndLeaveTheMapsIntact) {
   const pisco::BinnedMaps after = mm.solve();
   EXPECT_EQ(before.I, after.I);
   EXPECT_EQ(before.hits, after.hits);
+}
+
+
+
+// add() on several threads: every pixel's sums the same bits as on one thread (each pixel's samples
+// added in the order given), with samples across both poles, many samples in a few pixels, flags and
+// a half-wave plate; and the detector pointing of the stream, on a pool, the same bits as in one pass.
+TEST(BinnedMapmakerThreads, SameBitsWhateverTheThreads) {
+  const int nside = 16;
+  const std::size_t n = 50000;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  pisco::Pointing boresight;
+  for (std::size_t i = 0; i < n; ++i) {
+    // A third near the poles (within 3 deg), a third in a small patch (many samples a pixel), the rest
+    // anywhere on the sphere.
+    double theta = std::acos(1.0 - 2.0 * u(rng)), phi = 2 * pi * u(rng);
+    if (i % 3 == 0) theta = i % 2 ? 3 * deg * u(rng) : pi - 3 * deg * u(rng);
+    if (i % 3 == 1) {
+      theta = 60 * deg + 2 * deg * u(rng);
+      phi = 1.0 + 2 * deg * u(rng);
+    }
+    boresight.push_back(theta, phi, 2 * pi * u(rng) - pi);
+  }
+  std::vector<double> tod(n), hwp(n);
+  std::vector<std::uint8_t> flags(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    tod[i] = 2.7e6 + 100 * (u(rng) - 0.5);
+    hwp[i] = 2 * pi * u(rng);
+    flags[i] = i % 17 == 0;
+  }
+  pisco::FocalPlane fp;
+  fp.add_pair("a", 10 * deg, 0, 0, 0.01, 1.0, 0.9);
+  std::vector<pisco::Detector> dets = fp.detectors();
+  dets[0].set_offset(1 * deg, -2 * deg, 0.3);
+  dets[1].hwp = pisco::HalfWavePlate{pisco::ideal_hwp_mueller(), pisco::HwpPlacement::aperture, dets[1].zeta};
+  const auto run = [&](unsigned threads) {
+    pisco::BinnedMapmaker mm(nside);
+    mm.set_threads(threads);
+    pisco::Pointing own;
+    for (std::size_t chunk = 0; chunk < 2; ++chunk)  // two calls: the threads and their scratch kept
+      for (std::size_t d = 0; d < dets.size(); ++d) {
+        pisco::detector_pointing(boresight, dets[d].offset, own);
+        mm.add(dets[d], own, tod, dets[d].hwp ? std::span<const double>(hwp) : std::span<const double>(),
+               chunk ? std::span<const std::uint8_t>(flags) : std::span<const std::uint8_t>());
+      }
+    return mm;
+  };
+  const pisco::BinnedMapmaker one = run(1);
+  for (const unsigned threads : {2u, 3u, 5u, 0u}) {
+    const pisco::BinnedMapmaker many = run(threads);
+    EXPECT_GE(many.threads(), 1u);
+    const auto same = [](auto a, auto b) { return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin()); };
+    EXPECT_TRUE(same(one.normal_matrices(), many.normal_matrices())) << threads << " threads";
+    EXPECT_TRUE(same(one.normal_vectors(), many.normal_vectors())) << threads << " threads";
+    EXPECT_TRUE(same(one.hits(), many.hits())) << threads << " threads";
+  }
+  // Copies keep the maps and the number of threads.
+  pisco::BinnedMapmaker three = run(3);
+  const pisco::BinnedMapmaker copy = three;
+  EXPECT_EQ(copy.threads(), 3u);
+  EXPECT_TRUE(std::equal(copy.normal_vectors().begin(), copy.normal_vectors().end(), one.normal_vectors().begin()));
+  expect_error([] { pisco::BinnedMapmaker(4).set_threads(1u << 30); }, "BinnedMapmaker: threads");
+}
+
+TEST(BinnedMapmakerThreads, DetectorPointingOnAPoolIsTheSameBits) {
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  pisco::Pointing angles;
+  std::vector<pisco::Quat> quats;
+  for (std::size_t i = 0; i < 20000; ++i) {
+    const double theta = i % 4 == 0 ? 0.5 * deg * u(rng) : std::acos(1.0 - 2.0 * u(rng));
+    angles.push_back(theta, 2 * pi * u(rng), 2 * pi * u(rng) - pi);
+    quats.push_back(pisco::quat_from_pointing(angles.theta[i], angles.phi[i], angles.psi[i]));
+  }
+  pisco::detail::ThreadPool pool(3);
+  for (const pisco::Quat& offset : {pisco::Quat{0, 0, 0, 1}, pisco::offset_quat(2 * deg, -1 * deg, 30 * deg)}) {
+    pisco::Pointing serial, parallel;
+    pisco::detector_pointing(angles, offset, serial);
+    pisco::detail::detector_pointing(angles.view(), offset, parallel, pool);
+    EXPECT_EQ(serial.theta, parallel.theta);
+    EXPECT_EQ(serial.phi, parallel.phi);
+    EXPECT_EQ(serial.psi, parallel.psi);
+    pisco::detector_pointing(pisco::QuatPointingView{quats}, offset, serial);
+    pisco::detail::detector_pointing(pisco::QuatPointingView{quats}, offset, parallel, pool);
+    EXPECT_EQ(serial.theta, parallel.theta);
+    EXPECT_EQ(serial.psi, parallel.psi);
+  }
 }
 
 }  // namespace

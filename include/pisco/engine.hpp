@@ -219,8 +219,16 @@ class Engine {
   // Replaces the sky, keeping the beams, the detectors and the options: what an iterative solver
   // (DeconvolvingMapmaker) does between iterations. The same NSIDE; waits for every submission; the
   // adjoint maps must have been taken. Costs what the constructor's sky set-up costs (the backend's
-  // copy of the pixels; the polar copy and a split beam's coarse sky when they are used).
+  // copy of the pixels; the polar copy and a split beam's coarse sky when they are used). The polar
+  // copy's transform runs in the background, as at construction (prepare()).
   void set_sky(const SkyView& sky);
+  // Completes the set-up the engine runs in the background: the sky's polar copy (EngineOptions::
+  // quadrature), whose spherical-harmonic turn of the sky starts on a thread of its own at construction
+  // and at set_sky(), and its upload to the backend. Optional: the first submission with a sample near
+  // a pole otherwise completes it (and a run far from the poles never waits for it). Call it to pay
+  // the set-up before time-critical work, or to time the set-up apart from the convolution (`pisco-vk
+  // bench`). Rethrows an error of the transform (pisco::Error). Does nothing when there is no polar copy.
+  void prepare();
   std::size_t npix() const noexcept;
   int nside() const noexcept;
 
@@ -230,12 +238,16 @@ class Engine {
   // Mean number of sky pixels per sample over all convolve() calls so far (a split beam's main and
   // outer parts together).
   double mean_disc_pixels() const noexcept;
+  // Seconds the calling thread has spent in convolve() and submit()'s own per-sample host work so far:
+  // checking the pointing, plate angles and TOD, finding the samples near the poles, and completing
+  // and checking each TOD; not the backends' staging, kernels or transfers, nor the polar copy's set-up.
+  double host_seconds() const noexcept { return host_seconds_; }
   // Beams split into a main part and sidelobes (Beamsor::sidelobes; docs/beams.md, "Sidelobes"): the
   // NSIDE of the band-limited sky their outer parts are summed on; 0 when no beam is split.
   int sidelobe_nside() const noexcept { return outer_nside_; }
   // Whether samples near the poles are summed on the sky's polar copy (EngineOptions::quadrature), and how
   // many submitted so far were.
-  bool polar_copy() const noexcept { return polar_backend_ != nullptr || polar_source_ != nullptr; }
+  bool polar_copy() const noexcept { return polar_backend_ != nullptr || polar_setup_ != nullptr; }
   std::uint64_t polar_samples() const noexcept { return polar_samples_; }
 
   // Backends compiled into the library, with availability on this machine.
@@ -276,11 +288,13 @@ class Engine {
   // detector: the combination of their row detectors), and the check that its TOD is finite.
   struct Pending;
   void complete(Pending& p);
+  void drop_pending() noexcept;
 
   FocalPlane focal_plane_;
   std::shared_ptr<const detail::EngineInputs> inputs_;
   std::unique_ptr<detail::Backend> backend_;
   std::uint64_t samples_ = 0, pixels_ = 0;
+  double host_seconds_ = 0.0;
   std::uint64_t next_ticket_ = 1;
   std::vector<std::unique_ptr<Pending>> pending_;
   std::vector<std::uint32_t> masked_;  // UnseenPolicy::flag: the sky's UNSEEN pixels, ascending
@@ -294,8 +308,10 @@ class Engine {
   std::uint64_t outer_ticket_ = 1;
   // Samples near the poles: their pointing turned onto the polar copy's equator and summed there,
   // run as each submission is made and written over the main backend's when it completes.
-  // The copy is made from polar_source_ (then released) by the backend entry_ when first needed.
-  std::unique_ptr<Sky> polar_source_;
+  // The copy's transform runs in the background from set-up (polar_setup_); the backend entry_ makes
+  // the polar backend from it at prepare() or when a submission first needs it.
+  struct PolarSetup;
+  std::unique_ptr<PolarSetup> polar_setup_;
   const detail::BackendEntry* entry_ = nullptr;
   EngineOptions options_;
   std::unique_ptr<detail::Backend> polar_backend_;

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -13,6 +14,9 @@
 #include "pisco/pointing.hpp"
 
 namespace pisco {
+namespace detail {
+class ThreadPool;
+}
 
 struct BinnedMaps {
   int nside = 0;
@@ -32,6 +36,18 @@ class BinnedMapmaker {
  public:
   // Pixels whose 3x3 normal matrix has a reciprocal condition number below rcond_min are cut.
   explicit BinnedMapmaker(int nside, double rcond_min = 1e-3);
+  ~BinnedMapmaker();
+  // Copies have the same maps and number of threads, and threads of their own.
+  BinnedMapmaker(const BinnedMapmaker& other);
+  BinnedMapmaker& operator=(const BinnedMapmaker& other);
+  BinnedMapmaker(BinnedMapmaker&&) noexcept;
+  BinnedMapmaker& operator=(BinnedMapmaker&&) noexcept;
+
+  // The host threads add() runs on: 1 (the default) or more, 0 for all hardware threads (at most
+  // Engine::max_threads()). The maps are the same bits whatever the number: each pixel's samples are
+  // added in the order given (docs/physics.md, "Map-making and spectra").
+  void set_threads(unsigned threads);
+  unsigned threads() const noexcept { return threads_; }
 
   // Adds a chunk: the pixel of each sample is that of its beam centre, and the model is the
   // detector's D(gamma) = s/2 [(1+eps), (1-eps) cos 2gamma, (1-eps) sin 2gamma], gamma = psi + zeta;
@@ -64,6 +80,11 @@ class BinnedMapmaker {
  private:
   int nside_;
   double rcond_min_;
+  unsigned threads_ = 1;
+  std::unique_ptr<detail::ThreadPool> pool_;  // made by the first add() with threads_ > 1
+  // add()'s per-sample pixels and weights, kept between calls.
+  std::vector<std::size_t> pixel_scratch_;
+  std::vector<std::array<double, 3>> weight_scratch_;
   std::vector<double> ata_;  // 6 per pixel: upper triangle of A^T A
   std::vector<double> atd_;  // 3 per pixel
   std::vector<std::uint32_t> hits_;

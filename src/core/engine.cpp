@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
+#include <future>
 
 #include "core/backend.hpp"
 #include "core/masked_sky.hpp"
@@ -91,6 +93,12 @@ std::shared_ptr<const detail::EngineInputs> prepared(const SkyView& sky, const s
 }
 }  // namespace
 
+// The polar copy's transform (detail::polar_sky), running from set-up until the backend is made.
+struct Engine::PolarSetup {
+  std::future<Sky> sky;
+  std::exception_ptr error;  // the transform's or the backend's, once reported
+};
+
 Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
                const EngineOptions& options)
     : focal_plane_(focal_plane) {
@@ -130,7 +138,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
 
   // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator.
   polar_backend_.reset();
-  polar_source_.reset();
+  polar_setup_.reset();  // waits for a transform still running from the previous sky
   polar_cut_.clear();
   offset_angle_.clear();
   if (options.quadrature == Quadrature::corrected && unseen_pixels_ == 0) {
@@ -141,10 +149,16 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
       offset_angle_.push_back(std::acos(std::clamp(z, -1.0, 1.0)) + 1e-9);
       any = any || polar_cut_.back() > 0.0;
     }
-    // Made when a submission first has such a sample (a ground scan far from the poles never pays
-    // for it): until then the engine keeps a copy of the sky. The detectors and the ring table are
-    // the main backend's.
-    if (any) polar_source_ = std::make_unique<Sky>(sky);
+    // Its transform starts now on a thread of its own, beside the rest of the set-up and whatever the
+    // caller does next; the backend is made from it at prepare() or by the first submission with such
+    // a sample (a ground scan far from the poles never waits for it). The detectors and the ring
+    // table are the main backend's.
+    if (any) {
+      polar_setup_ = std::make_unique<PolarSetup>();
+      polar_setup_->sky = std::async(std::launch::async, [source = Sky(sky), weigh = weighs_cap_boundaries(options)] {
+        return detail::polar_sky(source, weigh);
+      });
+    }
   }
 
   // Split beams: their outer parts on a band-limited copy of the sky at a coarser NSIDE.
@@ -184,7 +198,10 @@ Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 
 struct Engine::Pending {
-  std::uint64_t ticket = 0;  // the last backend submission it needs
+  std::uint64_t ticket = 0;  // the last main-backend submission it needs
+  // Its last submissions to the outer and polar backends (0: none), waited for when it completes, so
+  // that submit() queues every part and returns without waiting.
+  std::uint64_t outer_ticket = 0, polar_ticket = 0;
   std::size_t detector = 0;
   std::span<double> tod;
   bool accumulate = false;
@@ -201,6 +218,10 @@ struct Engine::Pending {
 };
 
 namespace {
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 detail::PointingInput input_of(const PointingView& v) { return {v, {}, false, {}}; }
 detail::PointingInput input_of(const QuatPointingView& v) { return {{}, v, true, {}}; }
 }  // namespace
@@ -236,15 +257,24 @@ void Engine::check_submission(const char* what, std::size_t detector, const View
 }
 
 void Engine::make_polar_backend() {
-  if (polar_backend_) return;
-  const Sky copy = detail::polar_sky(*polar_source_, weighs_cap_boundaries(options_));
-  polar_backend_ = entry_->create(inputs_, copy, options_);
-  polar_source_.reset();
+  if (polar_backend_ || !polar_setup_) return;
+  if (polar_setup_->error) std::rethrow_exception(polar_setup_->error);  // every later call fails alike
+  try {
+    const Sky copy = polar_setup_->sky.get();
+    polar_backend_ = entry_->create(inputs_, copy, options_);
+  } catch (...) {
+    polar_setup_->error = std::current_exception();
+    throw;
+  }
+  polar_setup_.reset();
 }
+
+void Engine::prepare() { make_polar_backend(); }
 
 template <class View>
 std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
                                   bool accumulate, std::span<const double> hwp_angle) {
+  const auto host_start = std::chrono::steady_clock::now();
   auto pending = std::make_unique<Pending>();
   check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle);
   const std::string& name = focal_plane_[detector].name;
@@ -260,6 +290,7 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   const bool split = !split_.empty() && split_[detector];
   const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
                                                                 polar_cut_.at(detector), pending->polar);
+  host_seconds_ += seconds_since(host_start);
   if (polar) make_polar_backend();
   try {
     if (det.plate == detail::PreparedDetector::Plate::detector) {
@@ -276,7 +307,7 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
           t = outer_ticket_++;
           outer_backend_->submit(det.rows[r], input, pending->outer_rows[r], false, t);
         }
-        pixels_ += outer_backend_->wait(t);
+        pending->outer_ticket = t;
       }
       if (polar) {
         std::uint64_t t = 0;
@@ -286,7 +317,7 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
           t = polar_ticket_++;
           polar_backend_->submit(det.rows[r], turned, pending->polar_rows[r], false, t);
         }
-        polar_backend_->wait(t);
+        pending->polar_ticket = t;
       }
       pending->ticket = ticket;
       pending->detector = detector;
@@ -305,13 +336,13 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
         pending->outer.assign(tod.size(), 0.0);
         const std::uint64_t t = outer_ticket_++;
         outer_backend_->submit(detector, input, pending->outer, false, t);
-        pixels_ += outer_backend_->wait(t);
+        pending->outer_ticket = t;
       }
       if (polar) {
         pending->polar_tod.assign(pending->polar.index.size(), 0.0);
         const std::uint64_t t = polar_ticket_++;
         polar_backend_->submit(detector, pending->polar.input(), pending->polar_tod, false, t);
-        polar_backend_->wait(t);
+        pending->polar_ticket = t;
       }
       // Every submission is completed, or at least checked, by finish_pending().
       pending->ticket = ticket;
@@ -340,8 +371,21 @@ void Engine::finish_pending(std::uint64_t ticket) {
   std::string problem;
   for (; done < pending_.size() && pending_[done]->ticket <= ticket; ++done) {
     Pending& p = *pending_[done];
+    try {
+      if (p.outer_ticket) pixels_ += outer_backend_->wait(p.outer_ticket);
+      if (p.polar_ticket) polar_backend_->wait(p.polar_ticket);
+    } catch (const detail::SubmissionError& e) {
+      drop_pending();
+      throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " +
+                      e.what(),
+                  e.kind());
+    }
+    const auto host_start = std::chrono::steady_clock::now();
     complete(p);
-    if (!problem.empty()) continue;
+    if (!problem.empty()) {
+      host_seconds_ += seconds_since(host_start);
+      continue;
+    }
     // One pass over the chunk: the arithmetic overflowed somewhere in the sum (every input was finite).
     for (std::size_t i = 0; i < p.tod.size(); ++i)
       if (!std::isfinite(p.tod[i])) {
@@ -356,9 +400,21 @@ void Engine::finish_pending(std::uint64_t ticket) {
                   (p.accumulate ? ", or so is the TOD accumulated into" : "");
         break;
       }
+    host_seconds_ += seconds_since(host_start);
   }
   pending_.erase(pending_.begin(), pending_.begin() + std::ptrdiff_t(done));
   if (!problem.empty()) throw Error(problem);
+}
+
+// After a failed submission: every part's backend finished with the buffers of the pending
+// submissions (their own errors are the same failure's), then the submissions dropped.
+void Engine::drop_pending() noexcept {
+  for (const auto& [b, next] : {std::pair{outer_backend_.get(), outer_ticket_}, {polar_backend_.get(), polar_ticket_}})
+    if (b && next > 1) try {
+        b->wait(next - 1);
+      } catch (...) {
+      }
+  pending_.clear();
 }
 
 void Engine::complete(Pending& p) {
@@ -401,7 +457,7 @@ void Engine::wait(std::uint64_t ticket) {
   try {
     pixels_ += backend_->wait(ticket);
   } catch (const detail::SubmissionError& e) {
-    pending_.clear();
+    drop_pending();
     throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
                 e.kind());
   }

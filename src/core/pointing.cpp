@@ -4,7 +4,9 @@
 #include <numbers>
 #include <string>
 
+#include "core/detector_pointing.hpp"
 #include "core/frame.hpp"
+#include "cpu/thread_pool.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {
@@ -12,37 +14,70 @@ namespace {
 
 detail::DetectorOffset kernel_offset(const Quat& q) { return detail::make_offset({q.x, q.y, q.z, q.w}); }
 
-void push_sample(const detail::SampleFrame<double>& f, double theta, double phi, Pointing& out) {
-  out.push_back(theta, phi, detail::position_angle(f.theta_p, theta, phi));
+void set_sample(const detail::SampleFrame<double>& f, double theta, double phi, Pointing& out, std::size_t i) {
+  out.theta[i] = theta;
+  out.phi[i] = phi;
+  out.psi[i] = detail::position_angle(f.theta_p, theta, phi);
+}
+
+void resize(Pointing& out, std::size_t n) {
+  out.theta.resize(n);
+  out.phi.resize(n);
+  out.psi.resize(n);
 }
 
 }  // namespace
 
-void detector_pointing(const PointingView& b, const Quat& offset, Pointing& out) {
-  out.clear();
-  out.reserve(b.size());
+namespace detail {
+
+void detector_pointing_range(const PointingView& b, const Quat& offset, Pointing& out, std::size_t begin,
+                             std::size_t end) {
   const detail::DetectorOffset o = kernel_offset(offset);
-  for (std::size_t i = 0; i < b.size(); ++i) {
+  for (std::size_t i = begin; i < end; ++i) {
     if (!o.active) {
-      out.push_back(b.theta[i], detail::wrap_phi(b.phi[i]), b.psi[i]);
+      out.theta[i] = b.theta[i];
+      out.phi[i] = detail::wrap_phi(b.phi[i]);
+      out.psi[i] = b.psi[i];
       continue;
     }
     double theta = 0.0, phi = 0.0;
     const auto f = detail::angle_sample(b.theta[i], b.phi[i], b.psi[i], o, 1.0, 0.0, theta, phi);
-    push_sample(f, theta, phi, out);
+    set_sample(f, theta, phi, out, i);
   }
 }
 
-void detector_pointing(const QuatPointingView& b, const Quat& offset, Pointing& out) {
-  out.clear();
-  out.reserve(b.size());
+void detector_pointing_range(const QuatPointingView& b, const Quat& offset, Pointing& out, std::size_t begin,
+                             std::size_t end) {
   const detail::DetectorOffset o = kernel_offset(offset);
-  for (std::size_t i = 0; i < b.size(); ++i) {
+  for (std::size_t i = begin; i < end; ++i) {
     const Quat& q = b.quats[i];
     double theta = 0.0, phi = 0.0;
     const auto f = detail::quat_sample({q.x, q.y, q.z, q.w}, o, 1.0, 0.0, theta, phi);
-    push_sample(f, theta, phi, out);
+    set_sample(f, theta, phi, out, i);
   }
+}
+
+template <class View>
+void detector_pointing(const View& b, const Quat& offset, Pointing& out, ThreadPool& pool) {
+  resize(out, b.size());
+  pool.parallel_for(b.size(), 4096, [&](std::size_t begin, std::size_t end) {
+    detector_pointing_range(b, offset, out, begin, end);
+  });
+}
+
+template void detector_pointing(const PointingView&, const Quat&, Pointing&, ThreadPool&);
+template void detector_pointing(const QuatPointingView&, const Quat&, Pointing&, ThreadPool&);
+
+}  // namespace detail
+
+void detector_pointing(const PointingView& b, const Quat& offset, Pointing& out) {
+  resize(out, b.size());
+  detail::detector_pointing_range(b, offset, out, 0, b.size());
+}
+
+void detector_pointing(const QuatPointingView& b, const Quat& offset, Pointing& out) {
+  resize(out, b.size());
+  detail::detector_pointing_range(b, offset, out, 0, b.size());
 }
 
 void offset_pointing(const PointingView& b, double xi, double eta, double gamma, Pointing& out) {

@@ -92,8 +92,11 @@ bool find_polar_samples(const PointingInput& in, const DetectorOffset& offset, d
   if (cut <= 0.0) return false;
   const double cos_cut = std::cos(cut);
   // A boresight farther than cut + offset_angle from both poles cannot carry the detector within cut.
+  // The test on theta itself (no cosine per sample): |cos theta| <= cos(wide) is wide <= theta <= pi - wide.
   const double wide = cut + offset_angle;
-  const double cos_wide = wide < std::numbers::pi / 2 ? std::cos(wide) : -1.0;
+  const bool far_exists = wide < std::numbers::pi / 2;
+  const double cos_wide = far_exists ? std::cos(wide) : -1.0;
+  const double theta_lo = far_exists ? wide : std::numbers::pi, theta_hi = far_exists ? std::numbers::pi - wide : 0.0;
   const std::size_t n = in.size();
   for (std::size_t i = 0; i < n; ++i) {
     Q4 b;
@@ -102,7 +105,7 @@ bool find_polar_samples(const PointingInput& in, const DetectorOffset& offset, d
       if (std::abs(line_of_sight_z(b)) <= cos_wide) continue;
     } else {
       const double theta = in.angles.theta[i];
-      if (std::abs(std::cos(theta)) <= cos_wide) continue;
+      if (theta >= theta_lo && theta <= theta_hi) continue;
       b = q4(quat_from_pointing(theta, in.angles.phi[i], in.angles.psi[i]));
     }
     const double z = offset.active ? line_of_sight_z(quat_mul(b, offset.quat)) : line_of_sight_z(b);

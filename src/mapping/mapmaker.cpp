@@ -3,11 +3,15 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
+#include <thread>
 
 #include <healpix_base.h>
 #include <pointing.h>
 
+#include "cpu/thread_pool.hpp"
+#include "pisco/engine.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {
@@ -144,10 +148,11 @@ void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
     throw Error("BinnedMapmaker::add: detector '" + detector.name + "' has no half-wave plate, but plate angles were given");
   }
   const Base base(int64(nside_), RING, SET_NSIDE);
-  for (std::size_t i = 0; i < tod.size(); ++i) {
-    if (!flags.empty() && flags[i] != 0) continue;
-    const std::size_t pix = std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i])));
-    const std::array<double, 3> a = stokes_weights(detector, ptg.psi[i], detector.hwp ? hwp_angle[i] : 0.0);
+  const auto pixel_of = [&](std::size_t i) { return std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i]))); };
+  const auto weights_of = [&](std::size_t i) {
+    return stokes_weights(detector, ptg.psi[i], detector.hwp ? hwp_angle[i] : 0.0);
+  };
+  const auto accumulate = [&](std::size_t pix, const std::array<double, 3>& a, double d) {
     double* m = &ata_[6 * pix];
     m[0] += a[0] * a[0];
     m[1] += a[0] * a[1];
@@ -156,9 +161,61 @@ void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
     m[4] += a[1] * a[2];
     m[5] += a[2] * a[2];
     double* v = &atd_[3 * pix];
-    for (int k = 0; k < 3; ++k) v[k] += a[k] * tod[i];
+    for (int k = 0; k < 3; ++k) v[k] += a[k] * d;
     ++hits_[pix];
+  };
+  const std::size_t n = tod.size();
+  constexpr std::size_t block = 4096;
+  if (threads_ == 1 || n < 2 * block) {
+    for (std::size_t i = 0; i < n; ++i)
+      if (flags.empty() || flags[i] == 0) accumulate(pixel_of(i), weights_of(i), tod[i]);
+    return;
   }
+  // On several threads: each sample's pixel and weights (the costly part: ang2pix, the cosine and
+  // sine of 2 gamma), then the sums, each thread adding the samples of the pixels it owns (blocks of
+  // 64 pixels dealt round the threads) in the order given, so that every pixel's sums are the same
+  // bits as on one thread.
+  if (!pool_) pool_ = std::make_unique<detail::ThreadPool>(threads_);
+  constexpr std::size_t left_out = std::numeric_limits<std::size_t>::max();
+  pixel_scratch_.resize(n);
+  weight_scratch_.resize(n);
+  pool_->parallel_for(n, block, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const bool flagged = !flags.empty() && flags[i] != 0;
+      pixel_scratch_[i] = flagged ? left_out : pixel_of(i);
+      if (!flagged) weight_scratch_[i] = weights_of(i);
+    }
+  });
+  const std::size_t parts = pool_->size();
+  pool_->parallel_for(parts, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t part = begin; part < end; ++part)
+      for (std::size_t i = 0; i < n; ++i) {
+        const std::size_t pix = pixel_scratch_[i];
+        if (pix != left_out && (pix >> 6) % parts == part) accumulate(pix, weight_scratch_[i], tod[i]);
+      }
+  });
+}
+
+BinnedMapmaker::~BinnedMapmaker() = default;
+BinnedMapmaker::BinnedMapmaker(BinnedMapmaker&&) noexcept = default;
+BinnedMapmaker& BinnedMapmaker::operator=(BinnedMapmaker&&) noexcept = default;
+
+BinnedMapmaker::BinnedMapmaker(const BinnedMapmaker& other)
+    : nside_(other.nside_), rcond_min_(other.rcond_min_), threads_(other.threads_), ata_(other.ata_),
+      atd_(other.atd_), hits_(other.hits_) {}
+
+BinnedMapmaker& BinnedMapmaker::operator=(const BinnedMapmaker& other) {
+  if (this != &other) *this = BinnedMapmaker(other);
+  return *this;
+}
+
+void BinnedMapmaker::set_threads(unsigned threads) {
+  if (threads > Engine::max_threads())
+    throw Error("BinnedMapmaker: threads = " + std::to_string(threads) + "; expected 0 (all hardware threads) up to " +
+                std::to_string(Engine::max_threads()));
+  const unsigned n = threads == 0 ? std::max(1u, std::thread::hardware_concurrency()) : threads;
+  if (n != threads_) pool_.reset();
+  threads_ = n;
 }
 
 void BinnedMapmaker::add_normal_equations(std::span<const double> matrices, std::span<const double> vectors,

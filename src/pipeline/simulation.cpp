@@ -17,6 +17,8 @@
 #include <thread>
 #include <unistd.h>
 
+#include "core/detector_pointing.hpp"
+#include "cpu/thread_pool.hpp"
 #include "pisco/deconvolution.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
@@ -305,6 +307,14 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
     }
   }
   return out;
+}
+
+// The threads of this process's per-sample host work in the stream: the engine's own on the cpu and
+// simd backends when they are set, else the host's hardware threads shared by the node's processes.
+unsigned stream_host_threads(const SimulationConfig& c, const Engine& engine, const RunContext& cl) {
+  EngineOptions o = c.engine.options;
+  if (const unsigned* threads = o.threads_of(engine.backend_name()); threads && *threads > 0) return *threads;
+  return std::max(1u, std::thread::hardware_concurrency() / unsigned(std::max(1, cl.node_size())));
 }
 
 Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& fp, const SimulationConfig& c,
@@ -682,9 +692,9 @@ struct StreamSinks {
 class JobStream {
  public:
   JobStream(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan, Engine& engine, StreamSinks sinks,
-            bool flagging, std::size_t chunk, RunObserver& obs)
+            bool flagging, std::size_t chunk, unsigned host_threads, RunObserver& obs)
       : c_(c), fp_(fp), engine_(engine), sinks_(sinks), flagging_(flagging), obs_(obs),
-        modelled_(fp.detectors()), pointing_(c, fp, scan) {
+        modelled_(fp.detectors()), pointing_(c, fp, scan), host_(host_threads) {
     for (auto& t : tod_) t.resize(chunk);
     // The detectors as the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in
     // place of the real one).
@@ -774,7 +784,9 @@ class JobStream {
     const std::size_t count = chunk.size();
     const std::span<double> t(tod_[j.slot].data(), count);
     if (sinks_.binned || (sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights)))
-      with_view(chunk, [&](const auto& view) { pisco::detector_pointing(view, fp_[chunk.detector].offset, own_); });
+      with_view(chunk, [&](const auto& view) {
+        pisco::detail::detector_pointing(view, fp_[chunk.detector].offset, own_, host_);
+      });
     const pisco::PointingView detector_view = own_.view();
     std::span<const std::uint8_t> fl;
     if (flagging_) fl = flag_samples(chunk);
@@ -789,11 +801,13 @@ class JobStream {
     if (sinks_.tod && c_.output.tod_weights) {  // the map-maker's weights of each sample
       const std::span<const double> h = chunk.hwp_angle;
       weights_.resize(3 * count);
-      for (std::size_t i = 0; i < count; ++i) {
-        const std::array<double, 3> a = pisco::stokes_weights(modelled_[chunk.detector], detector_view.psi[i],
-                                                              h.empty() ? 0.0 : h[i]);
-        std::copy(a.begin(), a.end(), weights_.begin() + std::ptrdiff_t(3 * i));
-      }
+      host_.parallel_for(count, 4096, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) {
+          const std::array<double, 3> a = pisco::stokes_weights(modelled_[chunk.detector], detector_view.psi[i],
+                                                                h.empty() ? 0.0 : h[i]);
+          std::copy(a.begin(), a.end(), weights_.begin() + std::ptrdiff_t(3 * i));
+        }
+      });
     }
     if (sinks_.tod)
       sinks_.tod->write(chunk.detector, j.first, t, c_.output.tod_pointing ? &detector_view : nullptr, fl,
@@ -809,6 +823,9 @@ class JobStream {
   RunObserver& obs_;
   std::vector<pisco::Detector> modelled_;
   JobPointing pointing_;
+  // The per-sample host work of a finished job (detector pointing, the TOD file's weights) on all
+  // its threads, while the backend convolves the next job: the same bits as on one thread.
+  pisco::detail::ThreadPool host_;
   std::array<std::vector<double>, 2> tod_;
   std::array<std::vector<double>, 2> hwp_;  // per-detector files: a job's plate angles, by TOD buffer
   std::optional<Job> pending_;
@@ -891,6 +908,9 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   const int maps_nside = deconvolving ? sky.nside() : pisco::maps_nside(c, sky);
   say("scan: %s, %zu detectors x %zu samples\n", scan_kind_name(c.scan.kind), fp.size(), samples_per_detector);
 
+  // The host's share of this process (the engine's threads on the cpu and simd backends) for the
+  // per-sample host work of the stream: detector pointing and binning.
+  const unsigned host_threads = stream_host_threads(c, engine, cl);
   std::optional<pisco::BinnedMapmaker> mapper;
   std::optional<pisco::DeconvolvingMapmaker> deconvolver;
   cl.step([&] {
@@ -901,7 +921,10 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
       throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
                          std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
-    if (c.output.maps) mapper.emplace(maps_nside, c.output.rcond_min);
+    if (c.output.maps) {
+      mapper.emplace(maps_nside, c.output.rcond_min);
+      mapper->set_threads(host_threads);
+    }
     if (deconvolving) {
       for (const pisco::BackendInfo& b : pisco::Engine::backends())
         if (b.name == engine.backend_name() && !b.capabilities.adjoint)
@@ -936,7 +959,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   {
     JobStream stream(c, fp, *scan, engine,
                      {mapper ? &*mapper : nullptr, deconvolver ? &*deconvolver : nullptr, tod_file ? &*tod_file : nullptr},
-                     flagging, chunk, obs);
+                     flagging, chunk, host_threads, obs);
     stream.run(plan, cl);
     flagged = stream.flagged();
   }

@@ -11,7 +11,11 @@
 #include <map>
 #include <numbers>
 #include <random>
+#include <thread>
 
+#include "core/detector_pointing.hpp"
+#include "cpu/thread_pool.hpp"
+#include "pisco/mapmaker.hpp"
 #include "pisco/pisco.hpp"
 #include "pisco/scan.hpp"
 
@@ -102,20 +106,29 @@ int run_bench(const BenchOptions& options) {
     o.grid_step = beam_step;
     std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(1.5 * deg, o)};
     pisco::Engine engine(sky, beams, fp, engine_options);
+    engine.prepare();  // the polar copy, which would otherwise be made by the first convolution
     const double setup = seconds_since(t0);
     std::vector<double> tod(scan.size());
+    std::vector<std::vector<double>> tods(fp.size(), std::vector<double>(scan.size()));
     // The best of `repeat` runs of each path, the two alternating. conv: the convolution alone (Table
-    // 1's figure). With --adjoint the forward path also loads the sky (Engine::set_sky: the backend's
-    // sky and the polar copy's transform, made at the first convolution that needs it), as the
-    // adjoint path includes take_adjoint (the polar copy's transpose): a map-maker's iteration runs both.
+    // 1's figure): every detector submitted, then one wait. With --adjoint the forward path also loads
+    // the sky (Engine::set_sky: the backend's sky and the polar copy's transform, completed by
+    // Engine::prepare), as the adjoint path includes take_adjoint (the polar copy's transpose): a
+    // map-maker's iteration runs both.
     const double inf = std::numeric_limits<double>::infinity();
-    double conv = inf, forward = inf, adjoint = inf, take = inf, normal = inf, iteration = inf;
+    double conv = inf, forward = inf, adjoint = inf, take = inf, normal = inf, iteration = inf, host = inf;
     for (unsigned rep = 0; rep < options.repeat; ++rep) {
       const auto t0 = std::chrono::steady_clock::now();
-      if (options.adjoint) engine.set_sky(sky);
+      if (options.adjoint) {
+        engine.set_sky(sky);
+        engine.prepare();
+      }
+      const double host0 = engine.host_seconds();
       const auto t1 = std::chrono::steady_clock::now();
-      for (std::size_t d = 0; d < fp.size(); ++d) engine.convolve(d, scan, tod, false, hwp_angle);
+      for (std::size_t d = 0; d < fp.size(); ++d) engine.submit(d, scan, tods[d], false, hwp_angle);
+      engine.wait();
       conv = std::min(conv, seconds_since(t1));
+      host = std::min(host, engine.host_seconds() - host0);
       const double f = seconds_since(t0);
       forward = std::min(forward, f);
       if (!options.adjoint) continue;
@@ -151,6 +164,9 @@ int run_bench(const BenchOptions& options) {
       std::printf("%8.1f %9.1f %10.3f %10.3f %12.3e %12s %10s\n", rho, engine.mean_disc_pixels(), setup, conv,
                   evals / conv, "-", "-");
     if (options.repeat > 1) std::printf("         best of %u runs of each path\n", options.repeat);
+    std::printf("         set-up %.3f s (the engine and the polar copy), apart from conv; the engine's own host work in "
+                "conv: %.1f ns/sample (%.3f s)\n",
+                setup, host / double(samples) * 1e9, host);
     if (options.adjoint)
       std::printf("         adjoint: %.3f s (take_adjoint %.3f s), %.3e evals/s; forward path with set_sky: %.3f s; "
                   "adjoint / forward: %.2f\n",
@@ -161,6 +177,71 @@ int run_bench(const BenchOptions& options) {
                   normal, iteration, normal / iteration);
     std::printf("         device: %s\n", engine.device_name().c_str());
   }
+  return 0;
+}
+
+// The streamed run's host work (docs/simd.md, "The stream's host work"): what JobStream does per
+// detector-sample besides the convolution, for a CLASS-like run (paper section 7: constant-elevation
+// scans from the Atacama at 20 Hz, 36 PSB pairs over a 10 deg focal plane, maps at NSIDE 128). The
+// boresight is made once per time chunk for all detectors; each detector's pointing and its binning
+// per detector-sample, on one thread and on the host's threads as a run uses them.
+int run_stream_bench(const BenchOptions& options) {
+  const std::size_t chunk = std::size_t(1) << 16, chunks = 4;
+  pisco::CesScan ces;
+  ces.latitude = -22.96 * deg;
+  ces.longitude = -67.79 * deg;
+  ces.elevation = 45 * deg;
+  ces.az_centre = 180 * deg;
+  ces.az_throw = 720 * deg;
+  ces.az_speed = 1 * deg;
+  ces.sample_rate = 20.0;
+  ces.start_unix = 1.7e9;
+  ces.samples = chunk * chunks;
+  ces.check();
+  std::vector<pisco::Detector> dets;
+  for (int k = 0; k < 36; ++k) {
+    pisco::FocalPlane pair;
+    pair.add_pair("p" + std::to_string(k), (k % 2) * 45 * deg, 0, 0);
+    for (pisco::Detector d : pair.detectors()) {
+      d.set_offset((k % 6 - 2.5) * 2 * deg, (k / 6 - 2.5) * 2 * deg, 0.0);
+      dets.push_back(d);
+    }
+  }
+  const unsigned threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  std::printf("streamed host work: CLASS-like constant-elevation scan, %zu detectors x %zu samples in chunks of %zu, "
+              "maps NSIDE 128, no convolution (the backend's work left out)\n",
+              dets.size(), ces.samples, chunk);
+  std::printf("%8s %14s %14s %14s %14s\n", "threads", "boresight_ns", "pointing_ns", "binning_ns", "total_ns");
+  pisco::Pointing boresight, own;
+  std::vector<double> tod(chunk, 1.0);
+  const double per = double(dets.size()) * double(ces.samples);  // detector-samples
+  for (const unsigned n : threads > 1 ? std::vector<unsigned>{1u, threads} : std::vector<unsigned>{1u}) {
+    pisco::BinnedMapmaker mapper(128);
+    mapper.set_threads(n);
+    pisco::detail::ThreadPool pool(n);
+    double best[3] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+                      std::numeric_limits<double>::infinity()};
+    for (unsigned rep = 0; rep < std::max(1u, options.repeat); ++rep) {
+      double t[3] = {0, 0, 0};
+      for (std::size_t c = 0; c < chunks; ++c) {
+        auto t0 = std::chrono::steady_clock::now();
+        ces.generate(c * chunk, chunk, boresight);
+        t[0] += seconds_since(t0);
+        for (const pisco::Detector& d : dets) {
+          t0 = std::chrono::steady_clock::now();
+          pisco::detail::detector_pointing(boresight.view(), d.offset, own, pool);
+          t[1] += seconds_since(t0);
+          t0 = std::chrono::steady_clock::now();
+          mapper.add(d, own, tod);
+          t[2] += seconds_since(t0);
+        }
+      }
+      for (int k = 0; k < 3; ++k) best[k] = std::min(best[k], t[k]);
+    }
+    std::printf("%8u %14.2f %14.2f %14.2f %14.2f\n", n, best[0] / per * 1e9, best[1] / per * 1e9, best[2] / per * 1e9,
+                (best[0] + best[1] + best[2]) / per * 1e9);
+  }
+  if (options.repeat > 1) std::printf("         best of %u runs\n", options.repeat);
   return 0;
 }
 

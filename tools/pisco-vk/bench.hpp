@@ -24,7 +24,14 @@ struct BenchOptions {
   // Times each path this many times, alternately, and reports the best (this shared machine's
   // speed varies from run to run; the best of several is the code's own cost).
   unsigned repeat = 1;
+  // Instead of Table 1: the streamed run's host work per detector-sample, without the convolution
+  // (a CLASS-like constant-elevation scan, 36 pairs): the boresight, each detector's pointing and the
+  // binned map-maker, on one thread and on `threads` (0: all).
+  bool stream = false;
 };
+
+// The streamed pipeline's host work (BenchOptions::stream): a table of ns per detector-sample.
+int run_stream_bench(const BenchOptions& options);
 
 // The paper's Table 1 workload: a table of evaluations/s and the ratio to the paper's GTX 1080.
 int run_bench(const BenchOptions& options);

@@ -166,6 +166,9 @@ static int main_body(int argc, char** argv) {
                   "Also time the adjoint (Engine::adjoint) of the same TOD and its ratio to the forward path.");
   bench->add_option("--hwp-placement", bench_options.hwp_placement, "aperture or detector (default: aperture).")
       ->check(CLI::IsMember({"aperture", "detector"}));
+  bench->add_flag("--stream", bench_options.stream,
+                  "Instead: the streamed run's host work per detector-sample (boresight, detector pointing, binning; "
+                  "no convolution) on one thread and on --threads.");
   bench->add_option("--repeat", bench_options.repeat,
                     "Time the forward path (and the adjoint) this many times, alternately, and report the best "
                     "of each (default: 1).")
@@ -193,7 +196,8 @@ static int main_body(int argc, char** argv) {
 
   try {
     if (app.got_subcommand("devices")) return devices();
-    if (app.got_subcommand("bench")) return pisco_cli::run_bench(bench_options);
+    if (app.got_subcommand("bench"))
+      return bench_options.stream ? pisco_cli::run_stream_bench(bench_options) : pisco_cli::run_bench(bench_options);
     if (app.got_subcommand("validate")) return validate(vo, data_dir());
     const fs::path data = data_dir();
     const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
