@@ -107,6 +107,31 @@ TEST_F(Cli, VersionHelpAndDevices) {
   EXPECT_NE(run("frobnicate").status, 0);
 }
 
+// The bench's set-up apart (the polar copy made in it) and the engine's host work, and the streamed
+// run's host work per detector-sample: each line printed with finite figures.
+TEST_F(Cli, BenchPrintsTheSetUpApartAndTheStreamsHostWork) {
+  const Result b = run("bench -b simd --threads 2 --rho-max 1");
+  ASSERT_EQ(b.status, 0) << b.output;
+  EXPECT_NE(b.output.find("set-up"), std::string::npos) << b.output;
+  EXPECT_NE(b.output.find("ns/sample"), std::string::npos) << b.output;
+  const Result s = run("bench --stream --threads 2");
+  ASSERT_EQ(s.status, 0) << s.output;
+  std::istringstream lines(s.output);
+  std::string line;
+  int rows = 0;
+  while (std::getline(lines, line)) {
+    unsigned threads = 0;
+    double boresight = 0, pointing = 0, binning = 0, total = 0;
+    if (std::sscanf(line.c_str(), "%u %lf %lf %lf %lf", &threads, &boresight, &pointing, &binning, &total) != 5) continue;
+    ++rows;
+    EXPECT_TRUE(threads == 1 || threads == 2) << line;
+    EXPECT_GT(pointing, 0.0) << line;
+    EXPECT_GT(binning, 0.0) << line;
+    EXPECT_NEAR(total, boresight + pointing + binning, 0.02) << line;
+  }
+  EXPECT_EQ(rows, 2) << s.output;
+}
+
 TEST_F(Cli, SmallSimulationEndToEnd) {
   const fs::path cfg = write("sim.toml", config());
   const Result r = run("run " + cfg.string());
