@@ -447,6 +447,8 @@ class Engine:
         """
     def set_sky(self, sky: Sky) -> None:
         """Replaces the sky (the same NSIDE), keeping beams, detectors and options."""
+    def prepare(self) -> None:
+        """Completes the set-up that runs in the background (the sky's polar copy); optional."""
     @property
     def npix(self) -> int: ...
     def submit(

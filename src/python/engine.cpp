@@ -330,6 +330,12 @@ class PyEngine {
     open().set_sky(sky);
   }
 
+  void prepare() {
+    nb::gil_scoped_release release;
+    std::lock_guard lock(mutex_);
+    open().prepare();
+  }
+
   std::uint64_t submit(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
                        nb::handle out, bool accumulate, nb::handle hwp_angle) {
     const std::size_t d = detector_index(detector);
@@ -713,6 +719,9 @@ void bind_engine(nb::module_& m) {
            "result as the two calls. An iterative map-maker's step.")
       .def("set_sky", &PyEngine::set_sky, "sky"_a,
            "Replaces the sky (the same NSIDE), keeping beams, detectors and options.")
+      .def("prepare", &PyEngine::prepare,
+           "Completes the set-up that runs in the background (the sky's polar copy, started at construction\n"
+           "and set_sky), without the GIL; otherwise the first submission near a pole completes it.")
       .def_prop_ro("npix", [](PyEngine& e) { return e.npix(); }, "Pixels of the engine's sky (12 NSIDE^2).")
       .def("submit", &PyEngine::submit, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
