@@ -17,28 +17,87 @@ __device__ __forceinline__ T warp_sum(T v) {
   return v;
 }
 
+// The disc of (theta, phi) walked by the whole warp, 32 rings a pass, one a lane (sample.hpp, "The
+// cooperative disc walk"): each pass's ranges staged in ring order in `begin`/`end` (staging_ranges
+// each) with two ballots, and every batch_ranges of them handed to flush(count) with their pixel
+// offsets in `offset` (a warp scan), the caps first and last: walk_disc's batches, cut the same way.
+// Returns the disc's pixel count.
+template <class Flush>
+__device__ __forceinline__ std::uint32_t walk_disc_warp(const KernelSky& sky, const KernelDetector& det, double theta,
+                                                        double phi, std::uint32_t* begin, std::uint32_t* end,
+                                                        std::uint32_t* offset, int lane, Flush&& flush) {
+  const DiscRings d = disc_rings(sky.nside, theta, det.rho_max);
+  std::uint32_t pixels = 0;
+  int pending = 0;  // ranges staged, the same in every lane
+  // Hands out whole batches, and with `all` the rest as a last one.
+  const auto cut = [&](bool all) {
+    while (pending >= batch_ranges || (all && pending > 0)) {
+      const int count = pending < batch_ranges ? pending : batch_ranges;
+      __syncwarp();  // the staged ranges are visible to the warp
+      std::uint32_t sum = lane < count ? end[lane] - begin[lane] : 0u;
+      for (int o = 1; o < warp_lanes; o *= 2) {
+        const std::uint32_t below = __shfl_up_sync(full_mask, sum, o);
+        if (lane >= o) sum += below;
+      }
+      offset[lane + 1] = sum;
+      if (lane == 0) offset[0] = 0;
+      __syncwarp();
+      flush(count);
+      pixels += __shfl_sync(full_mask, sum, warp_lanes - 1);
+      if (pending > count) unstage_batch(begin, end, pending, lane);
+      pending -= count;
+      __syncwarp();  // the staging rewritten before the next pass writes into it
+    }
+  };
+  if (d.north) {
+    if (lane == 0) {
+      begin[0] = 0;
+      end[0] = north_cap_end(sky, d);
+    }
+    pending = 1;
+  }
+  for (std::int64_t base = d.first; base <= d.last; base += warp_lanes) {
+    RingRanges rr;
+    if (base + lane <= d.last) rr = ring_ranges(sky, d, phi, det.cos_rho_max, base + lane);
+    const std::uint32_t one = __ballot_sync(full_mask, rr.count >= 1);
+    const std::uint32_t two = __ballot_sync(full_mask, rr.count == 2);
+    stage_ranges(begin, end, pending, one, two, lane, rr);
+    pending += __popc(one) + __popc(two);
+    cut(false);
+  }
+  if (d.south) {
+    if (lane == 0) {
+      begin[pending] = south_cap_begin(sky, d);
+      end[pending] = sky_pixels(sky);
+    }
+    pending += 1;
+  }
+  cut(true);
+  return pixels;
+}
+
 // One warp's sample: its frames (float64, and float32 for the pixels), its plate's Mueller matrix,
-// and its disc walked a batch of ranges at a time in the warp's share of the block's shared arrays
-// (sample.hpp, walk_disc), with batch(f, fd, first, offset, count, plate) run by the whole warp on
-// each batch. Returns the disc's pixel count. Both kernels below start here.
+// and its disc walked by the warp a batch of ranges at a time in the warp's share of the block's
+// shared arrays (walk_disc_warp), with batch(f, fd, first, offset, count, plate) run by the whole warp
+// on each batch. Returns the disc's pixel count. Both kernels below start here.
 template <bool Plate, class Batch>
 __device__ __forceinline__ std::uint32_t walk_warp_sample(const KernelSky& sky, const KernelDetector& det,
                                                           const double* pointing, bool quaternions,
                                                           const double* plate_angle, std::size_t i, int warp,
                                                           int lane, Batch&& batch) {
-  __shared__ std::uint32_t first[warps_per_block][batch_ranges];
-  __shared__ std::uint32_t offset[warps_per_block][batch_ranges + 1];
+  __shared__ std::uint32_t begin[warps_per_block][staging_ranges];
+  __shared__ std::uint32_t end[warps_per_block][staging_ranges];
+  __shared__ std::uint32_t offset[warps_per_block][warp_lanes + 1];
   double theta = 0.0, phi = 0.0;
   const SampleFrame<double> fd = sample_frame(pointing + 4 * i, quaternions, det, theta, phi);
   const SampleFrame<float> f = to_float(fd);
   PlateSample plate;
   if constexpr (Plate) plate = plate_sample(det, plate_angle[i]);
-  std::uint32_t* my_first = first[warp];
+  std::uint32_t* my_begin = begin[warp];
   std::uint32_t* my_offset = offset[warp];
-  return walk_disc(sky, det, theta, phi, my_first, my_offset, lane == 0, [&](int count) {
-    __syncwarp();  // the batch written by lane 0 is visible to the warp
-    batch(f, fd, my_first, my_offset, count, plate);
-    __syncwarp();  // every lane is done with it before lane 0 writes the next
+  return walk_disc_warp(sky, det, theta, phi, my_begin, end[warp], my_offset, lane, [&](int count) {
+    batch(f, fd, my_begin, my_offset, count, plate);
+    __syncwarp();  // every lane is done with the batch before the staging moves on
   });
 }
 

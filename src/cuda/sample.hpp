@@ -3,8 +3,10 @@
 // docs/validation.md, "B", without a GPU). The kernel (convolve.cu) adds only the warp plumbing: shared memory for the
 // range batch, __syncwarp and the shuffle reduction.
 //
-// One warp per sample. Every lane walks the disc's ring ranges (for_each_disc_range in double, as the
-// reference does) and the ranges are gathered into a batch of up to batch_ranges; the batch's pixels,
+// One warp per sample. The warp walks the disc's rings together, one ring a lane (the cooperative disc
+// walk below, for_each_disc_range's float64 arithmetic, as the reference's), and the ranges are
+// gathered in ring order into batches of up to batch_ranges, cut where walk_disc, the serial walk the
+// host emulation keeps, cuts them; the batch's pixels,
 // numbered 0 ... total-1 across its ranges, are dealt to the lanes round-robin, so a lane stays busy
 // however short the rings are. The assignment depends only on the disc, never on the chunk or launch
 // size: results are deterministic.
@@ -212,8 +214,9 @@ PISCO_HD void scatter_batch(const KernelSky& sky, const KernelDetector& det, con
 }
 
 // Walks the disc of (theta, phi), gathering ranges into first[]/offset[] (written only where
-// `writer`, the other lanes keep the same counts in registers) and calling flush(count) whenever
-// batch_ranges ranges are gathered and once at the end. Returns the disc's pixel count.
+// `writer`) and calling flush(count) whenever batch_ranges ranges are gathered and once at the end.
+// Returns the disc's pixel count. The serial walk: the host emulation's, and the batches the
+// kernel's cooperative walk must give (tests/test_cuda_host.cpp).
 template <class Flush>
 PISCO_HD std::uint32_t walk_disc(const KernelSky& sky, const KernelDetector& det, double theta, double phi,
                                  std::uint32_t* first, std::uint32_t* offset, bool writer, Flush&& flush) {
@@ -238,6 +241,91 @@ PISCO_HD std::uint32_t walk_disc(const KernelSky& sky, const KernelDetector& det
   if (count > 0) flush(count);
   return pixels + batched;
 }
+
+// The cooperative disc walk (docs/cuda.md, "Kernel"): the warp walks the disc's rings 32 at a time, one
+// ring a lane, instead of every lane walking every ring. Each lane finds its ring's ranges with the
+// float64 arithmetic of for_each_disc_range (at most two, non-empty ones only), and the warp stages
+// them in ring order in shared memory: the north cap's range first, each pass's lanes in order, the
+// south cap's last, the very order walk_disc emits. The batches of batch_ranges ranges are then cut
+// from the staging exactly as walk_disc cuts them, so every lane gets the same pixels and the TOD the
+// same bits. The kernel (convolve.cu, walk_disc_warp) supplies the warp's ballots and scans;
+// tests/test_cuda_host.cpp runs these steps lane by lane and requires walk_disc's batches.
+
+// Ring iz's non-empty ranges in the disc d, in for_each_disc_range's order.
+struct RingRanges {
+  int count = 0;
+  std::uint32_t begin[2] = {0, 0}, end[2] = {0, 0};
+};
+
+PISCO_HD RingRanges ring_ranges(const KernelSky& sky, const DiscRings& d, double phi0, double cos_rho,
+                                std::int64_t iz) {
+  RingRanges out;
+  const RingEntry& r = sky.rings[iz - 1];
+  double x, ysq;
+  ring_edge(r, d, cos_rho, x, ysq);
+  if (ysq <= 0) return out;  // the ring does not cross the disc boundary
+  emit_ring_crossing(r, phi0, x, ysq, [&](std::uint32_t begin, std::uint32_t end) {
+    if (end <= begin) return;
+    out.begin[out.count] = begin;
+    out.end[out.count] = end;
+    ++out.count;
+  });
+  return out;
+}
+
+// The staging's capacity: fewer than batch_ranges left over, and a pass's 32 lanes with two ranges each.
+constexpr int staging_ranges = 3 * batch_ranges;
+static_assert(batch_ranges == warp_lanes, "a batch's offsets are one warp scan");
+
+PISCO_HD int popcount32(std::uint32_t v) {
+#if defined(__CUDA_ARCH__)
+  return __popc(v);
+#else
+  return __builtin_popcount(v);
+#endif
+}
+
+// The lanes below `lane`, as a mask.
+PISCO_HD std::uint32_t lanes_below(int lane) { return lane == 0 ? 0u : 0xffffffffu >> (warp_lanes - lane); }
+
+// Lane `lane`'s ranges into the staging, after the `pending` ranges already there and those of the
+// lanes below it: `one` and `two` are the warp's masks of the lanes with at least one and with two.
+PISCO_HD void stage_ranges(std::uint32_t* begin, std::uint32_t* end, int pending, std::uint32_t one, std::uint32_t two,
+                           int lane, const RingRanges& rr) {
+  const std::uint32_t below = lanes_below(lane);
+  const int at = pending + popcount32(one & below) + popcount32(two & below);
+  for (int k = 0; k < rr.count; ++k) {
+    begin[at + k] = rr.begin[k];
+    end[at + k] = rr.end[k];
+  }
+}
+
+// After a whole batch: lane `lane`'s share of moving the staging's ranges [batch_ranges, pending) to its
+// front. Each lane reads slots batch_ranges + lane and 2 batch_ranges + lane and writes lane and
+// batch_ranges + lane, so no lane reads what another writes.
+PISCO_HD void unstage_batch(std::uint32_t* begin, std::uint32_t* end, int pending, int lane) {
+  const int a = batch_ranges + lane, b = 2 * batch_ranges + lane;
+  const bool has_a = a < pending, has_b = b < pending;
+  const std::uint32_t begin_a = has_a ? begin[a] : 0u, end_a = has_a ? end[a] : 0u;
+  const std::uint32_t begin_b = has_b ? begin[b] : 0u, end_b = has_b ? end[b] : 0u;
+  if (has_a) {
+    begin[lane] = begin_a;
+    end[lane] = end_a;
+  }
+  if (has_b) {
+    begin[a] = begin_b;
+    end[a] = end_b;
+  }
+}
+
+// The disc's polar caps as ranges (walk_disc's first and last): [0, end) of the rings north of d.first,
+// [begin, 12 NSIDE^2) of those south of d.last.
+PISCO_HD std::uint32_t north_cap_end(const KernelSky& sky, const DiscRings& d) {
+  const RingEntry& r = sky.rings[d.first - 2];
+  return r.first + r.count;
+}
+PISCO_HD std::uint32_t south_cap_begin(const KernelSky& sky, const DiscRings& d) { return sky.rings[d.last].first; }
+PISCO_HD std::uint32_t sky_pixels(const KernelSky& sky) { return std::uint32_t(12 * sky.nside * sky.nside); }
 
 // The sample from the reduced sums, as every backend (shaders/pixel.glsl): float32 sum plus I0 sum w_I,
 // over the normalization when per-sample.

@@ -31,6 +31,14 @@ def short_name(demangled):
     return text[scope + 2:].replace(" ", "") if scope >= 0 else text.replace(" ", "")
 
 
+def occupancy(registers, block_threads=256, sm_registers=65536, sm_warps=64):
+    """Percent of an SM's warps resident, by registers alone: registers are allocated per warp in units
+    of 256 (8 a thread), blocks of block_threads (convolve.cu's 8 warps)."""
+    per_warp = -(-registers * 32 // 256) * 256
+    blocks = sm_registers // (per_warp * (block_threads // 32))
+    return 100.0 * min(sm_warps, blocks * block_threads // 32) / sm_warps
+
+
 def compile_report(nvcc, source_dir, build_dir, arch):
     flags = ["-O3", "-DNDEBUG", "-std=c++17", "-DPISCO_HAVE_CUDA", '-DPISCO_CUDA_ARCHITECTURES="%s"' % arch[3:],
              "-I" + str(source_dir / "include"), "-I" + str(build_dir / "include"), "-I" + str(source_dir / "src"),
@@ -94,14 +102,14 @@ def main():
         sys.exit("kernel_budgets: ptxas reported no entry function")
     names = dict(zip(kernels, (short_name(d) for d in demangle(list(kernels)))))
     failures = []
-    print("%-60s %9s %7s %13s" % ("kernel (%s)" % a.arch, "registers", "budget", "spill stores"))
+    print("%-60s %9s %7s %13s %10s" % ("kernel (%s)" % a.arch, "registers", "budget", "spill stores", "occupancy"))
     seen = set()
     for mangled, (regs, spill) in sorted(kernels.items(), key=lambda kv: names[kv[0]]):
         name = names[mangled]
         seen.add(name)
         budget = budgets.get(name)
-        print("%-60s %9d %7s %10d B%s" % (name, regs, budget[0] if budget else "-", spill,
-                                          "" if budget else "   <- no budget line"))
+        print("%-60s %9d %7s %10d B %9.1f%%%s" % (name, regs, budget[0] if budget else "-", spill, occupancy(regs),
+                                                  "" if budget else "   <- no budget line"))
         if budget is None:
             failures.append("%s: no line in %s" % (name, budgets_path.name))
         else:
