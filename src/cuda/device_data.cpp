@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <thread>
+
+#include "pisco/error.hpp"
 
 namespace pisco::detail::cuda {
 
@@ -61,6 +64,11 @@ std::vector<double> plate_weights(const PreparedDetector& det) {
 
 KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* exact,
                                const double* plate) {
+  // The kernel reads each node's weights with 16-byte loads (contribution-inl.hpp, weight_pair).
+  for (const void* table : {static_cast<const void*>(weights), static_cast<const void*>(exact),
+                            static_cast<const void*>(plate)})
+    if (reinterpret_cast<std::uintptr_t>(table) % 16 != 0)
+      throw Error("cuda backend: a detector's weight table is not 16-byte aligned");
   KernelDetector k{};
   k.weights = weights;
   k.exact_weights = exact;
