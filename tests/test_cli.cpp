@@ -121,13 +121,16 @@ TEST_F(Cli, BenchPrintsTheSetUpApartAndTheStreamsHostWork) {
   int rows = 0;
   while (std::getline(lines, line)) {
     unsigned threads = 0;
-    double boresight = 0, pointing = 0, binning = 0, total = 0;
-    if (std::sscanf(line.c_str(), "%u %lf %lf %lf %lf", &threads, &boresight, &pointing, &binning, &total) != 5) continue;
+    double boresight = 0, quaternions = 0, from_boresight = 0, pointing = 0, binning = 0, total = 0;
+    if (std::sscanf(line.c_str(), "%u %lf %lf %lf %lf %lf %lf", &threads, &boresight, &quaternions, &from_boresight,
+                    &pointing, &binning, &total) != 7)
+      continue;
     ++rows;
     EXPECT_TRUE(threads == 1 || threads == 2) << line;
+    EXPECT_GT(from_boresight, 0.0) << line;
     EXPECT_GT(pointing, 0.0) << line;
     EXPECT_GT(binning, 0.0) << line;
-    EXPECT_NEAR(total, boresight + pointing + binning, 0.02) << line;
+    EXPECT_NEAR(total, boresight + quaternions + from_boresight, 0.02) << line;
   }
   EXPECT_EQ(rows, 2) << s.output;
 }

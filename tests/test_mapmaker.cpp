@@ -1,6 +1,7 @@
 // Binned I/Q/U map-maker (docs/physics.md, "Map-making and spectra"): exact round trips, the condition-number cut, streaming.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <numbers>
@@ -345,6 +346,79 @@ TEST(BinnedMapmakerThreads, DetectorPointingOnAPoolIsTheSameBits) {
     EXPECT_EQ(serial.theta, parallel.theta);
     EXPECT_EQ(serial.psi, parallel.psi);
   }
+}
+
+// Binning from the boresight (the detector's offset applied in the map-maker, its angle from the
+// rotation's columns): the maps of detector_pointing then add() to rounding, with samples across both
+// poles and exactly on them, offsets, a plate and flags; the same bits whatever the threads.
+TEST(BinnedMapmakerThreads, FromTheBoresightEqualsThePointingThenAdd) {
+  const int nside = 32;
+  const std::size_t n = 30000;
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<pisco::Quat> quats;
+  for (std::size_t i = 0; i < n; ++i) {
+    double theta = std::acos(1.0 - 2.0 * u(rng));
+    if (i % 4 == 0) theta = i % 8 ? 5 * deg * u(rng) : pi - 5 * deg * u(rng);
+    if (i < 4) theta = i % 2 ? 0.0 : pi;  // on the poles themselves
+    quats.push_back(pisco::quat_from_pointing(theta, 2 * pi * u(rng), 2 * pi * u(rng) - pi));
+  }
+  std::vector<double> tod(n), hwp(n);
+  std::vector<std::uint8_t> flags(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    tod[i] = 2.7 + 1e-3 * (u(rng) - 0.5);
+    hwp[i] = 2 * pi * u(rng);
+    flags[i] = i % 13 == 5;
+  }
+  pisco::FocalPlane fp;
+  fp.add_pair("a", 30 * deg, 0, 0, 0.02, 1.0, 0.95);
+  std::vector<pisco::Detector> dets = fp.detectors();
+  dets[0].set_offset(2 * deg, -1.5 * deg, 0.4);
+  dets.push_back(dets[1]);
+  dets.back().name = "plated";
+  dets.back().set_offset(-3 * deg, 0.5 * deg, -0.2);
+  dets.back().hwp = pisco::HalfWavePlate{pisco::ideal_hwp_mueller(), pisco::HwpPlacement::aperture, 0.1};
+  const pisco::QuatPointingView view{quats};
+  const auto run = [&](bool from_boresight, unsigned threads) {
+    pisco::BinnedMapmaker mm(nside);
+    mm.set_threads(threads);
+    pisco::Pointing own;
+    for (const pisco::Detector& d : dets) {
+      const std::span<const double> h = d.hwp ? std::span<const double>(hwp) : std::span<const double>();
+      if (from_boresight) {
+        mm.add_from_boresight(d, view, tod, h, flags);
+      } else {
+        pisco::detector_pointing(view, d.offset, own);
+        mm.add(d, own, tod, h, flags);
+      }
+    }
+    return mm;
+  };
+  const pisco::BinnedMapmaker before = run(false, 1), after = run(true, 1);
+  EXPECT_TRUE(std::equal(before.hits().begin(), before.hits().end(), after.hits().begin()));
+  double worst = 0.0;
+  for (const auto& [a, b] : {std::pair{before.normal_matrices(), after.normal_matrices()},
+                             {before.normal_vectors(), after.normal_vectors()}})
+    for (std::size_t k = 0; k < a.size(); ++k) worst = std::max(worst, std::abs(a[k] - b[k]) / (1.0 + std::abs(a[k])));
+  std::cout << "from the boresight against the pointing then add: largest difference " << worst << "\n";
+  EXPECT_LT(worst, 1e-12);
+  const pisco::BinnedMaps m0 = before.solve(), m1 = after.solve();
+  EXPECT_GT(std::count_if(m0.I.begin(), m0.I.end(), [](double v) { return v != pisco::unseen; }), 1000);
+  for (std::size_t p = 0; p < m0.I.size(); ++p)
+    if (m0.I[p] != pisco::unseen) {
+      ASSERT_NE(m1.I[p], pisco::unseen) << p;
+      EXPECT_NEAR(m0.Q[p], m1.Q[p], 1e-9) << p;
+    }
+  const pisco::BinnedMapmaker three = run(true, 3);
+  EXPECT_TRUE(std::equal(after.normal_vectors().begin(), after.normal_vectors().end(), three.normal_vectors().begin()));
+  EXPECT_TRUE(std::equal(after.normal_matrices().begin(), after.normal_matrices().end(), three.normal_matrices().begin()));
+  // Checked as add() is: a bad quaternion and a short TOD are named.
+  std::vector<pisco::Quat> bad = quats;
+  bad[7] = {0.0, 0.0, 0.0, 2.0};
+  expect_error([&] { pisco::BinnedMapmaker(4).add_from_boresight(dets[0], pisco::QuatPointingView{bad}, tod); },
+               "BinnedMapmaker::add_from_boresight: quaternion of sample 7");
+  expect_error([&] { pisco::BinnedMapmaker(4).add_from_boresight(dets[0], view, std::span<const double>(tod).first(3)); },
+               "3 TOD samples for 30000 pointing samples");
 }
 
 }  // namespace

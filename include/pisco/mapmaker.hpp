@@ -12,6 +12,7 @@
 #include "pisco/focal_plane.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/pointing.hpp"
+#include "pisco/quaternion.hpp"
 
 namespace pisco {
 namespace detail {
@@ -56,6 +57,14 @@ class BinnedMapmaker {
   // Samples with a non-zero flag (`flags`: empty, or one per sample; Engine::flag_samples) are left out.
   void add(const Detector& detector, const PointingView& pointing, std::span<const double> tod,
            std::span<const double> hwp_angle = {}, std::span<const std::uint8_t> flags = {});
+  // The same from the boresight's quaternions (quaternion.hpp) with the detector's offset
+  // (Detector::offset) applied here, as the engine applies it: each sample's pixel from its line of
+  // sight and its polarization angle's cos 2 gamma and sin 2 gamma from the rotation's columns, with
+  // no angle computed on the way (docs/physics.md, "Map-making and spectra"). Equal to
+  // detector_pointing() followed by add() to rounding (a sample within rounding of a pixel's edge may
+  // fall on the other side). Checks as add(), and the quaternions as the engine does.
+  void add_from_boresight(const Detector& detector, const QuatPointingView& boresight, std::span<const double> tod,
+                          std::span<const double> hwp_angle = {}, std::span<const std::uint8_t> flags = {});
   // Solves every pixel; may be called again after more add() calls.
   BinnedMaps solve() const;
 
@@ -82,6 +91,10 @@ class BinnedMapmaker {
   double rcond_min_;
   unsigned threads_ = 1;
   std::unique_ptr<detail::ThreadPool> pool_;  // made by the first add() with threads_ > 1
+  // Bins samples [0, n) whose pixel and weights sample(i, pixel, weights) gives (false: left out), in
+  // order for each pixel, on threads_ threads.
+  template <class Sample>
+  void bin(std::size_t n, std::span<const double> tod, const Sample& sample);
   // add()'s per-sample pixels and weights, kept between calls.
   std::vector<std::size_t> pixel_scratch_;
   std::vector<std::array<double, 3>> weight_scratch_;

@@ -9,7 +9,9 @@
 
 #include <healpix_base.h>
 #include <pointing.h>
+#include <vec3.h>
 
+#include "core/frame.hpp"
 #include "cpu/thread_pool.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
@@ -88,33 +90,26 @@ Vec3 cholesky_solve(const Sym3& s, const Vec3& b) {
   return {x0, x1, x2};
 }
 
-void check_inputs(const Detector& det, const PointingView& ptg, std::span<const double> tod) {
-  if (tod.size() != ptg.size())
-    throw Error("BinnedMapmaker::add: detector '" + det.name + "': " + std::to_string(tod.size()) +
-                " TOD samples for " + std::to_string(ptg.size()) + " pointing samples");
-  if (!std::isfinite(det.zeta) || !std::isfinite(det.epsilon) || !std::isfinite(det.gain))
-    throw Error("BinnedMapmaker::add: detector '" + det.name +
-                "' has a non-finite zeta, epsilon or gain");
-  check_pointing(ptg, "BinnedMapmaker::add");
-  for (std::size_t i = 0; i < tod.size(); ++i)
-    if (!std::isfinite(tod[i]))
-      throw Error("BinnedMapmaker::add: detector '" + det.name + "': TOD sample " +
-                  std::to_string(i) + " is not finite");
-}
 
 }  // namespace
 
-std::array<double, 3> stokes_weights(const Detector& detector, double psi, double hwp_angle) {
+namespace {
+// stokes_weights from cos 2 gamma and sin 2 gamma.
+std::array<double, 3> weights_of_angle(const Detector& detector, double c2, double s2, double hwp_angle) {
   const double co = 0.5 * detector.gain * (1.0 + detector.epsilon);
   const double pol = 0.5 * detector.gain * (1.0 - detector.epsilon);
-  const double gamma = psi + detector.zeta;
-  const double c2 = std::cos(2.0 * gamma), s2 = std::sin(2.0 * gamma);
   if (!detector.hwp) return {co, pol * c2, pol * s2};
   // r = D(0) M(theta) R(gamma), D(0) = (co, pol, 0, 0): the plate-modulated response to I, Q, U.
   const Mueller m = rotated_mueller(detector.hwp->mueller, hwp_angle - detector.hwp->gamma);
   double dm[4];
   for (int b = 0; b < 4; ++b) dm[b] = co * m[0][b] + pol * m[1][b];
   return {dm[0], dm[1] * c2 - dm[2] * s2, dm[1] * s2 + dm[2] * c2};
+}
+}  // namespace
+
+std::array<double, 3> stokes_weights(const Detector& detector, double psi, double hwp_angle) {
+  const double gamma = psi + detector.zeta;
+  return weights_of_angle(detector, std::cos(2.0 * gamma), std::sin(2.0 * gamma), hwp_angle);
 }
 
 BinnedMapmaker::BinnedMapmaker(int nside, double rcond_min) : nside_(nside), rcond_min_(rcond_min) {
@@ -128,30 +123,102 @@ BinnedMapmaker::BinnedMapmaker(int nside, double rcond_min) : nside_(nside), rco
   hits_.assign(npix, 0);
 }
 
+namespace {
+// add()'s and add_from_boresight()'s checks, before anything is accumulated.
+template <class View>
+void check_chunk(const char* what, const Detector& detector, const View& pointing, std::span<const double> tod,
+                 std::span<const double> hwp_angle, std::span<const std::uint8_t> flags) {
+  const std::size_t n = pointing.size();
+  const std::string op = std::string("BinnedMapmaker::") + what;
+  if (tod.size() != n)
+    throw Error(op + ": detector '" + detector.name + "': " + std::to_string(tod.size()) + " TOD samples for " +
+                std::to_string(n) + " pointing samples");
+  if (!std::isfinite(detector.zeta) || !std::isfinite(detector.epsilon) || !std::isfinite(detector.gain))
+    throw Error(op + ": detector '" + detector.name + "' has a non-finite zeta, epsilon or gain");
+  check_pointing(pointing, op.c_str());
+  for (std::size_t i = 0; i < tod.size(); ++i)
+    if (!std::isfinite(tod[i]))
+      throw Error(op + ": detector '" + detector.name + "': TOD sample " + std::to_string(i) + " is not finite");
+  if (!flags.empty() && flags.size() != tod.size())
+    throw Error(op + ": detector '" + detector.name + "': " + std::to_string(flags.size()) + " flags for " +
+                std::to_string(tod.size()) + " TOD samples (expected one per sample, or none)");
+  if (detector.hwp) {
+    if (hwp_angle.size() != tod.size())
+      throw Error(op + ": detector '" + detector.name + "' has a half-wave plate: expected " +
+                  std::to_string(tod.size()) + " plate angles, got " + std::to_string(hwp_angle.size()));
+    for (std::size_t i = 0; i < hwp_angle.size(); ++i)
+      if (!std::isfinite(hwp_angle[i]))
+        throw Error(op + ": detector '" + detector.name + "': plate angle of sample " + std::to_string(i) +
+                    " is not finite");
+  } else if (!hwp_angle.empty()) {
+    throw Error(op + ": detector '" + detector.name + "' has no half-wave plate, but plate angles were given");
+  }
+}
+
+// cos 2 psi and sin 2 psi of the detector whose rotation is r (theta' = r.ex, line of sight r.ez):
+// psi is the angle of theta' from the meridian theta^ towards phi^ at the line of sight p, whose
+// components along theta^ and phi^ times sin(theta) are a = p_z (theta'_x p_x + theta'_y p_y) -
+// theta'_z (p_x^2 + p_y^2) and b = theta'_y p_x - theta'_x p_y. Exactly at a pole (a = b = 0), where the
+// meridian is HEALPix's phi = 0 one, through the angles.
+void double_angle(const detail::Rotation& r, double& c2, double& s2) {
+  const detail::Vec3<double>& p = r.ez;
+  const detail::Vec3<double>& t = r.ex;
+  const double a = p.z * (t.x * p.x + t.y * p.y) - t.z * (p.x * p.x + p.y * p.y);
+  const double b = t.y * p.x - t.x * p.y;
+  const double n = a * a + b * b;
+  if (n > 0.0) {
+    c2 = (a * a - b * b) / n;
+    s2 = 2.0 * a * b / n;
+    return;
+  }
+  double theta = 0.0, phi = 0.0;
+  detail::direction_angles(p, theta, phi);
+  const double psi = detail::position_angle(t, theta, phi);
+  c2 = std::cos(2.0 * psi);
+  s2 = std::sin(2.0 * psi);
+}
+}  // namespace
+
 void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
                          std::span<const double> tod, std::span<const double> hwp_angle,
                          std::span<const std::uint8_t> flags) {
   // Everything is checked before anything is accumulated, so a bad chunk leaves the maps intact.
-  check_inputs(detector, ptg, tod);
-  if (!flags.empty() && flags.size() != tod.size())
-    throw Error("BinnedMapmaker::add: detector '" + detector.name + "': " + std::to_string(flags.size()) +
-                " flags for " + std::to_string(tod.size()) + " TOD samples (expected one per sample, or none)");
-  if (detector.hwp) {
-    if (hwp_angle.size() != tod.size())
-      throw Error("BinnedMapmaker::add: detector '" + detector.name + "' has a half-wave plate: expected " +
-                  std::to_string(tod.size()) + " plate angles, got " + std::to_string(hwp_angle.size()));
-    for (std::size_t i = 0; i < hwp_angle.size(); ++i)
-      if (!std::isfinite(hwp_angle[i]))
-        throw Error("BinnedMapmaker::add: detector '" + detector.name + "': plate angle of sample " +
-                    std::to_string(i) + " is not finite");
-  } else if (!hwp_angle.empty()) {
-    throw Error("BinnedMapmaker::add: detector '" + detector.name + "' has no half-wave plate, but plate angles were given");
-  }
+  check_chunk("add", detector, ptg, tod, hwp_angle, flags);
   const Base base(int64(nside_), RING, SET_NSIDE);
-  const auto pixel_of = [&](std::size_t i) { return std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i]))); };
-  const auto weights_of = [&](std::size_t i) {
-    return stokes_weights(detector, ptg.psi[i], detector.hwp ? hwp_angle[i] : 0.0);
-  };
+  bin(tod.size(), tod, [&](std::size_t i, std::size_t& pixel, std::array<double, 3>& weights) {
+    if (!flags.empty() && flags[i] != 0) return false;
+    pixel = std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i])));
+    weights = stokes_weights(detector, ptg.psi[i], detector.hwp ? hwp_angle[i] : 0.0);
+    return true;
+  });
+}
+
+void BinnedMapmaker::add_from_boresight(const Detector& detector, const QuatPointingView& boresight,
+                                        std::span<const double> tod, std::span<const double> hwp_angle,
+                                        std::span<const std::uint8_t> flags) {
+  check_chunk("add_from_boresight", detector, boresight, tod, hwp_angle, flags);
+  const Base base(int64(nside_), RING, SET_NSIDE);
+  const Quat& o = detector.offset;
+  const detail::DetectorOffset offset = detail::make_offset({o.x, o.y, o.z, o.w});
+  const double c2z = std::cos(2.0 * detector.zeta), s2z = std::sin(2.0 * detector.zeta);
+  bin(tod.size(), tod, [&](std::size_t i, std::size_t& pixel, std::array<double, 3>& weights) {
+    if (!flags.empty() && flags[i] != 0) return false;
+    const Quat& q = boresight.quats[i];
+    const detail::Q4 b{q.x, q.y, q.z, q.w};
+    const detail::Rotation r = detail::rotation_matrix(offset.active ? detail::quat_mul(b, offset.quat) : b);
+    // rotation_matrix holds for any norm; the line of sight for HEALPix as a unit vector.
+    const double norm = std::sqrt(r.ez.x * r.ez.x + r.ez.y * r.ez.y + r.ez.z * r.ez.z);
+    pixel = std::size_t(base.vec2pix(vec3(r.ez.x / norm, r.ez.y / norm, r.ez.z / norm)));
+    double c2 = 0.0, s2 = 0.0;
+    double_angle(r, c2, s2);
+    // 2 gamma = 2 psi + 2 zeta
+    weights = weights_of_angle(detector, c2 * c2z - s2 * s2z, s2 * c2z + c2 * s2z, detector.hwp ? hwp_angle[i] : 0.0);
+    return true;
+  });
+}
+
+template <class Sample>
+void BinnedMapmaker::bin(std::size_t n, std::span<const double> tod, const Sample& sample) {
   const auto accumulate = [&](std::size_t pix, const std::array<double, 3>& a, double d) {
     double* m = &ata_[6 * pix];
     m[0] += a[0] * a[0];
@@ -164,14 +231,15 @@ void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
     for (int k = 0; k < 3; ++k) v[k] += a[k] * d;
     ++hits_[pix];
   };
-  const std::size_t n = tod.size();
   constexpr std::size_t block = 4096;
   if (threads_ == 1 || n < 2 * block) {
+    std::size_t pix = 0;
+    std::array<double, 3> a{};
     for (std::size_t i = 0; i < n; ++i)
-      if (flags.empty() || flags[i] == 0) accumulate(pixel_of(i), weights_of(i), tod[i]);
+      if (sample(i, pix, a)) accumulate(pix, a, tod[i]);
     return;
   }
-  // On several threads: each sample's pixel and weights (the costly part: ang2pix, the cosine and
+  // On several threads: each sample's pixel and weights (the costly part: the pixel, the cosine and
   // sine of 2 gamma), then the sums, each thread adding the samples of the pixels it owns (blocks of
   // 64 pixels dealt round the threads) in the order given, so that every pixel's sums are the same
   // bits as on one thread.
@@ -180,11 +248,8 @@ void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
   pixel_scratch_.resize(n);
   weight_scratch_.resize(n);
   pool_->parallel_for(n, block, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      const bool flagged = !flags.empty() && flags[i] != 0;
-      pixel_scratch_[i] = flagged ? left_out : pixel_of(i);
-      if (!flagged) weight_scratch_[i] = weights_of(i);
-    }
+    for (std::size_t i = begin; i < end; ++i)
+      if (!sample(i, pixel_scratch_[i], weight_scratch_[i])) pixel_scratch_[i] = left_out;
   });
   const std::size_t parts = pool_->size();
   pool_->parallel_for(parts, 1, [&](std::size_t begin, std::size_t end) {

@@ -88,6 +88,10 @@ struct BoresightChunk {
   pisco::Pointing angles;
   std::vector<pisco::Quat> quats;
   std::vector<double> hwp;  // the half-wave plate's angle per sample, with [hwp]
+  // The angles as quaternions, for the binned map-maker (BinnedMapmaker::add_from_boresight), made
+  // once per chunk for all detectors when the stream asks for them (JobPointing::boresight_quats).
+  std::vector<pisco::Quat> angle_quats;
+  bool angle_quats_made = false;
   bool quaternions = false;
   std::size_t first = 0;
   std::size_t size() const { return quaternions ? quats.size() : angles.size(); }
@@ -125,6 +129,7 @@ class Boresight {
       out.angles.phi.assign(v.phi.begin(), v.phi.end());
       out.angles.psi.assign(v.psi.begin(), v.psi.end());
     }
+    out.angle_quats_made = false;
     out.hwp.clear();
     if (hwp_.angles_from_file) file_->read_hwp_angle(first, count, out.hwp);
     else if (hwp_.enabled) hwp_.stream.generate(first, count, out.hwp);
@@ -645,6 +650,7 @@ class JobPointing {
     }
     pisco::SurveyChunk chunk;
     chunk.detector = job.detector;
+    chunk_slot_ = slot_;
     const bool plate = fp_[job.detector].hwp.has_value();
     if (per_detector) {
       chunk.angles = file_[slot_].view().subspan(job.first, job.count);
@@ -662,10 +668,31 @@ class JobPointing {
     return chunk;
   }
 
+  // The slot of the chunk load() returned last: a chunk stays valid until two more loads.
+  int chunk_slot() const { return chunk_slot_; }
+  // The boresight of the chunk in `slot` as quaternions: as loaded, or the angles turned into
+  // quaternions (pisco::quat_from_pointing, on the pool's threads) the first time a detector of that
+  // chunk asks. Per-detector files have none (empty).
+  pisco::QuatPointingView boresight_quats(int slot, pisco::detail::ThreadPool& pool) {
+    if (scan_.per_detector()) return {};
+    BoresightChunk& b = bore_[std::size_t(slot)];
+    if (b.quaternions) return pisco::QuatPointingView{b.quats};
+    if (!b.angle_quats_made) {
+      const pisco::PointingView a = b.angles.view();
+      b.angle_quats.resize(a.size());
+      pool.parallel_for(a.size(), 4096, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) b.angle_quats[i] = pisco::quat_from_pointing(a.theta[i], a.phi[i], a.psi[i]);
+      });
+      b.angle_quats_made = true;
+    }
+    return pisco::QuatPointingView{b.angle_quats};
+  }
+
  private:
   const SimulationConfig& c_;
   const FocalPlane& fp_;
   const ScanSource& scan_;
+  int chunk_slot_ = 0;
   std::array<BoresightChunk, 2> bore_;
   std::array<pisco::Pointing, 2> file_;
   std::size_t loaded_ = static_cast<std::size_t>(-1);  // the detector or the first sample loaded last
@@ -740,6 +767,7 @@ class JobStream {
   struct Job {
     std::size_t first = 0;
     pisco::SurveyChunk chunk;  // its pointing and plate angles (JobPointing)
+    int pointing_slot = 0;     // JobPointing's slot of that pointing
     int slot = 0;              // its TOD buffer
     std::uint64_t ticket = 0;
   };
@@ -755,6 +783,7 @@ class JobStream {
       j.slot = next_slot_;
       next_slot_ ^= 1;
       j.chunk = pointing_.load(span, hwp_[j.slot]);
+      j.pointing_slot = pointing_.chunk_slot();
       const std::span<double> t(tod_[j.slot].data(), span.count);
       j.ticket = with_view(j.chunk, [&](const auto& view) {
         return engine_.submit(span.detector, view, t, false, j.chunk.hwp_angle);
@@ -783,14 +812,24 @@ class JobStream {
     const pisco::SurveyChunk& chunk = j.chunk;
     const std::size_t count = chunk.size();
     const std::span<double> t(tod_[j.slot].data(), count);
-    if (sinks_.binned || (sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights)))
+    // The binned map-maker takes the boresight's quaternions (one conversion per time chunk for every
+    // detector) and applies the detector's offset itself; the detector's angles are made only for the
+    // TOD file's pointing or weights, or from a per-detector file.
+    const bool tod_pointing = sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights);
+    const pisco::QuatPointingView boresight =
+        sinks_.binned && !tod_pointing ? pointing_.boresight_quats(j.pointing_slot, host_) : pisco::QuatPointingView{};
+    const bool from_boresight = sinks_.binned && !tod_pointing && boresight.size() == count;
+    if ((sinks_.binned && !from_boresight) || tod_pointing)
       with_view(chunk, [&](const auto& view) {
         pisco::detail::detector_pointing(view, fp_[chunk.detector].offset, own_, host_);
       });
     const pisco::PointingView detector_view = own_.view();
     std::span<const std::uint8_t> fl;
     if (flagging_) fl = flag_samples(chunk);
-    if (sinks_.binned) sinks_.binned->add(modelled_[chunk.detector], detector_view, t, chunk.hwp_angle, fl);
+    if (from_boresight)
+      sinks_.binned->add_from_boresight(modelled_[chunk.detector], boresight.subspan(0, count), t, chunk.hwp_angle, fl);
+    else if (sinks_.binned)
+      sinks_.binned->add(modelled_[chunk.detector], detector_view, t, chunk.hwp_angle, fl);
     if (sinks_.deconvolver) {  // the right-hand side A^T d, chunk by chunk
       try {
         sinks_.deconvolver->add(chunk, t);
