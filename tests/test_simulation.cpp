@@ -152,6 +152,48 @@ TEST_F(SimulationTest, WritesWhatTheCommandLineWrites) {
   }
 }
 
+// The stream's host work on the process's threads (the scan generated in blocks, the map-maker's
+// quaternions, binning from the boresight or, with the TOD's pointing written, the detectors' angles)
+// gives the same files bit for bit on one thread and on three: constant-elevation and satellite scans,
+// offsets, a plate, chunks of 20,000 samples.
+TEST_F(SimulationTest, HostThreadsGiveTheSameBits) {
+  const std::string scans[] = {
+      "[scan]\ntype = \"ces\"\nlatitude_deg = -22.96\nlongitude_deg = -67.79\nelevation_deg = 45.0\n"
+      "az_centre_deg = 180.0\naz_throw_deg = 90.0\naz_speed_deg_s = 1.0\nsample_rate_hz = 20.0\n"
+      "start = \"2019-06-01T00:00:00Z\"\nduration_hours = 1.0\nnside = 16\n",
+      "[scan]\ntype = \"satellite\"\nspin_sun_angle_deg = 45.0\nspin_boresight_angle_deg = 50.0\n"
+      "precession_period_min = 9.6174\nspin_period_min = 1.0\nsample_rate_hz = 19.0\nduration_hours = 1.0\nnside = 16\n"};
+  for (const std::string& scan : scans)
+    for (const bool tod_pointing : {false, true}) {
+      std::array<fs::path, 2> out;
+      for (int k = 0; k < 2; ++k) {
+        out[k] = dir_ / ("out" + std::to_string(k));
+        fs::remove_all(out[k]);
+        const fs::path p = dir_ / "threads.toml";
+        std::ofstream(p) << "[sky]\nnside = 32\nlmax = 64\nseed = 3\n"
+                            "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 6.0\n"
+                            "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\nxi_deg = 2\n"
+                            "[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"main\"\nzeta_deg = 30\nxi_deg = -1\n"
+                            "eta_deg = 1.5\ngamma_deg = 10\n"
+                         << scan << "[hwp]\nrpm = 60\nsample_rate_hz = " << (scan.find("ces") != std::string::npos ? "20" : "19")
+                         << "\n[engine]\nbackend = \"simd\"\nchunk_samples = 20000\nthreads = " << (k == 0 ? 1 : 3)
+                         << "\n[output]\ndir = \"" << out[k].string() << "\"\nplots = false\nspectra = false\n"
+                         << "tod_pointing = " << (tod_pointing ? "true" : "false") << "\n";
+        pisco::Simulation sim = pisco::Simulation::from_file(p);
+        const pisco::SimulationResult r = sim.run();
+        ASSERT_GT(r.solved_pixels, 20u);
+        ASSERT_GT(r.samples_per_detector, 60000u);
+      }
+      for (const char* name : {"maps.fits", "hits.fits"})
+        EXPECT_TRUE(read_bytes(out[0] / name) == read_bytes(out[1] / name))
+            << name << " differs between one and three threads (" << scan.substr(0, 25) << ", tod_pointing "
+            << tod_pointing << ")";
+      for (const auto& d : pisco::read_tod_detectors(out[0] / "tod.h5"))
+        EXPECT_TRUE(pisco::read_tod_signal(out[0] / "tod.h5", d.name) == pisco::read_tod_signal(out[1] / "tod.h5", d.name))
+            << d.name;
+    }
+}
+
 TEST_F(SimulationTest, PartsOneByOne) {
   const pisco::SimulationConfig c = pisco::read_simulation_file(write_config());
   EXPECT_EQ(c.scan.kind, pisco::ScanKind::pixel_centres);

@@ -117,10 +117,30 @@ class Boresight {
     if (file_) return file_->size();
     return all_.size();
   }
-  void fill(std::size_t first, std::size_t count, BoresightChunk& out) const {
+  // With `pool`, the generated scans (constant-elevation and satellite, whose samples do not depend on
+  // each other) in blocks of samples on its threads: the same values.
+  void fill(std::size_t first, std::size_t count, BoresightChunk& out, pisco::detail::ThreadPool* pool = nullptr) const {
     out.first = first;
     out.quaternions = quaternions();
-    if (scan_.kind == ScanKind::ces) scan_.ces.generate(first, count, out.angles);
+    constexpr std::size_t block = 4096;
+    const bool spread = pool && pool->size() > 1 && count > block;
+    if (scan_.kind == ScanKind::ces && spread) {
+      for (auto* v : {&out.angles.theta, &out.angles.phi, &out.angles.psi}) v->resize(count);
+      pool->parallel_for(count, block, [&](std::size_t begin, std::size_t end) {
+        pisco::Pointing part;
+        scan_.ces.generate(first + begin, end - begin, part);
+        std::copy(part.theta.begin(), part.theta.end(), out.angles.theta.begin() + std::ptrdiff_t(begin));
+        std::copy(part.phi.begin(), part.phi.end(), out.angles.phi.begin() + std::ptrdiff_t(begin));
+        std::copy(part.psi.begin(), part.psi.end(), out.angles.psi.begin() + std::ptrdiff_t(begin));
+      });
+    } else if (scan_.kind == ScanKind::satellite && spread) {
+      out.quats.resize(count);
+      pool->parallel_for(count, block, [&](std::size_t begin, std::size_t end) {
+        std::vector<pisco::Quat> part;
+        scan_.satellite.generate(first + begin, end - begin, part);
+        std::copy(part.begin(), part.end(), out.quats.begin() + std::ptrdiff_t(begin));
+      });
+    } else if (scan_.kind == ScanKind::ces) scan_.ces.generate(first, count, out.angles);
     else if (scan_.kind == ScanKind::satellite) scan_.satellite.generate(first, count, out.quats);
     else if (file_) file_->read(first, count, out.quats);
     else {
@@ -617,7 +637,9 @@ class ScanSource {
   bool per_detector() const { return per_detector_; }
   std::size_t samples_per_detector() const { return samples_; }
   // The boresight's samples [first, first + count).
-  void fill(std::size_t first, std::size_t count, BoresightChunk& out) const { boresight_->fill(first, count, out); }
+  void fill(std::size_t first, std::size_t count, BoresightChunk& out, pisco::detail::ThreadPool* pool = nullptr) const {
+    boresight_->fill(first, count, out, pool);
+  }
   // A per-detector file's pointing of detector d, whole.
   pisco::Pointing detector_pointing(std::size_t d) const { return pisco::read_pointing_hdf5(c_.scan.file, fp_[d].name); }
 
@@ -635,7 +657,10 @@ class ScanSource {
 // (JobStream's pending job): a job's views stay valid until the load after next.
 class JobPointing {
  public:
-  JobPointing(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan) : c_(c), fp_(fp), scan_(scan) {}
+  // With `pool`, generated scans are made on its threads.
+  JobPointing(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan,
+              pisco::detail::ThreadPool* pool = nullptr)
+      : c_(c), fp_(fp), scan_(scan), pool_(pool) {}
 
   // Job's pointing and its detector's plate angles (none without a plate); a per-detector file's
   // plate angles are generated into `hwp`, which must outlive the views as well.
@@ -645,7 +670,7 @@ class JobPointing {
     if (key != loaded_) {
       slot_ ^= 1;
       if (per_detector) file_[slot_] = scan_.detector_pointing(job.detector);
-      else scan_.fill(job.first, job.count, bore_[slot_]);
+      else scan_.fill(job.first, job.count, bore_[slot_], pool_);
       loaded_ = key;
     }
     pisco::SurveyChunk chunk;
@@ -692,6 +717,7 @@ class JobPointing {
   const SimulationConfig& c_;
   const FocalPlane& fp_;
   const ScanSource& scan_;
+  pisco::detail::ThreadPool* pool_ = nullptr;
   int chunk_slot_ = 0;
   std::array<BoresightChunk, 2> bore_;
   std::array<pisco::Pointing, 2> file_;
@@ -721,7 +747,7 @@ class JobStream {
   JobStream(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan, Engine& engine, StreamSinks sinks,
             bool flagging, std::size_t chunk, unsigned host_threads, RunObserver& obs)
       : c_(c), fp_(fp), engine_(engine), sinks_(sinks), flagging_(flagging), obs_(obs),
-        modelled_(fp.detectors()), pointing_(c, fp, scan), host_(host_threads) {
+        modelled_(fp.detectors()), host_(host_threads), pointing_(c, fp, scan, &host_) {
     for (auto& t : tod_) t.resize(chunk);
     // The detectors as the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in
     // place of the real one).
@@ -861,10 +887,11 @@ class JobStream {
   bool flagging_;
   RunObserver& obs_;
   std::vector<pisco::Detector> modelled_;
-  JobPointing pointing_;
-  // The per-sample host work of a finished job (detector pointing, the TOD file's weights) on all
-  // its threads, while the backend convolves the next job: the same bits as on one thread.
+  // The per-sample host work (the scan's generation, the map-maker's quaternions, detector pointing,
+  // the TOD file's weights) on all its threads, while the backend convolves the previous job: the
+  // same bits as on one thread.
   pisco::detail::ThreadPool host_;
+  JobPointing pointing_;
   std::array<std::vector<double>, 2> tod_;
   std::array<std::vector<double>, 2> hwp_;  // per-detector files: a job's plate angles, by TOD buffer
   std::optional<Job> pending_;
