@@ -114,6 +114,10 @@ TEST_F(Cli, BenchPrintsTheSetUpApartAndTheStreamsHostWork) {
   ASSERT_EQ(b.status, 0) << b.output;
   EXPECT_NE(b.output.find("set-up"), std::string::npos) << b.output;
   EXPECT_NE(b.output.find("ns/sample"), std::string::npos) << b.output;
+  const Result e = run("bench -b simd --threads 2 --rho-max 1 --beam elliptical");
+  ASSERT_EQ(e.status, 0) << e.output;
+  EXPECT_NE(e.output.find("elliptical beam 1.52 x 1.46 deg FWHM (2D grid)"), std::string::npos) << e.output;
+  EXPECT_NE(run("bench --beam square").status, 0);
   const Result s = run("bench --stream --threads 2");
   ASSERT_EQ(s.status, 0) << s.output;
   std::istringstream lines(s.output);

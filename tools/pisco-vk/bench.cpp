@@ -93,8 +93,10 @@ int run_bench(const BenchOptions& options) {
   const std::string monopole =
       options.monopole_uk != 0.0 ? ", monopole " + std::to_string(options.monopole_uk) + " uK" : std::string();
   std::printf("Table 1 workload: NSIDE %d sky, %zu samples (%zu pointings x %zu detectors), "
-              "FWHM 1.5 deg, beam grid step %.2f arcmin%s%s\n",
-              nside, samples, scan.size(), fp.size(), beam_step / deg * 60,
+              "%s, beam grid step %.2f arcmin%s%s\n",
+              nside, samples, scan.size(), fp.size(),
+              options.beam == "elliptical" ? "elliptical beam 1.52 x 1.46 deg FWHM (2D grid)" : "FWHM 1.5 deg",
+              beam_step / deg * 60,
               options.hwp == "none" ? "" : (", " + options.hwp + " half-wave plate at the " + options.hwp_placement).c_str(),
               monopole.c_str());
   std::printf("%8s %9s %10s %10s %12s %12s %10s\n", "rho_max", "pixels", "setup_s", "conv_s",
@@ -104,7 +106,9 @@ int run_bench(const BenchOptions& options) {
     pisco::BeamOptions o;
     o.rho_max = rho * deg;
     o.grid_step = beam_step;
-    std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(1.5 * deg, o)};
+    std::vector<pisco::Beamsor> beams{options.beam == "elliptical"
+                                          ? pisco::Beamsor::elliptical_gaussian(1.52 * deg, 1.46 * deg, 10 * deg, o)
+                                          : pisco::Beamsor::gaussian(1.5 * deg, o)};
     pisco::Engine engine(sky, beams, fp, engine_options);
     engine.prepare();  // the polar copy, which would otherwise be made by the first convolution
     const double setup = seconds_since(t0);

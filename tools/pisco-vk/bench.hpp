@@ -15,6 +15,9 @@ struct BenchOptions {
   // entries non-zero), at the aperture or, with hwp_placement = "detector", behind the optics.
   std::string hwp = "none";
   std::string hwp_placement = "aperture";
+  // "gaussian" (Table 1's round beam, a radial profile) or "elliptical" (class_like.toml's first beam,
+  // 1.52 x 1.46 deg FWHM at 10 deg, on the 2D grid that every beam that is not round uses).
+  std::string beam = "gaussian";
   // A monopole added to the sky's I, in uK (2.725e6 for the CMB's): the float32 backends then sum
   // the monopole's weight in float64 (docs/vulkan.md, "Precision"), which this measures.
   double monopole_uk = 0.0;
