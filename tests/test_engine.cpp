@@ -421,6 +421,11 @@ TEST(Engine, EveryPartQueuedBeforeAnyWaitAndPreparedAtSetUp) {
       EXPECT_GT(engine.polar_samples(), 0u) << backend;
       EXPECT_EQ(engine.polar_samples(), one_by_one.polar_samples()) << backend;
     }
+    {  // an engine let go with every part of every detector in flight: its backends finish first
+      std::vector<std::vector<double>> queued(fp.size(), std::vector<double>(s.ptg.size(), NAN));
+      pisco::Engine engine(s.sky, s.beams, fp, options);
+      for (std::size_t det = 0; det < fp.size(); ++det) engine.submit(det, s.ptg, queued[det], false, angles(det));
+    }
   }
 }
 

@@ -193,7 +193,16 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   outer_backend_ = entry.create(outer_inputs_, coarse, options);
 }
 
-Engine::~Engine() = default;
+Engine::~Engine() {
+  // Nothing still in flight may write into the pending submissions' buffers once they are gone (a
+  // plate's rows, the polar samples', a split beam's outer part): every backend finishes first.
+  if (backend_ && next_ticket_ > 1) try {
+      backend_->wait(next_ticket_ - 1);
+    } catch (...) {  // the caller's wait() reports errors; a destructor cannot
+    }
+  drop_pending();
+}
+
 Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 
