@@ -64,6 +64,7 @@ step bench-cpu-5deg "$build/tools/pisco-vk" bench -b cpu --rho-max 5
 # The bench's first call against its best (the polar copy made at set-up), and the streamed run's host
 # work per detector-sample on one thread and on all of them.
 step bench-cuda-repeat1 "$build/tools/pisco-vk" bench -b cuda --repeat 1 --rho-max 1 5 10
+step bench-cuda-elliptical "$build/tools/pisco-vk" bench -b cuda --beam elliptical --repeat 2 --rho-max 5 10
 step bench-stream "$build/tools/pisco-vk" bench --stream --repeat 3
 # shellcheck disable=SC2086
 step ducc0 python3 "$root/tools/ducc0_compare.py" --pisco "$build/tools/pisco-vk" -b cuda --rho-max $radii
@@ -76,7 +77,7 @@ else
 fi
 
 echo | tee -a "$logs/summary.txt"
-for f in bench-cuda bench-cuda-repeat1 bench-stream bench-vulkan bench-simd-1 bench-simd-2 bench-simd-4 bench-simd-8 bench-simd-16 ducc0; do
+for f in bench-cuda bench-cuda-repeat1 bench-cuda-elliptical bench-stream bench-vulkan bench-simd-1 bench-simd-2 bench-simd-4 bench-simd-8 bench-simd-16 ducc0; do
   [ -f "$logs/$f.log" ] && { echo "--- $f"; cat "$logs/$f.log"; } >>"$logs/summary.txt"
 done
 echo "logs in $logs"
