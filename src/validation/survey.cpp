@@ -162,19 +162,7 @@ SurveyRun observe(const Geometry& g, const Sky& sky, Mismatch kind, double delta
 
   Engine engine(sky, beams, fp, {.backend = backend});
   r.device = engine.backend_name() + ": " + engine.device_name();
-  CesScan ces;
-  ces.latitude = -22.96 * deg;
-  ces.longitude = -67.79 * deg;
-  ces.elevation = 45 * deg;
-  ces.az_centre = 180 * deg;
-  ces.az_throw = 720 * deg;
-  ces.az_speed = 1 * deg;
-  ces.sample_rate = 20;
-  ces.start_unix = 1559347200;  // 2019-06-01T00:00:00Z
-  ces.boresight_angles = {-45 * deg, -30 * deg, -15 * deg, 0.0, 15 * deg, 30 * deg, 45 * deg};
-  ces.boresight_period = 86400;
-  ces.samples = std::size_t(std::llround(g.hours * 3600 * ces.sample_rate));
-  ces.check();
+  const CesScan ces = class_like_scan(std::size_t(std::llround(g.hours * 3600 * 20.0)));
   BinnedMapmaker mapper(g.nside);
   std::optional<DeconvolvingMapmaker> maker;
   if (deconvolve) maker.emplace(engine, *deconvolve);
@@ -590,6 +578,23 @@ CaseResult deconvolved_survey(Scale scale, const std::string& backend, const Sur
     r.notes.push_back("report: " + (options.report_dir / "M" / "report.md").string());
   }
   return r;
+}
+
+CesScan class_like_scan(std::size_t samples) {
+  CesScan ces;
+  ces.latitude = -22.96 * deg;
+  ces.longitude = -67.79 * deg;
+  ces.elevation = 45 * deg;
+  ces.az_centre = 180 * deg;
+  ces.az_throw = 720 * deg;
+  ces.az_speed = 1 * deg;
+  ces.sample_rate = 20;
+  ces.start_unix = 1559347200;  // 2019-06-01T00:00:00Z
+  ces.boresight_angles = {-45 * deg, -30 * deg, -15 * deg, 0.0, 15 * deg, 30 * deg, 45 * deg};
+  ces.boresight_period = 86400;
+  ces.samples = samples;
+  ces.check();
+  return ces;
 }
 
 }  // namespace pisco::validation

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "pisco/scan.hpp"
+
 namespace pisco::validation {
 
 enum class Scale {
@@ -49,6 +51,10 @@ CaseResult pointing_offsets(Scale scale, const std::string& backend = "cpu");
 // polarized r = 0 sky (P -> B from uneven intra-pixel coverage). Test scale: 4 h, 4 pairs, NSIDE 64;
 // full: a week, 36 pairs, NSIDE 128 (the paper's 871 million samples).
 enum class Mismatch { none, pointing, beam };
+// The survey's constant-elevation scans (paper 7): the CLASS site in the Atacama, elevation 45 deg,
+// 720 deg azimuth sweeps at 1 deg/s around south, 20 Hz from 2019-06-01, the boresight rotated
+// daily through -45 ... +45 deg; `samples` of them. `pisco-vk bench --stream` scans the same way.
+CesScan class_like_scan(std::size_t samples);
 struct SurveyOptions {
   int nside = 0;       // 0: the scale's
   int pairs = 0;       // 0: the scale's

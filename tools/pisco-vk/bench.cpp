@@ -18,6 +18,7 @@
 #include "pisco/mapmaker.hpp"
 #include "pisco/pisco.hpp"
 #include "pisco/scan.hpp"
+#include "validation/validation.hpp"
 
 namespace pisco_cli {
 namespace {
@@ -191,17 +192,7 @@ int run_bench(const BenchOptions& options) {
 // per detector-sample, on one thread and on the host's threads as a run uses them.
 int run_stream_bench(const BenchOptions& options) {
   const std::size_t chunk = std::size_t(1) << 16, chunks = 4;
-  pisco::CesScan ces;
-  ces.latitude = -22.96 * deg;
-  ces.longitude = -67.79 * deg;
-  ces.elevation = 45 * deg;
-  ces.az_centre = 180 * deg;
-  ces.az_throw = 720 * deg;
-  ces.az_speed = 1 * deg;
-  ces.sample_rate = 20.0;
-  ces.start_unix = 1.7e9;
-  ces.samples = chunk * chunks;
-  ces.check();
+  const pisco::CesScan ces = pisco::validation::class_like_scan(chunk * chunks);
   std::vector<pisco::Detector> dets;
   for (int k = 0; k < 36; ++k) {
     pisco::FocalPlane pair;
