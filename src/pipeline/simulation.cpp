@@ -888,7 +888,7 @@ class JobStream {
   RunObserver& obs_;
   std::vector<pisco::Detector> modelled_;
   // The per-sample host work (the scan's generation, the map-maker's quaternions, detector pointing,
-  // the TOD file's weights) on all its threads, while the backend convolves the previous job: the
+  // the TOD file's weights) on all its threads, while the backend convolves the next job: the
   // same bits as on one thread.
   pisco::detail::ThreadPool host_;
   JobPointing pointing_;
