@@ -134,7 +134,7 @@ TEST_F(Cli, BenchPrintsTheSetUpApartAndTheStreamsHostWork) {
     EXPECT_GT(from_boresight, 0.0) << line;
     EXPECT_GT(pointing, 0.0) << line;
     EXPECT_GT(binning, 0.0) << line;
-    EXPECT_NEAR(total, boresight + quaternions + from_boresight, 0.02) << line;
+    EXPECT_NEAR(total, boresight + quaternions + from_boresight, 0.05) << line;  // four figures rounded to 0.005
   }
   EXPECT_EQ(rows, 2) << s.output;
 }
