@@ -523,11 +523,7 @@ std::uint32_t cooperative_walk(const pc::KernelSky& sky, const pc::KernelDetecto
       pending -= count;
     }
   };
-  if (d.north) {
-    begin[0] = 0;
-    end[0] = pc::north_cap_end(sky, d);
-    pending = 1;
-  }
+  pc::stage_cap(begin, end, pending, true, [&](auto&& emit) { pisco::detail::emit_north_cap(sky.rings, d, emit); });
   for (std::int64_t base = d.first; base <= d.last; base += pc::warp_lanes) {
     pc::RingRanges rr[pc::warp_lanes];
     std::uint32_t one = 0, two = 0;
@@ -540,11 +536,8 @@ std::uint32_t cooperative_walk(const pc::KernelSky& sky, const pc::KernelDetecto
     pending += pc::popcount32(one) + pc::popcount32(two);
     cut(false);
   }
-  if (d.south) {
-    begin[pending] = pc::south_cap_begin(sky, d);
-    end[pending] = pc::sky_pixels(sky);
-    pending += 1;
-  }
+  pc::stage_cap(begin, end, pending, true,
+                [&](auto&& emit) { pisco::detail::emit_south_cap(sky.rings, sky.nside, d, emit); });
   cut(true);
   return pixels;
 }

@@ -73,9 +73,15 @@ struct ArrayGrid {
   T a, inv_step;  // nodes at x_i = -a + i * step (radial: r_i = i * step)
 };
 
+// A node and the next: four weights each.
+template <class T>
+PISCO_HD void node_pair(const T* p, Vec4<T>& w, Vec4<T>& next) {
+  w = {p[0], p[1], p[2], p[3]};
+  next = {p[4], p[5], p[6], p[7]};
+}
 #if defined(__CUDA_ARCH__)
-// On a CUDA device, the float32 tables' two nodes as two aligned 16-byte loads (float4) rather than
-// eight scalar ones: the same values. Every table starts a device allocation and a node is 16 bytes
+// On a CUDA device, the float32 tables' nodes as two aligned 16-byte loads (float4) rather than eight
+// scalar ones: the same values. Every table starts a device allocation and a node is 16 bytes
 // (src/cuda/device_data.cpp checks the alignment). The float64 tables (the monopole's and per-sample
 // sums) keep scalar loads: double2 loads there cost those variants up to 20 registers and an
 // occupancy step (tests/cuda/kernel_budgets.txt).
@@ -85,21 +91,11 @@ __device__ __forceinline__ void node_pair(const float* p, Vec4<float>& w, Vec4<f
   w = {a.x, a.y, a.z, a.w};
   next = {b.x, b.y, b.z, b.w};
 }
-__device__ __forceinline__ void node_pair(const double* p, Vec4<double>& w, Vec4<double>& next) {
-  w = {p[0], p[1], p[2], p[3]};
-  next = {p[4], p[5], p[6], p[7]};
-}
 #endif
 
 template <class T>
 PISCO_HD void weight_pair(const ArrayGrid<T>& g, int k, Vec4<T>& w, Vec4<T>& next) {
-  const T* p = g.weights + 4 * k;
-#if defined(__CUDA_ARCH__)
-  node_pair(p, w, next);
-#else
-  w = {p[0], p[1], p[2], p[3]};
-  next = {p[4], p[5], p[6], p[7]};
-#endif
+  node_pair(g.weights + 4 * k, w, next);
 }
 
 // pixel.glsl as C++ templates of T (and of the grid type G). The macros that shaders/common.glsl

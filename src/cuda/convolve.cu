@@ -49,13 +49,7 @@ __device__ __forceinline__ std::uint32_t walk_disc_warp(const KernelSky& sky, co
       __syncwarp();  // the staging rewritten before the next pass writes into it
     }
   };
-  if (d.north) {
-    if (lane == 0) {
-      begin[0] = 0;
-      end[0] = north_cap_end(sky, d);
-    }
-    pending = 1;
-  }
+  stage_cap(begin, end, pending, lane == 0, [&](auto&& emit) { emit_north_cap(sky.rings, d, emit); });
   for (std::int64_t base = d.first; base <= d.last; base += warp_lanes) {
     RingRanges rr;
     if (base + lane <= d.last) rr = ring_ranges(sky, d, phi, det.cos_rho_max, base + lane);
@@ -65,13 +59,7 @@ __device__ __forceinline__ std::uint32_t walk_disc_warp(const KernelSky& sky, co
     pending += __popc(one) + __popc(two);
     cut(false);
   }
-  if (d.south) {
-    if (lane == 0) {
-      begin[pending] = south_cap_begin(sky, d);
-      end[pending] = sky_pixels(sky);
-    }
-    pending += 1;
-  }
+  stage_cap(begin, end, pending, lane == 0, [&](auto&& emit) { emit_south_cap(sky.rings, sky.nside, d, emit); });
   cut(true);
   return pixels;
 }

@@ -318,14 +318,18 @@ PISCO_HD void unstage_batch(std::uint32_t* begin, std::uint32_t* end, int pendin
   }
 }
 
-// The disc's polar caps as ranges (walk_disc's first and last): [0, end) of the rings north of d.first,
-// [begin, 12 NSIDE^2) of those south of d.last.
-PISCO_HD std::uint32_t north_cap_end(const KernelSky& sky, const DiscRings& d) {
-  const RingEntry& r = sky.rings[d.first - 2];
-  return r.first + r.count;
+// A polar cap's range (disc.hpp's emit_north_cap and emit_south_cap, as walk_disc takes them) staged
+// after the `pending` ranges by `writer`; every lane counts it.
+template <class EmitCap>
+PISCO_HD void stage_cap(std::uint32_t* begin, std::uint32_t* end, int& pending, bool writer, EmitCap&& emit_cap) {
+  emit_cap([&](std::uint32_t b, std::uint32_t e) {
+    if (writer) {
+      begin[pending] = b;
+      end[pending] = e;
+    }
+    ++pending;
+  });
 }
-PISCO_HD std::uint32_t south_cap_begin(const KernelSky& sky, const DiscRings& d) { return sky.rings[d.last].first; }
-PISCO_HD std::uint32_t sky_pixels(const KernelSky& sky) { return std::uint32_t(12 * sky.nside * sky.nside); }
 
 // The sample from the reduced sums, as every backend (shaders/pixel.glsl): float32 sum plus I0 sum w_I,
 // over the normalization when per-sample.
