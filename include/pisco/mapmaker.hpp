@@ -91,10 +91,10 @@ class BinnedMapmaker {
   double rcond_min_;
   unsigned threads_ = 1;
   std::unique_ptr<detail::ThreadPool> pool_;  // made by the first add() with threads_ > 1
-  // Bins samples [0, n) whose pixel and weights sample(i, pixel, weights) gives (false: left out), in
-  // order for each pixel, on threads_ threads.
+  // Bins the samples of `tod` whose pixel and weights sample(i, pixel, weights) gives (false: left
+  // out), in order for each pixel, on threads_ threads.
   template <class Sample>
-  void bin(std::size_t n, std::span<const double> tod, const Sample& sample);
+  void bin(std::span<const double> tod, const Sample& sample);
   // add()'s per-sample pixels and weights, kept between calls.
   std::vector<std::size_t> pixel_scratch_;
   std::vector<std::array<double, 3>> weight_scratch_;

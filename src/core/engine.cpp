@@ -391,12 +391,8 @@ void Engine::finish_pending(std::uint64_t ticket) {
     }
     const auto host_start = std::chrono::steady_clock::now();
     complete(p);
-    if (!problem.empty()) {
-      host_seconds_ += seconds_since(host_start);
-      continue;
-    }
     // One pass over the chunk: the arithmetic overflowed somewhere in the sum (every input was finite).
-    for (std::size_t i = 0; i < p.tod.size(); ++i)
+    for (std::size_t i = 0; i < p.tod.size() && problem.empty(); ++i)
       if (!std::isfinite(p.tod[i])) {
         const std::string& name = focal_plane_[p.detector].name;
         // The cpu backend sums in float64; the others sum the pixels in float32 (docs/simd.md).
@@ -407,7 +403,6 @@ void Engine::finish_pending(std::uint64_t ticket) {
                   "for " + (wide ? "float64 (their products exceed 1.8e308)" :
                                    "the " + backend_->name() + " backend's float32 sums (beyond 3.4e38)") +
                   (p.accumulate ? ", or so is the TOD accumulated into" : "");
-        break;
       }
     host_seconds_ += seconds_since(host_start);
   }

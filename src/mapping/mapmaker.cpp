@@ -90,10 +90,6 @@ Vec3 cholesky_solve(const Sym3& s, const Vec3& b) {
   return {x0, x1, x2};
 }
 
-
-}  // namespace
-
-namespace {
 // stokes_weights from cos 2 gamma and sin 2 gamma.
 std::array<double, 3> weights_of_angle(const Detector& detector, double c2, double s2, double hwp_angle) {
   const double co = 0.5 * detector.gain * (1.0 + detector.epsilon);
@@ -185,7 +181,7 @@ void BinnedMapmaker::add(const Detector& detector, const PointingView& ptg,
   // Everything is checked before anything is accumulated, so a bad chunk leaves the maps intact.
   check_chunk("add", detector, ptg, tod, hwp_angle, flags);
   const Base base(int64(nside_), RING, SET_NSIDE);
-  bin(tod.size(), tod, [&](std::size_t i, std::size_t& pixel, std::array<double, 3>& weights) {
+  bin(tod, [&](std::size_t i, std::size_t& pixel, std::array<double, 3>& weights) {
     if (!flags.empty() && flags[i] != 0) return false;
     pixel = std::size_t(base.ang2pix(pointing(ptg.theta[i], ptg.phi[i])));
     weights = stokes_weights(detector, ptg.psi[i], detector.hwp ? hwp_angle[i] : 0.0);
@@ -201,14 +197,12 @@ void BinnedMapmaker::add_from_boresight(const Detector& detector, const QuatPoin
   const Quat& o = detector.offset;
   const detail::DetectorOffset offset = detail::make_offset({o.x, o.y, o.z, o.w});
   const double c2z = std::cos(2.0 * detector.zeta), s2z = std::sin(2.0 * detector.zeta);
-  bin(tod.size(), tod, [&](std::size_t i, std::size_t& pixel, std::array<double, 3>& weights) {
+  bin(tod, [&](std::size_t i, std::size_t& pixel, std::array<double, 3>& weights) {
     if (!flags.empty() && flags[i] != 0) return false;
     const Quat& q = boresight.quats[i];
     const detail::Q4 b{q.x, q.y, q.z, q.w};
     const detail::Rotation r = detail::rotation_matrix(offset.active ? detail::quat_mul(b, offset.quat) : b);
-    // rotation_matrix holds for any norm; the line of sight for HEALPix as a unit vector.
-    const double norm = std::sqrt(r.ez.x * r.ez.x + r.ez.y * r.ez.y + r.ez.z * r.ez.z);
-    pixel = std::size_t(base.vec2pix(vec3(r.ez.x / norm, r.ez.y / norm, r.ez.z / norm)));
+    pixel = std::size_t(base.vec2pix(vec3(r.ez.x, r.ez.y, r.ez.z)));  // HEALPix normalizes it
     double c2 = 0.0, s2 = 0.0;
     double_angle(r, c2, s2);
     // 2 gamma = 2 psi + 2 zeta
@@ -218,7 +212,8 @@ void BinnedMapmaker::add_from_boresight(const Detector& detector, const QuatPoin
 }
 
 template <class Sample>
-void BinnedMapmaker::bin(std::size_t n, std::span<const double> tod, const Sample& sample) {
+void BinnedMapmaker::bin(std::span<const double> tod, const Sample& sample) {
+  const std::size_t n = tod.size();
   const auto accumulate = [&](std::size_t pix, const std::array<double, 3>& a, double d) {
     double* m = &ata_[6 * pix];
     m[0] += a[0] * a[0];

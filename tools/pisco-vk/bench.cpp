@@ -196,7 +196,9 @@ int run_stream_bench(const BenchOptions& options) {
   std::vector<pisco::Detector> dets;
   for (int k = 0; k < 36; ++k) {
     pisco::FocalPlane pair;
-    pair.add_pair("p" + std::to_string(k), (k % 2) * 45 * deg, 0, 0);
+    std::string name = "p";  // (not "p" + to_string: GCC 12 warns, -Wrestrict, of a memcpy it cannot reach)
+    name += std::to_string(k);
+    pair.add_pair(name, (k % 2) * 45 * deg, 0, 0);
     for (pisco::Detector d : pair.detectors()) {
       d.set_offset((k % 6 - 2.5) * 2 * deg, (k / 6 - 2.5) * 2 * deg, 0.0);
       dets.push_back(d);
