@@ -68,6 +68,13 @@ void detector_pointing(const View& b, const Quat& offset, Pointing& out, ThreadP
 template void detector_pointing(const PointingView&, const Quat&, Pointing&, ThreadPool&);
 template void detector_pointing(const QuatPointingView&, const Quat&, Pointing&, ThreadPool&);
 
+void pointing_quats(const PointingView& a, std::vector<Quat>& out, ThreadPool& pool) {
+  out.resize(a.size());
+  pool.parallel_for(a.size(), 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) out[i] = quat_from_pointing(a.theta[i], a.phi[i], a.psi[i]);
+  });
+}
+
 }  // namespace detail
 
 void detector_pointing(const PointingView& b, const Quat& offset, Pointing& out) {

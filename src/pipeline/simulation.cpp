@@ -703,11 +703,7 @@ class JobPointing {
     BoresightChunk& b = bore_[std::size_t(slot)];
     if (b.quaternions) return pisco::QuatPointingView{b.quats};
     if (!b.angle_quats_made) {
-      const pisco::PointingView a = b.angles.view();
-      b.angle_quats.resize(a.size());
-      pool.parallel_for(a.size(), 4096, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) b.angle_quats[i] = pisco::quat_from_pointing(a.theta[i], a.phi[i], a.psi[i]);
-      });
+      pisco::detail::pointing_quats(b.angles.view(), b.angle_quats, pool);
       b.angle_quats_made = true;
     }
     return pisco::QuatPointingView{b.angle_quats};

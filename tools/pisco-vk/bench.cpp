@@ -188,8 +188,9 @@ int run_bench(const BenchOptions& options) {
 // The streamed run's host work (docs/simd.md, "The stream's host work"): what JobStream does per
 // detector-sample besides the convolution, for a CLASS-like run (paper section 7: constant-elevation
 // scans from the Atacama at 20 Hz, 36 PSB pairs over a 10 deg focal plane, maps at NSIDE 128). The
-// boresight is made once per time chunk for all detectors; each detector's pointing and its binning
-// per detector-sample, on one thread and on the host's threads as a run uses them.
+// boresight (here on one thread) and its quaternions are made once per time chunk for all detectors;
+// then per detector-sample the binning from the boresight, which a run does, and beside it the path
+// before (each detector's angles, then BinnedMapmaker::add), on one thread and on the host's threads.
 int run_stream_bench(const BenchOptions& options) {
   const std::size_t chunk = std::size_t(1) << 16, chunks = 4;
   const pisco::CesScan ces = pisco::validation::class_like_scan(chunk * chunks);
@@ -231,11 +232,7 @@ int run_stream_bench(const BenchOptions& options) {
         ces.generate(c * chunk, chunk, boresight);
         t[0] += seconds_since(t0);
         t0 = std::chrono::steady_clock::now();
-        quats.resize(chunk);
-        pool.parallel_for(chunk, 4096, [&](std::size_t begin, std::size_t end) {
-          for (std::size_t i = begin; i < end; ++i)
-            quats[i] = pisco::quat_from_pointing(boresight.theta[i], boresight.phi[i], boresight.psi[i]);
-        });
+        pisco::detail::pointing_quats(boresight.view(), quats, pool);
         t[1] += seconds_since(t0);
         for (const pisco::Detector& d : dets) {
           t0 = std::chrono::steady_clock::now();
