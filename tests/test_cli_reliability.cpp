@@ -11,6 +11,7 @@
 #include <unistd.h>
 #include <filesystem>
 #include <fstream>
+#include <regex>
 #include <numeric>
 #include <string>
 #include <utility>
@@ -104,7 +105,11 @@ TEST_F(Reliability, HostileOutputDirectoryReachesNoShell) {
     std::ifstream recorded(out / "plot-args.txt");
     std::vector<std::string> got;
     for (std::string line; std::getline(recorded, line);) got.push_back(line);
-    EXPECT_EQ(got, (std::vector<std::string>{"--", dir})) << "the plotting tool's arguments, for " << option;
+    // The suffix of pisco-vk's temporaries (its lock records it), then the directory after "--".
+    ASSERT_EQ(got.size(), 3u) << joined(got);
+    EXPECT_TRUE(std::regex_match(got[0], std::regex(R"(--temporary-suffix=\.tmp-pisco-[0-9]+-[0-9a-f]{16})"))) << got[0];
+    EXPECT_EQ(std::vector<std::string>(got.begin() + 1, got.end()), (std::vector<std::string>{"--", dir}))
+        << "the plotting tool's arguments, for " << option;
     // The real plotting tool on the same directory: plots, or a skip message where healpy is missing.
     args.erase(args.begin() + 1);  // not quiet: the plotting tool's messages
     const CliResult real = run_cli(args, {}, 120, dir_);
@@ -310,11 +315,15 @@ TEST_F(Reliability, AClosedPipeEndsTheRunCleanly) {
 TEST_F(Reliability, OneRunPerDirectoryAndStaleTemporariesRemoved) {
   const fs::path cfg = write("long.toml", long_config());
   const fs::path out = dir_ / "out";
+  // A user's files whose names look temporary: the killed run's clean-up leaves them.
+  fs::create_directories(out);
+  std::ofstream(out / "notes.tmp-20261127") << "a user's notes\n";
+  std::ofstream(out / "tod.h5.tmp-1") << "a user's file\n";
   auto first = pisco_test::start_cli({"run", cfg.string(), "-o", out.string()});
   bool tried = false;
   CliResult second;
   const CliResult r = pisco_test::finish_cli(first, 120, [&](const std::string&) {
-    if (tried || temporaries_under(out).empty()) return;
+    if (tried || temporaries_under(out).size() <= 2) return;  // the user's two, and none of the run's yet
     second = run_cli({"run", "-q", cfg.string(), "-o", out.string()}, {}, 60);
     tried = true;
     ::kill(first.pid, SIGKILL);  // as a crash or the OOM killer would: the temporary stays
@@ -324,14 +333,45 @@ TEST_F(Reliability, OneRunPerDirectoryAndStaleTemporariesRemoved) {
               contains(second.error_line(), "another pisco-vk run (process " + std::to_string(first.pid) + ")"))
       << second.describe() << "\n" << second.output;
   const auto stale = temporaries_under(out);
-  ASSERT_FALSE(stale.empty()) << "the killed run left no temporary file";
+  ASSERT_GT(stale.size(), 2u) << "the killed run left no temporary file";
   // The next run takes the lock the kernel released, and removes what the killed run left.
   const CliResult third = run_cli({"run", "-q", "--no-plots", cfg.string(), "-o", out.string()}, {}, 120);
   EXPECT_TRUE(third.exited && third.status == 0) << third.describe() << "\n" << third.output;
   EXPECT_TRUE(contains(third.output, "a temporary file left by process " + std::to_string(first.pid) + ", which has ended"))
       << third.output;
-  EXPECT_TRUE(temporaries_under(out).empty()) << joined(temporaries_under(out));
+  auto left = temporaries_under(out);
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{"notes.tmp-20261127", "tod.h5.tmp-1"})) << joined(left);
   EXPECT_FALSE(fs::exists(out / ".pisco-vk.lock"));
+}
+
+// The lock file is never opened through a link: a `.pisco-vk.lock` that links to a user's file stops
+// the run with one error naming it, and the file keeps every byte.
+TEST_F(Reliability, ALinkedLockFileStopsTheRunAndItsTargetSurvives) {
+  const fs::path cfg = write("sim.toml", config("[sky]\nnside = 32\nlmax = 64\nseed = 3\n",
+                                                "[scan]\ntype = \"pixel_centres\"\nnside = 16\n"));
+  const fs::path out = dir_ / "out", victim = dir_ / "thesis.tex";
+  fs::create_directories(out);
+  std::ofstream(victim) << "Chapter 1\n";
+  for (const bool hard : {false, true}) {
+    fs::remove(out / ".pisco-vk.lock");
+    if (hard)
+      fs::create_hard_link(victim, out / ".pisco-vk.lock");
+    else
+      fs::create_symlink(victim, out / ".pisco-vk.lock");
+    const CliResult r = run_cli({"run", "-q", "--no-plots", cfg.string(), "-o", out.string()});
+    EXPECT_TRUE(r.exited && r.status == 2 && r.error_lines() == 1 &&
+                contains(r.error_line(), (out / ".pisco-vk.lock").string() + ": ") &&
+                contains(r.error_line(), "not a lock file of pisco-vk"))
+        << r.describe() << "\n" << r.output;
+    std::ifstream in(victim);
+    std::string line;
+    std::getline(in, line);
+    EXPECT_EQ(line, "Chapter 1");
+    EXPECT_EQ(std::distance(fs::directory_iterator(out), fs::directory_iterator()), 1) << joined(files_under(out));
+    EXPECT_TRUE(hard ? fs::is_regular_file(fs::symlink_status(out / ".pisco-vk.lock"))
+                     : fs::is_symlink(out / ".pisco-vk.lock"));
+  }
 }
 
 // A stop signal while the plotting tool runs reaches it: it removes its temporary PNG, and pisco-vk

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "pisco/output_file.hpp"
 #include "pisco/pointing_file.hpp"
 #include "pisco/quaternion.hpp"
 #include "support.hpp"
@@ -56,7 +57,7 @@ TEST_F(PointingFile, WrittenAndReadBackInChunks) {
   for (std::size_t i = 0; i < times.size(); ++i) times[i] = 0.05 * double(i);
   const fs::path file = dir_ / "bore.h5";
   pisco::BoresightFile::write(file, q, times);
-  EXPECT_FALSE(fs::exists(file.string() + ".tmp-" + std::to_string(::getpid())));
+  EXPECT_FALSE(fs::exists(file.string() + pisco::temporary_suffix()));
   ASSERT_TRUE(pisco::BoresightFile::holds_boresight(file));
   const pisco::BoresightFile f(file);
   ASSERT_EQ(f.size(), q.size());

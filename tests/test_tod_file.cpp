@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "support.hpp"
+#include "pisco/output_file.hpp"
 #include "pisco/error.hpp"
 #include "pisco/focal_plane.hpp"
 #include "pisco/pointing.hpp"
@@ -342,11 +343,11 @@ TEST_F(TodFile, WithWeightsWritesThreePerSample) {
 }
 
 TEST_F(TodFile, CommitRenamesAndLeavesNoTemporary) {
-  std::cout << "checking: the writer works under file.tmp-<pid>, commit() renames it over an existing file\n";
+  std::cout << "checking: the writer works under file + temporary_suffix(), commit() renames it over an existing file\n";
   const fs::path file = dir_ / "out.h5";
   { std::ofstream(file) << "an older output"; }
   TodWriter writer(file, two_detectors(), 4, TodPrecision::float64, false, {});
-  EXPECT_EQ(writer.temporary_path(), fs::path(file.string() + ".tmp-" + std::to_string(::getpid())));
+  EXPECT_EQ(writer.temporary_path(), fs::path(file.string() + pisco::temporary_suffix()));
   EXPECT_TRUE(fs::exists(writer.temporary_path()));
   const std::vector<double> v = {1, 2, 3, 4};
   writer.write(0, 0, v);
@@ -431,7 +432,7 @@ TEST_F(TodFile, WriterErrors) {
 
   std::cout << "checking: a failing HDF5 call becomes a pisco::Error naming the file and the operation\n";
   const fs::path blocked = dir_ / "blocked.h5";
-  fs::create_directory(blocked.string() + ".tmp-" + std::to_string(::getpid()));  // the temporary name is taken
+  fs::create_directory(blocked.string() + pisco::temporary_suffix());  // the temporary name is taken
   const std::string message =
       error_of([&] { TodWriter w(blocked, two_detectors(), 1, TodPrecision::float64, false, {}); });
   std::cout << "    error: " << message << "\n";
@@ -439,7 +440,7 @@ TEST_F(TodFile, WriterErrors) {
               contains(message, "(HDF5: "))
       << message;
   EXPECT_FALSE(fs::exists(blocked));
-  EXPECT_TRUE(fs::is_directory(blocked.string() + ".tmp-" + std::to_string(::getpid())))
+  EXPECT_TRUE(fs::is_directory(blocked.string() + pisco::temporary_suffix()))
       << "what was in the way is not the writer's to remove";
 }
 

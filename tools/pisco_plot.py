@@ -14,6 +14,8 @@ ever left (the temporary is removed on any failure or signal).
 import argparse
 import errno
 import os
+import re
+import secrets
 import signal
 import sys
 
@@ -37,9 +39,14 @@ def on_signal(signum, _frame):
     raise Stopped(signum)
 
 
+# The suffix of this process's temporary files: pisco-vk passes its own (--temporary-suffix), which
+# its output directory's lock records; run alone, a name no user's file has.
+TEMPORARY_SUFFIX = f".tmp-pisco-{os.getpid()}-{secrets.token_hex(8)}"
+
+
 def save(fig, path, dpi):
     """fig as the PNG `path`, whole or not at all (PISCO_TEST_FAULT=write-fail:NAME: a full disk)."""
-    temporary = f"{path}.tmp-{os.getpid()}"
+    temporary = f"{path}{TEMPORARY_SUFFIX}"
     try:
         fig.savefig(temporary, dpi=dpi, bbox_inches="tight", format="png")
         if os.environ.get("PISCO_TEST_FAULT") == "write-fail:" + os.path.basename(path):
@@ -149,7 +156,13 @@ def main():
     parser.add_argument("output_dir")
     parser.add_argument("--dpi", type=int, default=100)
     parser.add_argument("--no-gnomview", action="store_true")
+    parser.add_argument("--temporary-suffix", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.temporary_suffix is not None:
+        if not re.fullmatch(r"\.tmp-pisco-[0-9]+-[0-9a-f]{16}", args.temporary_suffix):
+            fail(f"--temporary-suffix: expected .tmp-pisco-PID-TOKEN, got {args.temporary_suffix!r}", 2)
+        global TEMPORARY_SUFFIX
+        TEMPORARY_SUFFIX = args.temporary_suffix
     # The signals that would end the process: its temporary file removed first. One ignored when the
     # plot started (nohup) stays ignored.
     for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2,

@@ -87,6 +87,10 @@ struct SimulationOptions {
   // Holds assets/spectra/tensor_bb_r1.txt, the tensor BB template of [sky] r > 0 without bb_template;
   // empty: default_data_dir().
   std::filesystem::path data_dir;
+  // Whether run() takes the output directory's OutputLock (include/pisco/output_file.hpp) for its
+  // duration. false: the caller holds it already (pisco-vk does, from before the run to after its
+  // plots); run() checks that it does.
+  bool lock_output = true;
 };
 
 // $PISCO_DATA_DIR, else the installed share/pisco, else the source tree the library was built from.

@@ -5,9 +5,12 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <cstdio>
 #include <mutex>
+#include <random>
 #include <set>
 #include <string>
 #include <system_error>
@@ -50,7 +53,7 @@ TemporaryListing::~TemporaryListing() {
 
 fs::path temporary_name(const fs::path& file) {
   fs::path t = file;
-  t += ".tmp-" + std::to_string(::getpid());
+  t += temporary_suffix();
   return t;
 }
 
@@ -92,11 +95,24 @@ bool divert_descriptor(int fd) noexcept {
 
 }  // namespace detail
 
+const std::string& temporary_suffix() {
+  // Made once: the process id names the run to a reader; 64 random bits make the name one that no
+  // user's file and no other process has.
+  static const std::string suffix = [] {
+    std::random_device device;
+    const std::uint64_t token = (std::uint64_t(device()) << 32) ^ std::uint64_t(device());
+    char text[64];
+    std::snprintf(text, sizeof text, ".tmp-pisco-%ld-%016llx", long(::getpid()), static_cast<unsigned long long>(token));
+    return std::string(text);
+  }();
+  return suffix;
+}
+
 void write_file_atomically(const std::filesystem::path& file, std::string_view contents) {
   const std::string where = file.string();
   const detail::TemporaryListing temporary(detail::temporary_name(file));
   const char* tmp = temporary.path().c_str();
-  const int fd = ::open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+  const int fd = ::open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
   if (fd < 0)
     throw Error(where + ": cannot create the temporary file '" + temporary.path().string() + "' (" +
                 detail::system_reason(errno) + ")", ErrorKind::io);
@@ -148,6 +164,7 @@ std::size_t remove_temporary_files() noexcept {
   std::size_t removed = 0;
   for (const auto& p : l.paths)
     if (::unlink(p.c_str()) == 0) ++removed;
+  detail::release_output_locks();
   return removed;
 }
 

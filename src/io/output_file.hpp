@@ -21,8 +21,11 @@ class TemporaryListing {
   std::filesystem::path path_;
 };
 
-// file + ".tmp-<pid>": the temporary name of every writer.
+// file + pisco::temporary_suffix(): the temporary name of every writer.
 std::filesystem::path temporary_name(const std::filesystem::path& file);
+
+// Releases every pisco::OutputLock of this process (remove_temporary_files). Safe from any thread.
+void release_output_locks() noexcept;
 
 // Test hook: whether PISCO_TEST_FAULT=write-fail:NAME names `file` (its file name), that is whether
 // the writer of `file` must find the disk full. Unset (always, outside tests): false.

@@ -145,7 +145,7 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
                      TodPrecision precision, bool with_pointing,
                      const std::map<std::string, std::string>& attributes, bool with_flags, bool with_weights)
     : file_(file),
-      temporary_(fs::path(file.string() + ".tmp-" + std::to_string(::getpid()))),
+      temporary_(detail::temporary_name(file)),
       samples_(samples_per_detector) {
   create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, with_weights, false);
 }

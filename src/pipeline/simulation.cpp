@@ -519,7 +519,7 @@ std::optional<pisco::TodWriter> open_tod_file(const SimulationConfig& c, const f
     // One file for all ranks (parallel HDF5): rank 0 creates it whole, then every rank opens it and
     // writes its own samples; rank 0 renames it once every rank has closed it.
     pisco::SharedTodOptions shared;
-    shared.temporary_suffix = ".tmp-" + cl.broadcast(std::to_string(::getpid()));
+    shared.temporary_suffix = cl.broadcast(pisco::temporary_suffix());  // the one the lock records
     shared.leader = cl.leader();
     shared.mpi_communicator = cl.mpi_communicator();
     shared.barrier = [&cl] { cl.barrier(); };
@@ -928,7 +928,9 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   const fs::path data_dir = options_.data_dir.empty() ? default_data_dir() : options_.data_dir;
   SimulationResult result;
 
-  // The output directory, made when missing (pisco-vk makes and locks it before: then nothing to do).
+  // The output directory, made when missing and locked by the leading process (pisco-vk makes and
+  // locks it before: then nothing to do), so that a second run into it stops before its set-up.
+  std::optional<OutputLock> lock;
   cl.step([&] {
     std::error_code ec;
     if (!fs::is_directory(c.output.dir, ec)) {
@@ -936,6 +938,12 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
       if (ec && !fs::is_directory(c.output.dir))
         throw Error(c.output.dir.string() + ": cannot make the output directory: " + ec.message());
     }
+    if (!cl.leader()) return;
+    if (options_.lock_output)
+      lock.emplace(c.output.dir, [&](const std::string& m) { obs.log(m + "\n"); });
+    else if (!OutputLock::held(c.output.dir))
+      throw Error(c.output.dir.string() + ": SimulationOptions::lock_output is false, but this process holds no "
+                                          "OutputLock of the directory");
   });
   std::optional<Sky> sky_holder;
   cl.step([&] { sky_holder.emplace(make_sky(c.sky, data_dir)); });

@@ -973,6 +973,45 @@ def test_simulation_releases_the_gil(tmp_path):
     assert os.path.exists(tmp_path / "out" / "maps.fits")
 
 
+def test_simulation_locks_its_output_directory(tmp_path):
+    """pisco.Simulation takes the lock pisco-vk run takes: a second run into a directory another process
+    is writing is refused, naming that process; once that process is killed, the next run removes the
+    temporaries it left, and only those; a lock file that links to a user's file is refused and the file
+    kept."""
+    slow = tmp_path / "slow.toml"
+    slow.write_text(write_simulation(tmp_path).read_text().replace("nside = 16\n", "nside = 128\n")
+                    .replace("nside = 32\n", "nside = 64\n"))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.tmp-20261127").write_text("a user's notes")
+    child = subprocess.Popen([sys.executable, "-c", f"import pisco; pisco.Simulation({str(slow)!r}).run()"])
+    try:
+        deadline = time.monotonic() + 120
+        while not any(".tmp-pisco-" in f for f in os.listdir(out)):
+            assert child.poll() is None, "the first run ended before it wrote"
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        with pytest.raises(pisco.Error, match=re.escape(f"{out}: another pisco-vk run (process {child.pid})")):
+            pisco.Simulation(write_simulation(tmp_path)).run()
+    finally:
+        child.kill()
+        child.wait()
+    left = [f for f in os.listdir(out) if ".tmp-pisco-" in f]
+    assert left, "the killed run left no temporary file"
+    result = pisco.Simulation(write_simulation(tmp_path)).run()
+    assert any(f"a temporary file left by process {child.pid}, which has ended" in line for line in result["log"])
+    assert not any(".tmp-pisco-" in f for f in os.listdir(out))
+    assert (out / "notes.tmp-20261127").read_text() == "a user's notes"
+    assert not (out / ".pisco-vk.lock").exists()
+
+    victim = tmp_path / "thesis.tex"
+    victim.write_text("Chapter 1\n")
+    os.symlink(victim, out / ".pisco-vk.lock")
+    with pytest.raises(pisco.Error, match="is a symbolic link, not a lock file of pisco-vk"):
+        pisco.Simulation(write_simulation(tmp_path)).run()
+    assert victim.read_text() == "Chapter 1\n"
+
+
 def test_default_hwp_gamma():
     """The plate's gamma where a table gives none: the offset's gamma plus zeta, as pisco-vk takes it."""
     d = pisco.Detector("d", zeta=0.3, offset=pisco.offset_quat(1 * deg, 2 * deg, 0.2))

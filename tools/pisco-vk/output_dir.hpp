@@ -12,9 +12,9 @@ namespace pisco_cli {
 class OutputDirectory {
  public:
   // Makes `dir` and its missing parents. With `lock` (one process of a run: MPI's rank 0), takes the
-  // run lock (an flock on DIR/.pisco-vk.lock, released by the kernel whatever ends the process) and
-  // removes NAME.tmp-PID files whose process has ended, telling `say` of each. Throws pisco::Error
-  // naming the directory: cannot be made, or another run (named by its process) holds the lock.
+  // directory's pisco::OutputLock (include/pisco/output_file.hpp), which removes the temporary files of
+  // a killed run, telling `say` of each. Throws pisco::Error naming the directory: cannot be made, or
+  // another run (named by its process) holds the lock, or the lock file is not this program's.
   OutputDirectory(const std::filesystem::path& dir, bool lock, void (*say)(const std::string&));
   // Releases the lock (the lock file is removed); unless keep() was called, removes the directories
   // this run made that are empty. Also done by the stop-signal watcher (signals.hpp, on_stop).

@@ -13,6 +13,7 @@
 
 #include "cluster.hpp"
 #include "output_dir.hpp"
+#include "pisco/output_file.hpp"
 #include "progress.hpp"
 #include "signals.hpp"
 
@@ -86,7 +87,10 @@ bool run_plots(const fs::path& python, const fs::path& script, const fs::path& d
   std::error_code ec;
   fs::path absolute_script = fs::absolute(script, ec);
   if (ec) absolute_script = script;
-  const std::vector<std::string> args{python.string(), absolute_script.string(), "--", dir.string()};
+  // Its temporary files carry this process's suffix, which the directory's lock records: if both are
+  // killed, the next run there removes them.
+  const std::vector<std::string> args{python.string(), absolute_script.string(),
+                                      "--temporary-suffix=" + pisco::temporary_suffix(), "--", dir.string()};
   const ChildStatus st = run_child(args, quiet);
   if (st.spawn_error != 0) {
     say("plots: skipped (" + python.string() + " could not be started: " + std::strerror(st.spawn_error) + ")\n");
@@ -129,6 +133,7 @@ int run_simulation(const pisco::SimulationConfig& c, const RunOptions& ro) {
   Printer printer(quiet);
   pisco::SimulationOptions options;
   options.data_dir = ro.data_dir;
+  options.lock_output = false;  // out_dir holds it, until after the plots
   const pisco::SimulationResult r = pisco::Simulation(c, options).run(context, &printer);
 
   // Plots: rank 0's, of the maps it wrote. A run whose maps solve no pixel has none (exit status 4).
