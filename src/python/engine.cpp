@@ -9,7 +9,9 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <atomic>
 #include <mutex>
+#include <thread>
 #include <new>
 #include <numbers>
 #include <optional>
@@ -242,7 +244,7 @@ class PyEngine {
       problem = check_values(p);
       if (problem.empty()) problem = check_hwp_values(h);
       if (problem.empty()) {
-        std::lock_guard lock(mutex_);
+        const auto lock = hold();
         Engine& e = open();
         try {
           if (p.theta)
@@ -299,7 +301,7 @@ class PyEngine {
         if (bad < p.size) problem = "tod[" + std::to_string(bad) + "] is " + format_double(tod->data()[bad]) + ": the adjoint needs finite values";
       }
       if (problem.empty()) {
-        std::lock_guard lock(mutex_);
+        const auto lock = hold();
         Engine& e = open();
         try {
           if (what == Scatter::diagonal) {
@@ -326,13 +328,13 @@ class PyEngine {
 
   void set_sky(const Sky& sky) {
     nb::gil_scoped_release release;
-    std::lock_guard lock(mutex_);
+    const auto lock = hold();
     open().set_sky(sky);
   }
 
   void prepare() {
     nb::gil_scoped_release release;
-    std::lock_guard lock(mutex_);
+    const auto lock = hold();
     open().prepare();
   }
 
@@ -352,7 +354,7 @@ class PyEngine {
       problem = check_values(p);
       if (problem.empty()) problem = check_hwp_values(h);
       if (problem.empty()) {
-        std::lock_guard lock(mutex_);
+        const auto lock = hold();
         Engine& e = open();
         // The plate's angles, like the pointing, are read before submit() returns.
         try {
@@ -383,7 +385,7 @@ class PyEngine {
       nb::gil_scoped_release release;
       problem = check_values(p);
       if (problem.empty()) {
-        std::lock_guard lock(mutex_);
+        const auto lock = hold();
         Engine& e = open();
         if (p.theta)
           e.flag_samples(d, p.angles(), out);
@@ -409,7 +411,7 @@ class PyEngine {
     bool out_of_memory = false;
     try {
       nb::gil_scoped_release release;
-      std::lock_guard lock(mutex_);
+      const auto lock = hold();
       Engine& e = open();
       try {
         if (ticket)
@@ -430,13 +432,30 @@ class PyEngine {
   void close() {
     {
       nb::gil_scoped_release release;
-      std::lock_guard lock(mutex_);
+      const auto lock = hold();
       engine_.reset();
     }
     in_flight_.clear();
   }
 
   bool closed() const { return !engine_; }
+  // The engine's lock, taken without the GIL. Inside DeconvolvingMapmaker.solve, whose thread holds
+  // it for the whole solve, a call from the survey raises instead of waiting for itself.
+  std::unique_lock<std::mutex> hold() {
+    if (solver_.load() == std::this_thread::get_id())
+      throw nb::value_error("Engine: used by the survey of a DeconvolvingMapmaker.solve that is running on it; "
+                            "the survey must only yield the chunks");
+    return std::unique_lock<std::mutex>(mutex_);
+  }
+  // The engine for DeconvolvingMapmaker's calls, under hold(): raises once close() has freed it.
+  Engine& open_for(const char* call) {
+    if (!engine_)
+      throw nb::value_error((std::string(call) + ": its engine was closed (Engine.close()); make the "
+                                                 "DeconvolvingMapmaker with an open engine").c_str());
+    return *engine_;
+  }
+  // Marks the thread that holds the lock for a DeconvolvingMapmaker.solve (default id: none).
+  void set_solver(std::thread::id id) { solver_.store(id); }
   std::string backend_name() { return locked([](Engine& e) { return e.backend_name(); }); }
   std::string device_name() { return locked([](Engine& e) { return e.device_name(); }); }
   double mean_disc_pixels() { return locked([](Engine& e) { return e.mean_disc_pixels(); }); }
@@ -448,7 +467,6 @@ class PyEngine {
   std::size_t npix() { return open().npix(); }
   // For pisco.DeconvolvingMapmaker, which drives this engine.
   Engine& engine() { return open(); }
-  std::mutex& mutex() { return mutex_; }
   std::size_t detector(nb::handle d) const { return detector_index(d); }
 
  private:
@@ -460,7 +478,7 @@ class PyEngine {
   template <class F>
   std::invoke_result_t<F, Engine&> locked(F f) {
     nb::gil_scoped_release release;
-    std::lock_guard lock(mutex_);
+    const auto lock = hold();
     return f(open());
   }
 
@@ -507,6 +525,7 @@ class PyEngine {
   // so destroyed after it: the engine completes its work before the arrays can go.
   std::map<std::uint64_t, nb::object> in_flight_;
   std::mutex mutex_;
+  std::atomic<std::thread::id> solver_{};
   std::vector<std::string> names_;
   std::unique_ptr<Engine> engine_;
 };
@@ -537,7 +556,8 @@ class PyMapmaker {
       throw nb::value_error(("DeconvolvingMapmaker.add: tod has " + std::to_string(tod.shape(0)) +
                              " samples, but the pointing has " + std::to_string(c.chunk.size())).c_str());
     nb::gil_scoped_release release;
-    std::lock_guard lock(py_.mutex());
+    const auto lock = py_.hold();
+    py_.open_for("DeconvolvingMapmaker.add");
     maker_->add(c.chunk, {tod.data(), tod.shape(0)});
   }
 
@@ -557,8 +577,7 @@ class PyMapmaker {
         const Chunk c = chunk(d["detector"], get("theta"), get("phi"), get("psi"), get("boresight_quats"),
                               get("hwp_angle"), "DeconvolvingMapmaker.solve");
         nb::gil_scoped_release release;
-        std::lock_guard lock(py_.mutex());
-        visit(c.chunk);
+        visit(c.chunk);  // under the engine's lock, which solve() holds
       }
     };
     std::function<void(const DeconvolutionProgress&)> report;
@@ -569,7 +588,16 @@ class PyMapmaker {
       };
     DeconvolvedMaps m;
     {
+      // The engine's lock for the whole solve: the solver's own calls (its sky, its adjoint maps) and
+      // the survey's chunks, so that no other thread's call and no close() comes between them.
       nb::gil_scoped_release release;
+      const auto lock = py_.hold();
+      py_.open_for("DeconvolvingMapmaker.solve");
+      py_.set_solver(std::this_thread::get_id());
+      struct Unmark {
+        PyEngine& e;
+        ~Unmark() { e.set_solver({}); }
+      } unmark{py_};
       m = maker_->solve(replay, report);
     }
     nb::dict out;

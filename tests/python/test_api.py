@@ -1,6 +1,7 @@
 """The package's API: skies, beams, focal planes, the engine, arrays and errors, threads, stubs."""
 
 import ast
+import gc
 import os
 import re
 import subprocess
@@ -284,6 +285,38 @@ def test_deconvolving_mapmaker_recovers_a_mismatched_pair():
         with pytest.raises(ValueError, match="regularize = 'polarisation'; expected 'all' or 'polarization'"):
             pisco.DeconvolvingMapmaker(engine, regularize="polarisation")
         assert pisco.DeconvolvingMapmaker(engine, regularization=1e-3, regularize="polarization") is not None
+
+
+def test_deconvolving_mapmaker_after_its_engine_is_closed():
+    """A DeconvolvingMapmaker whose engine was closed raises ValueError on every call (it never reads
+    freed memory); a survey that calls the engine the solve is running on raises instead of waiting
+    for itself."""
+    sky, beam, fp = small_setup()
+    theta, phi, psi = pointing(50)
+    engine = pisco.Engine(sky, beam, fp, backend="cpu")
+    maker = pisco.DeconvolvingMapmaker(engine, max_iterations=2)
+    tod = engine.convolve(0, theta, phi, psi)
+    maker.add(0, tod, theta, phi, psi)
+    chunks = [dict(detector=0, theta=theta, phi=phi, psi=psi)]
+
+    def survey_calling_the_engine():
+        engine.convolve(0, theta, phi, psi)
+        return iter(chunks)
+
+    with pytest.raises(ValueError, match="used by the survey of a DeconvolvingMapmaker.solve"):
+        maker.solve(survey_calling_the_engine)
+    assert len(maker.solve(lambda: iter(chunks))["I"]) == 12 * sky.nside**2  # the engine is usable again
+    engine.close()
+    with pytest.raises(ValueError, match=r"DeconvolvingMapmaker.add: its engine was closed \(Engine.close\(\)\)"):
+        maker.add(0, tod, theta, phi, psi)
+    with pytest.raises(ValueError, match=r"DeconvolvingMapmaker.solve: its engine was closed"):
+        maker.solve(lambda: iter(chunks))
+    with pytest.raises(ValueError, match="used after close"):
+        pisco.DeconvolvingMapmaker(engine)
+    del engine  # the maker keeps the closed engine object alive; still no crash
+    gc.collect()
+    with pytest.raises(ValueError, match="its engine was closed"):
+        maker.add(0, tod, theta, phi, psi)
 
 
 def test_out_is_written_in_place_and_accumulates():
