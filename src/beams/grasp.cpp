@@ -18,6 +18,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "io/input_file.hpp"
 #include "core/text.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/error.hpp"
@@ -31,8 +32,14 @@ constexpr double pi = std::numbers::pi;
 
 class Lines {
  public:
-  explicit Lines(const fs::path& file) : file_(file), in_(file) {
+  explicit Lines(const fs::path& file)
+      : file_(file), size_(detail::require_regular_file(file, "a TICRA GRASP .grd or .cut file")), in_(file) {
     if (!in_) throw Error(file.string() + ": cannot be opened for reading; expected a TICRA GRASP .grd or .cut file");
+  }
+  // The bytes after the lines read so far: what the rest of the file can hold.
+  std::uintmax_t remaining() {
+    const auto at = in_.tellg();
+    return at < 0 || std::uintmax_t(at) > size_ ? 0 : size_ - std::uintmax_t(at);
   }
   // The next line, or false at the end of the file.
   bool next(std::string& line) {
@@ -56,6 +63,7 @@ class Lines {
 
  private:
   fs::path file_;
+  std::uintmax_t size_;
   std::ifstream in_;
   int number_ = 0;
 };
@@ -194,6 +202,18 @@ std::vector<GraspBeam> read_grid(const fs::path& file) {
     const int ny = as_int(in, size[1], "NY", 2, 100000);
     const int klimit = as_int(in, size[2], "KLIMIT", 0, 1);
     if (static_cast<double>(nx) * ny > 1e8) in.fail("NX NY = " + std::to_string(nx) + " x " + std::to_string(ny) + ": more than 1e8 points");
+    // Declared against what the rest of the file can hold, before the grid is allocated (32 bytes a
+    // point): a point's line holds 2 NCOMP numbers, each at least a digit and a separator. Rows with
+    // limits (KLIMIT = 1) may hold part of the grid: up to four times what the file holds, plus 1e6.
+    {
+      const double holdable = static_cast<double>(in.remaining()) / (4.0 * ncomp);
+      const double points = static_cast<double>(nx) * ny;
+      if (points > (klimit == 1 ? 4.0 * holdable + 1e6 : holdable))
+        in.fail("NX NY = " + std::to_string(nx) + " x " + std::to_string(ny) + " of " + set + " declares " +
+                detail::count_text(points) + " points (" + detail::bytes_text(32.0 * points) + " in memory), but the " +
+                std::to_string(in.remaining()) + " bytes left in the file hold at most " + detail::count_text(holdable) +
+                "; expected a grid the file holds");
+    }
     if (ext[2] == ext[0] || ext[3] == ext[1]) in.fail("XS YS XE YE of " + set + ": the grid has no extent");
     GraspBeam b;
     b.grid = grid;
@@ -261,6 +281,10 @@ std::vector<GraspBeam> read_cuts(const fs::path& file) {
     if (icut != 1)
       in.fail("ICUT = " + std::to_string(icut) + ": expected 1 (a polar cut: phi = C fixed, theta varying); conical cuts are not read");
     check_icomp(in, icomp, ncomp);
+    if (const double holdable = static_cast<double>(in.remaining()) / (4.0 * ncomp); c.vnum > holdable)
+      in.fail("V_NUM = " + std::to_string(c.vnum) + " declares " + detail::bytes_text(32.0 * c.vnum) +
+              " of points, but the " + std::to_string(in.remaining()) + " bytes left in the file hold at most " +
+              detail::count_text(holdable) + " points; expected a cut the file holds");
     c.co.resize(static_cast<std::size_t>(c.vnum));
     c.cx.resize(static_cast<std::size_t>(c.vnum));
     for (int k = 0; k < c.vnum; ++k)

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <numbers>
@@ -32,39 +33,69 @@ using cd = std::complex<double>;
 constexpr double pi = std::numbers::pi;
 
 // d^l_{m1,m2}(beta) for l = 0..lmax (zero below max(|m1|, |m2|)).
+//
+// For any m up to lmax: the closed form at l0 is summed in logarithms (its factorials overflow a double
+// beyond m of about 85, its powers of cos and sin underflow it), and the recursion carries a power of
+// two apart from its values, so that a start far below the smallest double still grows into the
+// values of larger l exactly. Values below the smallest double are 0.
 void wigner_d(int m1, int m2, double beta, int lmax, std::vector<double>& d) {
   d.assign(static_cast<std::size_t>(lmax) + 1, 0.0);
   const int l0 = std::max(std::abs(m1), std::abs(m2));
   if (l0 > lmax) return;
   const double c = std::cos(beta / 2), s = std::sin(beta / 2);
-  // The closed form (a sum over k) at j = l0, in which only one or two terms survive.
+  const double log_c = std::log(std::abs(c)), log_s = std::log(std::abs(s));
+  // The closed form (a sum over k) at j = l0, in which only one or two terms survive: each term as a
+  // sign and a logarithm, summed relative to the largest.
   const int j = l0, mp = m1, m = m2;
-  double first = 0.0;
+  std::vector<std::pair<double, double>> terms;  // (log |term|, sign)
+  double largest = -std::numeric_limits<double>::infinity();
   for (int k = std::max(0, m - mp); k <= std::min(j + m, j - mp); ++k) {
+    const int pc = 2 * j + m - mp - 2 * k, ps = mp - m + 2 * k;  // the powers of c and s, >= 0
+    if ((pc > 0 && c == 0.0) || (ps > 0 && s == 0.0)) continue;  // a zero term (at beta = 0 or pi)
     const double lf = 0.5 * (std::lgamma(j + mp + 1.0) + std::lgamma(j - mp + 1.0) + std::lgamma(j + m + 1.0) +
                              std::lgamma(j - m + 1.0)) -
                       std::lgamma(j + m - k + 1.0) - std::lgamma(k + 1.0) - std::lgamma(mp - m + k + 1.0) -
-                      std::lgamma(j - mp - k + 1.0);
-    const double t = std::exp(lf) * std::pow(c, 2 * j + m - mp - 2 * k) * std::pow(s, mp - m + 2 * k);
-    first += ((mp - m + k) % 2 != 0 ? -t : t);
+                      std::lgamma(j - mp - k + 1.0) + (pc > 0 ? pc * log_c : 0.0) + (ps > 0 ? ps * log_s : 0.0);
+    double sign = (mp - m + k) % 2 != 0 ? -1.0 : 1.0;
+    if (pc % 2 != 0 && c < 0) sign = -sign;
+    if (ps % 2 != 0 && s < 0) sign = -sign;
+    terms.emplace_back(lf, sign);
+    largest = std::max(largest, lf);
   }
-  d[static_cast<std::size_t>(l0)] = first;
+  if (terms.empty()) return;  // d^l vanishes for every l (m1 != m2 at beta = 0, ...)
+  double first = 0.0;
+  for (const auto& [lf, sign] : terms) first += sign * std::exp(lf - largest);
+  // The values are stored * 2^scale; the stored ones are kept between 2^-500 and 2^500.
+  int scale = 0;
+  {
+    const double e2 = std::floor(largest / std::numbers::ln2);
+    scale = static_cast<int>(std::clamp(e2, -1e6, 1e6));
+    first *= std::exp(largest - scale * std::numbers::ln2);
+  }
+  const auto put = [&](int l, double stored) { d[static_cast<std::size_t>(l)] = std::ldexp(stored, scale); };
+  put(l0, first);
   const double cb = std::cos(beta);
   const double mm = static_cast<double>(m1) * m2;
   const double a1 = static_cast<double>(m1) * m1, a2 = static_cast<double>(m2) * m2;
-  double previous = 0.0;
+  double previous = 0.0, current = first;
   for (int l = l0; l < lmax; ++l) {
     const double dl = static_cast<double>(l);
     double next;
     if (l == 0) {
       next = cb;  // d^1_00
     } else {
-      next = ((2 * dl + 1) * (dl * (dl + 1) * cb - mm) * d[static_cast<std::size_t>(l)] -
+      next = ((2 * dl + 1) * (dl * (dl + 1) * cb - mm) * current -
               (dl + 1) * std::sqrt(dl * dl - a1) * std::sqrt(dl * dl - a2) * previous) /
              (dl * std::sqrt((dl + 1) * (dl + 1) - a1) * std::sqrt((dl + 1) * (dl + 1) - a2));
     }
-    previous = d[static_cast<std::size_t>(l)];
-    d[static_cast<std::size_t>(l) + 1] = next;
+    previous = current;
+    current = next;
+    if (std::abs(current) > 0x1p500) {  // the recursion is linear: both values rescaled alike
+      current = std::ldexp(current, -500);
+      previous = std::ldexp(previous, -500);
+      scale += 500;
+    }
+    put(l + 1, current);
   }
 }
 
@@ -294,10 +325,29 @@ HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
   if (beam.lmax < 0) fail(file, "its alm tables are empty");
   if (beam.mmax > beam.lmax)
     fail(file, "mmax = " + std::to_string(beam.mmax) + " is above lmax = " + std::to_string(beam.lmax));
+  // The dense tables (16 bytes a coefficient, a table a component) against the rows the file holds:
+  // healpy writes every coefficient up to lmax and mmax, a sparse writer the non-zero ones. A table
+  // filled to less than a quarter (beyond a million coefficients) is refused before it is allocated:
+  // a small file must not declare gigabytes, nor hours of synthesis (O(lmax mmax) a radius).
   const std::size_t n = size(beam.lmax, beam.mmax);
+  std::size_t rows = 0;
+  for (const Part& p : parts) rows = std::max(rows, p.index.size());
+  if (static_cast<double>(n) > 4.0 * static_cast<double>(rows) + 1e6)
+    fail(file, "lmax = " + std::to_string(beam.lmax) + ", mmax = " + std::to_string(beam.mmax) + " (" +
+                   (parts[0].lmax_key >= 0 ? "MAX-LPOL and MAX-MPOL" : "the largest l and m of its rows") + ") make " +
+                   detail::count_text(static_cast<double>(n)) + " coefficients a component (" +
+                   detail::bytes_text(16.0 * static_cast<double>(n) * static_cast<double>(parts.size())) +
+                   "), but its tables hold " + std::to_string(rows) +
+                   " rows; expected the coefficients up to lmax and mmax, as healpy.write_alm writes them");
   std::vector<cd>* out[3] = {&beam.t, &beam.e, &beam.b};
   for (std::size_t c = 0; c < parts.size(); ++c) {
-    out[c]->assign(n, cd{});
+    try {
+      out[c]->assign(n, cd{});
+    } catch (const std::bad_alloc&) {
+      fail(file, detail::bytes_text(16.0 * static_cast<double>(n)) + " for the " + std::string(c == 0 ? "T" : c == 1 ? "E" : "B") +
+                     " coefficients (lmax " + std::to_string(beam.lmax) + ", mmax " + std::to_string(beam.mmax) +
+                     ") could not be allocated");
+    }
     const Part& p = parts[c];
     for (std::size_t r = 0; r < p.index.size(); ++r) {
       const auto i = static_cast<long long>(p.index[r]) - 1;

@@ -23,4 +23,15 @@ inline std::string number_text(double value, int digits = 6) {
   return s.str();
 }
 
+// A count in three significant digits ("1e+08", "2.56e+03", "512").
+inline std::string count_text(double value) { return number_text(value, 3); }
+
+// A size in bytes for a person: "3.2 GB", "512 kB", "96 bytes" (decimal units, two or three digits).
+inline std::string bytes_text(double bytes) {
+  const char* units[] = {"bytes", "kB", "MB", "GB", "TB", "PB"};
+  int u = 0;
+  while (bytes >= 1000.0 && u < 5) bytes /= 1000.0, ++u;
+  return number_text(bytes, u == 0 ? 6 : 3) + " " + units[u];
+}
+
 }  // namespace pisco::detail

@@ -1,3 +1,4 @@
+#include "io/input_file.hpp"
 #include "io/fits_table.hpp"
 
 #include <unistd.h>
@@ -78,6 +79,7 @@ FitsFile::~FitsFile() {
 }
 
 FitsFile FitsFile::open(const fs::path& file, const std::string& expected) {
+  require_regular_file(file, expected.rfind("expected ", 0) == 0 ? expected.substr(9) : expected);
   FitsFile f(file);
   int status = 0;
   fits_open_diskfile(&f.ptr_, file.c_str(), READONLY, &status);

@@ -1,5 +1,6 @@
 // Focal plane tables (docs/config.md, "[focal_plane]"): CSV, TOML ([[detectors]], [[pairs]]) and
 // TOAST's HDF5 tables, each detector's beam named by a [beams] table.
+#include "io/input_file.hpp"
 #include "io/focal_plane_file.hpp"
 
 #include <algorithm>
@@ -179,9 +180,7 @@ using namespace detail;
 std::vector<Detector> read_focal_plane_file(const fs::path& file, const std::vector<std::string>& beams,
                                             std::vector<DetectorHwp>* hwp) {
   std::vector<pisco::Detector> out;
-  std::error_code ec;
-  if (fs::is_directory(file, ec))
-    throw pisco::Error(file.string() + ": is a directory (expected a focal plane file: CSV, TOML or TOAST HDF5)");
+  pisco::detail::require_regular_file(file, "a focal plane file: CSV, TOML or TOAST HDF5");
   if (is_hdf5_focal_plane(file)) {
     if (beams.size() != 1)
       throw pisco::Error(file.string() + ": a TOAST focal plane gives every detector one beam: name it with "

@@ -1,3 +1,4 @@
+#include "io/input_file.hpp"
 #include "io/hdf5.hpp"
 
 #include <sys/statvfs.h>
@@ -176,10 +177,7 @@ void inject_write_fault(hid_t file, const fs::path& target) {
 
 Handle open_read_only(const fs::path& file) {
   const std::string where = file.string();
-  std::error_code ec;
-  const fs::file_status status = fs::status(file, ec);
-  if (!fs::exists(status)) throw Error(where + ": no such file (expected an HDF5 file)");
-  if (fs::is_directory(status)) throw Error(where + ": is a directory (expected an HDF5 file)");
+  require_regular_file(file, "an HDF5 file");
   const htri_t is_hdf5 = H5Fis_hdf5(file.c_str());
   if (is_hdf5 < 0) fail(where, "cannot read the file (expected an HDF5 file)");
   if (is_hdf5 == 0) throw Error(where + ": not an HDF5 file");

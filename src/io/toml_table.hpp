@@ -20,6 +20,7 @@
 #include <toml++/toml.h>
 
 #include "pisco/error.hpp"
+#include "io/input_file.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/beamsor.hpp"
 
@@ -233,8 +234,7 @@ class Table {
 };
 
 inline toml::table parse(const fs::path& file, std::string* text) {
-  std::error_code ec;
-  if (fs::is_directory(file, ec)) throw pisco::Error(file.string() + ": is a directory (expected a TOML file)");
+  pisco::detail::require_regular_file(file, "a TOML file");
   std::ifstream in(file);
   if (!in) throw pisco::Error(file.string() + ": cannot open the file");
   std::stringstream ss;

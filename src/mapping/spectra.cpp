@@ -1,3 +1,4 @@
+#include "io/input_file.hpp"
 #include "pisco/spectra.hpp"
 
 #include <algorithm>
@@ -167,6 +168,7 @@ std::filesystem::path default_cl_file() {
 
 Spectra read_cl_table(const std::filesystem::path& file, int lmax, bool bb_zero) {
   check_lmax("read_cl_table", lmax);
+  detail::require_regular_file(file, "a C_l table");
   std::ifstream in(file);
   if (!in) throw Error(file.string() + ": cannot open the C_l table");
   Spectra s = zero_spectra(lmax);

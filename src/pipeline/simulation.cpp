@@ -1,5 +1,6 @@
 // pisco::Simulation (simulation.hpp): sky -> TOD -> binned maps -> spectra, streaming the TOD chunk by
 // chunk through the map-maker and the TOD file, so memory stays bounded whatever the length of the scan.
+#include "io/input_file.hpp"
 #include "pisco/simulation.hpp"
 
 #include <algorithm>
@@ -63,6 +64,7 @@ std::string format(const char* fmt, Args... args) {
 }
 
 std::vector<double> read_bb_template(const fs::path& file, int lmax) {
+  pisco::detail::require_regular_file(file, "the tensor BB template, a text table of l and D_l");
   std::ifstream in(file);
   if (!in) throw pisco::Error(file.string() + ": cannot open the tensor BB template");
   std::vector<double> cl(static_cast<std::size_t>(lmax) + 1, 0.0);
