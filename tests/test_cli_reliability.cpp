@@ -409,6 +409,31 @@ TEST_F(Reliability, StopSignalReachesThePlottingTool) {
   EXPECT_EQ(pisco::read_tod_signal(out / "tod.h5", "pa").size(), 9216u);
 }
 
+// The deconvolving map-maker's warnings: a solve that stops short of its tolerance, and one angle per
+// pixel (polarization constrained nowhere: the maps hold I alone) each end the run with a warning
+// naming what happened and status 5, every file written.
+TEST_F(Reliability, DeconvolutionWarningsExitWithStatus5) {
+  const std::string mapmaker = "[mapmaker]\ntype = \"deconvolve\"\niterations = 3\n";
+  const fs::path cfg = write("short.toml", config("[sky]\nnside = 16\nlmax = 32\nseed = 3\n",
+                                                  "[scan]\ntype = \"pixel_centres\"\nnside = 16\n" + mapmaker));
+  const fs::path out = dir_ / "out";
+  CliResult r = run_cli({"run", "-q", "--no-plots", cfg.string(), "-o", out.string()});
+  std::cout << r.output;
+  EXPECT_TRUE(r.exited && r.status == 5) << r.describe();
+  EXPECT_TRUE(contains(r.output, "pisco-vk: warning: the deconvolving map-maker did not converge: residual ")) << r.output;
+  EXPECT_TRUE(fs::exists(out / "maps.fits") && fs::exists(out / "tod.h5"));
+
+  const fs::path one = write("one.toml", config("[sky]\nnside = 16\nlmax = 32\nseed = 3\n",
+                                                "[scan]\ntype = \"pixel_centres\"\nnside = 16\npsi_deg = [0]\n" +
+                                                    mapmaker + "tolerance = 0.5\n"));
+  r = run_cli({"run", "-q", "--no-plots", one.string(), "-o", (dir_ / "one").string()});
+  std::cout << r.output;
+  EXPECT_TRUE(r.exited && r.status == 5) << r.describe();
+  EXPECT_TRUE(contains(r.output, "pisco-vk: warning: the scan's polarization angles constrain Q and U in no pixel")) << r.output;
+  EXPECT_FALSE(contains(r.output, "did not converge")) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "one" / "maps.fits"));
+}
+
 // A run whose maps solve no pixel (one polarization angle per pixel) says so on stderr and exits with
 // status 4; its TOD and maps are written, no spectra.
 TEST_F(Reliability, NoPixelSolvedExitsWithStatus4) {

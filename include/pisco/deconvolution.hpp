@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <functional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "pisco/engine.hpp"
@@ -31,6 +32,13 @@ struct DeconvolutionOptions {
   // least (docs/physics.md, "Map-making with the beams").
   enum class Regularize { all, polarization };
   Regularize regularize = Regularize::all;
+  // Polarization is solved only where the scan's angles constrain it: the detectors' (I, Q, U)
+  // weights are binned at coverage_nside (0: the engine's NSIDE / 4) as the binned map-maker bins
+  // them, and Q, U and V of the pixels in a coverage pixel whose 3x3 matrix has a reciprocal condition
+  // number below rcond_min are left out of the solve (zero) and unseen in the maps (docs/physics.md,
+  // "Map-making with the beams": what the solver leaves out).
+  double rcond_min = 1e-3;
+  int coverage_nside = 0;
   // > 0: the solution also returned reconvolved with a circular Gaussian of this FWHM (radians), by
   // harmonic smoothing (HEALPix map2alm with 3 iterations, to 3 NSIDE - 1), for analysis.
   double target_fwhm = 0.0;
@@ -66,7 +74,15 @@ struct DeconvolvedMaps {
   // the solution is; empty without a target.
   std::vector<double> smoothed_I, smoothed_Q, smoothed_U;
   int iterations = 0;
+  // Whether the residual fell to the tolerance within max_iterations (or A^T d was zero).
   bool converged = false;
+  // What the data do not constrain and the solver left out, a line each for a person ("Q and U in
+  // 120 of the 3072 pixels the beams reach: ..."); empty when everything the beams reach was solved.
+  std::vector<std::string> left_out;
+  // Pixels reached by the beams whose Q and U were solved, and whether that is none of them while the
+  // beams respond to polarization (one polarization angle: the maps hold I alone).
+  std::size_t polarization_pixels = 0;
+  bool polarization_unconstrained = false;
   std::vector<double> residuals;  // ||r|| / ||A^T d|| after each iteration
   double seconds = 0.0, seconds_per_iteration = 0.0;
 };

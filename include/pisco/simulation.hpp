@@ -162,9 +162,15 @@ struct SimulationResult {
   std::filesystem::path tod_file;        // empty: no TOD file
   std::vector<std::filesystem::path> written;  // every file written, in order
   std::size_t solved_pixels = 0;
-  // [mapmaker] type = "deconvolve": its iterations and final ||r|| / ||A^T d||.
+  // [mapmaker] type = "deconvolve": its iterations and final ||r|| / ||A^T d||, and whether it
+  // reached the tolerance.
   int deconvolution_iterations = 0;
   double deconvolution_residual = 0.0;
+  bool deconvolution_converged = true;
+  // What the run finished with but should not be trusted without a look, a line each: a
+  // deconvolution that did not converge, maps whose polarization no pixel's angles constrain.
+  // pisco-vk prints each as a warning and exits with status 5.
+  std::vector<std::string> warnings;
   // Not empty when the maps solve no pixel: why (maps.fits is all UNSEEN; no spectra were made).
   std::string nothing_solved;
 };

@@ -348,6 +348,8 @@ class DeconvolvingMapmaker:
         regularization: float = 0.0,
         target_fwhm: float = 0.0,
         regularize: Literal["all", "polarization"] = "all",
+        rcond_min: float = 1e-3,
+        coverage_nside: int = 0,
     ) -> None: ...
     def add(
         self,

@@ -1,10 +1,16 @@
 // The beam-deconvolving map-maker (docs/physics.md, "Map-making with the beams").
 #include "pisco/deconvolution.hpp"
 
+#include <healpix_base.h>
+
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 
 #include "core/sky_alm.hpp"
+#include "core/text.hpp"
+#include "pisco/mapmaker.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/spectra.hpp"
@@ -57,6 +63,13 @@ DeconvolvingMapmaker::DeconvolvingMapmaker(Engine& engine, const DeconvolutionOp
   if (!(options.regularization >= 0.0 && std::isfinite(options.regularization)))
     throw Error("deconvolution: regularization = " + std::to_string(options.regularization) +
                 "; expected a finite number >= 0");
+  if (!(options.rcond_min >= 0.0 && options.rcond_min < 1.0))
+    throw Error("deconvolution: rcond_min = " + detail::number_text(options.rcond_min) +
+                "; expected a number in [0, 1) (a reciprocal condition number)");
+  if (options.coverage_nside < 0 || options.coverage_nside > max_nside ||
+      (options.coverage_nside & (options.coverage_nside - 1)) != 0)
+    throw Error("deconvolution: coverage_nside = " + std::to_string(options.coverage_nside) +
+                "; expected 0 (the engine's NSIDE / 4) or a power of two up to " + std::to_string(max_nside));
   if (!(options.target_fwhm >= 0.0 && options.target_fwhm < 3.14159265358979323846))
     throw Error("deconvolution: target_fwhm = " + std::to_string(options.target_fwhm) +
                 " rad; expected 0 (none) or an angle below pi");
@@ -86,30 +99,151 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
     for (int k = 0; k < 4; ++k) std::copy_n(buffer.begin() + std::ptrdiff_t(k * n), n, out.stokes(StokesIndex(k)).begin());
   };
   take(b);
-  // The Jacobi preconditioner: the diagonal of A^T A (Engine::adjoint_diagonal), one more pass.
-  survey([&](const SurveyChunk& c) { diagonal_chunk(engine_, c); });
+  // The Jacobi preconditioner: the diagonal of A^T A (Engine::adjoint_diagonal), one more pass; and,
+  // in the same pass, the polarization angles the scan gives each region of the sky (the detectors'
+  // (I, Q, U) weights binned at the coverage NSIDE, as the binned map-maker bins them).
+  const int coverage_nside = options_.coverage_nside > 0 ? std::min(options_.coverage_nside, nside)
+                                                         : std::max(1, nside / 4);
+  BinnedMapmaker coverage(coverage_nside, options_.rcond_min);
+  {
+    const FocalPlane& fp = engine_.focal_plane();
+    std::vector<double> zeros;
+    survey([&](const SurveyChunk& c) {
+      diagonal_chunk(engine_, c);
+      zeros.assign(c.size(), 0.0);
+      const Detector& d = fp.detectors().at(c.detector);
+      if (c.quaternions) coverage.add_from_boresight(d, c.quats, zeros, c.hwp_angle);
+      else coverage.add(d, c.angles, zeros, c.hwp_angle);
+    });
+  }
   take(diagonal);
-  // Pixels no sample's disc reaches have a zero diagonal: they stay zero. Pixels that only the far
-  // tails of the beams reach have a tiny one: the preconditioner's divisor is floored at 1e-3 of the
-  // mean non-zero diagonal of its Stokes parameter (else it would multiply their residual by up to
-  // 1e27), and the maps mark them unseen (the data hardly constrain them).
-  std::vector<bool> seen(x.npix(), false);
-  double floor[4] = {0, 0, 0, 0};
+  if (options_.reduce) {  // the coverage of every process's chunks
+    const auto ata = coverage.normal_matrices();
+    std::vector<double> sum(ata.begin(), ata.end());
+    sum.resize(ata.size() + coverage.hits().size());
+    std::copy(coverage.hits().begin(), coverage.hits().end(), sum.begin() + std::ptrdiff_t(ata.size()));
+    options_.reduce(sum);
+    BinnedMapmaker all(coverage_nside, options_.rcond_min);
+    std::vector<std::uint32_t> hits(coverage.hits().size());
+    for (std::size_t i = 0; i < hits.size(); ++i)
+      hits[i] = static_cast<std::uint32_t>(std::min(sum[ata.size() + i], 4e9));
+    all.add_normal_equations(std::span<const double>(sum.data(), ata.size()),
+                             std::vector<double>(coverage.normal_vectors().size(), 0.0), hits);
+    coverage = std::move(all);
+  }
+  const BinnedMaps angles = coverage.solve();
+
+  DeconvolvedMaps out;
+  out.nside = nside;
+  const std::size_t npix = x.npix();
+  // What is solved: solve[k][i], Stokes parameter k of pixel i. A pixel no sample's disc reaches has a
+  // zero diagonal and stays zero, as conjugate gradients from zero leave it.
+  // - A Stokes parameter the beams do not respond to (a diagonal below 1e-12 of I's: the V of a beam
+  //   whose circular response is rounding, not zero) is left out everywhere: dividing by its diagonal
+  //   would multiply rounding by 1e16.
+  // - Q and U (and V) are left out everywhere when the scan's angles constrain them in no coverage
+  //   pixel (a 3x3 matrix with reciprocal condition number below rcond_min everywhere, as the binned
+  //   map-maker cuts: one angle): the solver would fill them with amplified noise. Where only some
+  //   pixels' angles fail (the edges of a scan) they are solved, for the data's sake, and marked
+  //   unseen in the maps.
+  std::array<double, 4> mean{};
   for (int k = 0; k < 4; ++k) {
-    const auto ds = diagonal.stokes(StokesIndex(k));
     double sum = 0;
     std::size_t n = 0;
-    for (double v : ds)
+    for (double v : diagonal.stokes(StokesIndex(k)))
       if (v > 0.0) sum += v, ++n;
-    floor[k] = n ? 1e-3 * sum / double(n) : 0.0;
+    mean[std::size_t(k)] = n ? sum / double(n) : 0.0;
   }
+  std::array<bool, 4> responds{};
+  for (int k = 0; k < 4; ++k) responds[std::size_t(k)] = k == 0 ? mean[0] > 0.0 : mean[std::size_t(k)] > 1e-12 * mean[0];
+  const bool any_polarization = responds[1] || responds[2] || responds[3];
+  std::vector<std::uint8_t> polarized(npix, 0);
+  {
+    T_Healpix_Base<int> sky_base(nside, RING, SET_NSIDE), coverage_base(coverage_nside, RING, SET_NSIDE);
+    for (std::size_t i = 0; i < npix; ++i) {
+      const int c = coverage_base.ang2pix(sky_base.pix2ang(int(i)));
+      polarized[i] = angles.rcond[std::size_t(c)] >= options_.rcond_min;
+    }
+  }
+  std::size_t reached = 0, polarization_poor = 0;
+  for (std::size_t i = 0; i < npix; ++i)
+    if (diagonal.I()[i] > 0.0) {
+      ++reached;
+      if (polarized[i]) ++out.polarization_pixels;
+      else ++polarization_poor;
+    }
+  out.polarization_unconstrained = any_polarization && reached > 0 && out.polarization_pixels == 0;
+  std::array<bool, 4> solve{};
+  for (int k = 0; k < 4; ++k) solve[std::size_t(k)] = responds[std::size_t(k)] && (k == 0 || !out.polarization_unconstrained);
+  const char* names[4] = {"I", "Q", "U", "V"};
+  for (int k = 1; k < 4; ++k)
+    if (!responds[std::size_t(k)] && mean[std::size_t(k)] > 0.0)
+      out.left_out.push_back(std::string(names[k]) + " everywhere: the beams' response to it is " +
+                             detail::number_text(std::sqrt(mean[std::size_t(k)] / mean[0]), 2) +
+                             " of their response to I (rounding, not a response); it is written as 0");
+  if (out.polarization_unconstrained)
+    out.left_out.push_back("Q and U everywhere: the scan's polarization angles constrain them in none of the " +
+                           std::to_string(reached) + " pixels the beams reach (reciprocal condition number below " +
+                           detail::number_text(options_.rcond_min) + " at NSIDE " + std::to_string(coverage_nside) +
+                           "); they are unseen in the maps");
+  else if (any_polarization && polarization_poor > 0)
+    out.left_out.push_back("Q and U from the maps in " + std::to_string(polarization_poor) + " of the " +
+                           std::to_string(reached) +
+                           " pixels the beams reach, where the scan's polarization angles do not constrain them "
+                           "(reciprocal condition number below " + detail::number_text(options_.rcond_min) +
+                           " at NSIDE " + std::to_string(coverage_nside) + "): solved, and unseen in the maps");
+  // Pixels that only the far tails of the beams reach have a tiny diagonal: the preconditioner's
+  // divisor is floored at 1e-3 of the mean non-zero diagonal of its Stokes parameter (else it would
+  // multiply their residual by up to 1e27), and the maps mark them unseen (the data hardly constrain
+  // them).
+  std::vector<bool> seen(npix, false);
+  double floor[4] = {0, 0, 0, 0};
+  for (int k = 0; k < 4; ++k) floor[k] = 1e-3 * mean[std::size_t(k)];
   {
     const auto di = diagonal.I();
     for (std::size_t i = 0; i < di.size(); ++i) seen[i] = di[i] >= floor[0] && di[i] > 0.0;
   }
+  // The edges of the coverage, where the beams reach pixels from one side only: the solution there is
+  // an extrapolation of the interior, and its errors grow several times. The maps mark unseen the
+  // pixels whose I diagonal is below a tenth of its median, and Q, U and V where Q's is.
+  const auto tenth_of_median = [&](std::span<const double> d) {
+    std::vector<double> values;
+    for (double v : d)
+      if (v > 0.0) values.push_back(v);
+    if (values.empty()) return 0.0;
+    std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
+    return 0.1 * values[values.size() / 2];
+  };
+  {
+    const auto di = diagonal.I();
+    const double least = tenth_of_median(di);
+    std::size_t edge = 0;
+    for (std::size_t i = 0; i < npix; ++i)
+      if (seen[i] && di[i] < least) seen[i] = false, ++edge;
+    if (edge > 0)
+      out.left_out.push_back("I, Q and U from the maps in " + std::to_string(edge) +
+                             " pixels at the edge of the coverage, whose diagonal is below a tenth of the median: "
+                             "solved, and unseen in the maps");
+  }
+  if (solve[1]) {
+    const auto dq = diagonal.Q();
+    const double least = tenth_of_median(dq);
+    std::size_t edge = 0;
+    for (std::size_t i = 0; i < npix; ++i)
+      if (polarized[i] && seen[i] && dq[i] < least) polarized[i] = 0, ++edge;
+    if (edge > 0)
+      out.left_out.push_back("Q and U from the maps in " + std::to_string(edge) +
+                             " more pixels at the edge of the coverage, whose Q diagonal is below a tenth of the "
+                             "median: solved, and unseen in the maps");
+  }
+  // The right-hand side of the parameters solved; the rest is zero and stays so.
+  const auto project = [&](Sky& m) {
+    for (int k = 0; k < 4; ++k)
+      if (!solve[std::size_t(k)])
+        for (double& v : m.stokes(StokesIndex(k))) v = 0.0;
+  };
+  project(b);
   const double bb = dot(b, b);
-  DeconvolvedMaps out;
-  out.nside = nside;
   // q = (A^T A + lambda) p: the survey convolved with the sky p, then its adjoint (Engine::normal:
   // in one pass over each disc where the backend can).
   double lambda = 0.0;
@@ -119,16 +253,19 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
     for (int k = 0; k < 4; ++k)
       for (double& v : result.stokes(StokesIndex(k))) v = 0.0;
     take(result);
+    project(result);
   };
   const bool temperature_too = options_.regularize == DeconvolutionOptions::Regularize::all;
-  // z = M^-1 r, M the diagonal (plus lambda where it applies); zero where the diagonal is.
+  // z = M^-1 r, M the diagonal (plus lambda where it applies); zero where the diagonal is, and for the
+  // parameters left out.
   const auto precondition = [&](const Sky& in, Sky& result) {
     for (int k = 0; k < 4; ++k) {
       const auto ds = diagonal.stokes(StokesIndex(k));
       const auto is = in.stokes(StokesIndex(k));
       const auto os = result.stokes(StokesIndex(k));
       const double lk = k == 0 && !temperature_too ? 0.0 : lambda;
-      for (std::size_t i = 0; i < ds.size(); ++i) os[i] = ds[i] > 0.0 ? is[i] / (std::max(ds[i], floor[k]) + lk) : 0.0;
+      const bool sk = solve[std::size_t(k)];
+      for (std::size_t i = 0; i < ds.size(); ++i) os[i] = sk && ds[i] > 0.0 ? is[i] / (std::max(ds[i], floor[k]) + lk) : 0.0;
     }
   };
   if (bb > 0.0) {
@@ -190,6 +327,7 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
     out.smoothed_U.assign(s.U().begin(), s.U().end());
     for (std::size_t i = 0; i < seen.size(); ++i)
       if (!seen[i]) out.smoothed_I[i] = out.smoothed_Q[i] = out.smoothed_U[i] = unseen;
+      else if (!polarized[i]) out.smoothed_Q[i] = out.smoothed_U[i] = unseen;
   }
   out.I.assign(x.I().begin(), x.I().end());
   out.Q.assign(x.Q().begin(), x.Q().end());
@@ -197,6 +335,7 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
   out.V.assign(x.V().begin(), x.V().end());
   for (std::size_t i = 0; i < seen.size(); ++i)
     if (!seen[i]) out.I[i] = out.Q[i] = out.U[i] = out.V[i] = unseen;
+    else if (!polarized[i]) out.Q[i] = out.U[i] = out.V[i] = unseen;
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   out.seconds_per_iteration = out.iterations ? out.seconds / out.iterations : 0.0;
   any_ = false;

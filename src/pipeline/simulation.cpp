@@ -1071,8 +1071,24 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     });
     say("mapmaker: %s after %d iterations, %.2f s each\n", deconvolved->converged ? "converged" : "stopped",
         deconvolved->iterations, deconvolved->seconds_per_iteration);
+    for (const std::string& line : deconvolved->left_out) say("mapmaker: left out %s\n", line.c_str());
     result.deconvolution_iterations = deconvolved->iterations;
     result.deconvolution_residual = deconvolved->residuals.empty() ? 0.0 : deconvolved->residuals.back();
+    result.deconvolution_converged = deconvolved->converged;
+    if (!deconvolved->converged) {
+      const auto& r = deconvolved->residuals;
+      const auto best = std::min_element(r.begin(), r.end());
+      result.warnings.push_back(format(
+          "the deconvolving map-maker did not converge: residual %.3g of ||A^T d|| after %d iterations (the "
+          "smallest, %.3g, at iteration %d), above [mapmaker] tolerance = %g; raise iterations, or the "
+          "tolerance to what the backend reaches (float32 kernels stop near 1e-4), or add regularization",
+          result.deconvolution_residual, deconvolved->iterations, best == r.end() ? 0.0 : *best,
+          int(best - r.begin()) + 1, c.mapmaker.tolerance));
+    }
+    if (deconvolved->polarization_unconstrained)
+      result.warnings.push_back(
+          "the scan's polarization angles constrain Q and U in no pixel the beams reach (one angle per "
+          "pixel?): the deconvolved maps hold I alone, Q and U are unseen");
   }
 
   // Maps and spectra: the leader's, from the normal equations of every process. A run whose maps solve

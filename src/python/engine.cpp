@@ -535,9 +535,11 @@ class PyEngine {
 class PyMapmaker {
  public:
   PyMapmaker(nb::object engine, int max_iterations, double tolerance, double regularization, double target_fwhm,
-             const std::string& regularize)
+             const std::string& regularize, double rcond_min, int coverage_nside)
       : owner_(std::move(engine)), py_(nb::cast<PyEngine&>(owner_)) {
     DeconvolutionOptions o;
+    o.rcond_min = rcond_min;
+    o.coverage_nside = coverage_nside;
     o.max_iterations = max_iterations;
     o.tolerance = tolerance;
     o.regularization = regularization;
@@ -619,6 +621,21 @@ class PyMapmaker {
     }
     out["iterations"] = m.iterations;
     out["converged"] = m.converged;
+    out["left_out"] = m.left_out;
+    out["polarization_pixels"] = m.polarization_pixels;
+    out["polarization_unconstrained"] = m.polarization_unconstrained;
+    if (!m.converged && !m.residuals.empty()) {
+      const std::string w = "DeconvolvingMapmaker.solve did not converge: residual " + std::to_string(m.residuals.back()) +
+                            " of ||A^T d|| after " + std::to_string(m.iterations) +
+                            " iterations, above the tolerance; raise max_iterations or tolerance, or add regularization";
+      if (PyErr_WarnEx(PyExc_RuntimeWarning, w.c_str(), 1) != 0) throw nb::python_error();
+    }
+    if (m.polarization_unconstrained &&
+        PyErr_WarnEx(PyExc_RuntimeWarning,
+                     "DeconvolvingMapmaker.solve: the survey's polarization angles constrain Q and U in no pixel; "
+                     "the maps hold I alone (Q and U unseen)",
+                     1) != 0)
+      throw nb::python_error();
     out["residuals"] = array(m.residuals);
     out["seconds"] = m.seconds;
     out["seconds_per_iteration"] = m.seconds_per_iteration;
@@ -660,23 +677,28 @@ void bind_engine(nb::module_& m) {
                          "The beam-deconvolving map-maker (docs/physics.md, 'Map-making with the beams'):\n"
                          "conjugate gradients on (A^T A + lambda) s = A^T d with each detector's own beam.\n\n"
                          "DeconvolvingMapmaker(engine, max_iterations=100, tolerance=1e-6, regularization=0.0,\n"
-                         "                     target_fwhm=0.0, regularize='all')\n\n"
-                         "regularize: 'all' Stokes parameters, or 'polarization' (Q, U, V) only.\n"
+                         "                     target_fwhm=0.0, regularize='all', rcond_min=1e-3, coverage_nside=0)\n\n"
+                         "regularize: 'all' Stokes parameters, or 'polarization' (Q, U, V) only. rcond_min and\n"
+                         "coverage_nside: Q, U and V are solved only where the survey's angles constrain them (the\n"
+                         "binned 3x3 matrices at coverage_nside, 0 for the engine's NSIDE / 4).\n"
                          "engine: a pisco.Engine whose backend has the adjoint; its sky is replaced as the solver\n"
                          "iterates (set_sky it again afterwards). add() each chunk's TOD, then solve(survey), survey\n"
                          "a callable returning the same chunks each time, as dicts: {'detector': ..., 'theta': ...,\n"
                          "'phi': ..., 'psi': ...} or {'detector': ..., 'boresight_quats': ...}, with 'hwp_angle'\n"
                          "for detectors with a plate.")
-      .def(nb::init<nb::object, int, double, double, double, const std::string&>(), "engine"_a,
+      .def(nb::init<nb::object, int, double, double, double, const std::string&, double, int>(), "engine"_a,
            "max_iterations"_a = 100, "tolerance"_a = 1e-6, "regularization"_a = 0.0, "target_fwhm"_a = 0.0,
-           "regularize"_a = "all")
+           "regularize"_a = "all", "rcond_min"_a = 1e-3, "coverage_nside"_a = 0)
       .def("add", &PyMapmaker::add, "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "hwp_angle"_a = nb::none(),
            "Adds a chunk's TOD to the right-hand side A^T d.")
       .def("solve", &PyMapmaker::solve, "survey"_a, "progress"_a = nb::none(),
            "Solves; progress(iteration, residual, seconds) after each iteration when given. Returns a\n"
-           "dict: nside, I, Q, U, V (UNSEEN where no beam reaches), smoothed_I/Q/U with a target_fwhm,\n"
-           "iterations, converged, residuals, seconds, seconds_per_iteration.");
+           "dict: nside, I, Q, U, V (UNSEEN where no beam reaches, Q, U and V also where the angles do not\n"
+           "constrain them), smoothed_I/Q/U with a target_fwhm, iterations, converged, residuals, seconds,\n"
+           "seconds_per_iteration, left_out (what was left out, a line each), polarization_pixels and\n"
+           "polarization_unconstrained. A solve that does not converge, or that constrains no pixel's\n"
+           "polarization, also issues a RuntimeWarning.");
 
   nb::class_<PyEngine>(m, "Engine",
                        "The convolution engine: the sky, beams and focal plane are set up once for a backend,\n"

@@ -49,7 +49,9 @@ nb::dict result_dict(const SimulationResult& r, std::vector<std::string> log) {
   if (r.deconvolution_iterations > 0) {  // [mapmaker] type = "deconvolve"
     d["deconvolution_iterations"] = r.deconvolution_iterations;
     d["deconvolution_residual"] = r.deconvolution_residual;
+    d["deconvolution_converged"] = r.deconvolution_converged;
   }
+  d["warnings"] = r.warnings;
   d["nothing_solved"] = r.nothing_solved.empty() ? nb::none() : nb::cast(r.nothing_solved);
   d["log"] = std::move(log);
   return d;
@@ -132,14 +134,18 @@ void bind_simulation(nb::module_& m) {
               nb::gil_scoped_release release;
               r = s.run(&log);
             }
+            // What pisco-vk prints as warnings (and exits with status 5 for): Python warnings too.
+            for (const std::string& w : r.warnings)
+              if (PyErr_WarnEx(PyExc_RuntimeWarning, w.c_str(), 1) != 0) throw nb::python_error();
             return result_dict(r, std::move(log.lines));
           },
           "Runs it, the GIL released: writes the TOD file, maps and spectra into the output directory (each\n"
           "whole or not at all) and returns a dict: files (paths written, in order), tod (its path or None),\n"
           "samples, detectors, samples_per_detector, mean_disc_pixels, convolution_seconds, seconds, backend,\n"
           "device, flagged, solved_pixels, nothing_solved (None, or why the maps solve no pixel) and log (the\n"
-          "lines pisco-vk run prints); with [mapmaker] type = \"deconvolve\", also deconvolution_iterations and\n"
-          "deconvolution_residual.")
+          "lines pisco-vk run prints), warnings (what pisco-vk prints as warnings, each also issued as a\n"
+          "RuntimeWarning); with [mapmaker] type = \"deconvolve\", also deconvolution_iterations,\n"
+          "deconvolution_residual and deconvolution_converged.")
       .def("__repr__", [](const Simulation& s) {
         return "pisco.Simulation('" + s.config().source.string() + "', output_dir='" + s.config().output.dir.string() +
                "')";

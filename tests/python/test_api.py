@@ -264,7 +264,8 @@ def test_deconvolving_mapmaker_recovers_a_mismatched_pair():
             maker.add(c["detector"], engine.convolve(c["detector"], c["theta"], c["phi"], c["psi"]),
                       c["theta"], c["phi"], c["psi"])
         seen = []
-        result = maker.solve(lambda: iter(chunks), progress=lambda it, res, sec: seen.append((it, res)))
+        with pytest.warns(RuntimeWarning, match="did not converge"):  # a tolerance of 1e-9 in 40 iterations
+            result = maker.solve(lambda: iter(chunks), progress=lambda it, res, sec: seen.append((it, res)))
     assert result["iterations"] == len(seen) and seen[0][0] == 1
     assert result["residuals"][-1] < 1e-2 * result["residuals"][0]
     want = healpy.smoothing(maps, fwhm=15 * deg, iter=3, lmax=3 * nside - 1, use_pixel_weights=False)
@@ -285,6 +286,35 @@ def test_deconvolving_mapmaker_recovers_a_mismatched_pair():
         with pytest.raises(ValueError, match="regularize = 'polarisation'; expected 'all' or 'polarization'"):
             pisco.DeconvolvingMapmaker(engine, regularize="polarisation")
         assert pisco.DeconvolvingMapmaker(engine, regularization=1e-3, regularize="polarization") is not None
+
+
+def test_deconvolving_mapmaker_warns_and_leaves_out_what_the_data_do_not_constrain():
+    """One angle per pixel: Q and U left out (unseen), said in left_out, and a RuntimeWarning; a solve
+    that stops short of its tolerance warns too."""
+    healpy = pytest.importorskip("healpy")
+    nside = 8
+    sky = pisco.Sky(nside)
+    sky.I[:] = 1.0
+    sky.Q[:] = 0.1
+    beam = pisco.Beamsor.gaussian(15 * deg, rho_max=30 * deg)
+    fp = pisco.FocalPlane()
+    fp.add_pair("p", zeta=0.0, beam_a=0, beam_b=0)
+    theta, phi = healpy.pix2ang(nside, np.arange(12 * nside**2))
+    psi = np.zeros_like(theta)
+    with pisco.Engine(sky, beam, fp, backend="cpu") as engine:
+        maker = pisco.DeconvolvingMapmaker(engine, max_iterations=3)
+        for d in range(2):
+            maker.add(d, engine.convolve(d, theta, phi, psi), theta, phi, psi)
+        chunks = [dict(detector=d, theta=theta, phi=phi, psi=psi) for d in range(2)]
+        with pytest.warns(RuntimeWarning) as caught:
+            result = maker.solve(lambda: iter(chunks))
+    messages = [str(w.message) for w in caught]
+    assert any("constrain Q and U in no pixel" in m for m in messages), messages
+    assert any("did not converge" in m for m in messages), messages
+    assert result["polarization_unconstrained"] is True and result["polarization_pixels"] == 0
+    assert np.all(result["Q"] == healpy.UNSEEN) and np.all(result["U"] == healpy.UNSEEN)
+    assert np.all(result["I"] != healpy.UNSEEN)
+    assert any(line.startswith("Q and U everywhere") for line in result["left_out"])
 
 
 def test_deconvolving_mapmaker_after_its_engine_is_closed():
@@ -980,8 +1010,11 @@ def test_simulation_deconvolves_the_beams(tmp_path):
     the deconvolved, reconvolved and binned maps written at the sky's NSIDE."""
     path = write_simulation(tmp_path, "tod = false\n[mapmaker]\ntype = \"deconvolve\"\niterations = 5\n"
                                       "target_fwhm_deg = 5.0\n")
-    result = pisco.Simulation(path, backend="simd").run()
+    with pytest.warns(RuntimeWarning, match="the deconvolving map-maker did not converge: residual "):
+        result = pisco.Simulation(path, backend="simd").run()
     assert result["deconvolution_iterations"] == 5
+    assert result["deconvolution_converged"] is False
+    assert result["warnings"][0].startswith("the deconvolving map-maker did not converge")
     assert 0 < result["deconvolution_residual"] < 1
     assert sum(line.startswith("mapmaker: iteration ") for line in result["log"]) == 5
     names = {"maps.fits", "deconvolved.fits", "binned_maps.fits", "hits.fits", "spectra.txt", "input_spectra.txt"}

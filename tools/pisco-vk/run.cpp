@@ -165,11 +165,14 @@ int run_simulation(const pisco::SimulationConfig& c, const RunOptions& ro) {
                   r.tod_file.empty() ? 0.0 : double(fs::file_size(r.tod_file)) / 1e6);
     for (const auto& f : r.written) std::printf("         wrote %s\n", f.string().c_str());
   }
+  if (!r.nothing_solved.empty() || !r.warnings.empty()) std::fflush(stdout);
+  if (cl.leader())
+    for (const std::string& w : r.warnings) std::fprintf(stderr, "pisco-vk: warning: %s\n", w.c_str());
   if (!r.nothing_solved.empty()) {
-    std::fflush(stdout);
     std::fprintf(stderr, "pisco-vk: warning: %s\n", r.nothing_solved.c_str());
     return exit_nothing_solved;
   }
+  if (!r.warnings.empty()) return exit_warnings;
   return 0;
 }
 
