@@ -279,14 +279,14 @@ TEST_P(Adjoint, DeterministicAcrossThreadsAndChunks) {
 
 // The adjoint maps are added into the caller's and the engine's are cleared; V may be left out.
 TEST_P(Adjoint, TakeAddsAndClears) {
-  const pisco_test::Scene scene = adjoint_scene(8);
+  const pisco_test::Scene scene = adjoint_scene(16);
   const pisco::Pointing p = pisco_test::random_pointing(50, 2);
   pisco::EngineOptions o;
   o.backend = GetParam();
   pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
   const std::vector<double> d = gaussian_tod(p.size(), 1);
   engine.adjoint(2, p.view(), d);
-  pisco::Sky first(8);
+  pisco::Sky first(16);
   engine.take_adjoint({first.I(), first.Q(), first.U(), first.V()});
   engine.adjoint(2, p.view(), d);
   pisco::Sky twice(first);
@@ -298,7 +298,7 @@ TEST_P(Adjoint, TakeAddsAndClears) {
     ASSERT_NEAR(twice.I()[k], 2 * first.I()[k], 1e-15 * largest);
     ASSERT_EQ(twice.V()[k], first.V()[k]);
   }
-  pisco::Sky none(8);
+  pisco::Sky none(16);
   engine.take_adjoint({none.I(), none.Q(), none.U(), none.V()});
   for (double x : none.I()) ASSERT_EQ(x, 0.0);
 }
@@ -491,7 +491,7 @@ INSTANTIATE_TEST_SUITE_P(Backends, Adjoint, ::testing::Values("cpu", "simd", "vu
                          [](const auto& info) { return info.param; });
 
 TEST(AdjointErrors, BadArgumentsNameTheProblem) {
-  const pisco_test::Scene scene = adjoint_scene(8);
+  const pisco_test::Scene scene = adjoint_scene(16);
   pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane);
   const pisco::Pointing p = pisco_test::random_pointing(10, 1);
   std::vector<double> d(10, 1.0);
@@ -504,9 +504,9 @@ TEST(AdjointErrors, BadArgumentsNameTheProblem) {
   d[3] = 1.0;
   pisco_test::expect_error([&] { engine.adjoint(5, p.view(), d); }, "has a half-wave plate");
   std::vector<double> small(10);
-  pisco::Sky back(8);
+  pisco::Sky back(16);
   pisco_test::expect_error([&] { engine.take_adjoint({small, back.Q(), back.U(), back.V()}); },
-                           "the I map has 10 pixels; the engine's NSIDE 8 has 768");
+                           "the I map has 10 pixels; the engine's NSIDE 16 has 3072");
   EXPECT_EQ(pisco_test::kind_of([&] { engine.take_adjoint({back.I(), back.Q(), back.U(), small}); }),
             pisco::ErrorKind::input);
 }

@@ -517,6 +517,24 @@ TEST_F(Cli, BeamFilesAndSplitBeams) {
                "only with sidelobe_split_deg");
   expect_error("run " + write("pw2.toml", config(sky, grasp + "sidelobe_split_deg = 3.0\nsidelobe_nside = 48\n")).string(),
                "sidelobe_nside: expected a power of two");
+  // sidelobe_nside above the sky's (64 here): refused, not silently lowered.
+  expect_error("run " + write("above.toml", config(sky, grasp + "sidelobe_split_deg = 3.0\nsidelobe_nside = 128\n")).string(),
+               "sidelobe_nside = 128 is above the sky's NSIDE 64");
+  // A b_lm file of T alone for a polarized pair: an error naming the option that means it.
+  {
+    const pisco::HarmonicBeam g = pisco_test::gaussian_blm(4.0 * pisco::deg, 200);
+    pisco_test::write_alm_fits(dir_ / "t_only.fits", {&g.t}, 200, 2);
+  }
+  const std::string t_only = "[beams.main]\ntype = \"blm\"\nfile = \"t_only.fits\"\nrho_max_deg = 8.0\n";
+  expect_error("run " + write("tonly.toml", config(sky, t_only)).string(),
+               "t_only.fits holds T coefficients alone, so detector 'pa' (polarization efficiency 1) would see no "
+               "polarization; give a file with T, E and B, or set temperature_only = true");
+  EXPECT_EQ(run("run -q --no-plots " + write("tonly_ok.toml", config(sky, t_only + "temperature_only = true\n")).string() +
+                " -o " + (dir_ / "tonly").string())
+                .status,
+            0);
+  expect_error("run " + write("tokey.toml", config(sky, gauss + "temperature_only = true\n")).string(),
+               "unknown key 'temperature_only'");
   write("b.fits", "not read: the split is refused first");
   expect_error("run " + write("fsplit.toml", config(sky, "[beams.main]\ntype = \"file\"\nfile = \"b.fits\"\nsidelobe_split_deg = 1\n")).string(),
                "cannot be split");

@@ -434,6 +434,46 @@ TEST_F(Reliability, DeconvolutionWarningsExitWithStatus5) {
   EXPECT_TRUE(fs::exists(dir_ / "one" / "maps.fits"));
 }
 
+// Settings that would make a run quietly wrong or pointless are refused before it starts, naming the
+// key: a grid step that does not sample the beam, a disc narrower than the sky's pixels (a TOD of 0),
+// a run with nothing to write, and a setting of the file that a backend named on the command line
+// does not have (the file form refuses it, so -b does too). No output directory is left behind.
+TEST_F(Reliability, RangesOfSettingsAreCheckedBeforeTheRun) {
+  const std::string sky = "[sky]\nnside = 32\nlmax = 64\nseed = 3\n";
+  const std::string scan = "[scan]\ntype = \"pixel_centres\"\nnside = 16\n";
+  const auto refused = [&](const std::string& name, const std::string& text, const std::vector<std::string>& extra,
+                           const std::string& needle) {
+    const fs::path cfg = write(name, text);
+    const fs::path out = dir_ / ("out-" + name);
+    std::vector<std::string> args{"run", "-q", "--no-plots", cfg.string(), "-o", out.string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const CliResult r = run_cli(args);
+    EXPECT_TRUE(r.exited && r.status == 2 && r.error_lines() == 1 && contains(r.error_line(), needle))
+        << name << ": " << r.describe() << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(out)) << name;
+  };
+  const std::string beam = "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n";
+  const std::string fp = "[focal_plane]\n[[focal_plane.pairs]]\nname = \"p\"\nbeam = \"main\"\n";
+  const auto file = [&](const std::string& beams, const std::string& engine, const std::string& output) {
+    return sky + beams + fp + scan + "[engine]\n" + engine + "[output]\nplots = false\nlmax = 32\n" + output;
+  };
+  refused("step.toml", file(beam + "grid_step_arcmin = 1e6\n", "backend = \"cpu\"\n", ""), {},
+          "[beams.main] grid_step_arcmin: a step of 1000000 arcmin is coarser than half of rho_max_deg = 8");
+  refused("fwhm.toml", file(beam + "grid_step_arcmin = 150\n", "backend = \"cpu\"\n", ""), {},
+          "grid_step_arcmin: a step of 150 arcmin is coarser than half of fwhm_deg = 4 deg");
+  refused("narrow.toml",
+          file("[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 0.5\nrho_max_deg = 0.5\n", "backend = \"cpu\"\n", ""), {},
+          "detector 'pa': its beam's rho_max, 0.5 deg, is below the largest pixel radius of the sky (NSIDE 32)");
+  refused("nothing.toml", file(beam, "backend = \"cpu\"\n", "tod = false\nmaps = false\nspectra = false\n"), {},
+          "[output] tod = false and maps = false: the run would write nothing");
+  refused("b.toml", file(beam, "threads = 2\n", ""), {"-b", "vulkan"},
+          "[engine] threads: the vulkan backend has no threads setting (it applies to cpu and simd); the backend "
+          "was named after the file (vulkan)");
+  // The file form of the same, for comparison: the same refusal.
+  refused("bfile.toml", file(beam, "backend = \"vulkan\"\nthreads = 2\n", ""), {},
+          "the vulkan backend has no threads setting (it applies to cpu and simd)");
+}
+
 // A run whose maps solve no pixel (one polarization angle per pixel) says so on stderr and exits with
 // status 4; its TOD and maps are written, no spectra.
 TEST_F(Reliability, NoPixelSolvedExitsWithStatus4) {

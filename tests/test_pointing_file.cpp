@@ -165,6 +165,7 @@ TEST_F(PointingFile, BadSamplesAreNamed) {
   std::vector<pisco::Quat> q = some_quats(50);
   q[17] = {0, 0, 0.5, 0.5};  // norm 0.707
   q[31].y = NAN;
+  q[40] = {1e200, 0, 0, 1e200};  // finite: named by its norm, not as non-finite
   const fs::path file = dir_ / "bad.h5";
   pisco::BoresightFile::write(file, q);
   const pisco::BoresightFile f(file);
@@ -172,6 +173,7 @@ TEST_F(PointingFile, BadSamplesAreNamed) {
   f.read(0, 17, chunk);  // the good part reads
   expect_error([&] { f.read(10, 20, chunk); }, "sample 17 has norm 0.7071");
   expect_error([&] { f.read(20, 20, chunk); }, "sample 31 has a non-finite component");
+  expect_error([&] { f.read(35, 10, chunk); }, "sample 40 has norm 1.41421356237309");
 }
 
 }  // namespace

@@ -23,6 +23,9 @@ static_assert(sizeof(Quat) == 4 * sizeof(double), "a Quat is four packed doubles
 Quat operator*(const Quat& a, const Quat& b) noexcept;
 Quat conjugate(const Quat& q) noexcept;
 double norm(const Quat& q) noexcept;
+// The same without overflow or underflow on the way (components of 1e200 have a norm of about 2e200,
+// not inf): for the checks that report a quaternion's norm.
+double checked_norm(const Quat& q) noexcept;
 // q rotated onto the unit sphere; throws pisco::Error for a zero or non-finite quaternion.
 Quat normalized(const Quat& q);
 // The rotation by `angle` (radians) about the unit vector `axis`.

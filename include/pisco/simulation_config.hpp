@@ -46,6 +46,7 @@ struct BeamConfig {
   BeamOptions options;
   std::filesystem::path file;
   int set = 0;                   // grasp: the beam of the file (1-based; 0 = its only one)
+  bool temperature_only = false; // blm: a T-only file meant for polarized detectors (else an error)
   // grasp and blm: the beam turns with each detector (its co-polar axis along the detector's zeta)
   bool turns_with_detector() const { return kind == BeamKind::grasp || kind == BeamKind::blm; }
 };
@@ -89,6 +90,16 @@ struct DetectorHwp {
 struct EngineConfig {
   EngineOptions options;
   std::size_t chunk_samples = 1 << 16;
+  // The backend settings the [engine] table gave, as given, so that a backend named afterwards routes
+  // them again (set_backend).
+  std::optional<std::string> device;
+  std::optional<unsigned> threads;
+  std::optional<Arithmetic> arithmetic;
+  // Names the backend after the file was read (pisco-vk run -b, Python's backend=): the settings the
+  // file gave are routed to it again, and one it does not have is an error naming `source`'s key, as
+  // the file form's own refusal ("the vulkan backend has no threads setting (it applies to cpu and
+  // simd)"), instead of a setting silently dropped.
+  void set_backend(const std::string& name, const std::filesystem::path& source);
 };
 
 struct OutputConfig {

@@ -270,6 +270,10 @@ Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step
   check_rho_max(rho_max, "beam");
   if (!(std::isfinite(grid_step) && grid_step > 0.0))
     throw Error("beam: grid_step must be a positive finite angle, got " + degrees_text(grid_step));
+  if (grid_step > std::sin(split.rho_main > 0.0 ? split.rho_main : rho_max))
+    throw Error("beam '" + description + "': grid_step = " + degrees_text(grid_step) + " is coarser than the grid's " +
+                "half width, sin(rho_max) = " + degrees_text(std::sin(split.rho_main > 0.0 ? split.rho_main : rho_max)) +
+                ": the grid would not sample the beam");
   if (split.rho_main != 0.0) return split_field(field, rho_max, grid_step, std::move(description), feature_scale, radial, split);
   Beamsor b;
   b.rho_max_ = rho_max;

@@ -189,6 +189,10 @@ std::vector<GraspBeam> read_grid(const fs::path& file) {
   std::vector<std::pair<double, double>> centre;
   for (int s = 0; s < nset; ++s) {
     const auto c = expect_numbers(in, "the centre \"IX IY\" of field set " + std::to_string(s + 1), 2);
+    if (!std::isfinite(c[0]) || !std::isfinite(c[1]) || std::abs(c[0]) > 1e6 || std::abs(c[1]) > 1e6)
+      in.fail("the centre \"IX IY\" of field set " + std::to_string(s + 1) +
+              " must be finite grid offsets (at most 1e6 steps), got " + detail::number_text(c[0]) + " " +
+              detail::number_text(c[1]));
     centre.emplace_back(c[0], c[1]);
   }
   std::vector<GraspBeam> beams;

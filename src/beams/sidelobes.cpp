@@ -18,6 +18,12 @@ int sidelobe_nside(const std::vector<Beamsor>& beams, int sky_nside) {
   for (const Beamsor& b : beams) {
     if (!b.sidelobes()) continue;
     any = true;
+    // The outer parts are summed on a band-limited copy of the sky, which cannot be finer than the sky.
+    if (b.sidelobe_nside() > sky_nside)
+      throw Error("beam " + b.description() + ": sidelobe_nside = " + std::to_string(b.sidelobe_nside()) +
+                  " is above the sky's NSIDE " + std::to_string(sky_nside) +
+                  "; the sidelobes are summed on a smoothed copy of the sky at most as fine as the sky: set at most " +
+                  std::to_string(sky_nside) + ", or 0 to choose it from the sidelobes' band limit");
     asked = std::max(asked, b.sidelobe_nside());
     band = std::max(band, b.sidelobe_band_limit());
   }

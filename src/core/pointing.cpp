@@ -6,6 +6,7 @@
 
 #include "core/detector_pointing.hpp"
 #include "core/frame.hpp"
+#include "core/text.hpp"
 #include "cpu/thread_pool.hpp"
 #include "pisco/error.hpp"
 
@@ -111,11 +112,11 @@ void check_pointing(const QuatPointingView& p, const char* origin) {
   for (std::size_t i = 0; i < p.size(); ++i) {
     const Quat& q = p.quats[i];
     const double n = norm(q);
-    if (!std::isfinite(n))
+    if (std::abs(n - 1.0) <= 1e-6) continue;  // the common case, at the cost of the plain norm
+    if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z) || !std::isfinite(q.w))
       throw Error(std::string(origin) + ": quaternion of sample " + std::to_string(i) + " has a non-finite component");
-    if (std::abs(n - 1.0) > 1e-6)
-      throw Error(std::string(origin) + ": quaternion of sample " + std::to_string(i) + " has norm " +
-                  std::to_string(n) + "; expected a unit quaternion (x, y, z, w), to within 1e-6");
+    throw Error(std::string(origin) + ": quaternion of sample " + std::to_string(i) + " has norm " +
+                detail::number_text(checked_norm(q)) + "; expected a unit quaternion (x, y, z, w), to within 1e-6");
   }
 }
 

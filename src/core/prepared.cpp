@@ -10,6 +10,7 @@
 #include <healpix_base.h>
 #include <vec3.h>
 
+#include "core/text.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail {
@@ -175,6 +176,15 @@ EngineInputs prepare_inputs(const SkyView& sky, const std::vector<Beamsor>& beam
   EngineInputs in;
   in.normalization = normalization;
   in.sky = prepare_sky(sky);
+  // A disc narrower than the sky's largest pixel radius holds no pixel centre wherever it falls between
+  // them, and its sample would be 0: refused, naming the detector.
+  const double largest = T_Healpix_Base<int>(sky.nside(), RING, SET_NSIDE).max_pixrad();
+  for (const Detector& d : focal_plane.detectors())
+    if (beams[d.beam].rho_max() < largest)
+      throw Error("detector '" + d.name + "': its beam's rho_max, " + degrees_text(beams[d.beam].rho_max()) +
+                  ", is below the largest pixel radius of the sky (NSIDE " + std::to_string(sky.nside()) + "), " +
+                  degrees_text(largest) + ": a disc between pixel centres would hold none, and its sample would be 0; "
+                  "widen rho_max or give a finer sky");
   for (const Detector& d : focal_plane.detectors()) {
     in.detectors.push_back(prepare_detector(d, beams[d.beam], in.sky.pixel_area, normalization));
     in.detectors.back().owner = in.detectors.size() - 1;

@@ -17,6 +17,10 @@ Quat conjugate(const Quat& q) noexcept { return {-q.x, -q.y, -q.z, q.w}; }
 
 double norm(const Quat& q) noexcept { return std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w); }
 
+double checked_norm(const Quat& q) noexcept {
+  return std::hypot(std::hypot(q.x, q.y), std::hypot(q.z, q.w));
+}
+
 Quat normalized(const Quat& q) {
   const double n = norm(q);
   if (!std::isfinite(n) || n == 0.0)

@@ -323,6 +323,17 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
         beam_names.push_back(b.name);
         say("beam %s for zeta %g deg: %s\n", b.name.c_str(), zeta * 180 / std::numbers::pi,
             beams.back().description().c_str());
+        // A b_lm file of T alone gives a polarized detector no polarization response: said, unless
+        // the table says that this is meant.
+        const Beamsor& made_beam = beams.back();
+        if (b.kind == BeamKind::blm && !b.temperature_only && c.detectors[i].epsilon < 1.0 &&
+            !made_beam.has_element(1, 1) && !made_beam.has_element(1, 2) && !made_beam.has_element(2, 1) &&
+            !made_beam.has_element(2, 2))
+          throw pisco::Error(c.source.string() + ": [beams." + b.name + "] " + b.file.string() +
+                             " holds T coefficients alone, so detector '" + c.detectors[i].name +
+                             "' (polarization efficiency " + format("%g", 1.0 - c.detectors[i].epsilon) +
+                             ") would see no polarization; give a file with T, E and B, or set temperature_only = "
+                             "true if a beam without polarization response is meant");
         made.emplace_back(zeta, beams.size() - 1);
         it = made.end() - 1;
       }
@@ -930,6 +941,10 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   const fs::path data_dir = options_.data_dir.empty() ? default_data_dir() : options_.data_dir;
   SimulationResult result;
 
+  // A run that would write nothing is refused before it starts (spectra and plots come from the maps).
+  if (!c.output.tod && !c.output.maps)
+    throw Error((c.source.empty() ? std::string("simulation") : c.source.string()) +
+                ": [output] tod = false and maps = false: the run would write nothing; set tod or maps to true");
   // The output directory, made when missing and locked by the leading process (pisco-vk makes and
   // locks it before: then nothing to do), so that a second run into it stops before its set-up.
   std::optional<OutputLock> lock;

@@ -98,6 +98,12 @@ BeamConfig read_beam(Table t, const std::string& name) {
   if (b.options.rho_max >= std::numbers::pi / 2) t.fail("rho_max_deg", "expected less than 90 deg");
   b.options.grid_step = t.number("grid_step_arcmin", 0.0) * arcmin;
   if (b.options.grid_step < 0) t.fail("grid_step_arcmin", "expected a positive step (or 0 for the default)");
+  // A grid has at least five nodes across the disc: a coarser one does not sample the beam.
+  if (b.options.grid_step > b.options.rho_max / 2)
+    t.fail("grid_step_arcmin", "a step of " + Table::format(b.options.grid_step / arcmin) +
+                                   " arcmin is coarser than half of rho_max_deg = " +
+                                   Table::format(b.options.rho_max / deg) +
+                                   ": the grid would not sample the beam (0 for the default step)");
   // A Gaussian's width: its half-maximum radius within rho_max, and a grid of at most
   // Beamsor::max_grid_nodes nodes a side at the step it implies (1/20 of the smallest FWHM by default).
   auto width = [&](const std::string& key) {
@@ -105,6 +111,11 @@ BeamConfig read_beam(Table t, const std::string& name) {
     if (fwhm / 2 >= b.options.rho_max)
       t.fail(key, "a FWHM of " + Table::format(fwhm / deg) + " deg is wider than the beam grid: its half-maximum "
                   "radius must fit within rho_max_deg = " + Table::format(b.options.rho_max / deg));
+    // At least two nodes within the FWHM: a coarser grid makes the beam another beam (TOD off by factors).
+    if (b.options.grid_step > fwhm / 2)
+      t.fail("grid_step_arcmin", "a step of " + Table::format(b.options.grid_step / arcmin) +
+                                     " arcmin is coarser than half of " + key + " = " + Table::format(fwhm / deg) +
+                                     " deg: the grid would not resolve the beam (0 for the default step, FWHM / 20)");
     const double step = b.options.grid_step > 0 ? b.options.grid_step : fwhm / 20;
     if (std::ceil(2 * std::sin(b.options.rho_max) / step) + 1 > pisco::Beamsor::max_grid_nodes)
       t.fail(b.options.grid_step > 0 ? "grid_step_arcmin" : key,
@@ -125,6 +136,7 @@ BeamConfig read_beam(Table t, const std::string& name) {
       t.fail("file", b.kind == BeamKind::grasp ? "a beam of type \"grasp\" needs file = \"beam.grd\" (or a .cut file)"
                      : b.kind == BeamKind::blm ? "a beam of type \"blm\" needs file = \"beam_alm.fits\" (healpy.write_alm)"
                                        : "a beam of type \"file\" needs file = \"beamsor.fits\"");
+    if (b.kind == BeamKind::blm) b.temperature_only = t.boolean("temperature_only", false);
     if (b.kind == BeamKind::grasp) {
       const double set = t.number("set", 0.0);
       if (!(set >= 0 && set <= 1e6 && set == std::floor(set)))
@@ -323,9 +335,11 @@ EngineConfig read_engine(Table t) {
   };
   const std::string device = t.string("device", "auto");
   route("device", [&] { e.options.set_device(device); });
+  if (t.has("device")) e.device = device;
   const pisco::Arithmetic arithmetic =
       pisco::arithmetic_from(t.choice("arithmetic", "auto", {"auto", "float64", "float-float"}));
   route("arithmetic", [&] { e.options.set_arithmetic(arithmetic); });
+  if (t.has("arithmetic")) e.arithmetic = arithmetic;
   e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
                                 ? pisco::Normalization::integral
                                 : pisco::Normalization::per_sample;
@@ -338,12 +352,38 @@ EngineConfig read_engine(Table t) {
       "0 (all hardware threads) or a number of threads up to " + std::to_string(max_threads) +
           " (64 per hardware thread of this machine)"));
   route("threads", [&] { e.options.set_threads(threads); });
+  if (t.has("threads")) e.threads = threads;
   const auto chunk = t.integer_in("chunk_samples", 1 << 16, 1, max_chunk_samples,
                                   "a number of samples from 1 to " + std::to_string(max_chunk_samples));
   e.chunk_samples = static_cast<std::size_t>(chunk);
   t.finish();
   return e;
 }
+
+}  // namespace
+
+void EngineConfig::set_backend(const std::string& name, const std::filesystem::path& source) {
+  EngineOptions o;
+  o.backend = name;
+  o.normalization = options.normalization;
+  o.quadrature = options.quadrature;
+  o.unseen = options.unseen;
+  const auto route = [&](const char* key, auto set) {
+    try {
+      set();
+    } catch (const pisco::Error& err) {
+      throw pisco::Error((source.empty() ? std::string("simulation") : source.string()) + ": [engine] " + key + ": " +
+                             err.what() + "; the backend was named after the file (" + name + ")",
+                         err.kind());
+    }
+  };
+  if (device) route("device", [&] { o.set_device(*device); });
+  if (arithmetic) route("arithmetic", [&] { o.set_arithmetic(*arithmetic); });
+  if (threads) route("threads", [&] { o.set_threads(*threads); });
+  options = std::move(o);
+}
+
+namespace {
 
 OutputConfig read_output(Table t) {
   OutputConfig o;

@@ -55,7 +55,7 @@ Quat quat_from(nb::handle obj, const char* name) {
   for (double c : v)
     if (!std::isfinite(c)) throw nb::value_error((std::string(name) + ": the quaternion is not finite").c_str());
   const Quat q{v[0], v[1], v[2], v[3]};
-  const double n = norm(q);
+  const double n = checked_norm(q);
   if (!(std::abs(n - 1.0) <= unit_quat_tolerance))
     throw nb::value_error((std::string(name) + ": the quaternion (" + format_double(q.x) + ", " + format_double(q.y) +
                            ", " + format_double(q.z) + ", " + format_double(q.w) + ") has norm " + format_double(n) +

@@ -64,7 +64,7 @@ void apply(Simulation& s, const std::optional<std::filesystem::path>& output_dir
     if (output_dir->empty()) throw nb::value_error("output_dir: expected a directory name, got an empty string");
     s.config().output.dir = *output_dir;
   }
-  if (backend) s.config().engine.options.backend = *backend;
+  if (backend) s.config().engine.set_backend(*backend, s.config().source);
   if (device) {
     try {
       s.config().engine.options.set_device(*device);
@@ -116,7 +116,7 @@ void bind_simulation(nb::module_& m) {
           "The output directory ([output] dir).")
       .def_prop_rw(
           "backend", [](const Simulation& s) { return s.config().engine.options.backend; },
-          [](Simulation& s, const std::string& b) { s.config().engine.options.backend = b; },
+          [](Simulation& s, const std::string& b) { s.config().engine.set_backend(b, s.config().source); },
           "The engine's backend ([engine] backend): auto, cpu, simd, vulkan, cuda.")
       .def_prop_ro("detectors",
                    [](const Simulation& s) {

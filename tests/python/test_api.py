@@ -410,6 +410,8 @@ def test_argument_errors_name_the_argument():
         engine.convolve(0, boresight_quats=quats[:, :3].copy())
     with pytest.raises(ValueError, match=r"boresight_quats\[2\] has norm 2"):
         engine.convolve(0, boresight_quats=np.where(np.arange(20)[:, None] == 2, 2 * quats, quats))
+    with pytest.raises(ValueError, match=r"boresight_quats\[3\] has norm 9.99999999999999\d*e\+199"):  # finite: not "non-finite"
+        engine.convolve(0, boresight_quats=np.where(np.arange(20)[:, None] == 3, 1e200 * quats, quats))
     with pytest.raises(TypeError, match="either theta, phi and psi .* or boresight_quats"):
         engine.convolve(0, theta, phi, psi, boresight_quats=quats)
     with pytest.raises(TypeError, match="either"):

@@ -210,7 +210,7 @@ static int main_body(int argc, char** argv) {
     pisco::SimulationConfig config;
     cluster.step([&] { config = pisco::read_simulation_file(config_file); });
     if (!output_dir.empty()) config.output.dir = output_dir;
-    if (!backend.empty()) config.engine.options.backend = backend;
+    if (!backend.empty()) config.engine.set_backend(backend, config.source);
     if (!device.empty()) {
       try {
         config.engine.options.set_device(device);
