@@ -168,7 +168,7 @@ INSTANTIATE_TEST_SUITE_P(Backends, Deconvolution, ::testing::Values("simd"),
                          [](const auto& info) { return info.param; });
 
 TEST(DeconvolutionErrors, BadOptionsAndNoData) {
-  pisco_test::Scene scene = pisco_test::backend_scene(8);
+  pisco_test::Scene scene = pisco_test::backend_scene(16);
   pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane);
   pisco::DeconvolutionOptions o;
   o.max_iterations = 0;

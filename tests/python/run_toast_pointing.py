@@ -69,7 +69,7 @@ seed = 1
 [beams.main]
 type = "gaussian"
 fwhm_deg = 1.0
-rho_max_deg = 2.0
+rho_max_deg = 4.0
 
 [focal_plane]
 file = "{focalplane}"

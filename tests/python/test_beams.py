@@ -54,7 +54,11 @@ def test_blm_errors_are_exceptions_naming_the_problem(tmp_path):
         pisco.Beamsor.from_blm(missing)
     grd = tmp_path / "beam.grd"
     grd.write_text("header\n++++\n1\n1 3 2 1\n0 0\n-0.1 -0.1 0.1 0.1\n3 3 0\n1 0 0 0\n")
-    with pytest.raises(pisco.Error, match="beam.grd: line 8: ends before point 2 of row 1"):
+    with pytest.raises(pisco.Error, match=r"beam.grd: line 7: NX NY = 3 x 3 of field set 1 of 1 declares 9 points "
+                                          r"\(288 bytes in memory\), but the 8 bytes left in the file hold at most 1"):
+        pisco.Beamsor.from_grasp(grd)
+    grd.write_text("header\n++++\n1\n1 3 2 1\n0 0\n-0.1 -0.1 0.1 0.1\n3 3 0\n1 0 0 0\n" + "\n" * 80)
+    with pytest.raises(pisco.Error, match="beam.grd: line 88: ends before point 2 of row 1"):
         pisco.Beamsor.from_grasp(grd)
 
 
