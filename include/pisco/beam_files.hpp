@@ -7,6 +7,7 @@
 #include <complex>
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,9 @@ struct FileBeamOptions {
   // sets it to each detector's zeta, so a pair's two detectors see the same optics turned by 90 deg.
   double angle = 0.0;
   SidelobeSplit split;
+  // When set, told of the progress of a build that takes more than a few seconds (a b_lm file's
+  // synthesis at large lmax and mmax), a line at its start and one every few seconds.
+  std::function<void(const std::string&)> progress;
 };
 
 // Harmonic beam coefficients, the beam axis at the north pole, sigma = longitude: T, E and B in

@@ -102,7 +102,9 @@ Sky make_sky(const SkyConfig& sky, const std::filesystem::path& data_dir);
 
 // One [beams] table as a beamsor; `angle` turns GRASP and b_lm beams (a detector's zeta). Errors name
 // `source` (the simulation file) and the table.
-Beamsor make_beam(const BeamConfig& beam, const std::filesystem::path& source, double angle = 0.0);
+// `progress`, when given, is told of a build that takes more than a few seconds (FileBeamOptions).
+Beamsor make_beam(const BeamConfig& beam, const std::filesystem::path& source, double angle = 0.0,
+                  const std::function<void(const std::string&)>& progress = {});
 
 // The beamsors of a run and its detectors pointed at them. GRASP and b_lm beams turn with their
 // detectors (docs/beams.md, "Which way a beam points"): one beamsor per beam and detector angle zeta.

@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -401,14 +402,31 @@ Beamsor Beamsor::from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& 
     std::sort(keys.begin(), keys.end());
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
     std::vector<Ring> rings(keys.size());
-    std::atomic<std::size_t> next{0};
+    std::atomic<std::size_t> next{0}, done{0};
     const auto work = [&] {
-      for (std::size_t k; (k = next.fetch_add(1)) < keys.size();) rings[k] = synthesis.ring(keys[k]);
+      for (std::size_t k; (k = next.fetch_add(1)) < keys.size();) {
+        rings[k] = synthesis.ring(keys[k]);
+        done.fetch_add(1);
+      }
     };
     const unsigned threads = std::max(1u, std::min(std::thread::hardware_concurrency(), 64u));
     std::vector<std::thread> pool;
-    for (unsigned t = 1; t < threads; ++t) pool.emplace_back(work);
-    work();
+    for (unsigned t = 0; t < threads; ++t) pool.emplace_back(work);
+    // Progress: the synthesis costs about 3 lmax mmax multiply-adds a radius (at 1e9 a second a
+    // thread, lmax = mmax = 3000 and a thousand radii take about a minute on two threads).
+    const double cost = 3.0 * (beam.lmax + 1.0) * (beam.mmax + 1.0) * double(keys.size()) / (1e9 * threads);
+    if (options.progress && cost > 2.0) {
+      options.progress("synthesizing " + std::to_string(keys.size()) + " radii of the b_lm beam (lmax " +
+                       std::to_string(beam.lmax) + ", mmax " + std::to_string(beam.mmax) + ", about " +
+                       detail::number_text(std::ceil(cost), 3) + " s)");
+      auto last = std::chrono::steady_clock::now();
+      while (done.load() < keys.size()) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        if (std::chrono::steady_clock::now() - last < std::chrono::seconds(5)) continue;
+        last = std::chrono::steady_clock::now();
+        options.progress("synthesized " + std::to_string(done.load()) + " of " + std::to_string(keys.size()) + " radii");
+      }
+    }
     for (auto& t : pool) t.join();
     for (std::size_t k = 0; k < keys.size(); ++k) cache->emplace(keys[k], std::move(rings[k]));
   }

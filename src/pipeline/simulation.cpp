@@ -271,11 +271,13 @@ Sky make_sky(const SkyConfig& s, const fs::path& data_dir) {
 }
 
 // A beam of the simulation file; `angle` turns GRASP and b_lm beams (a detector's zeta).
-Beamsor make_beam(const BeamConfig& b, const fs::path& config, double angle) {
+Beamsor make_beam(const BeamConfig& b, const fs::path& config, double angle,
+                  const std::function<void(const std::string&)>& progress) {
   try {
     if (b.kind == BeamKind::gaussian) return pisco::Beamsor::gaussian(b.fwhm, b.options);
     if (b.kind == BeamKind::elliptical) return pisco::Beamsor::elliptical_gaussian(b.fwhm_x, b.fwhm_y, b.angle, b.options);
-    const pisco::FileBeamOptions fo{b.options.rho_max, b.options.grid_step, angle, b.options.split};
+    pisco::FileBeamOptions fo{b.options.rho_max, b.options.grid_step, angle, b.options.split, {}};
+    if (progress) fo.progress = [&](const std::string& line) { progress("beam " + b.name + ": " + line + "\n"); };
     if (b.kind == BeamKind::blm) return pisco::Beamsor::from_harmonic(pisco::HarmonicBeam::read_fits(b.file), fo);
     if (b.kind == BeamKind::grasp) {
       const auto all = pisco::GraspBeam::read(b.file);
@@ -306,7 +308,7 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
   for (std::size_t k = 0; k < c.beams.size(); ++k) {
     const auto& b = c.beams[k];
     if (!b.turns_with_detector()) {
-      beams.push_back(make_beam(b, c.source));
+      beams.push_back(make_beam(b, c.source, 0.0, log));
       say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
       beam_names.push_back(b.name);
       for (std::size_t i = 0; i < detectors.size(); ++i)
@@ -319,7 +321,7 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
       const double zeta = c.detectors[i].zeta;
       auto it = std::find_if(made.begin(), made.end(), [&](const auto& m) { return m.first == zeta; });
       if (it == made.end()) {
-        beams.push_back(make_beam(b, c.source, zeta));
+        beams.push_back(make_beam(b, c.source, zeta, log));
         beam_names.push_back(b.name);
         say("beam %s for zeta %g deg: %s\n", b.name.c_str(), zeta * 180 / std::numbers::pi,
             beams.back().description().c_str());
@@ -340,7 +342,7 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
       detectors[i].beam = it->second;
     }
     if (made.empty()) {  // checked, though no detector uses it
-      beams.push_back(make_beam(b, c.source));
+      beams.push_back(make_beam(b, c.source, 0.0, log));
       beam_names.push_back(b.name);
     }
   }

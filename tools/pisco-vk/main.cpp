@@ -1,4 +1,5 @@
 // pisco-vk: the command line of PISCO-VK (README.md, "The command line"), a thin layer over the library.
+#include <new>
 #include <algorithm>
 #include <cstdio>
 #include <functional>
@@ -238,6 +239,18 @@ static int main_body(int argc, char** argv) {
       cluster.abort(2);
     }
     std::fprintf(stderr, "pisco-vk: error: %s\n", printable(e.what()).c_str());
+    return 2;
+  } catch (const std::bad_alloc&) {
+    // Memory that ran out where no reader named what it was allocating: not a bug, an input or a
+    // machine too large for each other.
+    pisco_cli::wait_for_stop();
+    const char* what = "this machine's memory ran out (std::bad_alloc); a smaller sky, beam grid or chunk, or a "
+                       "machine with more memory, is needed";
+    if (cluster.parallel()) {
+      std::fprintf(stderr, "pisco-vk: error: rank %d: %s\n", cluster.rank(), what);
+      cluster.abort(2);
+    }
+    std::fprintf(stderr, "pisco-vk: error: %s\n", what);
     return 2;
   } catch (const std::exception& e) {
     pisco_cli::wait_for_stop();
