@@ -160,6 +160,15 @@ TEST_F(InputBounds, HarmonicFilesWithMmaxUpToLmaxLoad) {
   EXPECT_NEAR(bs.at(0.0, 0.0)[0][0], centre[0], 1e-9 * std::abs(centre[0]));
 }
 
+// A C_l table whose multipole is a finite 2e67: beyond every lmax, skipped, never converted out of range
+// (float-to-integer overflow under the sanitizers before).
+TEST_F(InputBounds, ClTableMultipolesBeyondAnyRange) {
+  const fs::path f = text("cl.txt", "20000000000000000000000000000000000000000000000000000000000000000000 1 1 1 1\n"
+                                    "2 6.283185307179586 0 0 0\n");
+  const pisco::Spectra s = pisco::read_cl_table(f, 10, false);
+  EXPECT_NEAR(s.TT[2], 6.283185307179586 * 2 * M_PI / 6, 1e-12);  // C_l = 2 pi D_l / l (l + 1)
+}
+
 // A FIFO named as any input: refused at once, naming it, instead of a reader blocked forever.
 TEST_F(InputBounds, FifosAreRefusedByEveryReader) {
   const fs::path fifo = dir_ / "input.fifo";

@@ -59,7 +59,8 @@ void parse_row(const std::filesystem::path& file, std::size_t line_no, const std
   if (!(in >> l_value) || !std::isfinite(l_value) || l_value < 0.0 ||
       l_value != std::floor(l_value))
     table_error(file, line_no, "expected a non-negative integer multipole l in the first column");
-  l = static_cast<long>(l_value);
+  // Beyond any lmax asked for (at most 4 x 8192): read as that, never converted out of a long's range.
+  l = static_cast<long>(std::min(l_value, 1e9));
   static const char* names[4] = {"TT", "EE", "BB", "TE"};
   for (int k = 0; k < 4; ++k)
     if (!(in >> d[k]) || !std::isfinite(d[k]))
