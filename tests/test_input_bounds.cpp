@@ -5,6 +5,7 @@
 // lmax loads.
 #include <fitsio.h>
 #include <gtest/gtest.h>
+#include <hdf5.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -167,6 +168,28 @@ TEST_F(InputBounds, ClTableMultipolesBeyondAnyRange) {
                                     "2 6.283185307179586 0 0 0\n");
   const pisco::Spectra s = pisco::read_cl_table(f, 10, false);
   EXPECT_NEAR(s.TT[2], 6.283185307179586 * 2 * M_PI / 6, 1e-12);  // C_l = 2 pi D_l / l (l + 1)
+}
+
+// An HDF5 dataset declaring 4e11 elements in a file of a few kilobytes (chunked, nothing written):
+// refused when opened, before any reader allocates for it.
+TEST_F(InputBounds, HdfDatasetsDeclaringMoreThanTheFileHolds) {
+  const fs::path f = dir_ / "huge.h5";
+  {
+    const hid_t file = H5Fcreate(f.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    const hsize_t dims[2] = {100000000000ull, 4}, chunk[2] = {1024, 4};
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const hid_t plist = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_chunk(plist, 2, chunk);
+    const hid_t ds = H5Dcreate2(file, "boresight", H5T_NATIVE_DOUBLE, space, H5P_DEFAULT, plist, H5P_DEFAULT);
+    ASSERT_GE(ds, 0);
+    H5Dclose(ds);
+    H5Pclose(plist);
+    H5Sclose(space);
+    H5Fclose(file);
+  }
+  const std::string m = error_of([&] { pisco::BoresightFile b(f); });
+  EXPECT_TRUE(contains(m, "huge.h5: dataset '/boresight' declares 4e+11 elements (3.2 TB), more than 64 times the file's"))
+      << m;
 }
 
 // A FIFO named as any input: refused at once, naming it, instead of a reader blocked forever.

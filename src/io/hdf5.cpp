@@ -9,6 +9,7 @@
 #include <optional>
 
 #include "io/output_file.hpp"
+#include "core/text.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail::hdf5 {
@@ -258,6 +259,24 @@ Dataset open_dataset(hid_t loc, const std::string& name, const std::string& path
   out.shape.resize(static_cast<std::size_t>(rank));
   if (rank > 0 && H5Sget_simple_extent_dims(space.get(), out.shape.data(), nullptr) < 0)
     fail(where, "cannot get the size of " + q);
+  // What the dataset declares against what the file holds, before a reader allocates for it: a few
+  // hundred bytes must not declare gigabytes. Compression may hold data in less room than it takes
+  // in memory, so the bound is generous: 64 times the file, plus 64 MiB.
+  {
+    double elements = 1;
+    for (hsize_t d : out.shape) elements *= double(d);
+    const double bytes = elements * double(std::max<std::size_t>(1, H5Tget_size(type.get())));
+    hsize_t file_bytes = 0;
+    const hid_t file = H5Iget_file_id(out.handle.get());
+    if (file >= 0) {
+      H5Fget_filesize(file, &file_bytes);
+      H5Fclose(file);
+    }
+    if (file_bytes > 0 && bytes > 64.0 * double(file_bytes) + 64.0 * 1024 * 1024)
+      throw Error(where + ": dataset " + q + " declares " + detail::count_text(elements) + " elements (" +
+                  detail::bytes_text(bytes) + "), more than 64 times the file's " + std::to_string(file_bytes) +
+                  " bytes: not data this file holds" + tail);
+  }
   return out;
 }
 
