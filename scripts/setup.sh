@@ -9,7 +9,9 @@ packages=(build-essential cmake ninja-build pkg-config libhealpix-cxx-dev libcfi
           libgsl-dev libfftw3-dev libchealpix-dev
           libvulkan-dev libvulkan-volk-dev glslang-tools mesa-vulkan-drivers vulkan-validationlayers
           libhwy-dev
-          openmpi-bin libopenmpi-dev libhdf5-openmpi-dev)
+          openmpi-bin libopenmpi-dev libhdf5-openmpi-dev
+          # clang and its libFuzzer runtime: scripts/run-fuzz.sh
+          clang libclang-rt-14-dev)
 
 missing=()
 for p in "${packages[@]}"; do
