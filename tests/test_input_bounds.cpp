@@ -192,6 +192,39 @@ TEST_F(InputBounds, HdfDatasetsDeclaringMoreThanTheFileHolds) {
       << m;
 }
 
+// FITS headers are checked card by card before CFITSIO parses them: an unquoted value that overran
+// CFITSIO's buffers (an abort inside the library) and a byte that is not ASCII are refused, naming the
+// HDU, the card and the keyword.
+TEST_F(InputBounds, FitsHeaderCardsOutsideTheStandardAreRefused) {
+  pisco::Sky sky(4);
+  const fs::path good = dir_ / "sky.fits";
+  sky.write_fits(good);
+  std::string bytes;
+  {
+    std::ifstream in(good, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const auto patched = [&](const std::string& name, const std::string& key, const std::string& value) {
+    std::string b = bytes;
+    const std::size_t at = b.find(key);
+    EXPECT_NE(at, std::string::npos) << key;
+    b.replace(at + 10, 70, (value + std::string(70, ' ')).substr(0, 70));
+    const fs::path f = dir_ / name;
+    std::ofstream(f, std::ios::binary) << b;
+    return f;
+  };
+  std::string m = error_of([&] { pisco::Sky::read_fits(patched("word.fits", "TTYPE1  = ", std::string(60, 's'))); });
+  EXPECT_TRUE(contains(m, "word.fits: HDU 2, header card ") && contains(m, "(TTYPE1): the value 'ssssssssssss") &&
+              contains(m, "is neither a quoted string, a number, T nor F"))
+      << m;
+  m = error_of([&] { pisco::Sky::read_fits(patched("open.fits", "TTYPE1  = ", "'I_STOKES")); });
+  EXPECT_TRUE(contains(m, "(TTYPE1): the value ''I_STOKES' is neither")) << m;
+  m = error_of([&] { pisco::Sky::read_fits(patched("byte.fits", "TTYPE1  = ", "'I\x01'")); });
+  EXPECT_TRUE(contains(m, "holds a byte that is not printable ASCII")) << m;
+  // Values of every kind the standard allows read as before.
+  EXPECT_EQ(pisco::Sky::read_fits(patched("ok.fits", "TTYPE1  = ", "'I''S'  / a comment")).nside(), 4);
+}
+
 // A FIFO named as any input: refused at once, naming it, instead of a reader blocked forever.
 TEST_F(InputBounds, FifosAreRefusedByEveryReader) {
   const fs::path fifo = dir_ / "input.fifo";

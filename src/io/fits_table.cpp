@@ -7,6 +7,10 @@
 #include <cctype>
 #include <cerrno>
 #include <cstring>
+#include <cmath>
+#include <vector>
+#include <cstdlib>
+#include <cstdio>
 #include <new>
 #include <utility>
 
@@ -64,6 +68,133 @@ std::string trim_upper(std::string s) {
   return s;
 }
 
+// ---- Headers checked before CFITSIO reads them ---------------------------------------------------
+
+namespace {
+
+// Whether `v` (a card's value field, after "= ") is a value of the FITS standard (section 4.2): a
+// quoted string ('' inside for a quote), T or F, an integer or a real (E or D exponent), a complex
+// "(re, im)", or nothing; then spaces and an optional "/ comment". CFITSIO's own parsers copy an
+// unquoted word into fixed buffers and overrun them when it is long, so such a card never reaches it.
+bool valid_value(const std::string& v) {
+  std::size_t i = v.find_first_not_of(' ');
+  if (i == std::string::npos || v[i] == '/') return true;  // no value (undefined), or a comment alone
+  auto rest_is_comment = [&](std::size_t at) {
+    const std::size_t j = v.find_first_not_of(' ', at);
+    return j == std::string::npos || v[j] == '/';
+  };
+  if (v[i] == '\'') {
+    for (std::size_t j = i + 1; j < v.size(); ++j)
+      if (v[j] == '\'') {
+        if (j + 1 < v.size() && v[j + 1] == '\'') {
+          ++j;
+          continue;
+        }
+        return rest_is_comment(j + 1);
+      }
+    return false;  // not closed within the card
+  }
+  if (v[i] == 'T' || v[i] == 'F') return rest_is_comment(i + 1);
+  const auto number = [&](std::size_t& j) {
+    if (j < v.size() && (v[j] == '+' || v[j] == '-')) ++j;
+    std::size_t digits = 0;
+    while (j < v.size() && std::isdigit(static_cast<unsigned char>(v[j]))) ++j, ++digits;
+    if (j < v.size() && v[j] == '.') {
+      ++j;
+      while (j < v.size() && std::isdigit(static_cast<unsigned char>(v[j]))) ++j, ++digits;
+    }
+    if (digits == 0) return false;
+    if (j < v.size() && (v[j] == 'E' || v[j] == 'D' || v[j] == 'e' || v[j] == 'd')) {
+      ++j;
+      if (j < v.size() && (v[j] == '+' || v[j] == '-')) ++j;
+      std::size_t e = 0;
+      while (j < v.size() && std::isdigit(static_cast<unsigned char>(v[j]))) ++j, ++e;
+      if (e == 0) return false;
+    }
+    return true;
+  };
+  if (v[i] == '(') {
+    std::size_t j = v.find_first_not_of(' ', i + 1);
+    if (j == std::string::npos || !number(j)) return false;
+    j = v.find_first_not_of(' ', j);
+    if (j == std::string::npos || v[j] != ',') return false;
+    j = v.find_first_not_of(' ', j + 1);
+    if (j == std::string::npos || !number(j)) return false;
+    j = v.find_first_not_of(' ', j);
+    return j != std::string::npos && v[j] == ')' && rest_is_comment(j + 1);
+  }
+  std::size_t j = i;
+  return number(j) && rest_is_comment(j);
+}
+
+// Every header of the file, card by card, before CFITSIO opens it: printable ASCII, keywords of the
+// standard's characters, and values the standard allows; the data units between them skipped by
+// their declared size. Stops at the end of the file (a truncated table is the readers' to refuse).
+void check_headers(const fs::path& file, std::uintmax_t size, const std::string& expected) {
+  std::FILE* in = std::fopen(file.c_str(), "rb");
+  if (!in) return;  // CFITSIO then says why it cannot open it
+  struct Closer {
+    std::FILE* f;
+    ~Closer() { std::fclose(f); }
+  } closer{in};
+  constexpr std::uintmax_t block = 2880;
+  std::uintmax_t at = 0;
+  for (int hdu = 1; at < size && hdu <= 1000; ++hdu) {
+    double bitpix = 0, naxis = 0, pcount = 0, gcount = 1;
+    std::vector<double> axes;
+    bool end = false;
+    for (int n = 1; !end; ++n) {
+      if (at + 80 > size) {
+        if (hdu == 1) fail(file, "the FITS header ends before its END card; " + expected);
+        return;  // a truncated extension: CFITSIO and the readers say so
+      }
+      char card[80];
+      if (std::fseek(in, long(at), SEEK_SET) != 0 || std::fread(card, 1, 80, in) != 80) return;
+      at += 80;
+      const std::string text(card, 80);
+      const std::string where = "HDU " + std::to_string(hdu) + ", header card " + std::to_string(n);
+      for (char c : text)
+        if (c < 32 || c > 126)
+          fail(file, where + " holds a byte that is not printable ASCII (a FITS header holds ASCII text only); " +
+                         expected);
+      const std::string key = text.substr(0, 8);
+      const std::string name = key.substr(0, key.find_last_not_of(' ') + 1);
+      for (char c : name)
+        if (!(std::isupper(static_cast<unsigned char>(c)) || std::isdigit(static_cast<unsigned char>(c)) ||
+              c == '-' || c == '_' || c == ' '))
+          fail(file, where + ": the keyword '" + name + "' is not of the FITS standard's characters (A-Z, 0-9, - and _); " +
+                         expected);
+      if (name == "END") {
+        end = true;
+        break;
+      }
+      if (text.compare(8, 2, "= ") != 0) continue;  // commentary (COMMENT, HISTORY, blank, CONTINUE, HIERARCH)
+      const std::string value = text.substr(10);
+      if (!valid_value(value)) {
+        std::string shown = value.substr(value.find_first_not_of(' '));
+        shown = shown.substr(0, shown.find_last_not_of(' ') + 1);
+        fail(file, where + " (" + name + "): the value '" + shown.substr(0, 40) + (shown.size() > 40 ? "..." : "") +
+                       "' is neither a quoted string, a number, T nor F (FITS standard, section 4.2); " + expected);
+      }
+      const double number = std::atof(value.c_str());
+      if (name == "BITPIX") bitpix = number;
+      else if (name == "NAXIS") naxis = number;
+      else if (name == "PCOUNT") pcount = number;
+      else if (name == "GCOUNT") gcount = number;
+      else if (name.rfind("NAXIS", 0) == 0 && name.size() > 5) axes.push_back(number);
+    }
+    at = (at + block - 1) / block * block;
+    // The data unit: |BITPIX| / 8 GCOUNT (PCOUNT + NAXIS1 ... NAXISn) bytes, in whole blocks.
+    double data = naxis > 0 ? 1.0 : 0.0;
+    for (std::size_t k = 0; k < axes.size() && double(k) < naxis; ++k) data *= std::max(0.0, axes[k]);
+    data = std::abs(bitpix) / 8 * std::max(1.0, gcount) * (std::max(0.0, pcount) + data);
+    if (!(data >= 0) || data > double(size)) return;  // beyond the file: the readers say so
+    at += (std::uintmax_t(data) + block - 1) / block * block;
+  }
+}
+
+}  // namespace
+
 // ---- FitsFile -----------------------------------------------------------------------------------
 
 FitsFile::FitsFile(fs::path file) : file_(std::move(file)) {}
@@ -79,7 +210,9 @@ FitsFile::~FitsFile() {
 }
 
 FitsFile FitsFile::open(const fs::path& file, const std::string& expected) {
-  require_regular_file(file, expected.rfind("expected ", 0) == 0 ? expected.substr(9) : expected);
+  const std::uintmax_t size =
+      require_regular_file(file, expected.rfind("expected ", 0) == 0 ? expected.substr(9) : expected);
+  check_headers(file, size, expected);
   FitsFile f(file);
   int status = 0;
   fits_open_diskfile(&f.ptr_, file.c_str(), READONLY, &status);
