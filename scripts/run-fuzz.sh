@@ -85,6 +85,9 @@ export ASAN_OPTIONS="halt_on_error=1:strict_string_checks=1:allocator_may_return
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0"
 export OMP_WAIT_POLICY=passive
+# The HDF5 readers' first read in a child process (src/io/hdf5.hpp, run_isolated) gives up on a file
+# the library loops on before libFuzzer's own -timeout would call it a hang of the reader.
+export PISCO_HDF5_PROBE_SECONDS=5
 limits=(-timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=1024)
 
 # One target's fuzzing, in its own directory: the scratch corpus, the artifacts, the log, the readers'

@@ -225,6 +225,34 @@ TEST_F(InputBounds, FitsHeaderCardsOutsideTheStandardAreRefused) {
   EXPECT_EQ(pisco::Sky::read_fits(patched("ok.fits", "TTYPE1  = ", "'I''S'  / a comment")).nside(), 4);
 }
 
+// Files on which the HDF5 library itself crashes, loops or asks for gigabytes (found by fuzzing,
+// tests/fuzz/regressions): read first in a child process, each is one pisco::Error naming the file;
+// the test process survives every one.
+TEST_F(InputBounds, CorruptHdfFilesThatCrashTheLibraryAreOneError) {
+  const fs::path regressions = fs::path(PISCO_TEST_ASSETS_DIR).parent_path() / "tests" / "fuzz" / "regressions";
+  ::setenv("PISCO_HDF5_PROBE_SECONDS", "5", 1);
+  int files = 0;
+  for (const char* target : {"fuzz_focal_plane_hdf5", "fuzz_pointing_hdf5"})
+    for (const auto& e : fs::directory_iterator(regressions / target)) {
+      const fs::path f = dir_ / e.path().filename();
+      fs::copy_file(e.path(), f);
+      const std::string m = error_of([&] {
+        if (std::string(target) == "fuzz_focal_plane_hdf5") {
+          pisco::read_toast_focal_plane(f);
+        } else {
+          pisco::BoresightFile b(f);
+          std::vector<double> hwp;
+          if (b.has_hwp_angle()) b.read_hwp_angle(0, std::min<std::size_t>(b.size(), 16), hwp);
+        }
+      });
+      std::cout << f.filename().string() << ": " << m << "\n";
+      EXPECT_TRUE(contains(m, f.string() + ": ")) << m;
+      ++files;
+    }
+  ::unsetenv("PISCO_HDF5_PROBE_SECONDS");
+  EXPECT_GE(files, 10);
+}
+
 // A FIFO named as any input: refused at once, naming it, instead of a reader blocked forever.
 TEST_F(InputBounds, FifosAreRefusedByEveryReader) {
   const fs::path fifo = dir_ / "input.fifo";

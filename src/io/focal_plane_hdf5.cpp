@@ -298,7 +298,20 @@ std::optional<std::vector<std::string>> read_meta_lines(hid_t file, const std::s
 
 }  // namespace
 
+namespace {
+ToastFocalPlane read_table(const fs::path& file, std::size_t beam);
+}
+
+// The whole read first in a child process (hdf5.hpp, run_isolated): HDF5 1.10 crashes, loops or asks
+// for gigabytes on some corrupt tables; a focal plane is small, so reading it twice costs nothing.
 ToastFocalPlane read_toast_focal_plane(const fs::path& file, std::size_t beam) {
+  Session session;
+  run_isolated(file.string(), [&] { read_table(file, beam); });
+  return read_table(file, beam);
+}
+
+namespace {
+ToastFocalPlane read_table(const fs::path& file, std::size_t beam) {
   const std::string where = file.string();
   Session session;
   const Handle f = open_read_only(file);
@@ -388,5 +401,6 @@ ToastFocalPlane read_toast_focal_plane(const fs::path& file, std::size_t beam) {
   }
   return out;
 }
+}  // namespace
 
 }  // namespace pisco

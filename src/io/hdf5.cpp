@@ -1,11 +1,20 @@
 #include "io/input_file.hpp"
 #include "io/hdf5.hpp"
 
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/resource.h>
 #include <sys/statvfs.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <optional>
 
 #include "io/output_file.hpp"
@@ -18,9 +27,14 @@ namespace fs = std::filesystem;
 
 namespace {
 
+bool probe_child = false;  // this process is run_isolated's child
+
 std::recursive_mutex& hdf5_mutex() {
   static std::recursive_mutex m;
-  return m;
+  // run_isolated's child: the parent's lock was copied held by a thread the child does not have (a
+  // recursive mutex records its owner's thread id, and the child's differs), so the child has its own.
+  static std::recursive_mutex child;
+  return probe_child ? child : m;
 }
 
 herr_t walk_error(unsigned n, const H5E_error2_t* e, void* data) {
@@ -176,6 +190,125 @@ void inject_write_fault(hid_t file, const fs::path& target) {
   detail::make_disk_full(fd, target);
 }
 
+namespace {
+
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool sanitized = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool sanitized = true;
+#else
+constexpr bool sanitized = false;
+#endif
+#else
+constexpr bool sanitized = false;
+#endif
+
+// The process's address space in bytes (/proc/self/statm's first field), 0 if unknown.
+std::uintmax_t address_space() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (!f) return 0;
+  unsigned long long pages = 0;
+  const int got = std::fscanf(f, "%llu", &pages);
+  std::fclose(f);
+  return got == 1 ? pages * static_cast<std::uintmax_t>(::sysconf(_SC_PAGESIZE)) : 0;
+}
+
+// Every object of the file and, for each dataset, its type and dataspace: the metadata the readers
+// walk, so that a crash there happens in the probe.
+herr_t visit_object(hid_t loc, const char* name, const H5O_info_t* info, void*) {
+  if (info->type != H5O_TYPE_DATASET) return 0;
+  const hid_t ds = H5Dopen2(loc, name, H5P_DEFAULT);
+  if (ds < 0) return 0;
+  const hid_t type = H5Dget_type(ds), space = H5Dget_space(ds);
+  if (type >= 0) H5Tclose(type);
+  if (space >= 0) H5Sclose(space);
+  H5Dclose(ds);
+  return 0;
+}
+
+}  // namespace
+
+void run_isolated(const std::string& where, const std::function<void()>& read) {
+  if (probe_child) return;
+  double seconds = 30;
+  if (const char* s = std::getenv("PISCO_HDF5_PROBE_SECONDS"); s && std::atof(s) > 0) seconds = std::atof(s);
+  int message[2];
+  if (::pipe2(message, O_CLOEXEC) != 0) return;  // no isolation possible: read as before
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(message[0]);
+    ::close(message[1]);
+    return;
+  }
+  if (pid == 0) {
+    probe_child = true;
+    ::close(message[0]);
+    // Quiet: the parent speaks (the sanitizers' reports of a library crash included).
+    if (const int null = ::open("/dev/null", O_WRONLY); null >= 0) {
+      ::dup2(null, STDOUT_FILENO);
+      ::dup2(null, STDERR_FILENO);
+    }
+    if (!sanitized)
+      if (const std::uintmax_t now = address_space(); now > 0) {
+        const rlimit limit{now + (std::uintmax_t(2) << 30), now + (std::uintmax_t(2) << 30)};
+        ::setrlimit(RLIMIT_AS, &limit);
+      }
+    int code = 0;
+    try {
+      read();
+    } catch (const Error& e) {
+      const std::string text = e.what();
+      std::size_t done = 0;
+      while (done < text.size()) {
+        const ssize_t n = ::write(message[1], text.data() + done, text.size() - done);
+        if (n <= 0) break;
+        done += std::size_t(n);
+      }
+      code = 3;
+    } catch (...) {
+      code = 4;  // the parent's own read says what it is
+    }
+    ::_exit(code);
+  }
+  ::close(message[1]);
+  std::string text;
+  int status = 0;
+  bool ended = false;
+  const auto start = std::chrono::steady_clock::now();
+  char buffer[4096];
+  while (!ended) {
+    pollfd p{message[0], POLLIN, 0};
+    if (::poll(&p, 1, 20) > 0) {
+      const ssize_t n = ::read(message[0], buffer, sizeof buffer);
+      if (n > 0) text.append(buffer, std::size_t(n));
+    }
+    pid_t got = ::waitpid(pid, &status, WNOHANG);
+    if (got == pid) ended = true;
+    else if (got < 0 && errno != EINTR) break;
+    else if (std::chrono::steady_clock::now() - start > std::chrono::duration<double>(seconds)) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+      ::close(message[0]);
+      throw Error(where + ": the HDF5 library did not finish reading the file's structure in " + number_text(seconds) +
+                      " s (a corrupt file can make it loop; PISCO_HDF5_PROBE_SECONDS gives it longer)",
+                  ErrorKind::input);
+    }
+  }
+  for (ssize_t n; (n = ::read(message[0], buffer, sizeof buffer)) > 0;) text.append(buffer, std::size_t(n));
+  ::close(message[0]);
+  if (!ended) return;  // waitpid failed: read as before
+  if (WIFSIGNALED(status))
+    throw Error(where + ": the HDF5 library crashed reading the file (signal " + std::to_string(WTERMSIG(status)) +
+                "): the file is corrupt");
+  const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  if (code == 3) throw Error(text, ErrorKind::input);
+  if (code != 0 && code != 4)
+    throw Error(where + ": the HDF5 library failed reading the file (its reading process ended with status " +
+                std::to_string(code) + ", out of memory or a memory error): the file is corrupt");
+}
+
 Handle open_read_only(const fs::path& file) {
   const std::string where = file.string();
   require_regular_file(file, "an HDF5 file");
@@ -183,6 +316,12 @@ Handle open_read_only(const fs::path& file) {
   if (is_hdf5 < 0) fail(where, "cannot read the file (expected an HDF5 file)");
   if (is_hdf5 == 0) throw Error(where + ": not an HDF5 file");
   Handle fapl = file_access_plist(where);
+  // The file's structure walked in a child process first: HDF5 1.10 crashes on some corrupt files.
+  run_isolated(where, [&] {
+    Handle f = checked(H5Fopen(file.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose, where,
+                       "cannot open the HDF5 file for reading");
+    H5Ovisit2(f.get(), H5_INDEX_NAME, H5_ITER_NATIVE, visit_object, nullptr, H5O_INFO_BASIC);
+  });
   return checked(H5Fopen(file.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose, where,
                  "cannot open the HDF5 file for reading");
 }

@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -36,6 +37,16 @@ class Session {
   void* data_ = nullptr;
   bool saved_ = false;
 };
+
+// Runs `read` first in a child process (fork), so that a corrupt file on which the HDF5 library itself
+// crashes, loops or asks for gigabytes (HDF5 1.10 does, on some files: the fuzzing of docs/validation.md)
+// ends there and becomes one pisco::Error naming `where`: "the HDF5 library crashed reading the file
+// (signal 11): the file is corrupt". A pisco::Error thrown by `read` in the child is thrown again here
+// with its message. Returns when `read` succeeded in the child: the caller then reads for real. Call it
+// holding a Session (no other thread is then inside HDF5 when the process forks). Inside the child it
+// does nothing (one level of isolation). The child is given PISCO_HDF5_PROBE_SECONDS (default 30) and,
+// outside the sanitizer builds, 2 GiB of address space beyond the parent's.
+void run_isolated(const std::string& where, const std::function<void()>& read);
 
 // An HDF5 identifier closed with the matching H5?close.
 class Handle {
