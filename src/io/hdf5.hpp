@@ -44,7 +44,8 @@ class Session {
 // (signal 11): the file is corrupt". A pisco::Error thrown by `read` in the child is thrown again here
 // with its message. Returns when `read` succeeded in the child: the caller then reads for real. Call it
 // holding a Session (no other thread is then inside HDF5 when the process forks). Inside the child it
-// does nothing (one level of isolation). The child is given PISCO_HDF5_PROBE_SECONDS (default 30) and,
+// does nothing (one level of isolation), and so does the MPI build (its parallel HDF5 cannot run in a
+// forked child of an MPI process). The child is given PISCO_HDF5_PROBE_SECONDS (default 30) and,
 // outside the sanitizer builds, 2 GiB of address space beyond the parent's.
 void run_isolated(const std::string& where, const std::function<void()>& read);
 
