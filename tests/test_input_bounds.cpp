@@ -75,6 +75,15 @@ TEST_F(InputBounds, GraspHeadersDeclaringMoreThanTheFileHolds) {
   const fs::path limited = text("limited.grd", head + "3 2 1\n1 1\n1 0 0 0\n2 2\n1 0 0 0\n1 0 0 0\n");
   EXPECT_EQ(pisco::GraspBeam::read(limited).at(0).ny, 2);
 
+  // Messages that once misled: a directory named as a GRASP file ("line 0: no ++++"), and a grid centre
+  // that is not finite (blamed on the grid step).
+  fs::create_directory(dir_ / "beam.grd");
+  const std::string d = error_of([&] { pisco::GraspBeam::read(dir_ / "beam.grd"); });
+  EXPECT_TRUE(contains(d, "beam.grd: is a directory (expected a TICRA GRASP .grd or .cut file)")) << d;
+  const fs::path nan_centre = text("nan.grd", "a grid\nVERSION: 1\n++++\n1\n1 3 2 7\nnan 0\n-1 -1 1 1\n3 2 0\n");
+  const std::string n = error_of([&] { pisco::GraspBeam::read(nan_centre); });
+  EXPECT_TRUE(contains(n, "nan.grd: line 6: the centre \"IX IY\" of field set 1 must be finite grid offsets")) << n;
+
   const fs::path cut = text("big.cut", "a cut\n0 0.1 10000000 0 3 1 2\n1 0 0 0\n");
   const std::string m = error_of([&] { pisco::GraspBeam::read(cut); });
   EXPECT_TRUE(contains(m, cut.string() + ": line 2: V_NUM = 10000000 declares 320 MB of points, but the ") &&
