@@ -77,53 +77,16 @@ std::string error_of(F&& f) {
 
 // ---- harmonic beams -----------------------------------------------------------------------------
 
-TEST(HarmonicBeam, SynthesisMatchesHealpixAlm2mapPol) {
-  // HEALPix C++'s alm2map_pol of the same coefficients, at the pixel centres within 30 deg of the
-  // north pole (the beam axis), Q and U turned from (theta-hat, phi-hat) to the Ludwig-3 basis.
-  const int lmax = 60, mmax = 12, nside = 32;
-  const HarmonicBeam beam = random_beam(lmax, mmax, 7, 5 * deg);
-  Alm<xcomplex<double>> t(lmax, lmax), e(lmax, lmax), b(lmax, lmax);
-  t.SetToZero();
-  e.SetToZero();
-  b.SetToZero();
-  for (int m = 0; m <= mmax; ++m)
-    for (int l = m; l <= lmax; ++l) {
-      const std::size_t k = HarmonicBeam::index(lmax, l, m);
-      t(l, m) = xcomplex<double>(beam.t[k].real(), beam.t[k].imag());
-      e(l, m) = xcomplex<double>(beam.e[k].real(), beam.e[k].imag());
-      b(l, m) = xcomplex<double>(beam.b[k].real(), beam.b[k].imag());
-    }
-  Healpix_Map<double> mt(nside, RING, SET_NSIDE), mq(nside, RING, SET_NSIDE), mu(nside, RING, SET_NSIDE);
-  alm2map_pol(t, e, b, mt, mq, mu);
-  double worst = 0, scale = 0;
+// HEALPix C++'s alm2map_pol of a beam's coefficients against the beam's own synthesis (stokes_at), at
+// every `stride`-th pixel centre within 30 deg of the north pole (the beam axis), Q and U turned from
+// (theta-hat, phi-hat) to the Ludwig-3 basis.
+struct HealpixComparison {
+  double worst = 0, scale_t = 0, scale_all = 0;  // largest difference; largest |T|, and |T|, |Q|, |U|
   int checked = 0;
-  for (int p = 0; p < mt.Npix(); ++p) {
-    const pointing ang = mt.pix2ang(p);
-    if (ang.theta > 30 * deg) break;
-    const auto s = beam.stokes_at(ang.theta, ang.phi);
-    const cd l3 = cd(mq[p], mu[p]) * std::polar(1.0, 2 * ang.phi);
-    worst = std::max({worst, std::abs(s[0] - mt[p]), std::abs(s[1] - l3.real()), std::abs(s[2] - l3.imag())});
-    scale = std::max(scale, std::abs(mt[p]));
-    ++checked;
-  }
-  EXPECT_GT(checked, 100);
-  EXPECT_LT(worst, 1e-12 * scale) << "worst " << worst << " of " << scale;
-}
-
-// Any mmax up to lmax: at lmax = mmax = 1400 the Wigner-d closed form's factorials overflow a double
-// and its powers underflow it (a file with mmax above about 1024 once gave "B_TT is nan"); the
-// synthesis against HEALPix C++'s alm2map_pol at points out to 30 deg, where every m counts.
-TEST(HarmonicBeam, AnyMmaxUpToLmaxMatchesHealpixAlm2mapPol) {
-  const int lmax = 1400, mmax = 1400, nside = 256;
-  HarmonicBeam beam = random_beam(lmax, mmax, 11, 0.3 * deg);
-  // The high m as large as the low ones at the largest l: every m counts at 30 deg.
-  for (int m = 0; m <= mmax; ++m)
-    for (int l = m; l <= lmax; ++l) {
-      const std::size_t k = HarmonicBeam::index(lmax, l, m);
-      beam.t[k] *= 1.0 + m;
-      beam.e[k] *= 1.0 + m;
-      beam.b[k] *= 1.0 + m;
-    }
+  bool finite = true;
+};
+HealpixComparison compare_with_healpix(const HarmonicBeam& beam, int nside, int stride) {
+  const int lmax = beam.lmax, mmax = beam.mmax;
   Alm<xcomplex<double>> t(lmax, mmax), e(lmax, mmax), b(lmax, mmax);
   for (int m = 0; m <= mmax; ++m)
     for (int l = m; l <= lmax; ++l) {
@@ -134,20 +97,46 @@ TEST(HarmonicBeam, AnyMmaxUpToLmaxMatchesHealpixAlm2mapPol) {
     }
   Healpix_Map<double> mt(nside, RING, SET_NSIDE), mq(nside, RING, SET_NSIDE), mu(nside, RING, SET_NSIDE);
   alm2map_pol(t, e, b, mt, mq, mu);
-  double worst = 0, scale = 0;
-  int checked = 0;
-  for (int p = 0; p < mt.Npix(); p += 2017) {
+  HealpixComparison c;
+  for (int p = 0; p < mt.Npix(); p += stride) {
     const pointing ang = mt.pix2ang(p);
     if (ang.theta > 30 * deg) break;
     const auto s = beam.stokes_at(ang.theta, ang.phi);
-    ASSERT_TRUE(std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2])) << "pixel " << p;
+    c.finite = c.finite && std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2]);
     const cd l3 = cd(mq[p], mu[p]) * std::polar(1.0, 2 * ang.phi);
-    worst = std::max({worst, std::abs(s[0] - mt[p]), std::abs(s[1] - l3.real()), std::abs(s[2] - l3.imag())});
-    scale = std::max({scale, std::abs(mt[p]), std::abs(mq[p]), std::abs(mu[p])});
-    ++checked;
+    c.worst = std::max({c.worst, std::abs(s[0] - mt[p]), std::abs(s[1] - l3.real()), std::abs(s[2] - l3.imag())});
+    c.scale_t = std::max(c.scale_t, std::abs(mt[p]));
+    c.scale_all = std::max({c.scale_all, std::abs(mt[p]), std::abs(mq[p]), std::abs(mu[p])});
+    ++c.checked;
   }
-  EXPECT_GT(checked, 20);
-  EXPECT_LT(worst, 1e-10 * scale) << "worst " << worst << " of " << scale;
+  return c;
+}
+
+TEST(HarmonicBeam, SynthesisMatchesHealpixAlm2mapPol) {
+  const HarmonicBeam beam = random_beam(60, 12, 7, 5 * deg);
+  const HealpixComparison c = compare_with_healpix(beam, 32, 1);
+  EXPECT_GT(c.checked, 100);
+  EXPECT_LT(c.worst, 1e-12 * c.scale_t) << "worst " << c.worst << " of " << c.scale_t;
+}
+
+// Any mmax up to lmax: at lmax = mmax = 1400 the Wigner-d closed form's factorials overflow a double
+// and its powers underflow it (a file with mmax above about 1024 once gave "B_TT is nan"); the
+// synthesis against HEALPix C++'s alm2map_pol at points out to 30 deg, where every m counts.
+TEST(HarmonicBeam, AnyMmaxUpToLmaxMatchesHealpixAlm2mapPol) {
+  const int lmax = 1400, mmax = 1400;
+  HarmonicBeam beam = random_beam(lmax, mmax, 11, 0.3 * deg);
+  // The high m as large as the low ones at the largest l: every m counts at 30 deg.
+  for (int m = 0; m <= mmax; ++m)
+    for (int l = m; l <= lmax; ++l) {
+      const std::size_t k = HarmonicBeam::index(lmax, l, m);
+      beam.t[k] *= 1.0 + m;
+      beam.e[k] *= 1.0 + m;
+      beam.b[k] *= 1.0 + m;
+    }
+  const HealpixComparison c = compare_with_healpix(beam, 256, 2017);
+  ASSERT_TRUE(c.finite);
+  EXPECT_GT(c.checked, 20);
+  EXPECT_LT(c.worst, 1e-10 * c.scale_all) << "worst " << c.worst << " of " << c.scale_all;
 }
 
 TEST(HarmonicBeam, BeamsorNodesAreTheSynthesisAndTurnWithTheAngle) {
