@@ -2,6 +2,7 @@
 // the file and key.
 #include "pisco/simulation_config.hpp"
 
+#include <functional>
 #include <algorithm>
 #include <cstdio>
 #include <fstream>
@@ -321,25 +322,28 @@ ScanConfig read_scan(Table t) {
 // The TOD is streamed in chunks of at most this many samples (two buffers of 128 MiB at float64).
 constexpr std::int64_t max_chunk_samples = std::int64_t(1) << 24;
 
-EngineConfig read_engine(Table t) {
-  EngineConfig e;
-  e.options.backend = t.string("backend", "auto");
-  // One name each for whichever backend runs (EngineOptions::set_device and the others); a setting
-  // the named backend does not have is an error.
+// Routes the [engine] settings a file gave (EngineConfig::device, arithmetic, threads) to the backend
+// that options.backend names, one name each for whichever backend runs (EngineOptions::set_device and
+// the others); `fail(key, error)` reports, and must throw for, a setting that backend does not have.
+void route_settings(EngineConfig& e, const std::function<void(const char* key, const pisco::Error& error)>& fail) {
   const auto route = [&](const char* key, auto set) {
     try {
       set();
     } catch (const pisco::Error& err) {
-      t.fail(key, err.what());
+      fail(key, err);
     }
   };
-  const std::string device = t.string("device", "auto");
-  route("device", [&] { e.options.set_device(device); });
-  if (t.has("device")) e.device = device;
-  const pisco::Arithmetic arithmetic =
-      pisco::arithmetic_from(t.choice("arithmetic", "auto", {"auto", "float64", "float-float"}));
-  route("arithmetic", [&] { e.options.set_arithmetic(arithmetic); });
-  if (t.has("arithmetic")) e.arithmetic = arithmetic;
+  if (e.device) route("device", [&] { e.options.set_device(*e.device); });
+  if (e.arithmetic) route("arithmetic", [&] { e.options.set_arithmetic(*e.arithmetic); });
+  if (e.threads) route("threads", [&] { e.options.set_threads(*e.threads); });
+}
+
+EngineConfig read_engine(Table t) {
+  EngineConfig e;
+  e.options.backend = t.string("backend", "auto");
+  if (t.has("device")) e.device = t.string("device", "auto");
+  if (t.has("arithmetic"))
+    e.arithmetic = pisco::arithmetic_from(t.choice("arithmetic", "auto", {"auto", "float64", "float-float"}));
   e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
                                 ? pisco::Normalization::integral
                                 : pisco::Normalization::per_sample;
@@ -347,12 +351,13 @@ EngineConfig read_engine(Table t) {
                              ? pisco::Quadrature::corrected
                              : pisco::Quadrature::plain;
   const unsigned max_threads = pisco::Engine::max_threads();
-  const auto threads = static_cast<unsigned>(t.integer_in(
-      "threads", 0, 0, max_threads,
-      "0 (all hardware threads) or a number of threads up to " + std::to_string(max_threads) +
-          " (64 per hardware thread of this machine)"));
-  route("threads", [&] { e.options.set_threads(threads); });
-  if (t.has("threads")) e.threads = threads;
+  if (t.has("threads"))
+    e.threads = static_cast<unsigned>(t.integer_in(
+        "threads", 0, 0, max_threads,
+        "0 (all hardware threads) or a number of threads up to " + std::to_string(max_threads) +
+            " (64 per hardware thread of this machine)"));
+  // A setting the named backend does not have is an error naming its key.
+  route_settings(e, [&](const char* key, const pisco::Error& err) { t.fail(key, err.what()); });
   const auto chunk = t.integer_in("chunk_samples", 1 << 16, 1, max_chunk_samples,
                                   "a number of samples from 1 to " + std::to_string(max_chunk_samples));
   e.chunk_samples = static_cast<std::size_t>(chunk);
@@ -363,24 +368,20 @@ EngineConfig read_engine(Table t) {
 }  // namespace
 
 void EngineConfig::set_backend(const std::string& name, const std::filesystem::path& source) {
-  EngineOptions o;
-  o.backend = name;
-  o.normalization = options.normalization;
-  o.quadrature = options.quadrature;
-  o.unseen = options.unseen;
-  const auto route = [&](const char* key, auto set) {
-    try {
-      set();
-    } catch (const pisco::Error& err) {
-      throw pisco::Error((source.empty() ? std::string("simulation") : source.string()) + ": [engine] " + key + ": " +
-                             err.what() + "; the backend was named after the file (" + name + ")",
-                         err.kind());
-    }
-  };
-  if (device) route("device", [&] { o.set_device(*device); });
-  if (arithmetic) route("arithmetic", [&] { o.set_arithmetic(*arithmetic); });
-  if (threads) route("threads", [&] { o.set_threads(*threads); });
-  options = std::move(o);
+  EngineConfig routed;
+  routed.options.backend = name;
+  routed.options.normalization = options.normalization;
+  routed.options.quadrature = options.quadrature;
+  routed.options.unseen = options.unseen;
+  routed.device = device;
+  routed.arithmetic = arithmetic;
+  routed.threads = threads;
+  route_settings(routed, [&](const char* key, const pisco::Error& err) {
+    throw pisco::Error((source.empty() ? std::string("simulation") : source.string()) + ": [engine] " + key + ": " +
+                           err.what() + "; the backend was named after the file (" + name + ")",
+                       err.kind());
+  });
+  options = std::move(routed.options);
 }
 
 namespace {
