@@ -5,11 +5,14 @@
 #include <poll.h>
 #include <signal.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <sys/statvfs.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <set>
+#include <array>
 #include <cerrno>
 #include <chrono>
 #include <cstdint>
@@ -324,11 +327,21 @@ Handle open_read_only(const fs::path& file) {
   if (is_hdf5 == 0) throw Error(where + ": not an HDF5 file");
   Handle fapl = file_access_plist(where);
   // The file's structure walked in a child process first: HDF5 1.10 crashes on some corrupt files.
-  run_isolated(where, [&] {
-    Handle f = checked(H5Fopen(file.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose, where,
-                       "cannot open the HDF5 file for reading");
-    H5Ovisit2(f.get(), H5_INDEX_NAME, H5_ITER_NATIVE, visit_object, nullptr, H5O_INFO_BASIC);
-  });
+  // Once a version of a file (device, inode, size, modification time): readers that open it again (a
+  // TOD file read detector by detector) do not fork again. Under the Session lock.
+  static std::set<std::array<std::int64_t, 5>> walked;
+  struct stat st {};
+  const bool known = ::stat(file.c_str(), &st) == 0;
+  const std::array<std::int64_t, 5> version{std::int64_t(st.st_dev), std::int64_t(st.st_ino), std::int64_t(st.st_size),
+                                            std::int64_t(st.st_mtim.tv_sec), std::int64_t(st.st_mtim.tv_nsec)};
+  if (!known || walked.count(version) == 0) {
+    run_isolated(where, [&] {
+      Handle f = checked(H5Fopen(file.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose, where,
+                         "cannot open the HDF5 file for reading");
+      H5Ovisit2(f.get(), H5_INDEX_NAME, H5_ITER_NATIVE, visit_object, nullptr, H5O_INFO_BASIC);
+    });
+    if (known) walked.insert(version);
+  }
   return checked(H5Fopen(file.c_str(), H5F_ACC_RDONLY, fapl.get()), H5Fclose, where,
                  "cannot open the HDF5 file for reading");
 }
