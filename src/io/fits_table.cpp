@@ -1,4 +1,3 @@
-#include "io/input_file.hpp"
 #include "io/fits_table.hpp"
 
 #include <unistd.h>
@@ -16,6 +15,7 @@
 
 #include <error_handling.h>
 
+#include "io/input_file.hpp"
 #include "io/output_file.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"

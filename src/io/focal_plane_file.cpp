@@ -1,6 +1,5 @@
 // Focal plane tables (docs/config.md, "[focal_plane]"): CSV, TOML ([[detectors]], [[pairs]]) and
 // TOAST's HDF5 tables, each detector's beam named by a [beams] table.
-#include "io/input_file.hpp"
 #include "io/focal_plane_file.hpp"
 
 #include <algorithm>
@@ -10,6 +9,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "io/input_file.hpp"
 #include "pisco/units.hpp"
 
 namespace pisco {

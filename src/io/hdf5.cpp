@@ -1,4 +1,3 @@
-#include "io/input_file.hpp"
 #include "io/hdf5.hpp"
 
 #include <fcntl.h>
@@ -20,6 +19,7 @@
 #include <cstdlib>
 #include <optional>
 
+#include "io/input_file.hpp"
 #include "io/output_file.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"

@@ -1,4 +1,3 @@
-#include "io/input_file.hpp"
 #include "pisco/spectra.hpp"
 
 #include <algorithm>
@@ -20,6 +19,7 @@
 #include <powspec.h>
 #include <xcomplex.h>
 
+#include "io/input_file.hpp"
 #include "core/sky_alm.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"

@@ -1,6 +1,5 @@
 // pisco::Simulation (simulation.hpp): sky -> TOD -> binned maps -> spectra, streaming the TOD chunk by
 // chunk through the map-maker and the TOD file, so memory stays bounded whatever the length of the scan.
-#include "io/input_file.hpp"
 #include "pisco/simulation.hpp"
 
 #include <algorithm>
@@ -18,6 +17,7 @@
 #include <thread>
 #include <unistd.h>
 
+#include "io/input_file.hpp"
 #include "core/detector_pointing.hpp"
 #include "cpu/thread_pool.hpp"
 #include "pisco/deconvolution.hpp"
