@@ -14,11 +14,13 @@
 #include "pixel.glsl"
 
 // The float64 interpolation at (x, y): its nodes (absolute node indices) and coefficients, linear in
-// r = sqrt(x^2 + y^2) for a radial profile (2 nodes), bilinear on the grid otherwise (4 nodes); no
-// node outside the grid or beyond the profile. One stencil for every float64 table a node has.
+// r = sqrt(x^2 + y^2) for a radial profile (2 nodes), on the grid otherwise bilinear (4 nodes) less
+// the curvature terms of the cell's edges (4 records after the grid's nodes,
+// src/core/grid_curvature.hpp), as pixel.glsl's interpolate_weights; no node outside the grid or
+// beyond the profile. One stencil for every float64 table a node has.
 struct Stencil64 {
-  uint k[4];
-  PISCO_F64 c[4];
+  uint k[8];
+  PISCO_F64 c[8];
   int m;  // nodes used
 };
 
@@ -63,7 +65,16 @@ PISCO_FN Stencil64 stencil64(Grid grid, double x, double y) {
   s.c[1] = fu * (1.0lf - fv);
   s.c[2] = (1.0lf - fu) * fv;
   s.c[3] = fu * fv;
-  s.m = 4;
+  s.k[4] = offset + n * n + i * n + j;  // ex(i, j), ex(i, j + 1)
+  s.k[5] = s.k[4] + 1u;
+  s.k[6] = offset + 2u * n * n + j * n + i;  // ey(i, j), ey(i + 1, j)
+  s.k[7] = s.k[6] + 1u;
+  const double cu = fu * (1.0lf - fu), cv = fv * (1.0lf - fv);
+  s.c[4] = -(cu * (1.0lf - fv));
+  s.c[5] = -(cu * fv);
+  s.c[6] = -(cv * (1.0lf - fu));
+  s.c[7] = -(cv * fu);
+  s.m = 8;
   return s;
 }
 
@@ -126,7 +137,16 @@ PISCO_FN Stencil64 stencil64(Grid grid, vec2 x, vec2 y) {
   s.c[1] = ff_mul(fu, ff_sub(one, fv));
   s.c[2] = ff_mul(ff_sub(one, fu), fv);
   s.c[3] = ff_mul(fu, fv);
-  s.m = 4;
+  s.k[4] = offset + n * n + i * n + j;  // ex(i, j), ex(i, j + 1)
+  s.k[5] = s.k[4] + 1u;
+  s.k[6] = offset + 2u * n * n + j * n + i;  // ey(i, j), ey(i + 1, j)
+  s.k[7] = s.k[6] + 1u;
+  const vec2 cu = ff_mul(fu, ff_sub(fu, one)), cv = ff_mul(fv, ff_sub(fv, one));  // -u (1 - u), -v (1 - v)
+  s.c[4] = ff_mul(cu, ff_sub(one, fv));
+  s.c[5] = ff_mul(cu, fv);
+  s.c[6] = ff_mul(cv, ff_sub(one, fu));
+  s.c[7] = ff_mul(cv, fu);
+  s.m = 8;
   return s;
 }
 

@@ -105,8 +105,9 @@ PISCO_FN PISCO_GEOMETRY pixel_geometry(PISCO_IN(PISCO_FRAME) f, PISCO_IN(PISCO_V
   return g;
 }
 
-// Bilinear interpolation of the 4 weights on the n x n grid at x_i = -a + i * step (x fastest); zero
-// outside the grid.
+// Interpolation of the 4 weights on the n x n grid at x_i = -a + i * step (x fastest): bilinear less
+// the curvature terms of the cell's edges (src/core/grid_curvature.hpp), which leave an error of
+// order step^3 instead of step^2 (docs/physics.md, "Interpolation on the grid"); zero outside the grid.
 PISCO_TEMPLATE_GRID
 PISCO_FN PISCO_V4 interpolate_weights(PISCO_IN(PISCO_GRID) g, PISCO_REAL x, PISCO_REAL y) {
   const PISCO_REAL u = (x + g.a) * g.inv_step;
@@ -118,11 +119,20 @@ PISCO_FN PISCO_V4 interpolate_weights(PISCO_IN(PISCO_GRID) g, PISCO_REAL x, PISC
   const PISCO_REAL fu = u - PISCO_REAL(i);
   const PISCO_REAL fv = v - PISCO_REAL(j);
   const PISCO_INDEX k00 = j * g.n + i;
-  PISCO_V4 w00, w10, w01, w11;
-  weight_pair(g, k00, w00, w10);
-  weight_pair(g, k00 + g.n, w01, w11);
-  const PISCO_V4 w = ((1.0f - fu) * (1.0f - fv)) * w00 + (fu * (1.0f - fv)) * w10 + ((1.0f - fu) * fv) * w01 +
-                     (fu * fv) * w11;
+  // The edges' curvature terms (src/core/grid_curvature.hpp): ex of the cell's lower and upper edges
+  // (records n^2 + i n + j and the next), ey of its left and right edges (2 n^2 + k00 and the next).
+  // Each pair is used as soon as it is read, which keeps the kernels' registers down.
+  const PISCO_REAL gu = 1.0f - fu;
+  const PISCO_REAL gv = 1.0f - fv;
+  PISCO_V4 a, b;
+  weight_pair(g, k00, a, b);
+  PISCO_V4 w = (gu * gv) * a + (fu * gv) * b;
+  weight_pair(g, k00 + g.n, a, b);
+  w = w + (gu * fv) * a + (fu * fv) * b;
+  weight_pair(g, i * g.n + j + g.n * g.n, a, b);
+  w = w - (fu * gu) * (gv * a + fv * b);
+  weight_pair(g, k00 + 2 * g.n * g.n, a, b);
+  w = w - (fv * gv) * (gu * a + fu * b);
   return select_weights(inside, w);
 }
 

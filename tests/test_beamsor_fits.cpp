@@ -213,7 +213,7 @@ TEST_F(BeamsorFits, ResamplingErrorAgainstAnalyticGaussian) {
   const fs::path file = dir_ / "analytic.fits";
   write_table(file, nside, "RING", {"B_TT"}, {gaussian_map(nside, fwhm, RING)});
 
-  const Beamsor b = Beamsor::read_healpix_fits(file, rho_max);  // grid step = pixel size
+  const Beamsor b = Beamsor::read_healpix_fits(file, rho_max, std::sqrt(4 * pi / (12.0 * nside * nside)));  // one pixel
   const NodeError e = node_error(b, s);
   // A grid with an odd node count has a node on the axis, where the error peaks.
   const Beamsor odd = Beamsor::read_healpix_fits(file, rho_max, 2 * std::sin(rho_max) / 173.5);

@@ -342,15 +342,16 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
     glm::vec3 v(u(rng), u(rng), u(rng));
     return v / std::sqrt(glm::dot(v, v));
   };
-  // A beam grid of n x n nodes with 4 weights each, as the shaders' texels (COLUMNS 4 and 2) and as
-  // the reference's array.
+  // A beam grid of n x n nodes with 4 weights each and its 2 n^2 records of edge curvatures
+  // (src/core/grid_curvature.hpp; random here like the nodes), as the shaders' texels (COLUMNS 4 and 2)
+  // and as the reference's array.
   const int n = 9;
-  std::vector<float> nodes(4 * n * n + 4);
+  std::vector<float> nodes(4 * 3 * n * n + 4);
   for (float& w : nodes) w = u(rng);
   std::vector<float> two = nodes;  // COLUMNS 2: w_U = w_V = 0
   for (std::size_t k = 0; k + 3 < two.size(); k += 4) two[k + 2] = two[k + 3] = 0.0f;
   std::vector<float> pairs4, pairs2;
-  for (int k = 0; k < n * n; ++k) {
+  for (int k = 0; k < 3 * n * n; ++k) {
     for (int m = 0; m < 8; ++m) pairs4.push_back(nodes[4 * k + m]);
     for (int m : {0, 1, 4, 5}) pairs2.push_back(nodes[4 * k + m]);
   }

@@ -50,7 +50,7 @@ enum class CrossPolarPattern {
 
 struct BeamOptions {
   double rho_max = 5 * deg;              // radians; must be in (0, pi/2)
-  double grid_step = 0.0;                // radians; 0 = 1/20 of the smallest FWHM
+  double grid_step = 0.0;                // radians; 0 = 1/16 of the smallest FWHM (round: 1/20)
   double cross_polar = 0.0;              // kappa: cross-polar / co-polar field amplitude ratio
   CrossPolarPattern cross_polar_pattern = CrossPolarPattern::uniform;
   // Constant Mueller matrix applied after the beam: finite, M00 > 0, every |Mij| <= (1 + 1%) M00
@@ -98,7 +98,7 @@ class Beamsor {
   // The paper's HEALPix beamsor files: a FITS binary table of up to 16 HEALPix maps with columns
   // named B_TT, B_QT, ... (B_XY = row Y, column X; absent columns are zero), beam axis at the north
   // pole, sigma = longitude. Resampled onto the grid with HEALPix bilinear interpolation;
-  // Omega~ is the pixel sum of B_TT within rho_max. grid_step 0 = the file's pixel size.
+  // Omega~ is the pixel sum of B_TT within rho_max. grid_step 0 = 1.25 of the file's pixels.
   static Beamsor read_healpix_fits(const std::filesystem::path& file, double rho_max,
                                    double grid_step = 0.0);
   // Beams as teams hold them (docs/beams.md). Both describe the Stokes response (I_b, Q_b, U_b, V_b)

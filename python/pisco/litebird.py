@@ -216,7 +216,7 @@ def add_convolved_sky_to_observations(
         other fields are its harmonic convolution's own).
     beam_alms_rho_max, beam_alms_grid_step : float
         Beams from b_lm are summed out to this radius (radians) and sampled with this step (radians; 0:
-        ``Beamsor.from_blm``'s default, 0.6 / l_eff, FWHM / 21 for a Gaussian).
+        ``Beamsor.from_blm``'s default, 0.75 / l_eff, FWHM / 16.8 for a Gaussian).
     """
     import litebird_sim as lbs
     from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g

@@ -122,7 +122,7 @@ class PixelConvolve(Operator):
     beam_file_rho_max = Float(np.radians(5.0), help="Beams from b_lm files are summed out to this radius (radians)")
 
     beam_file_grid_step = Float(
-        0.0, help="Beams from b_lm files are sampled with this step (radians); 0: 0.6 / l_eff (FWHM / 21 for a "
+        0.0, help="Beams from b_lm files are sampled with this step (radians); 0: 0.75 / l_eff (FWHM / 16.8 for a "
         "Gaussian), Beamsor.from_blm's"
     )
 

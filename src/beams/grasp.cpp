@@ -616,7 +616,8 @@ Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) 
     throw Error(b.source + ": the file's " + kind + " reaches " + detail::degrees_text(reach) +
                 " from the beam axis; rho_max = " + detail::degrees_text(rho_max) + " is beyond it (set rho_max_deg <= " +
                 std::to_string(reach / deg) + ")");
-  double step = options.grid_step > 0 ? options.grid_step : file_step / 2;
+  // By default 1 / 1.6 of the file's own step (docs/beams.md, "GRASP files").
+  double step = options.grid_step > 0 ? options.grid_step : file_step / 1.6;
   step = std::max(step, 2 * std::sin(rho_max) / (max_grid_nodes - 2));
   std::ostringstream d;
   d << "GRASP " << kind << " " << b.source;

@@ -184,8 +184,9 @@ bool harmonic_is_radial(const HarmonicBeam& beam) {
   return true;
 }
 
-// The default grid step: 0.6 / l_eff, with l_eff the largest l whose power sum_m |t_lm|^2 is at least
-// 1e-12 of the largest (for a Gaussian of width s, l_eff s = 5.3 and the step is FWHM / 21).
+// The default grid step: 0.75 / l_eff, with l_eff the largest l whose power sum_m |t_lm|^2 is at least
+// 1e-12 of the largest (for a Gaussian of width s, l_eff s = 5.3 and the step is FWHM / 16.8), where the
+// grid's interpolation error is of order step^3 (docs/physics.md, "Interpolation on the grid").
 double default_step(const HarmonicBeam& beam) {
   std::vector<double> power(static_cast<std::size_t>(beam.lmax) + 1, 0.0);
   for (int m = 0; m <= beam.mmax; ++m)
@@ -194,7 +195,7 @@ double default_step(const HarmonicBeam& beam) {
   int leff = 1;
   for (int l = 0; l <= beam.lmax; ++l)
     if (power[static_cast<std::size_t>(l)] >= 1e-12 * peak) leff = std::max(leff, l);
-  return 0.6 / leff;
+  return 0.75 / leff;
 }
 
 }  // namespace

@@ -31,6 +31,11 @@ PISCO_HD Vec4<T> operator+(const Vec4<T>& a, const Vec4<T>& b) {
   return {a.x + b.x, a.y + b.y, a.z + b.z, a.w + b.w};
 }
 
+template <class T>
+PISCO_HD Vec4<T> operator-(const Vec4<T>& a, const Vec4<T>& b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z, a.w - b.w};
+}
+
 // sqrt of the argument's own precision, as GLSL's (and CUDA's device overloads): unqualified, a float
 // would otherwise find the C library's sqrt(double) on the host.
 PISCO_HD float sqrt(float x) { return sqrtf(x); }

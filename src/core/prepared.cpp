@@ -10,6 +10,7 @@
 #include <healpix_base.h>
 #include <vec3.h>
 
+#include "core/grid_curvature.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"
 
@@ -144,6 +145,10 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
     const auto btt = beam.element(0, 0);
     for (std::size_t k = 0; k < nodes; ++k) p.norm_weights[k * 4] = pixel_area / beam.omega_tilde() * btt[k];
   }
+  if (!p.radial) {
+    append_edge_curvature(p.weights, p.grid_n, 4);
+    if (!p.norm_weights.empty()) append_edge_curvature(p.norm_weights, p.grid_n, 4);
+  }
   p.d0[0] = d.gain / 2 * (1 + d.epsilon);
   p.d0[1] = d.gain / 2 * (1 - d.epsilon);
   if (d.hwp) {
@@ -162,11 +167,13 @@ PreparedDetector prepare_row_detector(const Detector& d, const Beamsor& beam, do
   plain.hwp.reset();
   PreparedDetector p = prepare_detector(plain, beam, pixel_area, normalization);
   const double scale = pixel_area / beam.omega_tilde();
-  const std::size_t nodes = p.weights.size() / 4;
+  const std::size_t nodes = p.radial ? static_cast<std::size_t>(p.grid_n) : static_cast<std::size_t>(p.grid_n) * p.grid_n;
+  p.weights.assign(nodes * 4, 0.0);
   for (int col = 0; col < 4; ++col) {
     const auto b = beam.element(row, col);
     for (std::size_t k = 0; k < nodes; ++k) p.weights[k * 4 + col] = b.empty() ? 0.0 : scale * b[k];
   }
+  if (!p.radial) append_edge_curvature(p.weights, p.grid_n, 4);
   return p;
 }
 

@@ -257,7 +257,9 @@ Beamsor Beamsor::read_healpix_fits(const std::filesystem::path& file, double rho
     // The grid's corner nodes lie at sin(rho) = sqrt(2) a; sample() evaluates them too.
     const BeamMaps maps = load_maps(file, rho_max, std::asin(std::min(1.0, std::sqrt(2.0) * b.a_)));
     const double pixel_size = std::sqrt(4 * pi / (12.0 * maps.nside * maps.nside));
-    b.n_ = grid_nodes(file, b.a_, grid_step > 0 ? grid_step : pixel_size, rho_max);
+    // By default 1.25 pixels: the grid's interpolation is of order step^3 (docs/physics.md,
+    // "Interpolation on the grid"), finer than the map's own resampling.
+    b.n_ = grid_nodes(file, b.a_, grid_step > 0 ? grid_step : 1.25 * pixel_size, rho_max);
     b.step_ = 2.0 * b.a_ / (b.n_ - 1);
     b.omega_ = pixel_sum_omega(file, maps, rho_max);
     b.description_ = "HEALPix beamsor file " + file.filename().string() + " (NSIDE " +

@@ -106,7 +106,8 @@ BeamConfig read_beam(Table t, const std::string& name) {
                                    Table::format(b.options.rho_max / deg) +
                                    ": the grid would not sample the beam (0 for the default step)");
   // A Gaussian's width: its half-maximum radius within rho_max, and a grid of at most
-  // Beamsor::max_grid_nodes nodes a side at the step it implies (1/20 of the smallest FWHM by default).
+  // Beamsor::max_grid_nodes nodes a side at the step it implies (by default 1/16 of the smallest FWHM on a
+  // 2D grid, 1/20 for a round beam's radial profile; 1/20 here, the finer of the two).
   auto width = [&](const std::string& key) {
     const double fwhm = t.positive(key, 1.5) * deg;
     if (fwhm / 2 >= b.options.rho_max)
@@ -116,7 +117,7 @@ BeamConfig read_beam(Table t, const std::string& name) {
     if (b.options.grid_step > fwhm / 2)
       t.fail("grid_step_arcmin", "a step of " + Table::format(b.options.grid_step / arcmin) +
                                      " arcmin is coarser than half of " + key + " = " + Table::format(fwhm / deg) +
-                                     " deg: the grid would not resolve the beam (0 for the default step, FWHM / 20)");
+                                     " deg: the grid would not resolve the beam (0 for the default step, FWHM / 16)");
     const double step = b.options.grid_step > 0 ? b.options.grid_step : fwhm / 20;
     if (std::ceil(2 * std::sin(b.options.rho_max) / step) + 1 > pisco::Beamsor::max_grid_nodes)
       t.fail(b.options.grid_step > 0 ? "grid_step_arcmin" : key,

@@ -351,7 +351,7 @@ void bind_beamsor(nb::module_& m) {
           "fwhm"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "cross_polar"_a = 0.0,
           "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(), "sidelobes"_a = nb::none(),
           "A circular Gaussian beam of full width at half maximum `fwhm` (radians), summed out to rho_max.\n"
-          "grid_step 0 = fwhm / 20. cross_polar: the cross-polar field ratio kappa ('uniform' or\n"
+          "grid_step 0 = fwhm / 16 (a round beam's radial profile: fwhm / 20). cross_polar: the cross-polar field ratio kappa ('uniform' or\n"
           "'quadrupole' pattern); mueller: a constant 4x4 Mueller matrix applied after the beam.")
       .def_static(
           "elliptical_gaussian",
@@ -381,7 +381,7 @@ void bind_beamsor(nb::module_& m) {
           "direction (rho, sigma), sampled every grid_step out to rho_max. radial: the field does not depend\n"
           "on sigma (stored as a radial profile).")
       .def_static("read_fits", &Beamsor::read_healpix_fits, "path"_a, "rho_max"_a, "grid_step"_a = 0.0,
-                  "Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...).")
+                  "Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...); grid_step 0 = 1.25 pixels.")
       .def_static(
           "from_grasp",
           [](const std::filesystem::path& path, double rho_max, double grid_step, std::optional<int> set, double angle,
@@ -402,7 +402,7 @@ void bind_beamsor(nb::module_& m) {
           "sidelobes"_a = nb::none(),
           "A TICRA GRASP far field (.grd grid or .cut cuts; ICOMP 3: linear co- and cross-polar fields):\n"
           "I = |co|^2 + |cx|^2, Q = |co|^2 - |cx|^2, U = 2 Re(co cx*), V = 2 Im(co cx*) of a detector polarized\n"
-          "along the file's x axis, interpolated onto the grid (grid_step 0 = half the file's step). set: which\n"
+          "along the file's x axis, interpolated onto the grid (grid_step 0 = 1/1.6 of the file's step). set: which\n"
           "of the file's beams (1, 2, ...; needed when it holds several). angle: the file's x axis from theta'\n"
           "towards phi' (a detector's zeta, so that a pair's B detector sees the optics turned by 90 deg).")
       .def_static(
@@ -457,7 +457,7 @@ void bind_beamsor(nb::module_& m) {
           "A harmonic beam b_lm, the beam axis at the north pole: a healpy alm FITS file (healpy.write_alm;\n"
           "T or T, E, B) or an array of shape (n,), (1, n) or (3, n) in healpy's layout (lmax and mmax as given,\n"
           "else mmax = lmax). In ducc0's totalconvolve convention (TOAST's and litebird_sim's), synthesized\n"
-          "exactly at every node; grid_step 0 = 0.6 / l_eff. angle: the beam frame's x axis from theta'.")
+          "exactly at every node; grid_step 0 = 0.75 / l_eff. angle: the beam frame's x axis from theta'.")
       .def("write_fits", &Beamsor::write_healpix_fits, "path"_a, "nside"_a,
            "Writes this beamsor as a HEALPix beamsor file at `nside`.")
       .def_prop_ro("rho_max", &Beamsor::rho_max, "The disc's radius (a split beam's: its main part's).")

@@ -323,8 +323,8 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
       xf[h] = hn::DemoteTo(dh, x);
       yf[h] = hn::DemoteTo(dh, y);
       auto inside = hn::FirstN(dd, live);
-      VD c0, c1, c2, c3;  // interpolation coefficients of w(k), w(k + 1) in records rec and above
-      hn::Vec<decltype(dl)> rec, above;
+      VD c0, c1, c2, c3, fu = zero_d, fv = zero_d, gu = zero_d, gv = zero_d;  // interpolation coefficients of w(k), w(k + 1) in records rec and above
+      hn::Vec<decltype(dl)> rec, above, edge_x, edge_y;  // the edges' curvature terms (ex, ey)
       if constexpr (Radial) {
         const VD r2 = hn::Add(hn::Mul(x, x), hn::Mul(y, y));
         const VD u = hn::Mul(hn::Sqrt(hn::Max(r2, zero_d)), inv_d);
@@ -341,26 +341,39 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
                                          hn::And(hn::Le(u, last_d), hn::Le(v, last_d))));
         const VD i = hn::Floor(hn::Min(hn::IfThenElseZero(inside, u), max_node_d));
         const VD j = hn::Floor(hn::Min(hn::IfThenElseZero(inside, v), max_node_d));
-        const VD fu = hn::Sub(u, i), fv = hn::Sub(v, j);
-        const VD gu = hn::Sub(one_d, fu), gv = hn::Sub(one_d, fv);
+        fu = hn::Sub(u, i);
+        fv = hn::Sub(v, j);
+        gu = hn::Sub(one_d, fu);
+        gv = hn::Sub(one_d, fv);
         c0 = hn::Mul(gu, gv);
         c1 = hn::Mul(fu, gv);
         c2 = hn::Mul(gu, fv);
         c3 = hn::Mul(fu, fv);
         rec = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(j, n_d), i), hn::Set(dd, 2.0)));
         above = hn::Add(rec, hn::Set(dl, 2 * det.grid_n));
+        // Records n^2 + i n + j (ex) and 2 n^2 + j n + i (ey), core/grid_curvature.hpp.
+        const std::int64_t nodes = std::int64_t(det.grid_n) * det.grid_n;
+        edge_x = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(i, n_d), j), hn::Set(dd, 2.0)));
+        edge_x = hn::Add(edge_x, hn::Set(dl, 2 * nodes));
+        edge_y = hn::Add(rec, hn::Set(dl, 4 * nodes));
       }
       // The reference's interpolation of one column (records of its float64 weights), the same sums
-      // in the same order: c0 w(i) + c1 w(i + 1) (+ c2 w(i, j + 1) + c3 w(i + 1, j + 1)).
+      // in the same order: c0 w(i) + c1 w(i + 1) (+ c2 w(i, j + 1) + c3 w(i + 1, j + 1), less the edges' curvature terms).
       auto column = [&](const double* table) HWY_ATTR {
         VD g0, g1;
         lookup_pairs(dd, table, rec, g0, g1);
         if constexpr (Radial) {
           return hn::Add(hn::Mul(c0, g0), hn::Mul(c1, g1));
         } else {
-          VD h0, h1;
+          VD h0, h1, ex0, ex1, ey0, ey1;
           lookup_pairs(dd, table, above, h0, h1);
-          return hn::Add(hn::Add(hn::Add(hn::Mul(c0, g0), hn::Mul(c1, g1)), hn::Mul(c2, h0)), hn::Mul(c3, h1));
+          lookup_pairs(dd, table, edge_x, ex0, ex1);
+          lookup_pairs(dd, table, edge_y, ey0, ey1);
+          const VD bilinear =
+              hn::Add(hn::Add(hn::Add(hn::Mul(c0, g0), hn::Mul(c1, g1)), hn::Mul(c2, h0)), hn::Mul(c3, h1));
+          const VD ex = hn::Mul(hn::Mul(fu, gu), hn::Add(hn::Mul(gv, ex0), hn::Mul(fv, ex1)));
+          const VD ey = hn::Mul(hn::Mul(fv, gv), hn::Add(hn::Mul(gu, ey0), hn::Mul(fu, ey1)));
+          return hn::Sub(hn::Sub(bilinear, ex), ey);
         }
       };
       if (in.monopole) {
