@@ -25,25 +25,26 @@ FWHM_X_DEG, FWHM_Y_DEG, KAPPA = 1.5, 1.2, 0.05
 HALF_DEG, N = 5.0, 61
 
 
-def fields(rho, sigma):
+def fields(rho, sigma, fwhm_x_deg=FWHM_X_DEG, fwhm_y_deg=FWHM_Y_DEG, kappa=KAPPA):
     to_s = 1.0 / math.sqrt(8.0 * math.log(2.0))
-    sx, sy = math.radians(FWHM_X_DEG) * to_s, math.radians(FWHM_Y_DEG) * to_s
+    sx, sy = math.radians(fwhm_x_deg) * to_s, math.radians(fwhm_y_deg) * to_s
     u, v = rho * np.cos(sigma), rho * np.sin(sigma)
     power = np.exp(-(u * u / (2 * sx * sx) + v * v / (2 * sy * sy)))
     q = rho * rho / (2 * sx * sy)
     co = np.sqrt(power) * np.exp(1j * (0.3 + 40.0 * rho))
-    return co, KAPPA * np.sin(2 * sigma) * q * np.exp(1 - q) * co
+    return co, kappa * np.sin(2 * sigma) * q * np.exp(1 - q) * co
 
 
-def main():
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parent.parent / "assets/examples/grasp_beam.grd"
-    half = math.sin(math.radians(HALF_DEG))
-    axis = np.linspace(-half, half, N)
+def write_grd(out, fwhm_x_deg=FWHM_X_DEG, fwhm_y_deg=FWHM_Y_DEG, half_deg=HALF_DEG, n=N, kappa=KAPPA):
+    """The beam above with other widths, extent and sampling (tools/accuracy_map.py writes its own)."""
+    half = math.sin(math.radians(half_deg))
+    axis = np.linspace(-half, half, n)
     u, v = np.meshgrid(axis, axis)  # x (u) runs fastest in the file
     rho = np.arcsin(np.minimum(1.0, np.hypot(u, v)))
-    co, cx = fields(rho, np.arctan2(v, u))
+    co, cx = fields(rho, np.arctan2(v, u), fwhm_x_deg, fwhm_y_deg, kappa)
     lines = [
-        "PISCO-VK example beam: elliptical Gaussian 1.5 x 1.2 deg, quadrupole cross-polar field (kappa 0.05)",
+        f"PISCO-VK example beam: elliptical Gaussian {fwhm_x_deg:g} x {fwhm_y_deg:g} deg, quadrupole cross-polar "
+        f"field (kappa {kappa:g})",
         "written by tools/make_grasp_beam.py; TICRA GRASP grid format",
         "FREQUENCIES [GHz]:",
         "100.0",
@@ -52,11 +53,16 @@ def main():
         "1 3 2 1",
         "0 0",
         f"{-half:.15e} {-half:.15e} {half:.15e} {half:.15e}",
-        f"{N} {N} 0",
+        f"{n} {n} 0",
     ]
     for c, x in zip(co.ravel(), cx.ravel()):
         lines.append(f"{c.real:.9e} {c.imag:.9e} {x.real:.9e} {x.imag:.9e}")
-    out.write_text("\n".join(lines) + "\n")
+    Path(out).write_text("\n".join(lines) + "\n")
+
+
+def main():
+    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parent.parent / "assets/examples/grasp_beam.grd"
+    write_grd(out)
     print(f"wrote {out}: {N} x {N} uv grid, |u|, |v| <= sin({HALF_DEG} deg)")
 
 
