@@ -8,12 +8,18 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # The Python package (docs/python.md): the python tests' virtual environment build/python-venv (TOAST,
 # litebird_sim, nanobind, pytest, ... from PyPI: created once, then reused without the network) and
 # the module pisco._pisco built in build/ for its Python. Where PyPI cannot be reached the package is
-# not built, and its tests (label python) skip, saying why.
+# not built, and its tests (label python) skip, saying why; with PISCO_REQUIRE_PEERS=1 (.ci/run) the
+# run fails instead, and so does every test that would skip for want of a peer package.
 venv="$root/build/python-venv"
 venv_status=0
 /usr/bin/python3 "$root/tests/python/python_env.py" "$venv" || venv_status=$?
 if ((venv_status == 0)); then
   python_flags=(-DPISCO_BUILD_PYTHON=ON "-DPython_EXECUTABLE=$venv/bin/python")
+elif [[ "${PISCO_REQUIRE_PEERS:-}" == 1 ]]; then
+  # .ci/run: the frameworks and peers must be tested; a run without them fails (docs/validation.md).
+  echo "run-tests: the python tests' environment $venv could not be completed (above), and PISCO_REQUIRE_PEERS=1" \
+    "requires it" >&2
+  exit 1
 else
   python_flags=(-DPISCO_BUILD_PYTHON=OFF)
 fi

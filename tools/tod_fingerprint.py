@@ -13,13 +13,20 @@ the boresight), pointing as angles and as quaternions, 400 samples of which 200 
 of the poles; on cpu, simd, vulkan (and vulkan in float-float). Each TOD is also scattered back
 (engine.adjoint, on the backends that have it), each detector's adjoint_diagonal taken, and its normal
 pass (engine.normal, A^T A of the sky): the maps are fingerprinted too. compare exits 1 when any array differs.
+
+  tod_fingerprint.py record OUT.npz [--threads N] [--chunk-samples N]
+records with N threads on the host backends (cpu, simd; 2 by default) and chunks of N samples on the
+device backends (0, the default: what fits the device). The engine promises the same bits whatever
+either is (docs/simd.md, docs/vulkan.md): tests/python/test_fingerprints.py records with other values
+and compares.
 """
+import argparse
 import sys
 
 import numpy as np
 
 
-def record(path):
+def record(path, threads=2, chunk_samples=0):
     import pisco
 
     rng = np.random.default_rng(7)
@@ -51,7 +58,8 @@ def record(path):
                 for norm in ("integral", "per_sample"):
                     for be in backends:
                         for ar in (["auto", "float-float"] if be == "vulkan" else ["auto"]):
-                            host = dict(threads=2) if be in ("cpu", "simd") else {}  # the host backends' threads
+                            # the host backends' threads, the device backends' chunks
+                            host = dict(threads=threads) if be in ("cpu", "simd") else dict(chunk_samples=chunk_samples)
                             e = pisco.Engine(sky, [beam], fp, backend=be, normalization=norm, arithmetic=ar, **host)
                             for d in ("a", "b"):
                                 kw = dict(hwp_angle=angle) if plate else {}
@@ -87,8 +95,13 @@ def compare(a_path, b_path):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 3 and sys.argv[1] == "record":
-        record(sys.argv[2])
+    if len(sys.argv) >= 3 and sys.argv[1] == "record":
+        ap = argparse.ArgumentParser(prog="tod_fingerprint.py record")
+        ap.add_argument("out")
+        ap.add_argument("--threads", type=int, default=2)
+        ap.add_argument("--chunk-samples", type=int, default=0)
+        a = ap.parse_args(sys.argv[2:])
+        record(a.out, a.threads, a.chunk_samples)
     elif len(sys.argv) == 4 and sys.argv[1] == "compare":
         sys.exit(compare(sys.argv[2], sys.argv[3]))
     else:

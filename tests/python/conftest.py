@@ -1,8 +1,33 @@
 """Shared pieces of the Python package's tests (run through ctest label `python`: run_pytest.py)."""
 
+import os
+
 import numpy as np
 import pytest
 
+# PISCO_REQUIRE_PEERS=1 (set by .ci/run): a test that skips (a peer package missing, importorskip, no
+# device) fails instead, with the reason, so that a run cannot pass with the frameworks untested
+# (docs/validation.md, "What a run must not skip").
+REQUIRE_PEERS = os.environ.get("PISCO_REQUIRE_PEERS") == "1"
+
+
+def _skip_to_failure(report, what):
+    if REQUIRE_PEERS and report.skipped and not hasattr(report, "wasxfail"):
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+        report.outcome = "failed"
+        report.longrepr = f"{what} skipped in a run that requires every peer package (PISCO_REQUIRE_PEERS=1): {reason}"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    _skip_to_failure(outcome.get_result(), item.nodeid)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector):
+    outcome = yield
+    _skip_to_failure(outcome.get_result(), collector.nodeid)
 
 def smooth_sky_alm(lmax, seed, smoothing_fwhm):
     """A band-limited polarized sky as healpy a_lm (T, E, B): C_l ~ 1 / (l (l + 1)), E at 0.3 and B at

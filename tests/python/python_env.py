@@ -44,12 +44,20 @@ WITHOUT_DEPENDENCIES = {
 REGISTRY = "https://pypi.org/simple/pip/"
 
 
+# PISCO_REQUIRE_PEERS=1 (set by .ci/run): nothing skips for want of PyPI or of a peer package; the run
+# fails instead, saying what is missing (docs/validation.md, "What a run must not skip").
+REQUIRED = os.environ.get("PISCO_REQUIRE_PEERS") == "1"
+
+
 class Unavailable(Exception):
-    """The environment cannot be completed; .skip says whether that is PyPI's absence."""
+    """The environment cannot be completed; .skip says whether that is PyPI's absence (never when
+    PISCO_REQUIRE_PEERS=1: then the tests fail)."""
 
     def __init__(self, message, skip):
+        if skip and REQUIRED:
+            message += " (PISCO_REQUIRE_PEERS=1: a run that requires every peer package fails instead of skipping)"
         super().__init__(message)
-        self.skip = skip
+        self.skip = skip and not REQUIRED
 
 
 def python_of(venv):
