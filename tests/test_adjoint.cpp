@@ -13,7 +13,7 @@
 
 #include "backend_fixtures.hpp"
 #include "core/prepared.hpp"
-#include "cpu/ring_slices.hpp"
+#include "core/ring_slices.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
 #include "pisco/quaternion.hpp"
@@ -541,7 +541,7 @@ TEST(EngineSetSky, GivesTheTodOfANewEngine) {
 }
 }  // namespace
 
-// The ring of a pixel (cpu/ring_slices.hpp), which the simd adjoint's windows are laid out by, at
+// The ring of a pixel (core/ring_slices.hpp), which the simd adjoint's windows are laid out by, at
 // both ends of every ring, the poles included.
 TEST(RingSlices, RingOfEveryRingsFirstAndLastPixel) {
   pisco::Sky sky(16);

@@ -10,7 +10,7 @@
 
 #include "support.hpp"
 #include "core/detector_pointing.hpp"
-#include "cpu/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 #include "pisco/error.hpp"
 #include "pisco/focal_plane.hpp"
 #include "pisco/hwp.hpp"

@@ -13,6 +13,7 @@
 #include "pisco/beamsor.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/focal_plane.hpp"
+#include "pisco/focal_plane_file.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/scan.hpp"
 #include "pisco/sky.hpp"
@@ -79,14 +80,6 @@ struct HwpConfig {
   std::string rate_key;                  // the key that gave the rotation: rpm or frequency_hz
 };
 
-// A detector's own plate settings from its focal-plane row (keys hwp, hwp_gamma_deg, hwp_mueller).
-struct DetectorHwp {
-  std::optional<bool> enabled;
-  std::optional<double> gamma;           // radians
-  bool gamma_key = false;                // set by the row's hwp_gamma_deg (not a TOAST table's gamma)
-  std::optional<Mueller> mueller;
-};
-
 struct EngineConfig {
   EngineOptions options;
   std::size_t chunk_samples = 1 << 16;
@@ -148,15 +141,6 @@ struct SimulationConfig {
 // directory ([output] dir excepted: relative to the working directory). Throws pisco::Error naming
 // the file and the key on anything unexpected, unknown keys included.
 SimulationConfig read_simulation_file(const std::filesystem::path& file);
-
-// Reads a focal plane table (docs/config.md, "[focal_plane]"): CSV with a header (name, zeta_deg,
-// epsilon, gain, beam, xi_deg, eta_deg, gamma_deg, hwp, hwp_gamma_deg), a TOAST HDF5 table (one beam,
-// its gamma column as the plates' gamma) or TOML ([[detectors]] / [[pairs]] as in the simulation
-// file). Each detector's beam is its index in `beam_names` (the [beams] tables); `hwp`, when given,
-// receives each detector's plate keys. Throws pisco::Error naming the file, line and column.
-std::vector<Detector> read_focal_plane_file(const std::filesystem::path& file,
-                                            const std::vector<std::string>& beam_names,
-                                            std::vector<DetectorHwp>* hwp = nullptr);
 
 // What float64 carries over a run of `samples` samples with the [hwp] plate's angle stream
 // (docs/formats.md, "Times, rates and angles"): throws pisco::Error naming the file and [hwp] key.

@@ -7,7 +7,7 @@
 #include "core/detector_pointing.hpp"
 #include "core/frame.hpp"
 #include "core/text.hpp"
-#include "cpu/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {

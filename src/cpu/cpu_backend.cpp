@@ -12,8 +12,8 @@
 #include "core/contribution.hpp"
 #include "core/disc.hpp"
 #include "core/frame.hpp"
-#include "cpu/ring_slices.hpp"
-#include "cpu/thread_pool.hpp"
+#include "core/ring_slices.hpp"
+#include "core/thread_pool.hpp"
 #include "core/plate.hpp"
 
 namespace pisco::detail {
@@ -144,7 +144,7 @@ double sample_norm(const PreparedSky& sky, const double* pixels, const PreparedD
   return norm;
 }
 
-// Samples [0, n) scattered onto the pixels of one slice of rings (cpu/ring_slices.hpp).
+// Samples [0, n) scattered onto the pixels of one slice of rings (core/ring_slices.hpp).
 PISCO_CPU_CLONES std::uint64_t scatter_samples(const PreparedSky& sky, const double* pixels, const PreparedDetector& det,
                                                const PointingInput& in, const double* tod, const double* norms,
                                                const RingSlice& slice, bool squares, double* acc) {
@@ -200,7 +200,7 @@ class CpuBackend final : public Backend {
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
 
-  // Spread over threads by slices of rings (cpu/ring_slices.hpp): deterministic.
+  // Spread over threads by slices of rings (core/ring_slices.hpp): deterministic.
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override {
     const PreparedDetector& det = in_->detectors.at(detector);
@@ -241,7 +241,7 @@ class CpuBackend final : public Backend {
 
  private:
   std::vector<double> adjoint_;  // 4 doubles a pixel: I, Q, U, V
-  std::vector<RingSlice> slices_;  // the adjoint's (cpu/ring_slices.hpp)
+  std::vector<RingSlice> slices_;  // the adjoint's (core/ring_slices.hpp)
   std::shared_ptr<const EngineInputs> in_;
   ThreadPool pool_;
   std::vector<double> pixels_;  // reference_pixels(): 8 doubles a pixel

@@ -1,4 +1,4 @@
-// The focal-plane readers behind pisco::read_focal_plane_file (simulation_config.hpp), and the parts of
+// The focal-plane readers behind pisco::read_focal_plane_file (pisco/focal_plane_file.hpp), and the parts of
 // them the simulation-file reader shares for [focal_plane] (src/pipeline/simulation_config.cpp).
 // Internal.
 #pragma once
@@ -10,7 +10,7 @@
 
 #include "io/toml_table.hpp"
 #include "pisco/focal_plane.hpp"
-#include "pisco/simulation_config.hpp"
+#include "pisco/focal_plane_file.hpp"
 
 namespace pisco::detail {
 

@@ -12,7 +12,7 @@
 #include <vec3.h>
 
 #include "core/frame.hpp"
-#include "cpu/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
 

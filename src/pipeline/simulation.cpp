@@ -19,7 +19,7 @@
 
 #include "io/input_file.hpp"
 #include "core/detector_pointing.hpp"
-#include "cpu/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 #include "pisco/deconvolution.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"

@@ -20,8 +20,8 @@
 #include "core/disc.hpp"
 #include "core/frame.hpp"
 #include "core/plate.hpp"
-#include "cpu/ring_slices.hpp"  // ring_of
-#include "cpu/thread_pool.hpp"
+#include "core/ring_slices.hpp"  // ring_of
+#include "core/thread_pool.hpp"
 #include "simd/simd_kernel.hpp"
 
 namespace pisco::detail {

@@ -14,7 +14,7 @@
 #include <thread>
 
 #include "core/detector_pointing.hpp"
-#include "cpu/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 #include "pisco/mapmaker.hpp"
 #include "pisco/pisco.hpp"
 #include "pisco/scan.hpp"

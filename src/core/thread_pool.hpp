@@ -1,4 +1,5 @@
-// A small persistent pool for the reference backend: parallel_for over [0, n) in dynamic chunks.
+// A small persistent pool of host threads: parallel_for over [0, n) in dynamic chunks. Used by the
+// reference and simd backends, the pointing and the map-maker (shared, so no layer borrows a backend's).
 #pragma once
 
 #include <atomic>
