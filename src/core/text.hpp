@@ -1,6 +1,7 @@
 // Formatting shared by the error messages of the core sources.
 #pragma once
 
+#include <cstdio>
 #include <sstream>
 #include <string>
 
@@ -32,6 +33,17 @@ inline std::string bytes_text(double bytes) {
   int u = 0;
   while (bytes >= 1000.0 && u < 5) bytes /= 1000.0, ++u;
   return number_text(bytes, u == 0 ? 6 : 3) + " " + units[u];
+}
+
+// printf into a string.
+template <typename... Args>
+std::string printf_text(const char* fmt, Args... args) {
+  const int n = std::snprintf(nullptr, 0, fmt, args...);
+  if (n <= 0) return {};
+  std::string s(static_cast<std::size_t>(n) + 1, '\0');
+  std::snprintf(s.data(), s.size(), fmt, args...);
+  s.resize(static_cast<std::size_t>(n));
+  return s;
 }
 
 }  // namespace pisco::detail
