@@ -16,6 +16,9 @@
 // value), no `lf` literal here (the C++ build includes this file as it is). Each backend supplies, for
 // its beam-weight layout:
 //   weight_pair(grid, node, w, next): the 4 weights of `node` and of `node + 1`;
+//   edge_x_pair(grid, k, i, j, ex0, ex1), edge_y_pair(grid, k, ey0, ey1): the curvature terms of the
+//   lower and upper edges and of the left and right edges of cell (i, j), k = j n + i
+//   (src/core/grid_curvature.hpp);
 //   node_index(u, inside, top): int(u) clamped to [0, top] (u >= 0 where `inside`);
 //   select_weights(inside, w): w where `inside`, zero elsewhere.
 #if defined(PISCO_TEMPLATE_TEXT) || !defined(PISCO_PIXEL_GLSL)
@@ -58,6 +61,16 @@ PISCO_FN void weight_pair(Grid g, int k, PISCO_OUT(vec4) w, PISCO_OUT(vec4) next
     w = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k));
     next = uintBitsToFloat(texelFetch(weight_pairs, g.offset + 2 * k + 1));
   }
+}
+
+// The edges' curvature terms, stored after the nodes in the nodes' layout (src/core/grid_curvature.hpp):
+// ex of cell (i, j)'s lower and upper edges at n^2 + i n + j, ey of its left and right edges at
+// 2 n^2 + k.
+PISCO_FN void edge_x_pair(Grid g, int k, int i, int j, PISCO_OUT(vec4) ex0, PISCO_OUT(vec4) ex1) {
+  weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
+}
+PISCO_FN void edge_y_pair(Grid g, int k, PISCO_OUT(vec4) ey0, PISCO_OUT(vec4) ey1) {
+  weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
 }
 
 // Signed indices: CPUs (lavapipe) convert float to int in one instruction, to uint in several. Out of
@@ -119,9 +132,8 @@ PISCO_FN PISCO_V4 interpolate_weights(PISCO_IN(PISCO_GRID) g, PISCO_REAL x, PISC
   const PISCO_REAL fu = u - PISCO_REAL(i);
   const PISCO_REAL fv = v - PISCO_REAL(j);
   const PISCO_INDEX k00 = j * g.n + i;
-  // The edges' curvature terms (src/core/grid_curvature.hpp): ex of the cell's lower and upper edges
-  // (records n^2 + i n + j and the next), ey of its left and right edges (2 n^2 + k00 and the next).
-  // Each pair is used as soon as it is read, which keeps the kernels' registers down.
+  // Then the curvature terms of the cell's edges (src/core/grid_curvature.hpp): ex of its lower and upper
+  // edges, ey of its left and right ones. Each pair is used as soon as it is read.
   const PISCO_REAL gu = 1.0f - fu;
   const PISCO_REAL gv = 1.0f - fv;
   PISCO_V4 a, b;
@@ -129,9 +141,9 @@ PISCO_FN PISCO_V4 interpolate_weights(PISCO_IN(PISCO_GRID) g, PISCO_REAL x, PISC
   PISCO_V4 w = (gu * gv) * a + (fu * gv) * b;
   weight_pair(g, k00 + g.n, a, b);
   w = w + (gu * fv) * a + (fu * fv) * b;
-  weight_pair(g, i * g.n + j + g.n * g.n, a, b);
+  edge_x_pair(g, k00, i, j, a, b);
   w = w - (fu * gu) * (gv * a + fv * b);
-  weight_pair(g, k00 + 2 * g.n * g.n, a, b);
+  edge_y_pair(g, k00, a, b);
   w = w - (fv * gv) * (gu * a + fu * b);
   return select_weights(inside, w);
 }

@@ -103,6 +103,16 @@ PISCO_HD void weight_pair(const ArrayGrid<T>& g, int k, Vec4<T>& w, Vec4<T>& nex
   node_pair(g.weights + 4 * k, w, next);
 }
 
+// The edges' curvature terms of cell (i, j), k = j n + i, after the nodes (src/core/grid_curvature.hpp).
+template <class T>
+PISCO_HD void edge_x_pair(const ArrayGrid<T>& g, int k, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
+  weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
+}
+template <class T>
+PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& ey1) {
+  weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
+}
+
 // pixel.glsl as C++ templates of T (and of the grid type G). The macros that shaders/common.glsl
 // also defines (for the GLSL-as-C++ host tests) are saved and restored around it.
 #pragma push_macro("PISCO_FN")

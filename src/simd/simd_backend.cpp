@@ -58,6 +58,30 @@ std::vector<T> node_records(const std::vector<T>& table, std::initializer_list<s
   return out;
 }
 
+// A 2D grid's float32 records (simd_kernel.cpp, RecordGrid): for each node k = j n + i, its record
+// (w(k), w(k + 1)), then (ex(k), ex(k + n)) and (ey(k), ey(k + 1)) of the cell it is the lower corner
+// of, from the table's nodes and edge terms (src/core/grid_curvature.hpp: ex(i, j) at n^2 + i n + j,
+// ey at 2 n^2 + k); a pair's member beyond the grid is 0 (no cell reads it).
+std::vector<float> grid_records(const std::vector<float>& table, std::initializer_list<std::size_t> cols, int n) {
+  const std::size_t nn = std::size_t(n) * std::size_t(n), m = cols.size();
+  std::vector<float> out(3 * 2 * m * nn, 0.0f);
+  auto put = [&](std::size_t record, std::size_t a, bool a_in, std::size_t b, bool b_in) {
+    std::size_t h = 0;
+    for (const std::size_t c : cols) {
+      if (a_in) out[2 * m * record + h] = table[4 * a + c];
+      if (b_in) out[2 * m * record + m + h] = table[4 * b + c];
+      ++h;
+    }
+  };
+  for (std::size_t k = 0; k < nn; ++k) {
+    const std::size_t i = k % std::size_t(n), j = k / std::size_t(n);
+    put(3 * k, k, true, k + 1, k + 1 < nn);
+    put(3 * k + 1, nn + i * n + j, true, nn + i * n + j + 1, j + 1 < std::size_t(n));
+    put(3 * k + 2, 2 * nn + k, true, 2 * nn + k + 1, k + 1 < nn);
+  }
+  return out;
+}
+
 // One detector's weights in the kernel's layout: float32 columns (float32_weights, the GPU
 // backends' rule) and the reference's float64 tables.
 struct DetectorTables {
@@ -80,8 +104,13 @@ DetectorTables detector_tables(const PreparedDetector& det, std::size_t index, b
   bool polarized_uv = false;
   for (std::size_t k = 0; k < nodes; ++k) polarized_uv = polarized_uv || w32[4 * k + 2] != 0.0f || w32[4 * k + 3] != 0.0f;
   const int columns = polarized_uv ? 4 : 2;
-  t.records[0] = node_records(w32, {0, 1});
-  if (columns == 4) t.records[1] = node_records(w32, {2, 3});
+  if (det.radial) {
+    t.records[0] = node_records(w32, {0, 1});
+    if (columns == 4) t.records[1] = node_records(w32, {2, 3});
+  } else {
+    t.records[0] = grid_records(w32, {0, 1}, det.grid_n);
+    if (columns == 4) t.records[1] = grid_records(w32, {2, 3}, det.grid_n);
+  }
   if (float64_path) {
     for (std::size_t c = 0; c < 4; ++c) t.pairs64[c] = node_records(det.weights, {c});
     if (!det.norm_weights.empty()) t.pairs64[4] = node_records(det.norm_weights, {0});

@@ -190,25 +190,29 @@ HWY_INLINE void lookup_records(const float* table, VI node, F out[4]) {
 }
 
 // A detector's float32 weights as records (lookup_records), for the shared interpolation: node k's
-// (w_I, w_Q) and node k + 1's in one record of r01, and (w_U, w_V) of both in r23 (Columns == 4).
+// (w_I, w_Q) and node k + 1's in one record of r01, and (w_U, w_V) of both in r23 (Columns == 4). A 2D
+// grid keeps each cell's edge curvature terms beside its lower corner's node (stride 3,
+// simd_backend.cpp's grid_records): records 3k, 3k + 1 = (ex(k), ex(k + n)) and 3k + 2 = (ey(k),
+// ey(k + 1)), so that a pixel's reads of one row fall in one cache line. A radial profile: stride 1.
 template <int Columns>
 struct RecordGrid {
   const float* r01;
   const float* r23;
   int n;
   F a, inv_step;
+  int stride;
 };
 
 template <int Columns>
-HWY_INLINE void weight_pair(const RecordGrid<Columns>& g, const I& k, Vec4<F>& w, Vec4<F>& next) {
+HWY_INLINE void record_pair(const RecordGrid<Columns>& g, const I& r, Vec4<F>& w, Vec4<F>& next) {
   F a[4];
-  lookup_records(g.r01, k.v, a);
+  lookup_records(g.r01, r.v, a);
   w.x = a[0];
   w.y = a[1];
   next.x = a[2];
   next.y = a[3];
   if constexpr (Columns == 4) {
-    lookup_records(g.r23, k.v, a);
+    lookup_records(g.r23, r.v, a);
     w.z = a[0];
     w.w = a[1];
     next.z = a[2];
@@ -216,6 +220,21 @@ HWY_INLINE void weight_pair(const RecordGrid<Columns>& g, const I& k, Vec4<F>& w
   } else {
     w.z = w.w = next.z = next.w = F(0.0f);
   }
+}
+
+template <int Columns>
+HWY_INLINE void weight_pair(const RecordGrid<Columns>& g, const I& k, Vec4<F>& w, Vec4<F>& next) {
+  record_pair(g, g.stride == 1 ? k : k * 3, w, next);
+}
+
+template <int Columns>
+HWY_INLINE void edge_x_pair(const RecordGrid<Columns>& g, const I& k, const I&, const I&, Vec4<F>& ex0, Vec4<F>& ex1) {
+  record_pair(g, k * 3 + 1, ex0, ex1);
+}
+
+template <int Columns>
+HWY_INLINE void edge_y_pair(const RecordGrid<Columns>& g, const I& k, Vec4<F>& ey0, Vec4<F>& ey1) {
+  record_pair(g, k * 3 + 2, ey0, ey1);
 }
 
 #if HWY_TARGET != HWY_SCALAR  // the float64 path there is the reference's scalar code
@@ -268,7 +287,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
     for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
   }
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
-                                 F(det.grid_inv_step)};
+                                 F(det.grid_inv_step), Radial ? 1 : 3};
   const VF zero = hn::Zero(df);
 
   F sum(zero), carry(zero);
@@ -526,7 +545,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   Vec4<F> mcols[4];
   if constexpr (Plate) plate_columns(in.plate, mcols);
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
-                                 F(det.grid_inv_step)};
+                                 F(det.grid_inv_step), Radial ? 1 : 3};
   double d = in.value;
   // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
   constexpr bool iq = Columns == 2 && !Plate;
