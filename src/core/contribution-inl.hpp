@@ -105,7 +105,7 @@ PISCO_HD void weight_pair(const ArrayGrid<T>& g, int k, Vec4<T>& w, Vec4<T>& nex
 
 // The edges' curvature terms of cell (i, j), k = j n + i, after the nodes (src/core/grid_curvature.hpp).
 template <class T>
-PISCO_HD void edge_x_pair(const ArrayGrid<T>& g, int k, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
+PISCO_HD void edge_x_pair(const ArrayGrid<T>& g, int /*k*/, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
   weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
 }
 template <class T>
