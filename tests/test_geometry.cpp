@@ -8,6 +8,7 @@
 #include <random>
 
 #include "core/contribution.hpp"
+#include "core/grid_curvature.hpp"
 #include "pisco/units.hpp"
 
 namespace {
@@ -124,25 +125,37 @@ TEST(Geometry, IdealDetectorResponse) {
   }
 }
 
-TEST(Geometry, BilinearInterpolationIsExactForBilinearFields) {
-  // A field f = a + b x + c y + d x y is reproduced exactly inside every cell.
+TEST(Geometry, GridInterpolationIsExactForQuadraticFields) {
+  // The grid's interpolation (bilinear less the edges' curvature terms, src/core/grid_curvature.hpp):
+  // a field f = a + b x + c y + d x y is reproduced exactly inside every cell, and one with x^2 and y^2
+  // terms too inside every cell whose edges' second differences are all interior.
   const int n = 7;
   const double a = 0.5, step = 2 * a / (n - 1);
-  std::vector<double> grid(n * n * 4);
-  auto f = [](double x, double y, int m) { return 1.0 + m + (2.0 - m) * x - 0.5 * y + 3.0 * m * x * y; };
-  for (int j = 0; j < n; ++j)
-    for (int i = 0; i < n; ++i)
-      for (int m = 0; m < 4; ++m) grid[(j * n + i) * 4 + m] = f(-a + i * step, -a + j * step, m);
-  const pisco::detail::ArrayGrid<double> g{grid.data(), n, a, 1 / step};
-  std::mt19937_64 rng(5);
-  std::uniform_real_distribution<double> u(-a, a);
-  for (int t = 0; t < 1000; ++t) {
-    const double x = u(rng), y = u(rng);
-    const auto w = pisco::detail::interpolate_weights(g, x, y);
-    const double wm[4] = {w.x, w.y, w.z, w.w};
-    for (int m = 0; m < 4; ++m) EXPECT_NEAR(wm[m], f(x, y, m), 1e-13);
+  for (const double q : {0.0, 1.0}) {
+    std::vector<double> grid(n * n * 4);
+    auto f = [q](double x, double y, int m) {
+      return 1.0 + m + (2.0 - m) * x - 0.5 * y + 3.0 * m * x * y + q * (2.5 * x * x - (1.0 + m) * y * y);
+    };
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        for (int m = 0; m < 4; ++m) grid[(j * n + i) * 4 + m] = f(-a + i * step, -a + j * step, m);
+    pisco::detail::append_edge_curvature(grid, n, 4);
+    const pisco::detail::ArrayGrid<double> g{grid.data(), n, a, 1 / step};
+    std::mt19937_64 rng(5);
+    const double within = q == 0.0 ? a : a - step;
+    std::uniform_real_distribution<double> u(-within, within);
+    for (int t = 0; t < 1000; ++t) {
+      const double x = u(rng), y = u(rng);
+      const auto w = pisco::detail::interpolate_weights(g, x, y);
+      const double wm[4] = {w.x, w.y, w.z, w.w};
+      for (int m = 0; m < 4; ++m) EXPECT_NEAR(wm[m], f(x, y, m), 1e-13) << "q " << q;
+    }
   }
-  // Outside the grid, a NaN included: zero.
+  // Outside the grid, a NaN included: zero (a grid of ones, 1 within it).
+  std::vector<double> grid(n * n * 4, 1.0);
+  pisco::detail::append_edge_curvature(grid, n, 4);
+  const pisco::detail::ArrayGrid<double> g{grid.data(), n, a, 1 / step};
+  EXPECT_EQ(pisco::detail::interpolate_weights(g, 0.3 * a, -0.2 * a).x, 1.0);
   for (const double x : {a * 1.01, -a * 1.01, std::nan("")}) {
     const auto w = pisco::detail::interpolate_weights(g, x, 0.0);
     EXPECT_EQ(w.x, 0.0);
