@@ -13,6 +13,8 @@ from litebird_sim.mueller_convolver import MuellerConvolver, mueller_to_C
 
 NTHREADS = 2
 IDEAL = np.diag([1.0, 1.0, -1.0, -1.0])
+# The ideal plate plus leakage in all 16 entries, a 2% loss in M_II keeping it passive
+# (tools/hwp_compare.py's generic plate).
 GENERIC = IDEAL + np.array([[-0.02, 0.012, -0.008, 0.005],
                             [0.021, -0.03, 0.017, -0.011],
                             [-0.015, 0.009, 0.025, 0.04],
@@ -95,6 +97,35 @@ class ExactMuellerConvolver(MuellerConvolver):
             full = np.concatenate([t, eb])
             res[ib] = resize_blm(full, L, mout, lmax, mout)
         return res
+
+
+def effective_beams(blm_full, lmax_full, mmax, lmax, mueller, mask_deg=30.0):
+    """The effective beams (per plate angle: T, E, B coefficients to lmax and mmax + 4) that
+    MuellerConvolver builds from the beam cut to (lmax, mmax), and that ExactMuellerConvolver builds from
+    the whole beam, without their interpolators: (MuellerConvolver's, the exact ones)."""
+    blm = resize_blm(blm_full, lmax_full, mmax, lmax, mmax)
+    theirs = MuellerConvolver.__new__(MuellerConvolver)
+    theirs._ctype = np.complex128
+    exact = ExactMuellerConvolver.__new__(ExactMuellerConvolver)
+    exact._full = (np.asarray(blm_full), lmax_full, mmax)
+    exact._mask = np.radians(mask_deg)
+    exact._ntheta = None
+    exact.max_imag = 0.0
+    exact._ctype = np.complex128
+    return (MuellerConvolver._mueller_tc_prep(theirs, blm, mueller, lmax, mmax),
+            exact._mueller_tc_prep(blm, mueller, lmax, mmax))
+
+
+def pplus_by_m(eb, lmax, mmax):
+    """{m: P+[l, m], l = |m|..lmax} for m in -mmax..mmax from healpy-layout E, B coefficients."""
+    out, idx = {}, 0
+    for m in range(mmax + 1):
+        n = lmax - m + 1
+        e, b = eb[0, idx:idx + n], eb[1, idx:idx + n]
+        out[m] = -(e + 1j * b)
+        out[-m] = (-1) ** m * np.conj(-(e - 1j * b))
+        idx += n
+    return out
 
 
 def exact_conv(slm, blm_full, lmax_full, mmax, lmax, mueller, ptg, alpha, epsilon=1e-9, mask_deg=30.0):

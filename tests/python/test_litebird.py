@@ -12,16 +12,10 @@ import litebird_sim as lbs
 import pisco
 import pisco.litebird
 from conftest import assert_everywhere, offset_elliptical_blm, relative_rms, smooth_sky_alm
+from mueller_reference import GENERIC, IDEAL  # the ideal plate, and one with leakage in all 16 entries
 
 FWHM_ARCMIN = 60.0
 POL_ANGLES_DEG = (0.0, 90.0, 22.5)
-IDEAL = np.diag([1.0, 1.0, -1.0, -1.0])
-# The ideal plate plus leakage in all 16 entries, a 2% loss in M_II keeping it passive
-# (tools/hwp_compare.py's generic plate).
-GENERIC = IDEAL + np.array([[-0.02, 0.012, -0.008, 0.005],
-                            [0.021, -0.03, 0.017, -0.011],
-                            [-0.015, 0.009, 0.025, 0.04],
-                            [0.007, -0.02, 0.033, 0.02]])
 HWP_SPEED = 2 * np.pi * 46 / 60  # LiteBIRD's LFT plate, 46 rpm, in rad/s
 
 
@@ -107,15 +101,12 @@ def away_from_poles(obs, degrees=10.0):
     return np.abs(np.cos(theta)) < np.cos(np.radians(degrees))
 
 
-def test_beam_alms_match_litebird_sim(tmp_path):
-    """litebird_sim's own beams, as its add_convolved_sky_to_observations takes them, through it and
-    through pisco.litebird, as a dict by detector name: generate_gauss_beam_alms's for det0 and det1
-    (elliptical, each with its ellipticity, major axis and polarization angle; mmax 12), and for det2
-    (pol_angle_rad 22.5 deg) an elliptical beam with cross-polar leakage polarized along its frame's x
-    axis, its centre 0.3 deg off the axis so that odd m hold coefficients too."""
-    nside, lmax = 256, 512
-    lmax_beam, mmax = 768, 12
-    obs = observation(tmp_path, ellipticity=(1.5, 1.3, 1.6), psi_deg=(30.0, -20.0, 75.0))
+def convolve_beam_alms(obs, nside, lmax, lmax_beam, mmax, grid_step=np.radians(FWHM_ARCMIN / 60.0) / 40):
+    """test_beam_alms_match_litebird_sim's beams (litebird_sim's elliptical b_lm for det0 and det1, one
+    0.3 deg off its axis with cross-polar leakage for det2) and sky (smooth, to lmax, NSIDE nside) through
+    litebird_sim's add_convolved_sky_to_observations into obs.tod and pisco.litebird's into obs.pisco,
+    with the observation's plate if it has one (tools/litebird_mueller/repro_litebird.py too). Returns
+    the sky's a_lm and the beams."""
     alm = smooth_sky_alm(lmax, seed=5, smoothing_fwhm=np.radians(0.5))
     sky_alm = lbs.SphericalHarmonics(values=alm, lmax=lmax, coordinates=lbs.CoordinateSystem.Galactic)
     sky = lbs.HealpixMap(values=hp.alm2map(alm, nside, lmax=lmax, pol=True), nside=nside,
@@ -126,11 +117,24 @@ def test_beam_alms_match_litebird_sim(tmp_path):
         lmax_beam, mmax, np.radians(FWHM_ARCMIN / 60.0), 1.5, np.radians(25.0), psi_pol=0.0, cross_polar_leakage=0.02,
         offset=np.radians(0.3), offset_angle=np.radians(40.0)), lmax=lmax_beam, mmax=mmax)
     lbs.add_convolved_sky_to_observations(obs, sky_alm, blms, convolution_params=params, nthreads=2)
-    # Sampled at FWHM / 40 (the default step, FWHM / 21, leaves 3e-4), out to 3 deg (5 sigma of the
-    # major axis beyond the offset).
+    # Sampled at FWHM / 40 unless grid_step says otherwise, out to 3 deg (5 sigma of the major axis
+    # beyond the offset).
     pisco.litebird.add_convolved_sky_to_observations(obs, sky, blms, component="pisco", backend="cpu",
                                                      convolution_params=params, beam_alms_rho_max=np.radians(3.0),
-                                                     beam_alms_grid_step=np.radians(FWHM_ARCMIN / 60.0) / 40)
+                                                     beam_alms_grid_step=grid_step)
+    return alm, blms
+
+
+def test_beam_alms_match_litebird_sim(tmp_path):
+    """litebird_sim's own beams, as its add_convolved_sky_to_observations takes them, through it and
+    through pisco.litebird, as a dict by detector name: generate_gauss_beam_alms's for det0 and det1
+    (elliptical, each with its ellipticity, major axis and polarization angle; mmax 12), and for det2
+    (pol_angle_rad 22.5 deg) an elliptical beam with cross-polar leakage polarized along its frame's x
+    axis, its centre 0.3 deg off the axis so that odd m hold coefficients too."""
+    nside, lmax = 256, 512
+    lmax_beam, mmax = 768, 12
+    obs = observation(tmp_path, ellipticity=(1.5, 1.3, 1.6), psi_deg=(30.0, -20.0, 75.0))
+    convolve_beam_alms(obs, nside, lmax, lmax_beam, mmax)
     away = away_from_poles(obs)
     rms = relative_rms(obs.pisco, obs.tod)
     per_detector = [relative_rms(obs.pisco[i], obs.tod[i]) for i in range(len(POL_ANGLES_DEG))]
@@ -343,46 +347,17 @@ def test_plate_arguments(tmp_path):
 # mueller_reference.ExactMuellerConvolver makes the same effective beams exactly, by turning the beam's
 # field in real space; PISCO-VK matches it, MuellerConvolver does not.
 
-def _pplus_by_m(eb, lmax, mmax):
-    """{m: P+[l, m], l = |m|..lmax} from healpy-layout E, B coefficients."""
-    out, idx = {}, 0
-    for m in range(mmax + 1):
-        n = lmax - m + 1
-        e, b = eb[0, idx:idx + n], eb[1, idx:idx + n]
-        out[m] = -(e + 1j * b)
-        out[-m] = (-1) ** m * np.conj(-(e - 1j * b))
-        idx += n
-    return out
-
-
 def test_mueller_convolvers_relabelling_is_exact_only_at_m_minus_2():
     """The effective spin +2 beam of an ideal plate at alpha = 0, MuellerConvolver's against the exact
     one, m by m, for a beam 1 deg off its axis: equal at m = -2, apart at 2e-4 and more elsewhere."""
-    from mueller_reference import IDEAL, ExactMuellerConvolver, MuellerConvolver
-    from pisco._blm import resize_blm
+    from mueller_reference import effective_beams, pplus_by_m
 
     ls, lb, mm = 512, 768, 12
-
-    class Grab(MuellerConvolver):
-        def __init__(self, **kw):  # the effective beams only
-            self._ctype = np.complex128
-            self.raw = self._mueller_tc_prep(kw["blm"], kw["mueller"], kw["lmax"], kw["kmax"])
-
-    class GrabExact(ExactMuellerConvolver):
-        def __init__(self, *, blm_full, lmax_full, mmax_full, **kw):
-            self._full = (np.asarray(blm_full), lmax_full, mmax_full)
-            self._mask = np.radians(30.0)
-            self._ntheta = None
-            self.max_imag = 0.0
-            self._ctype = np.complex128
-            self.raw = self._mueller_tc_prep(kw["blm"], kw["mueller"], kw["lmax"], kw["kmax"])
-
     blm = offset_elliptical_blm(lb, mm, np.radians(1.0), 1.5, np.radians(25.0), psi_pol=0.0, cross_polar_leakage=0.02,
                                 offset=np.radians(1.0), offset_angle=np.radians(40.0))
-    cut = resize_blm(blm, lb, mm, ls, mm)
-    theirs = _pplus_by_m(Grab(blm=cut, mueller=IDEAL, lmax=ls, kmax=mm).raw[0][1:3], ls, mm + 4)
-    exact = _pplus_by_m(GrabExact(blm_full=blm, lmax_full=lb, mmax_full=mm, blm=cut, mueller=IDEAL, lmax=ls,
-                                  kmax=mm).raw[0][1:3], ls, mm + 4)
+    theirs_raw, exact_raw = effective_beams(blm, lb, mm, ls, IDEAL)
+    theirs = pplus_by_m(theirs_raw[0][1:3], ls, mm + 4)
+    exact = pplus_by_m(exact_raw[0][1:3], ls, mm + 4)
     total = sum(np.sum(np.abs(v) ** 2) for v in exact.values())
     diff = {m: np.sqrt(np.sum(np.abs(theirs[m] - exact[m]) ** 2) / np.sum(np.abs(exact[m]) ** 2)) for m in exact
             if np.sum(np.abs(exact[m]) ** 2) > 1e-6 * total}
@@ -397,7 +372,7 @@ def test_an_off_axis_beam_through_a_plate_matches_the_exact_reference():
     sky with a monopole and a dipole, samples within 3 deg of both poles and over the sphere: PISCO-VK
     against the exact reference within 3e-4 of the TOD's RMS; MuellerConvolver's own difference from
     the reference is its relabelling (above)."""
-    from mueller_reference import IDEAL, exact_conv, mueller_conv, pisco_tod, ptg_array
+    from mueller_reference import exact_conv, mueller_conv, pisco_tod, ptg_array
     from pisco._blm import resize_blm
 
     ls, lb, mm, nside = 512, 768, 12, 256
@@ -435,7 +410,7 @@ def test_a_plate_with_intensity_leakage_passes_the_monopole_which_mueller_convol
     PISCO-VK and the exact reference follow it; litebird_sim 0.18's MuellerConvolver builds its effective
     T beam from the spin +-2 coefficients relabelled with the same l, so it has nothing at l = 0 and 1
     and its TOD does not turn."""
-    from mueller_reference import GENERIC, exact_conv, mueller_conv, pisco_tod, ptg_array
+    from mueller_reference import exact_conv, mueller_conv, pisco_tod, ptg_array
     from conftest import gaussian_blm
     from pisco._blm import resize_blm
 

@@ -15,7 +15,8 @@ import argparse
 
 import numpy as np
 
-from common import (IDEAL, ExactMuellerConvolver, MuellerConvolver, beam_blm, nalm, resize_blm)
+from common import IDEAL, beam_blm
+from mueller_reference import effective_beams, pplus_by_m
 
 p = argparse.ArgumentParser()
 p.add_argument("--offsets", type=float, nargs="+", default=[0.0, 0.3, 1.0, 2.0])
@@ -23,39 +24,10 @@ args = p.parse_args()
 LS, LB, MM = 512, 768, 12
 
 
-class Grab(MuellerConvolver):
-    def __init__(self, **kw):  # only the effective beams, no interpolators
-        self._ctype = np.complex128
-        self.raw = self._mueller_tc_prep(kw["blm"], kw["mueller"], kw["lmax"], kw["kmax"])
-
-
-class GrabX(ExactMuellerConvolver):
-    def __init__(self, *, blm_full, lmax_full, mmax_full, mask_deg=30.0, **kw):
-        self._full = (np.asarray(blm_full), lmax_full, mmax_full)
-        self._mask = np.radians(mask_deg)
-        self._ntheta = None
-        self.max_imag = 0.0
-        self._ctype = np.complex128
-        self.raw = self._mueller_tc_prep(kw["blm"], kw["mueller"], kw["lmax"], kw["kmax"])
-
-
-def pplus_by_m(eb, lmax, mmax):
-    """{m: P+[l, m] for l = |m|..lmax} for m in -mmax..mmax from healpy-layout E, B."""
-    out, idx = {}, 0
-    for m in range(mmax + 1):
-        n = lmax - m + 1
-        e, b = eb[0, idx:idx + n], eb[1, idx:idx + n]
-        out[m] = -(e + 1j * b)
-        out[-m] = (-1) ** m * np.conj(-(e - 1j * b))
-        idx += n
-    return out
-
-
 for off in args.offsets:
     blm = beam_blm(LB, MM, off)
-    cut = resize_blm(blm, LB, MM, LS, MM)
-    mc = Grab(blm=cut, mueller=IDEAL, lmax=LS, kmax=MM).raw[0]
-    ex = GrabX(blm_full=blm, lmax_full=LB, mmax_full=MM, blm=cut, mueller=IDEAL, lmax=LS, kmax=MM).raw[0]
+    mc_raw, ex_raw = effective_beams(blm, LB, MM, LS, IDEAL)
+    mc, ex = mc_raw[0], ex_raw[0]
     a, b = pplus_by_m(mc[1:3], LS, MM + 4), pplus_by_m(ex[1:3], LS, MM + 4)
     total = sum(np.sum(np.abs(v) ** 2) for v in b.values())
     diff_all = np.sqrt(sum(np.sum(np.abs(a[m] - b[m]) ** 2) for m in b) / total)

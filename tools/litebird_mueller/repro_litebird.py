@@ -14,15 +14,11 @@ import tempfile
 import pathlib
 
 import numpy as np
-import healpy as hp
 
 import litebird_sim as lbs
 from litebird_sim.coordinates import rotate_coordinates_e2g
 from litebird_sim.observation_utilities import _get_hwp_angle
-import pisco
-import pisco.litebird
-from conftest import offset_elliptical_blm, smooth_sky_alm
-from test_litebird import FWHM_ARCMIN, GENERIC, HWP_SPEED, IDEAL, observation
+from test_litebird import GENERIC, HWP_SPEED, IDEAL, convolve_beam_alms, observation
 from common import Timer, exact_conv, fmt, stats
 
 logging.getLogger().setLevel(logging.ERROR)
@@ -37,19 +33,7 @@ lmax_beam, mmax = 768, 12
 tmp = pathlib.Path(tempfile.mkdtemp(prefix="lbs_", dir=None))
 obs = observation(tmp, ellipticity=(1.5, 1.3, 1.6), psi_deg=(30.0, -20.0, 75.0), seconds=args.seconds,
                   hwp=lbs.IdealHWP(ang_speed_radpsec=HWP_SPEED, start_angle_rad=0.3), mueller_hwp=m0)
-alm = smooth_sky_alm(lmax, seed=5, smoothing_fwhm=np.radians(0.5))
-sky_alm = lbs.SphericalHarmonics(values=alm, lmax=lmax, coordinates=lbs.CoordinateSystem.Galactic)
-sky = lbs.HealpixMap(values=hp.alm2map(alm, nside, lmax=lmax, pol=True), nside=nside,
-                     coordinates=lbs.CoordinateSystem.Galactic)
-params = lbs.BeamConvolutionParameters(lmax=lmax, mmax=mmax, single_precision=False, epsilon=1e-8)
-blms = lbs.generate_gauss_beam_alms(obs, lmax=lmax_beam, mmax=mmax)
-blms["det2"] = lbs.SphericalHarmonics(values=offset_elliptical_blm(
-    lmax_beam, mmax, np.radians(FWHM_ARCMIN / 60.0), 1.5, np.radians(25.0), psi_pol=0.0, cross_polar_leakage=0.02,
-    offset=np.radians(0.3), offset_angle=np.radians(40.0)), lmax=lmax_beam, mmax=mmax)
-lbs.add_convolved_sky_to_observations(obs, sky_alm, blms, convolution_params=params, nthreads=2)
-pisco.litebird.add_convolved_sky_to_observations(obs, sky, blms, component="pisco", backend="cpu",
-                                                 convolution_params=params, beam_alms_rho_max=np.radians(3.0),
-                                                 beam_alms_grid_step=np.radians(FWHM_ARCMIN / 60.0) / 40)
+alm, blms = convolve_beam_alms(obs, nside, lmax, lmax_beam, mmax)
 alpha = np.asarray(_get_hwp_angle(obs=obs, hwp=None, pointing_dtype=np.float64), dtype=np.float64)
 pointings, _ = obs.get_pointings("all")
 print(f"{args.plate} plate at 46 rpm, {obs.tod.shape[0]} detectors x {obs.tod.shape[1]} samples "
