@@ -223,7 +223,7 @@ def test_beam_files_match_toast_total_convolution(tmp_path):
     assert [d[-5] for d in dets] == ["A", "B", "A", "B"]
     toast_totalconvolve(data, fp, alm, lmax, tmp_path, "totalconvolve", beam_files=beam_files, beammmax=mmax,
                         detectors=dets)
-    # Sampled at FWHM / 40 (the default step, FWHM / 21 for a Gaussian, leaves 3e-4: below), out to 3 deg
+    # Sampled at FWHM / 40 (the default step, FWHM / 16.8 for a Gaussian, is compared below), out to 3 deg
     # (5 sigma of the major axis beyond the offset).
     op = pisco.toast.PixelConvolve(sky=sky, det_data="pisco", backend="cpu", beam_file_dict=beam_files,
                                    beam_file_grid_step=FWHM / 40, beam_file_rho_max=np.radians(3.0))
@@ -252,7 +252,7 @@ def test_beam_files_match_toast_total_convolution(tmp_path):
     pisco.toast.PixelConvolve(sky=sky, det_data="pisco_default", backend="cpu", beam_file_dict=beam_files).apply(
         data, detectors=dets[2:3])
     default = relative_rms(ob.detdata["pisco_default"][dets[2]], reference[2])
-    print(f"  the default grid step (FWHM / 21) and rho_max, detector {dets[2]}: relative RMS {default:.2e} (at "
+    print(f"  the default grid step (FWHM / 16.8) and rho_max, detector {dets[2]}: relative RMS {default:.2e} (at "
           f"FWHM / 40: {relative_rms(ours[2], reference[2]):.2e})")
     assert default <= 5e-4
     # The beam turned by 180 deg (b_lm (-1)^m: the frame SimTotalconvolve hands ducc0, psi - psi_pol + pi,
