@@ -4,9 +4,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "pisco/error.hpp"
 
@@ -52,6 +54,15 @@ inline std::filesystem::path fresh_test_dir(const std::string& what) {
 inline void expect_error(const std::function<void()>& f, const std::string& needle) {
   const std::string message = error_of(f);
   EXPECT_TRUE(contains(message, needle)) << "expected a pisco::Error mentioning '" << needle << "', got: " << message;
+}
+
+// A TOD's RMS about its mean: the scale the validation tests give their errors in.
+inline double rms_about_mean(const std::vector<double>& v) {
+  double m = 0.0, s = 0.0;
+  for (double x : v) m += x;
+  m /= double(v.size());
+  for (double x : v) s += (x - m) * (x - m);
+  return std::sqrt(s / double(v.size()));
 }
 
 }  // namespace pisco_test

@@ -85,14 +85,6 @@ pisco::Pointing sphere_pointing(std::size_t random_samples) {
   return p;
 }
 
-double rms_about_mean(const std::vector<double>& v) {
-  double m = 0.0, s = 0.0;
-  for (double x : v) m += x;
-  m /= double(v.size());
-  for (double x : v) s += (x - m) * (x - m);
-  return std::sqrt(s / double(v.size()));
-}
-
 class GridBeams : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(GridBeams, TheDefaultStepIsWithin1e4OfTheConvergedBeam) {
@@ -155,7 +147,7 @@ TEST_P(GridBeams, TheDefaultStepIsWithin1e4OfTheConvergedBeam) {
       std::vector<double> ref(p.size()), got(p.size());
       reference.convolve(d, p, ref);
       engine.convolve(d, p, got);
-      const double scale = gain ? 2.725 : rms_about_mean(ref);
+      const double scale = gain ? 2.725 : pisco_test::rms_about_mean(ref);
       double worst = 0.0, sum = 0.0;
       for (std::size_t i = 0; i < p.size(); ++i) {
         const double err = std::abs(got[i] - ref[i]) / scale;

@@ -226,14 +226,6 @@ Errors errors(const std::vector<double>& d, const std::vector<double>& ref, doub
   return e;
 }
 
-double rms_about_mean(const std::vector<double>& v) {
-  double m = 0.0, s = 0.0;
-  for (double x : v) m += x;
-  m /= double(v.size());
-  for (double x : v) s += (x - m) * (x - m);
-  return std::sqrt(s / double(v.size()));
-}
-
 class Poles : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(Poles, BandLimitedSkiesMatchTheirExactSmoothingEverywhere) {
@@ -261,7 +253,7 @@ TEST_P(Poles, BandLimitedSkiesMatchTheirExactSmoothingEverywhere) {
                          Case{"two point sources", false, true}}) {
       const HarmonicSky hs = make_sky(nside, lmax, 7, c.monopole_dipole, c.point_source);
       const std::vector<double> ref = exact_tod(hs.alm, w, p);
-      const double scale = rms_about_mean(ref);
+      const double scale = pisco_test::rms_about_mean(ref);
       for (const pisco::Quadrature poles : {pisco::Quadrature::corrected, pisco::Quadrature::plain}) {
         if (poles == pisco::Quadrature::plain && (backend != "cpu" || per_fwhm != 6.0)) continue;
         pisco::EngineOptions o;
@@ -325,7 +317,7 @@ TEST(PolesWithoutRingWeights, TwoMoreIterationsKeepTheBar) {
     pisco::Engine engine(hs.sky, {beam}, fp, o);
     std::vector<double> d(p.size());
     engine.convolve(0, p, d);
-    const Errors e = errors(d, ref, rms_about_mean(ref), p);
+    const Errors e = errors(d, ref, pisco_test::rms_about_mean(ref), p);
     std::printf("simd, %s sky without ring weights:\n  worst     ", point_sources ? "two point sources" : "monopole + dipole + random");
     for (const double x : e.worst) std::printf(" %7.1e", x);
     std::printf("\n");
