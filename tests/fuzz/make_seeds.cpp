@@ -240,14 +240,19 @@ void h5_check(herr_t status, const std::string& what) {
   if (status < 0) die("HDF5: " + what);
 }
 
-// A 1-D dataset of `type` (file) written from doubles.
-void h5_vector(hid_t loc, const char* name, hid_t type, const std::vector<double>& v) {
-  const hsize_t n = v.size();
+// A 1-D dataset of n elements of `type` (file), written from memory of `memory_type`.
+void h5_dataset(hid_t loc, const char* name, hid_t type, hid_t memory_type, std::size_t count, const void* data) {
+  const hsize_t n = count;
   const hid_t space = H5Screate_simple(1, &n, nullptr);
   const hid_t ds = H5Dcreate2(loc, name, type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  h5_check(H5Dwrite(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()), name);
+  h5_check(H5Dwrite(ds, memory_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data), name);
   H5Dclose(ds);
   H5Sclose(space);
+}
+
+// A 1-D dataset of `type` (file) written from doubles.
+void h5_vector(hid_t loc, const char* name, hid_t type, const std::vector<double>& v) {
+  h5_dataset(loc, name, type, H5T_NATIVE_DOUBLE, v.size(), v.data());
 }
 
 std::vector<pisco::Quat> boresight(std::size_t n) {
@@ -367,24 +372,14 @@ void write_toast(const fs::path& file, const std::vector<ToastRow>& rows, const 
   H5Tinsert(row, "pol_leakage", HOFFSET(ToastRow, pol_leakage), H5T_NATIVE_DOUBLE);
   H5Tinsert(row, "fwhm", HOFFSET(ToastRow, fwhm), H5T_NATIVE_DOUBLE);
   H5Tinsert(row, "gamma", HOFFSET(ToastRow, gamma), H5T_NATIVE_DOUBLE);
-  const hsize_t n = rows.size();
-  const hid_t space = H5Screate_simple(1, &n, nullptr);
-  const hid_t ds = H5Dcreate2(f, "focalplane", row, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  h5_check(H5Dwrite(ds, row, H5S_ALL, H5S_ALL, H5P_DEFAULT, rows.data()), "focalplane");
-  H5Dclose(ds);
-  H5Sclose(space);
+  h5_dataset(f, "focalplane", row, row, rows.size(), rows.data());
   if (!meta.empty()) {
     // astropy's header: one variable-length string a line.
     const hid_t text = H5Tcopy(H5T_C_S1);
     H5Tset_size(text, H5T_VARIABLE);
     std::vector<const char*> lines;
     for (const auto& l : meta) lines.push_back(l.c_str());
-    const hsize_t m = lines.size();
-    const hid_t mspace = H5Screate_simple(1, &m, nullptr);
-    const hid_t mds = H5Dcreate2(f, "focalplane.__table_column_meta__", text, mspace, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-    h5_check(H5Dwrite(mds, text, H5S_ALL, H5S_ALL, H5P_DEFAULT, lines.data()), "meta");
-    H5Dclose(mds);
-    H5Sclose(mspace);
+    h5_dataset(f, "focalplane.__table_column_meta__", text, text, lines.size(), lines.data());
     H5Tclose(text);
   }
   H5Tclose(row);
