@@ -167,12 +167,10 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   RunObserver silent;
   RunObserver& obs = observer ? *observer : silent;
   // The run's account: the leading process's alone.
-  auto say = [&](const char* fmt, auto... args) {
-    if (cl.leader()) obs.log(detail::printf_text(fmt, args...));
-  };
   const std::function<void(const std::string&)> say_line = [&](const std::string& line) {
     if (cl.leader()) obs.log(line);
   };
+  auto say = [&](const char* fmt, auto... args) { say_line(detail::printf_text(fmt, args...)); };
   const fs::path data_dir = options_.data_dir.empty() ? default_data_dir() : options_.data_dir;
   SimulationResult result;
 
