@@ -111,9 +111,13 @@ std::vector<double> reference_pixels(const SkyView& sky, unsigned threads) {
   return pixels;
 }
 
-// The detector as check_focal_plane() has accepted it.
-PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double pixel_area,
-                                  Normalization normalization) {
+namespace {
+
+// A detector's weights w(col) = sum_r row[r] B_r,col(node) over the beam's rows r, with the grid's
+// edge records appended (src/core/grid_curvature.hpp); per-sample normalization's (Omega_pix B_TT /
+// Omega~, 0, 0, 0) likewise. `d` is the detector as check_focal_plane() has accepted it.
+PreparedDetector prepare(const Detector& d, const Beamsor& beam, double pixel_area, Normalization normalization,
+                         const double (&row)[4]) {
   PreparedDetector p;
   const Quat& o = d.offset;
   p.offset = make_offset({o.x, o.y, o.z, o.w});  // rotation_matrix() is exact for any norm
@@ -127,19 +131,13 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
   p.grid_inv_step = 1.0 / beam.grid_step();
   const std::size_t nodes = p.radial ? static_cast<std::size_t>(p.grid_n)
                                      : static_cast<std::size_t>(p.grid_n) * p.grid_n;
-  const double scale = pixel_area / beam.omega_tilde() * d.gain / 2;
-  const double row_t = scale * (1 + d.epsilon), row_q = scale * (1 - d.epsilon);
   p.weights.assign(nodes * 4, 0.0);
-  for (int col = 0; col < 4; ++col) {
-    const auto bt = beam.element(0, col);
-    const auto bq = beam.element(1, col);
-    for (std::size_t k = 0; k < nodes; ++k) {
-      double w = 0.0;
-      if (!bt.empty()) w += row_t * bt[k];
-      if (!bq.empty()) w += row_q * bq[k];
-      p.weights[k * 4 + col] = w;
+  for (int col = 0; col < 4; ++col)
+    for (int r = 0; r < 4; ++r) {
+      const auto b = beam.element(r, col);
+      if (row[r] == 0.0 || b.empty()) continue;
+      for (std::size_t k = 0; k < nodes; ++k) p.weights[k * 4 + col] += row[r] * b[k];
     }
-  }
   if (normalization == Normalization::per_sample) {
     p.norm_weights.assign(nodes * 4, 0.0);
     const auto btt = beam.element(0, 0);
@@ -161,20 +159,23 @@ PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double
   return p;
 }
 
+}  // namespace
+
+// The detector as check_focal_plane() has accepted it: rows T and Q, s/2 (1 + eps) and s/2 (1 - eps).
+PreparedDetector prepare_detector(const Detector& d, const Beamsor& beam, double pixel_area,
+                                  Normalization normalization) {
+  const double scale = pixel_area / beam.omega_tilde() * d.gain / 2;
+  const double row[4] = {scale * (1 + d.epsilon), scale * (1 - d.epsilon), 0.0, 0.0};
+  return prepare(d, beam, pixel_area, normalization, row);
+}
+
 PreparedDetector prepare_row_detector(const Detector& d, const Beamsor& beam, double pixel_area,
                                       Normalization normalization, int row) {
   Detector plain = d;
   plain.hwp.reset();
-  PreparedDetector p = prepare_detector(plain, beam, pixel_area, normalization);
-  const double scale = pixel_area / beam.omega_tilde();
-  const std::size_t nodes = p.radial ? static_cast<std::size_t>(p.grid_n) : static_cast<std::size_t>(p.grid_n) * p.grid_n;
-  p.weights.assign(nodes * 4, 0.0);
-  for (int col = 0; col < 4; ++col) {
-    const auto b = beam.element(row, col);
-    for (std::size_t k = 0; k < nodes; ++k) p.weights[k * 4 + col] = b.empty() ? 0.0 : scale * b[k];
-  }
-  if (!p.radial) append_edge_curvature(p.weights, p.grid_n, 4);
-  return p;
+  double rows[4] = {0.0, 0.0, 0.0, 0.0};
+  rows[row] = pixel_area / beam.omega_tilde();
+  return prepare(plain, beam, pixel_area, normalization, rows);
 }
 
 EngineInputs prepare_inputs(const SkyView& sky, const std::vector<Beamsor>& beams,
