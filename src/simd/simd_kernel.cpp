@@ -224,17 +224,17 @@ HWY_INLINE void record_pair(const RecordGrid<Columns>& g, const I& r, Vec4<F>& w
 
 template <int Columns>
 HWY_INLINE void weight_pair(const RecordGrid<Columns>& g, const I& k, Vec4<F>& w, Vec4<F>& next) {
-  record_pair(g, g.stride == 1 ? k : k * 3, w, next);
+  record_pair(g, g.stride == 1 ? k : k * g.stride, w, next);
 }
 
 template <int Columns>
 HWY_INLINE void edge_x_pair(const RecordGrid<Columns>& g, const I& k, const I&, const I&, Vec4<F>& ex0, Vec4<F>& ex1) {
-  record_pair(g, k * 3 + 1, ex0, ex1);
+  record_pair(g, k * g.stride + 1, ex0, ex1);
 }
 
 template <int Columns>
 HWY_INLINE void edge_y_pair(const RecordGrid<Columns>& g, const I& k, Vec4<F>& ey0, Vec4<F>& ey1) {
-  record_pair(g, k * 3 + 2, ey0, ey1);
+  record_pair(g, k * g.stride + 2, ey0, ey1);
 }
 
 #if HWY_TARGET != HWY_SCALAR  // the float64 path there is the reference's scalar code
