@@ -316,6 +316,7 @@ class Engine {
   EngineOptions options_;
   std::unique_ptr<detail::Backend> polar_backend_;
   std::vector<double> polar_cut_, offset_angle_;  // per prepared detector (row detectors included)
+  double polar_reach_ = 0.0;  // the polar copy's radius around each turned pole (polar_copy.hpp)
   std::uint64_t polar_ticket_ = 1, polar_samples_ = 0;
   // Which backends hold adjoint maps not yet taken.
   bool adjoint_main_ = false, adjoint_outer_ = false, adjoint_polar_ = false;

@@ -8,6 +8,7 @@
 
 #include "core/backend.hpp"
 #include "core/masked_sky.hpp"
+#include "core/polar_copy.hpp"
 #include "core/poles.hpp"
 #include "core/prepared.hpp"
 #include "beams/sidelobes.hpp"
@@ -140,6 +141,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   polar_backend_.reset();
   polar_setup_.reset();  // waits for a transform still running from the previous sky
   polar_cut_.clear();
+  polar_reach_ = 0.0;
   offset_angle_.clear();
   if (options.quadrature == Quadrature::corrected && unseen_pixels_ == 0) {
     bool any = false;
@@ -148,15 +150,23 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
       const double z = d.offset.active ? detail::rotation_matrix(d.offset.quat).ez.z : 1.0;
       offset_angle_.push_back(std::acos(std::clamp(z, -1.0, 1.0)) + 1e-9);
       any = any || polar_cut_.back() > 0.0;
+      // The copy's pixels that such a sample's disc can reach, two pixels more for the disc's edge.
+      if (polar_cut_.back() > 0.0)
+        polar_reach_ = std::max(polar_reach_, polar_cut_.back() + d.rho_max + 2.0 * std::sqrt(sky.pixel_area()));
     }
     // Its transform starts now on a thread of its own, beside the rest of the set-up and whatever the
     // caller does next; the backend is made from it at prepare() or by the first submission with such
     // a sample (a ground scan far from the poles never waits for it). The detectors and the ring
     // table are the main backend's.
+    if (any && !detail::polar_copy_fits(sky.nside(), polar_reach_)) {
+      any = false;
+      std::fill(polar_cut_.begin(), polar_cut_.end(), 0.0);
+    }
     if (any) {
       polar_setup_ = std::make_unique<PolarSetup>();
-      polar_setup_->sky = std::async(std::launch::async, [source = Sky(sky), weigh = weighs_cap_boundaries(options)] {
-        return detail::polar_sky(source, weigh);
+      polar_setup_->sky = std::async(std::launch::async, [source = Sky(sky), weigh = weighs_cap_boundaries(options),
+                                                           reach = polar_reach_] {
+        return detail::polar_sky(source, weigh, reach);
       });
     }
   }
@@ -659,7 +669,7 @@ void Engine::take_adjoint(const StokesMaps& maps) {
   }
   if (adjoint_polar_) {
     const Sky part = collect(*polar_backend_, nside);
-    add(detail::polar_sky_adjoint(part, weighs_cap_boundaries(options_)));
+    add(detail::polar_sky_adjoint(part, weighs_cap_boundaries(options_), polar_reach_));
     adjoint_polar_ = false;
   }
   if (adjoint_outer_) {

@@ -1,4 +1,4 @@
-// Samples near the HEALPix poles on a turned copy of the sky, and the cap-boundary rings
+// Samples near the HEALPix poles on a turned copy of the sky (polar_copy.cpp), and the cap-boundary rings
 // (docs/physics.md, "The quadrature").
 #include "core/poles.hpp"
 
@@ -6,9 +6,6 @@
 #include <cmath>
 #include <numbers>
 
-#include <alm_powspec_tools.h>
-
-#include "core/sky_alm.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail {
@@ -28,36 +25,6 @@ void weigh_cap_boundaries(Sky& sky) {
   for (const std::size_t first : {std::size_t(b.north), std::size_t(b.south)})
     for (auto map : {sky.I(), sky.Q(), sky.U(), sky.V()})
       for (std::size_t p = first; p < first + b.count; ++p) map[p] *= b.weight;
-}
-
-int polar_band_limit(int nside) { return nside == 1 ? 2 : 2 * nside; }
-
-Sky polar_sky(const SkyView& sky, bool weigh_boundaries, int iterations) {
-  try {
-    SkyAlm a = sky_alm(sky, polar_band_limit(sky.nside()), iterations, true);
-    // S'(R p) = S(p) for R = 90 deg about y: HEALPix's Euler angles (psi, theta, phi) = (0, pi/2, 0).
-    rotate_alm(a.t, a.e, a.b, 0.0, std::numbers::pi / 2, 0.0);
-    if (a.has_v) rotate_alm(a.v, 0.0, std::numbers::pi / 2, 0.0);
-    Sky out = sky_from_alm(a, sky.nside(), sky.units());
-    if (weigh_boundaries) weigh_cap_boundaries(out);
-    return out;
-  } catch (const PlanckError& err) {
-    throw Error(std::string("the sky's polar copy: HEALPix: ") + err.what());
-  }
-}
-
-Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, int iterations) {
-  try {
-    Sky weighed(maps);
-    if (weigh_boundaries) weigh_cap_boundaries(weighed);
-    SkyAlm a = sky_from_alm_adjoint(weighed, polar_band_limit(maps.nside()));
-    // The rotation's transpose is its inverse: Euler angles (-phi, -theta, -psi).
-    rotate_alm(a.t, a.e, a.b, 0.0, -std::numbers::pi / 2, 0.0);
-    if (a.has_v) rotate_alm(a.v, 0.0, -std::numbers::pi / 2, 0.0);
-    return sky_alm_adjoint(a, maps.nside(), iterations, true, maps.units());
-  } catch (const PlanckError& err) {
-    throw Error(std::string("the adjoint of the sky's polar copy: HEALPix: ") + err.what());
-  }
 }
 
 double polar_cut(double rho_max, int nside) {

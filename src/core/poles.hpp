@@ -4,7 +4,7 @@
 // - the poles, where its end term, a third of a pixel's weight times the integrand at the pole, is
 //   1e-2 of the TOD for a beam centred on one. Such samples are summed instead on a copy of the sky
 //   turned by 90 deg about y, where they lie on the equator, with their pointing turned the same way.
-//   For a sky band-limited to 2 NSIDE the copy is exact.
+//   The copy is resampled from the pixels around each pole (polar_copy.hpp).
 // - the two rings where the polar caps meet the equatorial belt (z = +-2/3), where the rings' spacing
 //   changes its law: the rule's slope jumps there, and Euler-Maclaurin's term for the jump is
 //   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE).
@@ -33,18 +33,6 @@ void weigh_cap_boundaries(Sky& sky);
 // The rotation R that takes the sky to its polar copy: 90 deg about y, (x, y, z) -> (z, y, -x). The
 // poles land on the equator at phi = 0 and pi; the old equator's points (+-1, 0, 0) become the poles.
 inline constexpr Q4 polar_rotation{0.0, 0.70710678118654752440, 0.0, 0.70710678118654752440};
-
-// The band limit of the polar copy: 2 NSIDE (3 NSIDE - 1 for NSIDE 1), the limit up to which HEALPix's
-// iterated map2alm recovers a band-limited sky.
-int polar_band_limit(int nside);
-
-// The sky seen through R: S'(R p) = S(p), I, Q, U (as T, E, B) and V (spin 0) through HEALPix C++'s
-// map2alm (`iterations` Jacobi iterations, HEALPix's ring weights where healpy-data has them) up to
-// polar_band_limit, rotate_alm and alm2map; its own cap-boundary rings weighted when `weigh_boundaries`.
-Sky polar_sky(const SkyView& sky, bool weigh_boundaries, int iterations = 3);
-// Its transpose (docs/physics.md, "The adjoint"): maps on the polar copy's pixels back onto the sky's,
-// so that <polar_sky(s), m> = <s, polar_sky_adjoint(m)> to rounding.
-Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, int iterations = 3);
 
 // The angle from a pole within which a detector's samples go to the polar copy: its disc radius plus
 // four pixel sizes, so that no ring within four of the pole meets the disc of a sample left on the
