@@ -61,7 +61,7 @@ std::vector<pisco::Beamsor> one_beam() {
 pisco::EngineOptions plain_cpu() {
   pisco::EngineOptions o;
   o.backend = "cpu";
-  o.quadrature = pisco::Quadrature::plain;  // no polar copy (its map2alm would overflow first)
+  o.quadrature = pisco::Quadrature::plain;  // no polar copy (its ring transforms would overflow first)
   return o;
 }
 

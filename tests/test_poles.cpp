@@ -12,7 +12,6 @@
 
 #include <cmath>
 #include <cstdlib>
-#include <filesystem>
 #include <complex>
 #include <cstdio>
 #include <numbers>
@@ -281,47 +280,6 @@ TEST_P(Poles, BandLimitedSkiesMatchTheirExactSmoothingEverywhere) {
         EXPECT_GT(engine.polar_samples(), 0u);
       }
     }
-  }
-}
-
-// Without healpy-data (a relocated install: PISCO_HEALPY_DATA_DIR naming an empty folder) the polar
-// copy, resampled from the sky's own pixels, keeps the bar: it reads no ring weights.
-TEST(PolesWithoutHealpyData, TheCopyKeepsTheBar) {
-  const std::filesystem::path empty = pisco_test::fresh_test_dir("no-healpy-data");
-  struct Env {
-    std::string saved;
-    bool had = false;
-    explicit Env(const std::string& value) {
-      if (const char* v = std::getenv("PISCO_HEALPY_DATA_DIR")) saved = v, had = true;
-      ::setenv("PISCO_HEALPY_DATA_DIR", value.c_str(), 1);
-    }
-    ~Env() { had ? ::setenv("PISCO_HEALPY_DATA_DIR", saved.c_str(), 1) : ::unsetenv("PISCO_HEALPY_DATA_DIR"); }
-  } env(empty.string());
-  const int nside = 128, lmax = 2 * nside;
-  const double fwhm = 6.0 * std::sqrt(pi / 3) / nside;
-  pisco::FocalPlane fp;
-  pisco::Detector det;
-  det.name = "d";
-  fp.add(det);
-  const pisco::Pointing p = pole_pointing(200);
-  pisco::BeamOptions bo;
-  bo.rho_max = 2.5 * fwhm;
-  const pisco::Beamsor beam = pisco::Beamsor::gaussian(fwhm, bo);
-  const Windows w = gaussian_windows(fwhm, bo.rho_max, lmax);
-  for (const bool point_sources : {true, false}) {
-    const HarmonicSky hs = make_sky(nside, lmax, 7, !point_sources, point_sources);
-    const std::vector<double> ref = exact_tod(hs.alm, w, p);
-    pisco::EngineOptions o;
-    o.backend = "simd";
-    pisco::Engine engine(hs.sky, {beam}, fp, o);
-    std::vector<double> d(p.size());
-    engine.convolve(0, p, d);
-    const Errors e = errors(d, ref, pisco_test::rms_about_mean(ref), p);
-    std::printf("simd, %s sky without ring weights:\n  worst     ", point_sources ? "two point sources" : "monopole + dipole + random");
-    for (const double x : e.worst) std::printf(" %7.1e", x);
-    std::printf("\n");
-    for (std::size_t k = 0; k < e.worst.size(); ++k) EXPECT_LE(e.worst[k], 1e-4) << "colatitude " << colatitudes_deg[k];
-    EXPECT_GT(engine.polar_samples(), 0u);
   }
 }
 

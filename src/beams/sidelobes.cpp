@@ -62,7 +62,7 @@ Sky band_limited_sky_adjoint(const SkyView& maps, int sky_nside, int l_pass) {
   try {
     SkyAlm a = sky_from_alm_adjoint(maps, l_stop);
     apply_window(a, l_pass, l_stop);
-    return sky_alm_adjoint(a, sky_nside, 3, false, maps.units());
+    return sky_alm_adjoint(a, sky_nside, 3, maps.units());
   } catch (const PlanckError& err) {
     throw Error(std::string("the adjoint of the sidelobes' band-limited sky: HEALPix: ") + err.what());
   }
@@ -73,7 +73,7 @@ Sky band_limited_sky(const SkyView& sky, int nside, int l_pass) {
   const int l_stop = std::min(2 * nside, 3 * sky.nside() - 1);
   const int lmax = l_stop;
   try {
-    SkyAlm a = sky_alm(sky, lmax, 3, false);
+    SkyAlm a = sky_alm(sky, lmax, 3);
     apply_window(a, l_pass, l_stop);
     return sky_from_alm(a, nside, sky.units());
   } catch (const PlanckError& err) {

@@ -6,7 +6,6 @@
 #include <span>
 
 #include <alm_healpix_tools.h>
-#include <healpix_data_io.h>
 #include <healpix_map.h>
 
 namespace pisco::detail {
@@ -19,35 +18,15 @@ Healpix_Map<double> healpix_map(std::span<const double> v, int nside) {
 
 void copy_map(const Healpix_Map<double>& m, std::span<double> out) { std::copy(&m[0], &m[0] + m.Npix(), out.begin()); }
 
-// map2alm's ring weights (1 per ring of the northern half and the equator) and the Jacobi
-// iterations that go with them. With healpy-data's weights each iteration is about 20 times more
-// accurate: 3 recover a sky band-limited to 2 NSIDE to 2e-7 of its largest a_lm, as 5 without them
-// do; where the file is missing (healpy-data elsewhere, PISCO_HEALPY_DATA_DIR unset) the unit weights
-// get two more iterations, so that the polar copy keeps its accuracy (tests/test_poles.cpp).
+// map2alm's quadrature: unit ring weights (one per ring of the northern half and the equator) and
+// `iterations` Jacobi iterations.
 struct Quadrature {
   arr<double> weight;
   int iterations = 0;
 };
 
-Quadrature map2alm_quadrature(int nside, bool ring_weights, int iterations) {
-  Quadrature q{arr<double>(static_cast<tsize>(2 * nside), 1.0), iterations};
-  if (!ring_weights) return q;
-  const std::filesystem::path dir = healpy_data_dir();
-  char name[40];
-  std::snprintf(name, sizeof name, "weight_ring_n%05d.fits", nside);
-  std::error_code ec;
-  if (std::filesystem::is_regular_file(dir / name, ec)) {
-    try {
-      read_weight_ring(dir.string(), nside, q.weight);
-      for (tsize i = 0; i < q.weight.size(); ++i) q.weight[i] += 1.0;  // the files hold w - 1
-      return q;
-    } catch (const PlanckError&) {
-      q.weight.alloc(static_cast<tsize>(2 * nside));
-      q.weight.fill(1.0);
-    }
-  }
-  q.iterations = iterations + 2;
-  return q;
+Quadrature map2alm_quadrature(int nside, int iterations) {
+  return Quadrature{arr<double>(static_cast<tsize>(2 * nside), 1.0), iterations};
 }
 }  // namespace
 
@@ -56,9 +35,9 @@ std::filesystem::path healpy_data_dir() {
   return env && *env ? std::filesystem::path(env) : std::filesystem::path(PISCO_HEALPY_DATA_DIR);
 }
 
-SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights) {
+SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations) {
   const int nside = sky.nside();
-  const Quadrature q = map2alm_quadrature(nside, ring_weights, iterations);
+  const Quadrature q = map2alm_quadrature(nside, iterations);
   SkyAlm a{{lmax, lmax}, {lmax, lmax}, {lmax, lmax}, {lmax, lmax}, false};
   map2alm_pol_iter(healpix_map(sky.I(), nside), healpix_map(sky.Q(), nside), healpix_map(sky.U(), nside), a.t, a.e,
                    a.b, q.iterations, q.weight);
@@ -115,8 +94,8 @@ SkyAlm sky_from_alm_adjoint(const SkyView& maps, int lmax) {
   return a;
 }
 
-Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weights, const std::string& units) {
-  const Quadrature q = map2alm_quadrature(nside, ring_weights, iterations);
+Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, const std::string& units) {
+  const Quadrature q = map2alm_quadrature(nside, iterations);
   const arr<double>& weight = q.weight;
   const int lmax = b.t.Lmax();
   // s = sum_j (1 - Y^T D Y)^j b, term by term: t <- t - Y^T D Y t.

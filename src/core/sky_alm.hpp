@@ -1,5 +1,5 @@
 // A sky's spherical harmonic coefficients through HEALPix C++ and back: what the split beams' coarse
-// sky (sidelobes.cpp) and the polar copy (poles.cpp) are made from.
+// sky (sidelobes.cpp) and the deconvolving map-maker's smoothing to a target beam go through.
 #pragma once
 
 #include <filesystem>
@@ -21,22 +21,21 @@ struct SkyAlm {
 // PISCO_HEALPY_DATA_DIR where set, else the build's (CMake's PISCO_HEALPY_DATA_DIR).
 std::filesystem::path healpy_data_dir();
 
-// The sky's a_lm up to lmax by HEALPix's map2alm with `iterations` Jacobi iterations; with
-// `ring_weights`, HEALPix's ring weights from healpy-data, or two more iterations where it has no
-// file for the sky's NSIDE. Throws PlanckError, which callers name.
-SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations, bool ring_weights);
+// The sky's a_lm up to lmax by HEALPix's map2alm with `iterations` Jacobi iterations and unit ring
+// weights. Throws PlanckError, which callers name.
+SkyAlm sky_alm(const SkyView& sky, int lmax, int iterations);
 // The maps of `a` at `nside` (alm2map_pol, and alm2map for V).
 Sky sky_from_alm(const SkyAlm& a, int nside, const std::string& units);
 
 // The transposes of the two, for the adjoint (docs/physics.md, "The adjoint"), in the inner products
 // sum_p m_p m'_p of maps and sum_l [a_l0 b_l0 + 2 sum_{m>0} Re(a_lm conj(b_lm))] of a_lm, in which
-// HEALPix's map2alm with ring weights is alm2map_adjoint of the map times the weights and pixel area:
+// HEALPix's map2alm is alm2map_adjoint of the map times the ring weights and pixel area:
 // sky_alm = P = sum_{j=0}^{n} (1 - W Y)^j W with Y = alm2map, W = Y^T D, D = the weights times
 // 4 pi / Npix, so P^T b = D Y sum_{j=0}^{n} (1 - Y^T D Y)^j b. Both leave V out where it is zero
 // (has_v false: V's a_lm or maps all zero), as the forward does: the same linear map.
 // sky_from_alm_adjoint: Y^T of the maps, a_lm up to lmax.
 SkyAlm sky_from_alm_adjoint(const SkyView& maps, int lmax);
 // sky_alm_adjoint: P^T of `b` into maps at `nside`.
-Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, bool ring_weights, const std::string& units);
+Sky sky_alm_adjoint(const SkyAlm& b, int nside, int iterations, const std::string& units);
 
 }  // namespace pisco::detail

@@ -311,7 +311,7 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
   }
   if (options_.target_fwhm > 0.0) {
     const int lmax = 3 * nside - 1;
-    detail::SkyAlm a = detail::sky_alm(x, lmax, 3, false);
+    detail::SkyAlm a = detail::sky_alm(x, lmax, 3);
     const std::vector<double> wt = gaussian_beam_window(options_.target_fwhm, lmax, false);
     const std::vector<double> wp = gaussian_beam_window(options_.target_fwhm, lmax, true);
     for (int m = 0; m <= lmax; ++m)
