@@ -13,6 +13,7 @@
 #include "pisco/focal_plane.hpp"
 #include "pisco/pointing.hpp"
 #include "pisco/sky.hpp"
+#include "pisco/sources.hpp"
 
 namespace pisco {
 
@@ -262,6 +263,18 @@ class Engine {
   std::size_t flag_samples(std::size_t detector, const PointingView& boresight, std::span<std::uint8_t> flags) const;
   std::size_t flag_samples(std::size_t detector, const QuatPointingView& boresight,
                            std::span<std::uint8_t> flags) const;
+  // Point sources, fixed or moving (pisco/sources.hpp, docs/sources.md): adds to tod each source's
+  // response at these samples, the detector's beam (a split beam's outer part included) evaluated at
+  // the source's direction, with the half-wave plate, exactly: no pixelization of the source, the same
+  // near the poles as anywhere. `time` is each sample's time on the sources' clock. Computed on the
+  // host in float64, the same bits whatever the backend. Needs the integral normalization. Throws
+  // pisco::Error naming the detector, the source or the sample (a time outside a source's track).
+  void add_sources(std::size_t detector, const PointingView& boresight, std::span<const double> time,
+                   const std::vector<SourceTrack>& sources, std::span<double> tod,
+                   std::span<const double> hwp_angle = {}) const;
+  void add_sources(std::size_t detector, const QuatPointingView& boresight, std::span<const double> time,
+                   const std::vector<SourceTrack>& sources, std::span<double> tod,
+                   std::span<const double> hwp_angle = {}) const;
   // The number of UNSEEN sky pixels taken as 0 (policies zero and flag).
   std::size_t unseen_pixels() const noexcept { return unseen_pixels_; }
   // The largest EngineOptions::threads: 64 per hardware thread of this machine.
@@ -281,6 +294,10 @@ class Engine {
   template <class View>
   void check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
                         std::span<const double> hwp_angle, std::vector<double>& plate_angle) const;
+  template <class View>
+  void add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
+                        const std::vector<SourceTrack>& sources, std::span<double> tod,
+                        std::span<const double> hwp_angle) const;
   void make_polar_backend();
   void load_sky(const SkyView& sky, const std::vector<Beamsor>* beams);
 

@@ -15,5 +15,6 @@
 #include "pisco/pointing.hpp"
 #include "pisco/quaternion.hpp"
 #include "pisco/sky.hpp"
+#include "pisco/sources.hpp"
 #include "pisco/units.hpp"
 #include "pisco/version.hpp"

@@ -11,6 +11,7 @@
 #include "core/polar_copy.hpp"
 #include "core/poles.hpp"
 #include "core/prepared.hpp"
+#include "core/sources.hpp"
 #include "beams/sidelobes.hpp"
 #include "core/text.hpp"
 #include "pisco/hwp.hpp"
@@ -273,6 +274,50 @@ void Engine::check_submission(const char* what, std::size_t detector, const View
       plate_angle[i] = hwp_angle[i] - det.plate_gamma;
     }
   }
+}
+
+template <class View>
+void Engine::add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
+                              const std::vector<SourceTrack>& sources, std::span<double> tod,
+                              std::span<const double> hwp_angle) const {
+  std::vector<double> plate_angle;
+  check_submission("add_sources", detector, boresight, tod.size(), hwp_angle, plate_angle);
+  const std::string& name = focal_plane_[detector].name;
+  if (time.size() != tod.size())
+    throw Error("add_sources: detector '" + name + "': " + std::to_string(time.size()) + " sample times for " +
+                std::to_string(tod.size()) + " samples");
+  for (std::size_t i = 0; i < time.size(); ++i)
+    if (!std::isfinite(time[i]))
+      throw Error("add_sources: detector '" + name + "': the time of sample " + std::to_string(i) + " is " +
+                  detail::number_text(time[i]) + "; expected a finite number");
+  if (options_.normalization != Normalization::integral)
+    throw Error("add_sources: point sources need the integral normalization; a per-sample normalization divides "
+                "each sample by its own disc's sum, which a source outside the sky does not change");
+  for (const SourceTrack& s : sources) s.check("add_sources");
+  const auto part = [&](const detail::EngineInputs& in) {
+    detail::SourcePart p;
+    p.detector = &in.detectors.at(detector);
+    for (int r = 0; r < 4; ++r)
+      if (p.detector->plate == detail::PreparedDetector::Plate::detector) p.rows[r] = &in.detectors.at(p.detector->rows[r]);
+    p.pixel_area = in.sky.pixel_area;
+    return p;
+  };
+  std::vector<detail::SourcePart> parts{part(*inputs_)};
+  if (!split_.empty() && split_[detector]) parts.push_back(part(*outer_inputs_));
+  detail::PointingInput input = input_of(boresight);
+  detail::add_source_tod(input, plate_angle, time, sources, parts, tod);
+}
+
+void Engine::add_sources(std::size_t detector, const PointingView& boresight, std::span<const double> time,
+                         const std::vector<SourceTrack>& sources, std::span<double> tod,
+                         std::span<const double> hwp_angle) const {
+  add_sources_view(detector, boresight, time, sources, tod, hwp_angle);
+}
+
+void Engine::add_sources(std::size_t detector, const QuatPointingView& boresight, std::span<const double> time,
+                         const std::vector<SourceTrack>& sources, std::span<double> tod,
+                         std::span<const double> hwp_angle) const {
+  add_sources_view(detector, boresight, time, sources, tod, hwp_angle);
 }
 
 void Engine::make_polar_backend() {
