@@ -201,7 +201,7 @@ TEST(Sources, AMovingSourceIsWhereItsTrackPutsIt) {
     engine.add_sources(0, p, late, {jupiter}, tod);
     FAIL() << "a time beyond the track";
   } catch (const pisco::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("source 'jupiter': sample 1 is at time 26"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("add_sources: detector 'd': source 'jupiter': sample 1 is at time 26"), std::string::npos) << e.what();
   }
 }
 

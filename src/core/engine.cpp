@@ -305,7 +305,11 @@ void Engine::add_sources_view(std::size_t detector, const View& boresight, std::
   std::vector<detail::SourcePart> parts{part(*inputs_)};
   if (!split_.empty() && split_[detector]) parts.push_back(part(*outer_inputs_));
   detail::PointingInput input = input_of(boresight);
-  detail::add_source_tod(input, plate_angle, time, sources, parts, tod);
+  try {
+    detail::add_source_tod(input, plate_angle, time, sources, parts, tod);
+  } catch (const Error& e) {
+    throw Error("add_sources: detector '" + name + "': " + e.what(), e.kind());
+  }
 }
 
 void Engine::add_sources(std::size_t detector, const PointingView& boresight, std::span<const double> time,

@@ -263,6 +263,41 @@ class PyEngine {
     return result;
   }
 
+  // Point sources (Engine::add_sources) at these samples, added into `out` (or new zeros).
+  nb::object add_sources(nb::handle detector, nb::handle time_arg, const std::vector<SourceTrack>& sources,
+                         nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats, nb::handle out,
+                         nb::handle hwp_angle) {
+    const std::size_t d = detector_index(detector);
+    const PointingArgs p = pointing_args(theta, phi, psi, quats, "add_sources");
+    const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    const ConstVector time = const_vector(time_arg, "time");
+    if (time.shape(0) != p.size)
+      throw nb::value_error(("add_sources: time has " + std::to_string(time.shape(0)) +
+                             " samples, but the pointing has " + std::to_string(p.size)).c_str());
+    nb::object result = out.is_none() ? nb::module_::import_("numpy").attr("zeros")(p.size, "float64") : nb::borrow(out);
+    Vector tod = vector(result, "out");
+    if (tod.shape(0) != p.size)
+      throw nb::value_error(("add_sources: out has " + std::to_string(tod.shape(0)) + " samples, but the pointing has " +
+                             std::to_string(p.size)).c_str());
+    std::string problem;
+    {
+      nb::gil_scoped_release release;
+      problem = check_values(p);
+      if (problem.empty()) problem = check_hwp_values(h);
+      if (problem.empty()) {
+        const auto lock = hold();
+        Engine& e = open();
+        const std::span<const double> t{time.data(), p.size};
+        if (p.theta)
+          e.add_sources(d, p.angles(), t, sources, {tod.data(), p.size}, span_of(h));
+        else
+          e.add_sources(d, p.quaternions(), t, sources, {tod.data(), p.size}, span_of(h));
+      }
+    }
+    if (!problem.empty()) throw nb::value_error(problem.c_str());
+    return result;
+  }
+
   // A^T tod of one detector (Scatter::adjoint), the diagonal of A^T A (diagonal) or A^T A s for the
   // engine's sky s (normal), added into `out` ((4, npix) float64: I, Q, U, V), or into new zeros.
   enum class Scatter { adjoint, diagonal, normal };
@@ -675,6 +710,40 @@ class PyMapmaker {
 }  // namespace
 
 void bind_engine(nb::module_& m) {
+  nb::class_<SourceTrack>(m, "SourceTrack",
+                          "A point source's track (pisco/sources.hpp, docs/sources.md): its direction and flux at a\n"
+                          "sequence of strictly increasing times; between two, the great circle at a constant rate and\n"
+                          "the flux linear in time; one point: a source fixed for all time. Flux: the integral of the\n"
+                          "source's Stokes brightness, in the sky's units times steradians (COSMO Q and U).")
+      .def(
+          "__init__",
+          [](SourceTrack* t, std::string name, std::vector<double> time, std::vector<double> theta,
+             std::vector<double> phi, std::vector<double> I, std::vector<double> Q, std::vector<double> U,
+             std::vector<double> V) {
+            new (t) SourceTrack{std::move(name), std::move(time), std::move(theta), std::move(phi),
+                                std::move(I),    std::move(Q),    std::move(U),     std::move(V)};
+            t->check("SourceTrack");
+          },
+          "name"_a, "time"_a, "theta"_a, "phi"_a, "I"_a, "Q"_a = std::vector<double>{}, "U"_a = std::vector<double>{},
+          "V"_a = std::vector<double>{},
+          "Arrays of one value per time (Q, U, V may be left out: zero); pisco.Error names a bad point.")
+      .def_static(
+          "fixed",
+          [](std::string name, double theta, double phi, double I, double Q, double U, double V) {
+            SourceTrack t = SourceTrack::fixed(std::move(name), theta, phi, I, Q, U, V);
+            t.check("SourceTrack.fixed");
+            return t;
+          },
+          "name"_a, "theta"_a, "phi"_a, "I"_a, "Q"_a = 0.0, "U"_a = 0.0, "V"_a = 0.0, "A source fixed at (theta, phi).")
+      .def_ro("name", &SourceTrack::name)
+      .def_ro("time", &SourceTrack::time)
+      .def_ro("theta", &SourceTrack::theta)
+      .def_ro("phi", &SourceTrack::phi)
+      .def_ro("I", &SourceTrack::I)
+      .def("__repr__", [](const SourceTrack& t) {
+        return "SourceTrack('" + t.name + "', " + std::to_string(t.time.size()) + " points)";
+      });
+
   nb::class_<PyMapmaker>(m, "DeconvolvingMapmaker",
                          "The beam-deconvolving map-maker (docs/physics.md, 'Map-making with the beams'):\n"
                          "conjugate gradients on (A^T A + lambda) s = A^T d with each detector's own beam.\n\n"
@@ -738,6 +807,16 @@ void bind_engine(nb::module_& m) {
            "hwp_angle: the half-wave plate's angle per sample (1-D float64, radians, in the focal-plane\n"
            "frame: TOAST's hwp_angle), required for a detector with a plate (Detector.hwp) and refused for\n"
            "one without (pisco.Error). The GIL is released while the engine runs.")
+      .def("add_sources", &PyEngine::add_sources, "detector"_a, "time"_a, "sources"_a, "theta"_a = nb::none(),
+           "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),
+           "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "Point sources, fixed or moving (pisco.SourceTrack), added into the TOD of one detector: the\n"
+           "detector's beam evaluated at each source's direction per sample, exactly (no pixelization, the\n"
+           "same near the poles as anywhere), with its half-wave plate and split beam; docs/sources.md.\n\n"
+           "time: each sample's time on the sources' clock (1-D float64). Pointing and hwp_angle as for\n"
+           "convolve(). out: a writable 1-D float64 array the sources are added to (a TOD from convolve());\n"
+           "None: new zeros. Returns out. Needs normalization='integral'. Computed on the host in float64,\n"
+           "the same whatever the backend.")
       .def("adjoint",
            [](PyEngine& e, nb::handle detector, nb::handle tod, nb::handle theta, nb::handle phi, nb::handle psi,
               nb::handle quats, nb::handle out, nb::handle hwp) {
