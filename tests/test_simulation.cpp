@@ -21,6 +21,10 @@
 #include "pisco/simulation.hpp"
 #include "support.hpp"
 
+#include <healpix_base.h>
+#include <iomanip>
+#include <sstream>
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -87,6 +91,64 @@ int run_cli(const std::string& args) {
   const std::string cmd = std::string(PISCO_VK_EXE) + " " + args + " > /dev/null 2>&1";
   const int rc = std::system(cmd.c_str());
   return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+// [[sources]] (docs/sources.md): a polarized source at a pixel's centre adds to the TOD what that
+// pixel of a [sky] point_source gives (plain quadrature, the float64 reference), for a detector with an
+// offset and a plate; a moving source on a scan without times is refused, naming the key.
+TEST_F(SimulationTest, SourcesAddWhatTheirPixelWould) {
+  const int nside = 32;
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  const pointing at = base.pix2ang(base.ang2pix(pointing(1.0, 2.0)));
+  const double area = 4 * std::numbers::pi / double(base.Npix()), deg = std::numbers::pi / 180;
+  const double th = at.theta / deg, ph = at.phi / deg;
+  const auto config = [&](const std::string& name, const std::string& sky, const std::string& sources,
+                          const std::string& scan) {
+    const fs::path p = dir_ / (name + ".toml");
+    std::ofstream(p) << std::setprecision(17) << "[sky]\nnside = 32\n" << sky
+                     << "[beams.main]\ntype = \"elliptical\"\nfwhm_x_deg = 3.5\nfwhm_y_deg = 4.5\nangle_deg = 20\n"
+                        "rho_max_deg = 8.0\n"
+                        "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"main\"\nzeta_deg = 30\n"
+                        "xi_deg = 1\neta_deg = -0.5\ngamma_deg = 10\n"
+                     << scan
+                     << "[hwp]\nrpm = 60\nsample_rate_hz = 10\n"
+                        "[engine]\nbackend = \"cpu\"\nquadrature = \"plain\"\n"
+                        "[output]\ndir = \""
+                     << (dir_ / name).string() << "\"\nmaps = false\nspectra = false\nplots = false\n"
+                     << sources;
+    return p;
+  };
+  const std::string scan = "[scan]\ntype = \"raster\"\nnside = 64\ntheta_deg = 57\nphi_deg = 115\nradius_deg = 12\n";
+  const fs::path with_pixel = config("pixel", "point_source = [" + std::to_string(th) + ", " + std::to_string(ph) +
+                                                  ", 2.0, 0.3, -0.5, 0.1]\n", "", scan);
+  std::ostringstream src;
+  src << std::setprecision(17) << "[[sources]]\nname = \"s\"\ntheta_deg = " << th << "\nphi_deg = " << ph
+      << "\nI = " << 2.0 * area << "\nQ = " << 0.3 * area << "\nU = " << -0.5 * area << "\nV = " << 0.1 * area << "\n";
+  const fs::path with_source =
+      config("source", "point_source = [" + std::to_string(th) + ", " + std::to_string(ph) + ", 0, 0, 0, 0]\n",
+             src.str(), scan);
+  pisco::Simulation::from_file(with_pixel).run();
+  pisco::Simulation::from_file(with_source).run();
+  const std::vector<double> a = pisco::read_tod_signal(dir_ / "pixel" / "tod.h5", "d");
+  const std::vector<double> b = pisco::read_tod_signal(dir_ / "source" / "tod.h5", "d");
+  ASSERT_EQ(a.size(), b.size());
+  double peak = 0.0, worst = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    peak = std::max(peak, std::abs(a[i]));
+    worst = std::max(worst, std::abs(a[i] - b[i]));
+  }
+  EXPECT_GT(peak, 0.0);
+  EXPECT_LE(worst, 1e-12 * peak);
+
+  const fs::path moving = config("moving", "", "[[sources]]\nname = \"jupiter\"\ntime_s = [0, 10]\ntheta_deg = [50, 51]\n"
+                                               "phi_deg = [100, 100]\nI = [1e-5, 1e-5]\n", scan);
+  try {
+    (void)pisco::read_simulation_file(moving);
+    FAIL() << "a moving source without times";
+  } catch (const pisco::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("[sources[0]] time_s: a moving source needs the samples' times"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST_F(SimulationTest, WritesWhatTheCommandLineWrites) {

@@ -13,6 +13,7 @@
 #include "pisco/beamsor.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/focal_plane.hpp"
+#include "pisco/sources.hpp"
 #include "pisco/focal_plane_file.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/scan.hpp"
@@ -135,6 +136,11 @@ struct SimulationConfig {
   EngineConfig engine;
   OutputConfig output;
   MapmakerConfig mapmaker;
+  // [[sources]]: point sources added to every detector's TOD (docs/sources.md), their times seconds
+  // from the run's first sample; sources_rate the samples' rate (Hz) that gives each sample's time
+  // (the scan's; 0 when the scan has none, which only fixed sources allow).
+  std::vector<SourceTrack> sources;
+  double sources_rate = 0.0;
 };
 
 // Reads and checks a simulation file (docs/config.md). Relative paths inside it are relative to its

@@ -513,6 +513,52 @@ void assign_plates(SimulationConfig& c, const fs::path& file) {
 
 }  // namespace
 
+// [[sources]] (docs/config.md, docs/sources.md): each source's name, its times (time_s, seconds from the
+// run's first sample) and at each time its direction (theta_deg, phi_deg) and flux (I, Q, U, V); a
+// source without time_s is fixed, its values single numbers or arrays of one. Moving sources need the
+// samples' times: a scan with a sample rate.
+std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& file, const ScanConfig& scan,
+                                      double rate) {
+  std::vector<SourceTrack> out;
+  std::size_t i = 0;
+  for (const auto& node : list) {
+    const std::string where = "sources[" + std::to_string(i++) + "]";
+    Table t(*node.as_table(), where, file);
+    SourceTrack s;
+    const auto name = t.string("name");
+    if (!name || name->empty()) t.fail("name", "every source needs a name");
+    s.name = *name;
+    const auto values = [&](const std::string& key, bool required) {
+      if (!t.has(key)) {
+        if (required) t.fail(key, "missing: give a number, or an array with one value per time");
+        return std::vector<double>{};
+      }
+      if (const auto v = t.numbers_or_number(key)) return *v;
+      return std::vector<double>{};
+    };
+    const bool moving = t.has("time_s");
+    s.time = moving ? t.numbers("time_s", {}) : std::vector<double>{0.0};
+    for (double& x : s.theta = values("theta_deg", true)) x *= deg;
+    for (double& x : s.phi = values("phi_deg", true)) x *= deg;
+    s.I = values("I", true);
+    s.Q = values("Q", false);
+    s.U = values("U", false);
+    s.V = values("V", false);
+    try {
+      s.check(file.string() + ": [" + where + "]");
+    } catch (const pisco::Error& e) {
+      throw pisco::Error(std::string(e.what()) + " (keys time_s, theta_deg, phi_deg, I, Q, U, V)", e.kind());
+    }
+    if (moving && s.time.size() > 1 && !(rate > 0))
+      t.fail("time_s", "a moving source needs the samples' times, which a scan of type \"" +
+                           std::string(scan.kind == ScanKind::file ? "file" : "pixel_centres/random_offsets/raster") +
+                           "\" does not give; use a ces or satellite scan, or a fixed source");
+    t.finish();
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
 SimulationConfig read_simulation_file(const fs::path& file) {
   SimulationConfig c;
   c.source = file;
@@ -579,6 +625,13 @@ SimulationConfig read_simulation_file(const fs::path& file) {
     }
   }
   assign_plates(c, file);
+  c.sources_rate = c.scan.kind == ScanKind::ces ? c.scan.ces.sample_rate
+                   : c.scan.kind == ScanKind::satellite ? c.scan.satellite.sample_rate : 0.0;
+  if (const toml::array* sources = t.array_of_tables("sources")) {
+    c.sources = read_sources(*sources, file, c.scan, c.sources_rate);
+    if (c.engine.options.normalization != pisco::Normalization::integral)
+      t.fail("sources", "point sources need [engine] normalization = \"integral\"");
+  }
   t.finish();
   return c;
 }

@@ -362,6 +362,22 @@ class JobStream {
     if (pending_) finish(*pending_);
   }
 
+  // [[sources]]: each source's response added to the job's TOD, sample i of the detector's run at time
+  // i / rate (docs/sources.md).
+  void add_sources(const Job& j, std::span<double> t) {
+    const pisco::SurveyChunk& chunk = j.chunk;
+    times_.resize(chunk.size());
+    for (std::size_t i = 0; i < times_.size(); ++i)
+      times_[i] = c_.sources_rate > 0 ? double(j.first + i) / c_.sources_rate : 0.0;
+    try {
+      with_view(chunk, [&](const auto& view) {
+        engine_.add_sources(chunk.detector, view, times_, c_.sources, t, chunk.hwp_angle);
+      });
+    } catch (const pisco::Error& e) {
+      throw pisco::Error(c_.source.string() + ": [[sources]]: " + e.what(), e.kind());
+    }
+  }
+
   // [sky] unseen = "flag": the samples whose disc holds an UNSEEN pixel.
   std::span<const std::uint8_t> flag_samples(const pisco::SurveyChunk& chunk) {
     flags_.resize(chunk.size());
@@ -374,6 +390,7 @@ class JobStream {
     const pisco::SurveyChunk& chunk = j.chunk;
     const std::size_t count = chunk.size();
     const std::span<double> t(tod_[j.slot].data(), count);
+    if (!c_.sources.empty()) add_sources(j, t);
     // The binned map-maker takes the boresight's quaternions (one conversion per time chunk for every
     // detector) and applies the detector's offset itself; the detector's angles are made only for the
     // TOD file's pointing or weights, or from a per-detector file.
@@ -434,6 +451,7 @@ class JobStream {
   int next_slot_ = 0;
   pisco::Pointing own_;
   std::vector<double> weights_;
+  std::vector<double> times_;  // the sources' sample times of a job
   std::vector<std::uint8_t> flags_;
   std::uint64_t flagged_ = 0;
 };
