@@ -370,6 +370,33 @@ class DeconvolvingMapmaker:
     ) -> dict[str, Any]:
         """Solves, replaying survey() once an iteration; returns the maps and the convergence."""
 
+class SourceTrack:
+    """A point source's track (docs/sources.md): its direction and flux at strictly increasing times;
+    between two, the great circle at a constant rate and the flux linear in time; one point: fixed.
+    Flux: the integral of the source's Stokes brightness, the sky's units times steradians (COSMO)."""
+
+    name: str
+    time: list[float]
+    theta: list[float]
+    phi: list[float]
+    I: list[float]
+
+    def __init__(
+        self,
+        name: str,
+        time: Sequence[float],
+        theta: Sequence[float],
+        phi: Sequence[float],
+        I: Sequence[float],
+        Q: Sequence[float] = ...,
+        U: Sequence[float] = ...,
+        V: Sequence[float] = ...,
+    ) -> None:
+        """One value per time (Q, U, V may be left out: zero); pisco.Error names a bad point."""
+    @staticmethod
+    def fixed(name: str, theta: float, phi: float, I: float, Q: float = 0.0, U: float = 0.0, V: float = 0.0) -> SourceTrack:
+        """A source fixed at (theta, phi)."""
+
 class Engine:
     """The convolution engine: set up once for a sky, beams and focal plane; then pointing -> TOD."""
 
@@ -387,6 +414,21 @@ class Engine:
         unseen: UnseenPolicy = "error",
         quadrature: Literal["corrected", "plain"] = "corrected",
     ) -> None: ...
+    def add_sources(
+        self,
+        detector: int | str,
+        time: Float64Array,
+        sources: Sequence[SourceTrack],
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        out: Float64Array | None = None,
+        hwp_angle: Float64Array | None = None,
+    ) -> Float64Array:
+        """Point sources added into a detector's TOD: its beam at each source's direction per sample, exactly
+        (docs/sources.md); time on the sources' clock; out None: new zeros. Needs normalization='integral'."""
     def convolve(
         self,
         detector: int | str,
