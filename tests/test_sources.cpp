@@ -16,6 +16,7 @@
 #include "pisco/beamsor.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
+#include "pisco/quaternion.hpp"
 #include "pisco/sources.hpp"
 #include "pisco/units.hpp"
 
@@ -203,6 +204,50 @@ TEST(Sources, AMovingSourceIsWhereItsTrackPutsIt) {
   } catch (const pisco::Error& e) {
     EXPECT_NE(std::string(e.what()).find("add_sources: detector 'd': source 'jupiter': sample 1 is at time 26"), std::string::npos) << e.what();
   }
+}
+
+// Boresight quaternions give what angles give; a beam split into a main part and sidelobes gives what
+// the whole beam gives (the two parts' weights sum to it), inside the split and beyond it.
+TEST(Sources, QuaternionsAndSplitBeamsAgree) {
+  const double fwhm = 2.0 * deg;
+  pisco::FocalPlane fp;
+  pisco::Detector d;
+  d.name = "d";
+  d.zeta = 0.3;
+  d.set_offset(0.5 * deg, 0.2 * deg, 0.1);
+  fp.add(d);
+  pisco::EngineOptions eo;
+  eo.backend = "cpu";
+  const auto field = [&](double rho, double) {
+    const double s = fwhm / std::sqrt(8 * std::log(2.0)), b = std::exp(-rho * rho / (2 * s * s)) + 1e-3 * std::exp(-rho / (4 * deg));
+    pisco::Mueller m{};
+    for (int i = 0; i < 4; ++i) m[i][i] = b;
+    return m;
+  };
+  const pisco::Beamsor whole = pisco::Beamsor::from_field(field, 12 * deg, 0.1 * deg, "whole");
+  pisco::SidelobeSplit split;
+  split.rho_main = 4 * deg;
+  const pisco::Beamsor parted = pisco::Beamsor::from_field(field, 12 * deg, 0.1 * deg, "parted", 0.0, false, split);
+  pisco::Engine one(pisco::Sky(64), {whole}, fp, eo), two(pisco::Sky(64), {parted}, fp, eo);
+  const std::vector<pisco::SourceTrack> sources{pisco::SourceTrack::fixed("s", 1.0, 2.0, 1e-3, 2e-4, -1e-4)};
+  pisco::Pointing p;
+  std::vector<pisco::Quat> quats;
+  for (int k = 0; k < 40; ++k) {
+    const double theta = 1.0 + 0.2 * deg * k, phi = 2.0 + 0.002 * k, psi = 0.3 * k;
+    p.push_back(theta, phi, psi);
+    quats.push_back(pisco::quat_from_pointing(theta, phi, psi));
+  }
+  std::vector<double> a(p.size(), 0.0), b(p.size(), 0.0), c(p.size(), 0.0), time(p.size(), 0.0);
+  one.add_sources(0, p, time, sources, a);
+  one.add_sources(0, pisco::QuatPointingView{quats}, time, sources, b);
+  two.add_sources(0, p, time, sources, c);
+  double peak = 0.0;
+  for (const double x : a) peak = std::max(peak, std::abs(x));
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    EXPECT_NEAR(b[i], a[i], 1e-12 * peak) << "sample " << i;
+    EXPECT_NEAR(c[i], a[i], 1e-4 * peak) << "sample " << i;  // two grids' interpolation
+  }
+  EXPECT_GT(std::abs(a.back()), 0.0);  // the last samples are beyond the split, within the sidelobes
 }
 
 TEST(Sources, BadTracksAndCallsAreRefusedByName) {
