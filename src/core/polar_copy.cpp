@@ -411,7 +411,7 @@ std::vector<int64> targets(const Base& base, int sign, double reach) {
 }
 
 void check_reach(int nside, double reach, const char* what) {
-  if (!(reach > 0.0 && reach < 88.0 * pi / 180.0) || rings_needed(nside, reach) == 0)
+  if (!polar_copy_fits(nside, reach))
     throw Error(std::string(what) + ": the reach of the polar copy is " + std::to_string(reach) +
                 " rad; expected more than 0, less than 88 deg and within the rings of NSIDE " + std::to_string(nside));
 }
@@ -428,11 +428,6 @@ void make_plans(const Cap& cap, Plans& plans) {
 
 bool polar_copy_fits(int nside, double reach) { return reach > 0.0 && reach < 88.0 * pi / 180.0 && rings_needed(nside, reach) > 0; }
 
-std::size_t polar_copy_pixels(int nside, double reach) {
-  const Base base(nside, RING, SET_NSIDE);
-  return targets(base, 1, reach).size() + targets(base, -1, reach).size();
-}
-
 Sky polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads) {
   check_reach(sky.nside(), reach, "the sky's polar copy");
   const Base base(sky.nside(), RING, SET_NSIDE);
@@ -443,10 +438,10 @@ Sky polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned 
   std::fill(out.I().begin(), out.I().end(), mean);
 
   ThreadPool pool(threads ? threads : std::max(1u, std::thread::hardware_concurrency()));
+  Plans plans;
   for (const int sign : {1, -1}) {
     Cap cap = make_cap(base, sign, reach);
-    Plans plans;
-    make_plans(cap, plans);
+    make_plans(cap, plans);  // both caps' rings have the same lengths: planned once
     const std::size_t K = cap.rings.size();
     // 1. The rings' samples and DFTs.
     std::array<std::vector<std::vector<cd>>, 2> spectra{std::vector<std::vector<cd>>(K), std::vector<std::vector<cd>>(K)};
@@ -524,10 +519,10 @@ Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, double reach) 
   // The mean-I fill of the pixels outside the caps: each pixel's I gets their sum / Npix.
   double rest = 0.0;
   for (const double x : in.I()) rest += x;
+  Plans plans;
   for (const int sign : {1, -1}) {
     Cap cap = make_cap(base, sign, reach);
-    Plans plans;
-    make_plans(cap, plans);
+    make_plans(cap, plans);  // both caps' rings have the same lengths: planned once
     const std::size_t K = cap.rings.size();
     // 5. The copy's pixels onto the stencils.
     for (const int64 pixel : targets(base, sign, reach)) {

@@ -28,7 +28,5 @@ Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, double reach);
 // Whether a copy of that reach can be made at `nside`: its stencils need kHalfWidth + 1 rings beyond
 // reach and 40 rings at least (polar_copy.cpp), fewer than the sky's 4 NSIDE - 1.
 bool polar_copy_fits(int nside, double reach);
-// How many of the copy's pixels polar_sky fills for `reach` at `nside` (both caps).
-std::size_t polar_copy_pixels(int nside, double reach);
 
 }  // namespace pisco::detail
