@@ -42,6 +42,22 @@ pisco::Pointing around(double theta0, double phi0, double rho_max, std::size_t n
   return p;
 }
 
+// An engine on the float64 reference for one ideal detector "d" with a Gaussian beam of `fwhm` cut at
+// `rho_max`, over an empty sky of `nside`.
+pisco::Engine ideal_engine(int nside, double fwhm, double rho_max,
+                           pisco::Normalization normalization = pisco::Normalization::integral) {
+  pisco::BeamOptions o;
+  o.rho_max = rho_max;
+  pisco::FocalPlane fp;
+  pisco::Detector d;
+  d.name = "d";
+  fp.add(d);
+  pisco::EngineOptions eo;
+  eo.backend = "cpu";
+  eo.normalization = normalization;
+  return pisco::Engine(pisco::Sky(nside), {pisco::Beamsor::gaussian(fwhm, o)}, fp, eo);
+}
+
 struct Case {
   std::string name;
   pisco::Beamsor beam;
@@ -129,15 +145,7 @@ TEST(Sources, ASourceAtAPixelCentreReadsAsThatPixel) {
 TEST(Sources, AnUnpolarizedSourceReadsTheBeamAtItsOffset) {
   const int nside = 128;
   const double fwhm = 1.0 * deg, rho_max = 2.5 * fwhm, s = fwhm / std::sqrt(8 * std::log(2.0));
-  pisco::BeamOptions o;
-  o.rho_max = rho_max;
-  pisco::FocalPlane fp;
-  pisco::Detector d;
-  d.name = "d";
-  fp.add(d);
-  pisco::EngineOptions eo;
-  eo.backend = "cpu";
-  pisco::Engine engine(pisco::Sky(nside), {pisco::Beamsor::gaussian(fwhm, o)}, fp, eo);
+  const pisco::Engine engine = ideal_engine(nside, fwhm, rho_max);
   double omega = 0.0;  // Simpson's rule over [0, rho_max] of 2 pi sin(rho) B(rho)
   const int n = 20000;
   for (int k = 0; k <= n; ++k) {
@@ -162,15 +170,7 @@ TEST(Sources, AnUnpolarizedSourceReadsTheBeamAtItsOffset) {
 // error naming the source and the sample.
 TEST(Sources, AMovingSourceIsWhereItsTrackPutsIt) {
   const double fwhm = 0.5 * deg;
-  pisco::BeamOptions o;
-  o.rho_max = 2.5 * fwhm;
-  pisco::FocalPlane fp;
-  pisco::Detector d;
-  d.name = "d";
-  fp.add(d);
-  pisco::EngineOptions eo;
-  eo.backend = "cpu";
-  pisco::Engine engine(pisco::Sky(64), {pisco::Beamsor::gaussian(fwhm, o)}, fp, eo);
+  const pisco::Engine engine = ideal_engine(64, fwhm, 2.5 * fwhm);
   pisco::SourceTrack jupiter;
   jupiter.name = "jupiter";
   jupiter.time = {0.0, 10.0, 25.0};
@@ -204,6 +204,7 @@ TEST(Sources, AMovingSourceIsWhereItsTrackPutsIt) {
   } catch (const pisco::Error& e) {
     EXPECT_NE(std::string(e.what()).find("add_sources: detector 'd': source 'jupiter': sample 1 is at time 26"), std::string::npos) << e.what();
   }
+  EXPECT_EQ(tod, std::vector<double>(2, 0.0));  // sample 0, within the track, was not added either
 }
 
 // Boresight quaternions give what angles give; a beam split into a main part and sidelobes gives what
@@ -275,16 +276,7 @@ TEST(Sources, BadTracksAndCallsAreRefusedByName) {
   s.phi = {0.0, pi};
   EXPECT_THROW(s.check("here"), pisco::Error);  // opposite directions: no great circle
 
-  pisco::FocalPlane fp;
-  pisco::Detector d;
-  d.name = "d";
-  fp.add(d);
-  pisco::EngineOptions eo;
-  eo.backend = "cpu";
-  eo.normalization = pisco::Normalization::per_sample;
-  pisco::BeamOptions o;
-  o.rho_max = 2 * deg;
-  pisco::Engine engine(pisco::Sky(64), {pisco::Beamsor::gaussian(1 * deg, o)}, fp, eo);
+  const pisco::Engine engine = ideal_engine(64, 1 * deg, 2 * deg, pisco::Normalization::per_sample);
   pisco::Pointing p;
   p.push_back(1.0, 2.0, 0.0);
   std::vector<double> tod(1), time(1, 0.0);

@@ -31,6 +31,9 @@ PISCO_HD void plate_at(const double* m0, double c, double s, double* out) {
 }
 
 // effective_weights (v = w M, a pixel's weights behind the plate, from M by columns) is in shaders/pixel.glsl,
-// with the other per-pixel formulas.
+// with the other per-pixel formulas; these are a row-major M's columns as it takes them.
+PISCO_HD void plate_columns(const double* m, Vec4<double> (&columns)[4]) {
+  for (int c = 0; c < 4; ++c) columns[c] = {m[c], m[4 + c], m[8 + c], m[12 + c]};
+}
 
 }  // namespace pisco::detail

@@ -10,7 +10,6 @@
 #include "core/plate.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"
-#include "pisco/hwp.hpp"
 
 namespace pisco {
 
@@ -79,16 +78,12 @@ struct SourceState {
   Vec4<double> flux;
 };
 
-// The track at time t: between points k and k + 1, the great circle at a constant rate and the flux
-// linear in time. `cursor` remembers the last interval (samples usually come in order).
-bool state_at(const SourceTrack& s, double t, std::size_t& cursor, SourceState& out) {
+// The track at time t, within it: between points k and k + 1, the great circle at a constant rate and
+// the flux linear in time. `cursor` remembers the last interval (samples usually come in order).
+SourceState state_at(const SourceTrack& s, double t, std::size_t& cursor) {
   const std::size_t n = s.time.size();
   const auto flux = [&](std::size_t k) { return Vec4<double>{s.I[k], at(s.Q, k), at(s.U, k), at(s.V, k)}; };
-  if (n == 1) {
-    out = {unit(s.theta[0], s.phi[0]), flux(0)};
-    return true;
-  }
-  if (!(t >= s.time.front() && t <= s.time.back())) return false;
+  if (n == 1) return {unit(s.theta[0], s.phi[0]), flux(0)};
   if (cursor + 1 >= n || !(s.time[cursor] <= t && t <= s.time[cursor + 1])) {
     const auto it = std::upper_bound(s.time.begin(), s.time.end(), t);
     cursor = std::min<std::size_t>(std::size_t(it - s.time.begin()), n - 1) - 1;
@@ -106,15 +101,14 @@ bool state_at(const SourceTrack& s, double t, std::size_t& cursor, SourceState& 
   const double norm = std::sqrt(k3.x * k3.x + k3.y * k3.y + k3.z * k3.z);
   k3 = {k3.x / norm, k3.y / norm, k3.z / norm};
   const Vec4<double> f0 = flux(k), f1 = flux(k + 1);
-  out = {k3, {f0.x + u * (f1.x - f0.x), f0.y + u * (f1.y - f0.y), f0.z + u * (f1.z - f0.z), f0.w + u * (f1.w - f0.w)}};
-  return true;
+  return {k3, {f0.x + u * (f1.x - f0.x), f0.y + u * (f1.y - f0.y), f0.z + u * (f1.z - f0.z), f0.w + u * (f1.w - f0.w)}};
 }
 
 // One prepared detector's response to a source of brightness S = flux / Omega_pix at k: the reference
-// backend's per-pixel arithmetic, with the plate's effective weights where `plate` is given. Zero
-// beyond the detector's disc, as a pixel beyond it is not summed.
+// backend's per-pixel arithmetic, with the plate's effective weights where its columns (plate_columns)
+// are given. Zero beyond the detector's disc, as a pixel beyond it is not summed.
 double response(const PreparedDetector& det, const SampleFrame<double>& f, const Vec3<double>& los,
-                const Vec3<double>& k, const Vec4<double>& S, const double* plate) {
+                const Vec3<double>& k, const Vec4<double>& S, const Vec4<double>* plate) {
   if (los.x * k.x + los.y * k.y + los.z * k.z < det.cos_rho_max) return 0.0;
   const ArrayGrid<double> grid{det.weights.data(), det.grid_n, det.grid_a, det.grid_inv_step};
   PixelGeometry<double> g = pixel_geometry(f, k);
@@ -123,11 +117,7 @@ double response(const PreparedDetector& det, const SampleFrame<double>& f, const
     g.sin2chi = 0.0;
   }
   Vec4<double> w = det.radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
-  if (plate) {
-    const Vec4<double> m0{plate[0], plate[4], plate[8], plate[12]}, m1{plate[1], plate[5], plate[9], plate[13]},
-        m2{plate[2], plate[6], plate[10], plate[14]}, m3{plate[3], plate[7], plate[11], plate[15]};
-    w = effective_weights(w, m0, m1, m2, m3);
-  }
+  if (plate) w = effective_weights(w, plate[0], plate[1], plate[2], plate[3]);
   return stokes_response(w, g.cos2chi, g.sin2chi, S);
 }
 
@@ -136,25 +126,29 @@ double response(const PreparedDetector& det, const SampleFrame<double>& f, const
 void add_source_tod(const PointingInput& in, std::span<const double> plate_angle, std::span<const double> time,
                     const std::vector<SourceTrack>& sources, const std::vector<SourcePart>& parts,
                     std::span<double> tod) {
+  // Every sample within every moving source's track, checked before the TOD changes.
+  for (const SourceTrack& s : sources)
+    if (s.time.size() > 1)
+      for (std::size_t i = 0; i < time.size(); ++i)
+        if (!(time[i] >= s.time.front() && time[i] <= s.time.back()))
+          throw Error("source '" + s.name + "': sample " + std::to_string(i) + " is at time " + number_text(time[i]) +
+                      ", outside its track (" + number_text(s.time.front()) + " to " + number_text(s.time.back()) +
+                      "); the TOD is unchanged");
   std::vector<std::size_t> cursor(sources.size(), 0);
   const PreparedDetector& main = *parts.at(0).detector;
-  double m[16];
-  Mueller m0{};
-  for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j) m0[i][j] = main.plate_mueller[i][j];
+  double m[16];          // the plate's M(theta) this sample, row-major
+  Vec4<double> cols[4];  // and by columns, for an aperture plate's effective weights
   for (std::size_t i = 0; i < tod.size(); ++i) {
     double theta = 0.0, phi = 0.0;
     const SampleFrame<double> f = detector_frame(in, i, main, theta, phi);
     const Vec3<double> los = unit(theta, phi);
-    if (main.plate == PreparedDetector::Plate::aperture) plate_at(&main.plate_mueller[0][0], std::cos(2 * plate_angle[i]), std::sin(2 * plate_angle[i]), m);
-    const Mueller mt = main.plate == PreparedDetector::Plate::detector ? rotated_mueller(m0, plate_angle[i]) : Mueller{};
+    if (main.plate != PreparedDetector::Plate::none) {
+      plate_at(&main.plate_mueller[0][0], std::cos(2 * plate_angle[i]), std::sin(2 * plate_angle[i]), m);
+      plate_columns(m, cols);
+    }
     double d = 0.0;
     for (std::size_t s = 0; s < sources.size(); ++s) {
-      SourceState st;
-      if (!state_at(sources[s], time[i], cursor[s], st))
-        throw Error("source '" + sources[s].name + "': sample " + std::to_string(i) + " is at time " +
-                    number_text(time[i]) + ", outside its track (" + number_text(sources[s].time.front()) + " to " +
-                    number_text(sources[s].time.back()) + ")");
+      const SourceState st = state_at(sources[s], time[i], cursor[s]);
       for (const SourcePart& part : parts) {
         const Vec4<double> S{st.flux.x / part.pixel_area, st.flux.y / part.pixel_area, st.flux.z / part.pixel_area,
                              st.flux.w / part.pixel_area};
@@ -162,9 +156,9 @@ void add_source_tod(const PointingInput& in, std::span<const double> plate_angle
         if (det.plate == PreparedDetector::Plate::detector) {
           // d = D(0) M(theta) s, s_b the row detector b's response (as Engine::complete combines them).
           for (int b = 0; b < 4; ++b)
-            d += (det.d0[0] * mt[0][b] + det.d0[1] * mt[1][b]) * response(*part.rows[b], f, los, st.k, S, nullptr);
+            d += (det.d0[0] * m[b] + det.d0[1] * m[4 + b]) * response(*part.rows[b], f, los, st.k, S, nullptr);
         } else {
-          d += response(det, f, los, st.k, S, det.plate == PreparedDetector::Plate::aperture ? m : nullptr);
+          d += response(det, f, los, st.k, S, det.plate == PreparedDetector::Plate::aperture ? cols : nullptr);
         }
       }
     }

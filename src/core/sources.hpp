@@ -22,7 +22,8 @@ struct SourcePart {
 
 // Adds to tod[i] every source's response at sample i (time[i]) through each part; plate_angle is the
 // plate's angle from the detector's axis per sample (empty without a plate). Throws pisco::Error
-// naming the source and the sample when a sample's time lies outside a source's track.
+// naming the source and the sample when a sample's time lies outside a source's track, before
+// anything is added.
 void add_source_tod(const PointingInput& in, std::span<const double> plate_angle, std::span<const double> time,
                     const std::vector<SourceTrack>& sources, const std::vector<SourcePart>& parts,
                     std::span<double> tod);

@@ -38,7 +38,7 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
   const ArrayGrid<double> norm_grid{det.norm_weights.data(), det.grid_n, det.grid_a, det.grid_inv_step};
   Vec4<double> m[4];  // the plate's M(theta) by columns
   if constexpr (Plate)
-    for (int c = 0; c < 4; ++c) m[c] = {plate[c], plate[4 + c], plate[8 + c], plate[12 + c]};
+    plate_columns(plate, m);
   double sum = 0.0, norm = 0.0;
   for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
                       [&](std::uint32_t begin, std::uint32_t end) {
@@ -107,7 +107,7 @@ inline void scatter_sample(const PreparedSky& sky, const double* pixels, const P
   const ArrayGrid<double> grid{det.weights.data(), det.grid_n, det.grid_a, det.grid_inv_step};
   Vec4<double> m[4];
   if constexpr (Plate)
-    for (int c = 0; c < 4; ++c) m[c] = {plate[c], plate[4 + c], plate[8 + c], plate[12 + c]};
+    plate_columns(plate, m);
   for_each_disc_range(sky.rings.data(), sky.nside, theta, phi, det.rho_max, det.cos_rho_max,
                       [&](std::uint32_t begin, std::uint32_t end) {
                         begin = std::max(begin, lo);
