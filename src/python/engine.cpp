@@ -239,25 +239,17 @@ class PyEngine {
     const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
     nb::object result = output(out, p.size, accumulate);
     Vector tod = vector(result, "out");
-    std::string problem;
     bool out_of_memory = false;
-    {
-      nb::gil_scoped_release release;
-      problem = check_values(p);
-      if (problem.empty()) problem = check_hwp_values(h);
-      if (problem.empty()) {
-        const auto lock = hold();
-        Engine& e = open();
-        try {
-          if (p.theta)
-            e.convolve(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h));
-          else
-            e.convolve(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
-        } catch (const std::bad_alloc&) {
-          out_of_memory = true;
-        }
+    const std::string problem = checked_run(p, h, [&](Engine& e) {
+      try {
+        if (p.theta)
+          e.convolve(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h));
+        else
+          e.convolve(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+      } catch (const std::bad_alloc&) {
+        out_of_memory = true;
       }
-    }
+    });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
     if (out_of_memory) raise_memory_error(chunk_memory("convolve", d, p.size));
     return result;
@@ -274,26 +266,16 @@ class PyEngine {
     if (time.shape(0) != p.size)
       throw nb::value_error(("add_sources: time has " + std::to_string(time.shape(0)) +
                              " samples, but the pointing has " + std::to_string(p.size)).c_str());
+    if (!out.is_none()) check_output_size(out, p.size);
     nb::object result = out.is_none() ? nb::module_::import_("numpy").attr("zeros")(p.size, "float64") : nb::borrow(out);
     Vector tod = vector(result, "out");
-    if (tod.shape(0) != p.size)
-      throw nb::value_error(("add_sources: out has " + std::to_string(tod.shape(0)) + " samples, but the pointing has " +
-                             std::to_string(p.size)).c_str());
-    std::string problem;
-    {
-      nb::gil_scoped_release release;
-      problem = check_values(p);
-      if (problem.empty()) problem = check_hwp_values(h);
-      if (problem.empty()) {
-        const auto lock = hold();
-        Engine& e = open();
-        const std::span<const double> t{time.data(), p.size};
-        if (p.theta)
-          e.add_sources(d, p.angles(), t, sources, {tod.data(), p.size}, span_of(h));
-        else
-          e.add_sources(d, p.quaternions(), t, sources, {tod.data(), p.size}, span_of(h));
-      }
-    }
+    const std::string problem = checked_run(p, h, [&](Engine& e) {
+      const std::span<const double> t{time.data(), p.size};
+      if (p.theta)
+        e.add_sources(d, p.angles(), t, sources, {tod.data(), p.size}, span_of(h));
+      else
+        e.add_sources(d, p.quaternions(), t, sources, {tod.data(), p.size}, span_of(h));
+    });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
     return result;
   }
@@ -383,25 +365,17 @@ class PyEngine {
     if (out.is_none()) throw nb::type_error("submit: out is required (the array the TOD is written to by wait())");
     check_output_size(out, p.size);
     Vector tod = vector(out, "out");
-    std::string problem;
     std::uint64_t ticket = 0;
     bool out_of_memory = false;
-    {
-      nb::gil_scoped_release release;
-      problem = check_values(p);
-      if (problem.empty()) problem = check_hwp_values(h);
-      if (problem.empty()) {
-        const auto lock = hold();
-        Engine& e = open();
-        // The plate's angles, like the pointing, are read before submit() returns.
-        try {
-          ticket = p.theta ? e.submit(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h))
-                           : e.submit(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
-        } catch (const std::bad_alloc&) {
-          out_of_memory = true;
-        }
+    const std::string problem = checked_run(p, h, [&](Engine& e) {
+      // The plate's angles, like the pointing, are read before submit() returns.
+      try {
+        ticket = p.theta ? e.submit(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h))
+                         : e.submit(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+      } catch (const std::bad_alloc&) {
+        out_of_memory = true;
       }
-    }
+    });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
     if (out_of_memory) raise_memory_error(chunk_memory("submit", d, p.size));
     in_flight_[ticket] = nb::borrow(out);  // kept alive until wait() has written it
@@ -417,19 +391,12 @@ class PyEngine {
     // bool is one byte holding 0 or 1: the engine's uint8 flags are written into it in place.
     static_assert(sizeof(bool) == sizeof(std::uint8_t));
     const std::span<std::uint8_t> out(reinterpret_cast<std::uint8_t*>(flags.data()), p.size);
-    std::string problem;
-    {
-      nb::gil_scoped_release release;
-      problem = check_values(p);
-      if (problem.empty()) {
-        const auto lock = hold();
-        Engine& e = open();
-        if (p.theta)
-          e.flag_samples(d, p.angles(), out);
-        else
-          e.flag_samples(d, p.quaternions(), out);
-      }
-    }
+    const std::string problem = checked_run(p, std::nullopt, [&](Engine& e) {
+      if (p.theta)
+        e.flag_samples(d, p.angles(), out);
+      else
+        e.flag_samples(d, p.quaternions(), out);
+    });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
     return result;
   }
@@ -546,6 +513,19 @@ class PyEngine {
     if (len != n)
       throw nb::value_error(("out: " + std::to_string(len) + " samples, but the pointing has " + std::to_string(n))
                                 .c_str());
+  }
+
+  // The pointing's and plate angles' values checked without the GIL, then `work` on the engine under
+  // its lock; returns the first bad value, named (the work not done), or an empty string.
+  template <class Work>
+  std::string checked_run(const PointingArgs& p, const std::optional<ConstVector>& h, Work&& work) {
+    nb::gil_scoped_release release;
+    std::string problem = check_values(p);
+    if (problem.empty()) problem = check_hwp_values(h);
+    if (!problem.empty()) return problem;
+    const auto lock = hold();
+    work(open());
+    return {};
   }
 
   // `out`, checked, or a new array of n samples (accumulating needs the caller's array).
