@@ -177,19 +177,13 @@ class Table {
     }
     return out;
   }
-  // A number or a non-empty array of numbers (a number read as an array of one).
+  // A number or a non-empty array of numbers (a number read as an array of one); none when absent.
   std::optional<std::vector<double>> numbers_or_number(const std::string& key) {
     const toml::node* n = t_.get(key);
-    if (n && !n->is_array()) {
-      const auto v = number(key);
-      if (!v) return std::nullopt;
-      return std::vector<double>{*v};
-    }
-    if (!n) {
-      used_.insert(key);
-      return std::nullopt;
-    }
-    return numbers(key, {});
+    if (n && n->is_array()) return numbers(key, {});
+    const std::optional<double> v = number(key);
+    if (!v) return std::nullopt;
+    return std::vector<double>{*v};
   }
   const toml::table* table(const std::string& key) {
     used_.insert(key);

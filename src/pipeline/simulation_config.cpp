@@ -432,6 +432,11 @@ MapmakerConfig read_mapmaker(Table t) {
 }
 
 // [hwp] (docs/config.md): the plate model and its angle stream.
+// The samples' rate of a scan that has one (ces, satellite: sample i at time i / rate); 0 for the others.
+double scan_sample_rate(const ScanConfig& scan) {
+  return scan.kind == ScanKind::ces ? scan.ces.sample_rate : scan.kind == ScanKind::satellite ? scan.satellite.sample_rate : 0.0;
+}
+
 HwpConfig read_hwp(Table t, const ScanConfig& scan) {
   HwpConfig h;
   h.enabled = true;
@@ -456,7 +461,7 @@ HwpConfig read_hwp(Table t, const ScanConfig& scan) {
   if (t.has("rpm") && t.has("frequency_hz")) t.fail("rpm", "give rpm or frequency_hz, not both");
   if (rotating && stepped) t.fail("steps_deg", "a plate either rotates (rpm, frequency_hz) or steps (steps_deg, step_seconds)");
   // The sample rate of the plate's angle stream: the scan's, or the table's own for scans without time.
-  double rate = scan.kind == ScanKind::ces ? scan.ces.sample_rate : scan.kind == ScanKind::satellite ? scan.satellite.sample_rate : 0.0;
+  double rate = scan_sample_rate(scan);
   if (t.has("sample_rate_hz")) rate = t.positive("sample_rate_hz", 1.0);
   h.stream.sample_rate = rate;
   h.stream.start_time = t.number("start_time_s", 0.0);
@@ -517,8 +522,7 @@ void assign_plates(SimulationConfig& c, const fs::path& file) {
 // run's first sample) and at each time its direction (theta_deg, phi_deg) and flux (I, Q, U, V); a
 // source without time_s is fixed, its values single numbers or arrays of one. Moving sources need the
 // samples' times: a scan with a sample rate.
-std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& file, const ScanConfig& scan,
-                                      double rate) {
+std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& file, double rate) {
   std::vector<SourceTrack> out;
   std::size_t i = 0;
   for (const auto& node : list) {
@@ -529,12 +533,9 @@ std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& f
     if (!name || name->empty()) t.fail("name", "every source needs a name");
     s.name = *name;
     const auto values = [&](const std::string& key, bool required) {
-      if (!t.has(key)) {
-        if (required) t.fail(key, "missing: give a number, or an array with one value per time");
-        return std::vector<double>{};
-      }
-      if (const auto v = t.numbers_or_number(key)) return *v;
-      return std::vector<double>{};
+      const auto v = t.numbers_or_number(key);
+      if (!v && required) t.fail(key, "missing: give a number, or an array with one value per time");
+      return v.value_or(std::vector<double>{});
     };
     const bool moving = t.has("time_s");
     s.time = moving ? t.numbers("time_s", {}) : std::vector<double>{0.0};
@@ -550,9 +551,8 @@ std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& f
       throw pisco::Error(std::string(e.what()) + " (keys time_s, theta_deg, phi_deg, I, Q, U, V)", e.kind());
     }
     if (moving && s.time.size() > 1 && !(rate > 0))
-      t.fail("time_s", "a moving source needs the samples' times, which a scan of type \"" +
-                           std::string(scan.kind == ScanKind::file ? "file" : "pixel_centres/random_offsets/raster") +
-                           "\" does not give; use a ces or satellite scan, or a fixed source");
+      t.fail("time_s", "a moving source needs the samples' times, which only a ces or satellite scan gives; use "
+                       "one, or a fixed source");
     t.finish();
     out.push_back(std::move(s));
   }
@@ -625,10 +625,9 @@ SimulationConfig read_simulation_file(const fs::path& file) {
     }
   }
   assign_plates(c, file);
-  c.sources_rate = c.scan.kind == ScanKind::ces ? c.scan.ces.sample_rate
-                   : c.scan.kind == ScanKind::satellite ? c.scan.satellite.sample_rate : 0.0;
+  c.sources_rate = scan_sample_rate(c.scan);
   if (const toml::array* sources = t.array_of_tables("sources")) {
-    c.sources = read_sources(*sources, file, c.scan, c.sources_rate);
+    c.sources = read_sources(*sources, file, c.sources_rate);
     if (c.engine.options.normalization != pisco::Normalization::integral)
       t.fail("sources", "point sources need [engine] normalization = \"integral\"");
   }
