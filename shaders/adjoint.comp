@@ -29,6 +29,8 @@ layout(constant_id = PISCO_SPEC_COLUMNS) const int COLUMNS = 4;
 layout(constant_id = PISCO_SPEC_PLATE) const bool PLATE = false;
 layout(constant_id = PISCO_SPEC_NORMS) const bool NORMS = false;      // the norm pass, not the scatter
 layout(constant_id = PISCO_SPEC_SQUARES) const bool SQUARES = false;  // v g^2: the diagonal of A^T A
+// The adjoint reads the sky's own tables (the pixels' positions), never a polar copy's band.
+const uint SKY_FIRST = 0u;
 
 shared PISCO_F64 s_n0[PISCO_WG_SIZE];
 shared uint s_count[PISCO_WG_SIZE];

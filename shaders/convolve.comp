@@ -30,6 +30,8 @@ layout(constant_id = PISCO_SPEC_FLOAT64) const bool FLOAT64 = false;  // the flo
 layout(constant_id = PISCO_SPEC_PARTS) const int PARTS = 1;           // invocations per sample
 layout(constant_id = PISCO_SPEC_COLUMNS) const int COLUMNS = 4;       // weights stored per node: 2 or 4
 layout(constant_id = PISCO_SPEC_PLATE) const bool PLATE = false;      // a half-wave plate at the aperture
+// The sky's first pixel in the sky tables: 0 for the sky, the band's first for its polar copy.
+layout(constant_id = PISCO_SPEC_SKY_FIRST) const uint SKY_FIRST = 0u;
 
 shared PISCO_F64 s_d[PISCO_WG_SIZE], s_s0[PISCO_WG_SIZE], s_n0[PISCO_WG_SIZE];
 shared uint s_count[PISCO_WG_SIZE];

@@ -112,9 +112,11 @@ PISCO_FN void ff_disc_rings(int nside, vec2 z0, vec2 sin_theta0, vec2 cos_rho, P
   last = ff_le(z0, ff_neg(cos_rho)) ? nrings : min(nrings, ff_ring_above(nside, ff_sub(a, b)) + 1);
 }
 
-// A sky pixel's float64 unit vector, as float-float: its float32 vector and the residual.
+// A sky pixel's float64 unit vector, as float-float: its float32 vector and the residual. The tables
+// start at pixel SKY_FIRST.
 PISCO_FN ff3 sky_vector_ff(uint pix) {
-  const uvec4 a = texelFetch(sky, int(2u * pix)), b = texelFetch(sky_lo, int(pix));
+  const uint t = pix - SKY_FIRST;
+  const uvec4 a = texelFetch(sky, int(2u * t)), b = texelFetch(sky_lo, int(t));
   return ff3_from_parts(vec3(uintBitsToFloat(a.x), uintBitsToFloat(a.y), uintBitsToFloat(a.z)),
                         vec3(uintBitsToFloat(b.x), uintBitsToFloat(b.y), uintBitsToFloat(b.z)));
 }

@@ -40,6 +40,7 @@
 #define PISCO_SPEC_PLATE 4    // a half-wave plate at the aperture: effective weights w M(theta) per pixel
 #define PISCO_SPEC_NORMS 5    // adjoint.comp: compute each sample's normalization instead of scattering
 #define PISCO_SPEC_SQUARES 6  // adjoint.comp: scatter v g^2 (the diagonal of A^T A) instead of v g
+#define PISCO_SPEC_SKY_FIRST 7  // convolve.comp: the first pixel the sky tables hold (a polar copy's band)
 
 #ifdef __cplusplus
 #include <cstdint>

@@ -81,8 +81,9 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
   const uint jump = b1 - (b0 + l0);  // from the end of the first range to the start of the second
   for (uint q = 0u; q < l0 + l1; ++q) {
     const uint p = b0 + q + (q >= l0 ? jump : 0u);
-    const vec4 a = uintBitsToFloat(texelFetch(sky, int(2u * p)));
-    const vec4 b = uintBitsToFloat(texelFetch(sky, int(2u * p + 1u)));
+    const uint t = p - SKY_FIRST;  // the sky tables start at pixel SKY_FIRST (a polar copy's band)
+    const vec4 a = uintBitsToFloat(texelFetch(sky, int(2u * t)));
+    const vec4 b = uintBitsToFloat(texelFetch(sky, int(2u * t + 1u)));
     const vec3 k = vec3(a.x, a.y, a.z);
     PixelGeometry g = pixel_geometry(smp.f, k);
     // On the float64 path the beam coordinates come from the float64 pixel vectors, as the cuda
@@ -99,7 +100,7 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
 #else
     double x64 = 0.0lf, y64 = 0.0lf;
     if (FLOAT64) {
-      const vec4 lo = uintBitsToFloat(texelFetch(sky_lo, int(p)));
+      const vec4 lo = uintBitsToFloat(texelFetch(sky_lo, int(t)));
       const dvec3 k64 = dvec3(k) + dvec3(lo.x, lo.y, lo.z);
       x64 = dot(k64, smp.theta_p);
       y64 = dot(k64, smp.phi_p);

@@ -64,6 +64,7 @@ inline std::vector<PISCO_F64> pointing, plate_angle;
 inline pisco::detail::vk::PushConstants pc;
 inline bool RADIAL = false, FLOAT64 = false, PLATE = false;
 inline int PARTS = 1, COLUMNS = 4;
+inline uint SKY_FIRST = 0;
 
 #include "kernel_host.hpp"  // shaders/kernel.glsl and its includes
 }  // namespace glsl

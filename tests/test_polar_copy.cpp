@@ -99,6 +99,15 @@ std::vector<vec3> centres(double within, int count) {
   return out;
 }
 
+// The copy's band in a whole sky (zeros elsewhere).
+pisco::Sky whole(const pisco::detail::SkyBand& band) {
+  pisco::Sky sky(band.nside);
+  for (int c = 0; c < 4; ++c)
+    std::copy(band.maps[std::size_t(c)].begin(), band.maps[std::size_t(c)].end(),
+              sky.stokes(pisco::StokesIndex(c)).begin() + std::ptrdiff_t(band.first));
+  return sky;
+}
+
 // The worst error of the smoothed copy against the smoothed reference, relative to the smoothed
 // reference's RMS (I about its mean, and |P|).
 double smoothed_error(const pisco::Sky& copy, const pisco::Sky& ref, double within) {
@@ -128,7 +137,7 @@ TEST(PolarCopy, MatchesTheTurnedSkyAsABeamSeesIt) {
       const Alms a = random_alms(lmax, 11, monopole);
       Alms turned = a;
       rotate_alm(turned.t, turned.e, turned.b, 0.0, pi / 2, 0.0);  // S'(R p) = S(p), R 90 deg about y
-      const pisco::Sky copy = pisco::detail::polar_sky(maps(a, nside), false, reach);
+      const pisco::Sky copy = whole(pisco::detail::polar_sky(maps(a, nside), false, reach));
       const double e = smoothed_error(copy, maps(turned, nside), within);
       std::printf("band limit %3d%s: worst %.1e of the smoothed RMS\n", lmax, monopole ? ", monopole and dipole" : "", e);
       // Measured 3e-7 to 8e-6 up to 1.5 NSIDE, 2.9e-5 at 2 NSIDE, 1.9e-3 at 3 NSIDE - 1 (docs/physics.md,
@@ -149,7 +158,7 @@ TEST(PolarCopy, APointSourceNearAPole) {
       const int src = base.ang2pix(pointing(theta, 0.3));
       pisco::Sky sky(nside);
       sky.I()[std::size_t(src)] = 1.0;
-      pisco::Sky copy = pisco::detail::polar_sky(sky, false, 12.0 * pi / 180);
+      pisco::Sky copy = whole(pisco::detail::polar_sky(sky, false, 12.0 * pi / 180));
       for (double& x : copy.I()) x -= 1.0 / double(sky.npix());  // the mean fill, where no sample reads
       const vec3 v = base.pix2vec(src);
       double worst = 0.0;
@@ -178,26 +187,57 @@ TEST(PolarCopy, ItsTransposeIsExact) {
   for (const double reach_deg : {10.0, 40.0})
     for (const bool weigh : {false, true}) {
       const double reach = reach_deg * pi / 180;
-      const pisco::Sky a = pisco::detail::polar_sky(s, weigh, reach);
-      const pisco::Sky b = pisco::detail::polar_sky_adjoint(m, weigh, reach);
+      const pisco::detail::SkyBand a = pisco::detail::polar_sky(s, weigh, reach);
+      const pisco::Sky b = pisco::detail::polar_sky_adjoint(pisco::detail::band_of(m, a.first, a.size()), weigh, reach);
       double lhs = 0.0, rhs = 0.0, scale = 0.0;
-      for (int c = 0; c < 4; ++c)
-        for (std::size_t p = 0; p < s.npix(); ++p) {
-          const auto k = pisco::StokesIndex(c);
-          lhs += a.stokes(k)[p] * m.stokes(k)[p];
-          rhs += s.stokes(k)[p] * b.stokes(k)[p];
-          scale += std::abs(a.stokes(k)[p] * m.stokes(k)[p]);
+      for (int c = 0; c < 4; ++c) {
+        const auto k = pisco::StokesIndex(c);
+        for (std::size_t p = a.first; p < a.first + a.size(); ++p) {
+          lhs += a.value(c, p) * m.stokes(k)[p];
+          scale += std::abs(a.value(c, p) * m.stokes(k)[p]);
         }
+        for (std::size_t p = 0; p < s.npix(); ++p) rhs += s.stokes(k)[p] * b.stokes(k)[p];
+      }
       EXPECT_NEAR(lhs, rhs, 1e-13 * scale) << reach_deg << " deg, " << (weigh ? "weighted" : "unweighted");
     }
 }
 
 TEST(PolarCopy, TheSameBitsOnAnyNumberOfThreads) {
   const pisco::Sky sky = maps(random_alms(96, 2, true), 64);
-  const pisco::Sky one = pisco::detail::polar_sky(sky, true, 0.3, 1), three = pisco::detail::polar_sky(sky, true, 0.3, 3);
-  for (int c = 0; c < 4; ++c)
-    for (std::size_t p = 0; p < sky.npix(); ++p)
-      ASSERT_EQ(one.stokes(pisco::StokesIndex(c))[p], three.stokes(pisco::StokesIndex(c))[p]) << "pixel " << p;
+  const pisco::detail::SkyBand one = pisco::detail::polar_sky(sky, true, 0.3, 1),
+                               three = pisco::detail::polar_sky(sky, true, 0.3, 3);
+  ASSERT_EQ(one.first, three.first);
+  for (int c = 0; c < 4; ++c) ASSERT_EQ(one.maps[std::size_t(c)], three.maps[std::size_t(c)]) << "Stokes " << c;
+}
+
+// The band holds every pixel within reach of both turned poles, in whole rings, from a multiple of 64,
+// and about sin(reach) of the sky: the memory the backends add for it.
+TEST(PolarCopy, ItsBandHoldsTheCapsInWholeRings) {
+  for (const int nside : {16, 64, 256, 2048})
+    for (const double reach_deg : {6.0, 12.0, 25.0, 60.0}) {
+      const double reach = reach_deg * pi / 180;
+      if (!pisco::detail::polar_copy_fits(nside, reach)) continue;
+      const Healpix_Base base(nside, RING, SET_NSIDE);
+      const auto [first, count] = pisco::detail::polar_band(nside, reach);
+      EXPECT_EQ(first % 64, 0u);
+      ASSERT_LE(first + count, std::size_t(base.Npix()));
+      for (const double x : {1.0, -1.0}) {
+        rangeset<int> set;
+        base.query_disc(pointing(vec3(x, 0.0, 0.0)), reach, set);
+        EXPECT_GE(std::size_t(set.ivbegin(0)), first);
+        EXPECT_LE(std::size_t(set.ivend(set.nranges() - 1)), first + count);
+      }
+      // Its last pixel ends a ring.
+      int start = 0, n = 0;
+      double theta = 0.0;
+      bool shifted = false;
+      base.get_ring_info2(base.pix2ring(int(first + count - 1)), start, n, theta, shifted);
+      EXPECT_EQ(std::size_t(start + n), first + count);
+      const double fraction = double(count) / double(base.Npix());
+      std::printf("NSIDE %4d, reach %4.1f deg: the band is %.3f of the sky (sin reach %.3f)\n", nside, reach_deg,
+                  fraction, std::sin(reach));
+      EXPECT_LE(fraction, std::sin(reach) + 8.0 / nside + 64.0 / double(base.Npix()));
+    }
 }
 
 TEST(PolarCopy, RefusesAReachItCannotHold) {

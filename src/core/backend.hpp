@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <span>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "core/frame.hpp"
+#include "core/polar_copy.hpp"
 #include "core/prepared.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
@@ -31,6 +33,9 @@ struct PointingInput {
   // Aperture half-wave plates: the plate's angle from the detector's axis per sample (hwp_angle -
   // gamma); empty for detectors without one.
   std::span<const double> plate_angle;
+  // The sky the samples are summed on: 0 the sky itself, 1 its polar copy (Backend::set_polar_sky), onto
+  // whose equator the engine has turned them.
+  int sky = 0;
   std::size_t size() const noexcept { return quaternions ? quats.size() : angles.size(); }
   PointingInput subspan(std::size_t offset, std::size_t count) const {
     PointingInput p = *this;
@@ -53,6 +58,14 @@ inline SampleFrame<double> detector_frame(const PointingInput& in, std::size_t i
                       theta, phi);
 }
 
+// A band's table read through the sky's pixel numbers: `data` less `first` elements, so that pixel p
+// of the band is element p. Formed through an integer, since it points before the table's start; the
+// kernels read it only at the band's pixels (Backend::set_polar_sky).
+template <class T>
+const T* band_indexed(const T* data, std::size_t first) {
+  return reinterpret_cast<const T*>(reinterpret_cast<std::uintptr_t>(data) - first * sizeof(T));
+}
+
 // take_adjoint's work for backends that keep the adjoint as four float64 maps (I, Q, U, V): adds them
 // into the caller's (those not empty) and frees them.
 inline void hand_over_adjoint(std::array<std::vector<double>, 4>& own, const std::array<std::span<double>, 4>& maps) {
@@ -68,7 +81,13 @@ class Backend {
   virtual ~Backend() = default;
   virtual std::string name() const = 0;
   virtual std::string device() const = 0;
-  // Queues the TOD of `pointing` (tod.size() samples, validated) for `detector`: written into tod,
+  // The sky's polar copy (core/polar_copy.hpp), kept beside the sky in the backend's own layout with
+  // the same detectors: submissions whose pointing has sky = 1 read it. The engine gives it once the
+  // copy is made and turns onto it only samples whose discs stay within the band. The adjoint needs
+  // no copy: its scatter reads the pixels' positions alone, which are the sky's.
+  virtual void set_polar_sky(const SkyBand& band) = 0;
+  // Queues the TOD of `pointing` (tod.size() samples, validated) for `detector`, on the sky that
+  // pointing.sky names: written into tod,
   // or added to it with `accumulate`. The pointing is read before submit() returns; tod must stay
   // valid until wait() has returned for `ticket` (tickets increase with every submission).
   virtual void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,

@@ -95,10 +95,17 @@ std::shared_ptr<const detail::EngineInputs> prepared(const SkyView& sky, const s
 }
 }  // namespace
 
-// The polar copy's transform (detail::polar_sky), running from set-up until the backend is made.
+// The polar copy's transform (detail::polar_sky), running from set-up until the backend takes it.
 struct Engine::PolarSetup {
-  std::future<Sky> sky;
+  std::future<detail::SkyBand> sky;
   std::exception_ptr error;  // the transform's or the backend's, once reported
+};
+
+// One adjoint call's samples near the poles, turned, and their values (a row detector's, with a plate).
+struct Engine::PolarAdjoint {
+  std::size_t detector = 0;
+  std::shared_ptr<const detail::PolarSamples> samples;
+  std::vector<double> values;
 };
 
 Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
@@ -116,7 +123,7 @@ void Engine::set_sky(const SkyView& sky) {
     throw Error("set_sky: the sky has NSIDE " + std::to_string(sky.nside()) + "; the engine was made for NSIDE " +
                 std::to_string(inputs_->sky.nside));
   wait();
-  if (adjoint_main_ || adjoint_outer_ || adjoint_polar_)
+  if (adjoint_main_ || adjoint_outer_ || !polar_adjoints_.empty())
     throw Error("set_sky: the engine holds adjoint maps not yet taken; call take_adjoint first");
   load_sky(sky, nullptr);
 }
@@ -139,7 +146,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   backend_ = entry.create(inputs_, weighted, options);
 
   // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator.
-  polar_backend_.reset();
+  polar_ready_ = false;
   polar_setup_.reset();  // waits for a transform still running from the previous sky
   polar_cut_.clear();
   polar_reach_ = 0.0;
@@ -156,9 +163,8 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
         polar_reach_ = std::max(polar_reach_, polar_cut_.back() + d.rho_max + 2.0 * std::sqrt(sky.pixel_area()));
     }
     // Its transform starts now on a thread of its own, beside the rest of the set-up and whatever the
-    // caller does next; the backend is made from it at prepare() or by the first submission with such
-    // a sample (a ground scan far from the poles never waits for it). The detectors and the ring
-    // table are the main backend's.
+    // caller does next; the backend takes it at prepare() or at the first submission with such a sample
+    // (a ground scan far from the poles never waits for it), beside the sky, with the same detectors.
     if (any && !detail::polar_copy_fits(sky.nside(), polar_reach_)) {
       any = false;
       std::fill(polar_cut_.begin(), polar_cut_.end(), 0.0);
@@ -218,10 +224,10 @@ Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 
 struct Engine::Pending {
-  std::uint64_t ticket = 0;  // the last main-backend submission it needs
-  // Its last submissions to the outer and polar backends (0: none), waited for when it completes, so
-  // that submit() queues every part and returns without waiting.
-  std::uint64_t outer_ticket = 0, polar_ticket = 0;
+  std::uint64_t ticket = 0;  // the last main-backend submission it needs (its polar samples' included)
+  // Its last submission to the outer backend (0: none), waited for when it completes, so that
+  // submit() queues every part and returns without waiting.
+  std::uint64_t outer_ticket = 0;
   std::size_t detector = 0;
   std::span<double> tod;
   bool accumulate = false;
@@ -324,20 +330,20 @@ void Engine::add_sources(std::size_t detector, const QuatPointingView& boresight
   add_sources_view(detector, boresight, time, sources, tod, hwp_angle);
 }
 
-void Engine::make_polar_backend() {
-  if (polar_backend_ || !polar_setup_) return;
+void Engine::attach_polar_copy() {
+  if (polar_ready_ || !polar_setup_) return;
   if (polar_setup_->error) std::rethrow_exception(polar_setup_->error);  // every later call fails alike
   try {
-    const Sky copy = polar_setup_->sky.get();
-    polar_backend_ = entry_->create(inputs_, copy, options_);
+    backend_->set_polar_sky(polar_setup_->sky.get());
   } catch (...) {
     polar_setup_->error = std::current_exception();
     throw;
   }
   polar_setup_.reset();
+  polar_ready_ = true;
 }
 
-void Engine::prepare() { make_polar_backend(); }
+void Engine::prepare() { attach_polar_copy(); }
 
 template <class View>
 std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
@@ -358,15 +364,23 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   const bool split = !split_.empty() && split_[detector];
   const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
                                                                 polar_cut_.at(detector), pending->polar);
+  // The sky's own pass over every sample but the runs that go to the polar copy (detail::sky_runs).
+  std::vector<std::array<std::size_t, 2>> runs{{0, tod.size()}};
+  if (polar) runs = detail::sky_runs(pending->polar.index, tod.size());
   host_seconds_ += seconds_since(host_start);
-  if (polar) make_polar_backend();
+  if (polar) attach_polar_copy();
+  const auto submit_runs = [&](std::size_t target, std::span<double> out, bool add) {
+    for (const auto& [b, e] : runs) {
+      ticket = next_ticket_++;
+      backend_->submit(target, input.subspan(b, e - b), out.subspan(b, e - b), add, ticket);
+    }
+  };
   try {
     if (det.plate == detail::PreparedDetector::Plate::detector) {
       // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
       for (int r = 0; r < 4; ++r) {
         pending->rows[r].assign(tod.size(), 0.0);
-        ticket = next_ticket_++;
-        backend_->submit(det.rows[r], input, pending->rows[r], false, ticket);
+        submit_runs(det.rows[r], pending->rows[r], false);
       }
       if (split) {
         std::uint64_t t = 0;
@@ -378,28 +392,20 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
         pending->outer_ticket = t;
       }
       if (polar) {
-        std::uint64_t t = 0;
         const detail::PointingInput turned = pending->polar.input();
         for (int r = 0; r < 4; ++r) {
           pending->polar_rows[r].assign(turned.size(), 0.0);
-          t = polar_ticket_++;
-          polar_backend_->submit(det.rows[r], turned, pending->polar_rows[r], false, t);
+          ticket = next_ticket_++;
+          backend_->submit(det.rows[r], turned, pending->polar_rows[r], false, ticket);
         }
-        pending->polar_ticket = t;
       }
-      pending->ticket = ticket;
-      pending->detector = detector;
-      pending->tod = tod;
-      pending->accumulate = accumulate;
-      pending_.push_back(std::move(pending));
     } else {
       if (polar && accumulate) {
         pending->polar_base.resize(pending->polar.index.size());
         for (std::size_t k = 0; k < pending->polar.index.size(); ++k)
           pending->polar_base[k] = tod[pending->polar.index[k]];
       }
-      ticket = next_ticket_++;
-      backend_->submit(detector, input, tod, accumulate, ticket);
+      submit_runs(detector, tod, accumulate);
       if (split) {
         pending->outer.assign(tod.size(), 0.0);
         const std::uint64_t t = outer_ticket_++;
@@ -408,17 +414,16 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
       }
       if (polar) {
         pending->polar_tod.assign(pending->polar.index.size(), 0.0);
-        const std::uint64_t t = polar_ticket_++;
-        polar_backend_->submit(detector, pending->polar.input(), pending->polar_tod, false, t);
-        pending->polar_ticket = t;
+        ticket = next_ticket_++;
+        backend_->submit(detector, pending->polar.input(), pending->polar_tod, false, ticket);
       }
-      // Every submission is completed, or at least checked, by finish_pending().
-      pending->ticket = ticket;
-      pending->detector = detector;
-      pending->tod = tod;
-      pending->accumulate = accumulate;
-      pending_.push_back(std::move(pending));
     }
+    // Every submission is completed, or at least checked, by finish_pending().
+    pending->ticket = ticket;
+    pending->detector = detector;
+    pending->tod = tod;
+    pending->accumulate = accumulate;
+    pending_.push_back(std::move(pending));
     if (polar) polar_samples_ += pending_.back()->polar.index.size();
   } catch (const detail::SubmissionError& e) {
     throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
@@ -441,7 +446,6 @@ void Engine::finish_pending(std::uint64_t ticket) {
     Pending& p = *pending_[done];
     try {
       if (p.outer_ticket) pixels_ += outer_backend_->wait(p.outer_ticket);
-      if (p.polar_ticket) polar_backend_->wait(p.polar_ticket);
     } catch (const detail::SubmissionError& e) {
       drop_pending();
       throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " +
@@ -472,11 +476,10 @@ void Engine::finish_pending(std::uint64_t ticket) {
 // After a failed submission: every part's backend finished with the buffers of the pending
 // submissions (their own errors are the same failure's), then the submissions dropped.
 void Engine::drop_pending() noexcept {
-  for (const auto& [b, next] : {std::pair{outer_backend_.get(), outer_ticket_}, {polar_backend_.get(), polar_ticket_}})
-    if (b && next > 1) try {
-        b->wait(next - 1);
-      } catch (...) {
-      }
+  if (outer_backend_ && outer_ticket_ > 1) try {
+      outer_backend_->wait(outer_ticket_ - 1);
+    } catch (...) {
+    }
   pending_.clear();
 }
 
@@ -561,11 +564,12 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
   // The diagonal leaves out the outer parts and the polar copy (the main backend's plain sum instead).
   const bool split = !squares && !split_.empty() && split_[detector];
-  detail::PolarSamples polar_samples;
+  auto polar_samples = std::make_shared<detail::PolarSamples>();
   const bool polar = !squares && polar_copy() &&
                      detail::find_polar_samples(input, det.offset, offset_angle_.at(detector), polar_cut_.at(detector),
-                                                polar_samples);
-  if (polar) make_polar_backend();
+                                                *polar_samples);
+  std::vector<std::array<std::size_t, 2>> runs{{0, tod.size()}};
+  if (polar) runs = detail::sky_runs(polar_samples->index, tod.size());
   // The TOD of each row detector (or of the detector itself): d, or d times the plate's coefficient.
   std::array<std::vector<double>, 4> rows;
   std::vector<std::size_t> targets;
@@ -591,14 +595,16 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
         adjoint_outer_ = true;
       }
       if (polar) {
-        std::vector<double> near(polar_samples.index.size()), away = d;
+        // The sky's part over its runs (a short run of polar samples inside one scatters 0), the
+        // polar samples' at take_adjoint.
+        std::vector<double> near(polar_samples->index.size()), away = d;
         for (std::size_t k = 0; k < near.size(); ++k) {
-          near[k] = d[polar_samples.index[k]];
-          away[polar_samples.index[k]] = 0.0;
+          near[k] = d[polar_samples->index[k]];
+          away[polar_samples->index[k]] = 0.0;
         }
-        pixels_ += polar_backend_->adjoint(targets[r], polar_samples.input(), near);
-        adjoint_polar_ = true;
-        pixels_ += backend_->adjoint(targets[r], input, away);
+        for (const auto& [b, e] : runs)
+          pixels_ += backend_->adjoint(targets[r], input.subspan(b, e - b), std::span(away).subspan(b, e - b));
+        polar_adjoints_.push_back({targets[r], polar_samples, std::move(near)});
       } else {
         pixels_ += backend_->adjoint(targets[r], input, d, squares);
       }
@@ -642,31 +648,33 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
   const bool split = !split_.empty() && split_[detector];
   detail::PointingInput input = input_of(boresight);
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
-  detail::PolarSamples polar_samples;
+  auto polar_samples = std::make_shared<detail::PolarSamples>();
   const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
-                                                                polar_cut_.at(detector), polar_samples);
-  if (polar) make_polar_backend();
+                                                                polar_cut_.at(detector), *polar_samples);
+  if (polar) attach_polar_copy();
   // The two passes where a sample's value comes from more than one backend's sum (a split beam's
-  // outer part, a plate's four row detectors) or a backend it uses has no normal pass.
-  if (split || det.plate == detail::PreparedDetector::Plate::detector || !backend_->has_normal() ||
-      (polar && !polar_backend_->has_normal())) {
+  // outer part, a plate's four row detectors) or the backend has no normal pass.
+  if (split || det.plate == detail::PreparedDetector::Plate::detector || !backend_->has_normal()) {
     std::vector<double> tod(boresight.size());
     convolve(detector, boresight, tod, false, hwp_angle);
     adjoint_view(detector, boresight, tod, hwp_angle, false);
     return;
   }
-  // The samples near the poles are the polar copy's, the rest the main backend's, as convolve has them.
+  // The samples near the poles are the polar copy's, the rest the sky's, as convolve has them: the
+  // copy's forward values now, scattered at take_adjoint with the adjoint's polar samples.
   std::vector<double> main(boresight.size(), 1.0);
-  for (const std::size_t i : polar_samples.index) main[i] = 0.0;
+  for (const std::size_t i : polar_samples->index) main[i] = 0.0;
   std::uint64_t pixels = 0;
   try {
     pixels += backend_->normal(detector, input, main);
     adjoint_main_ = true;
     if (polar) {
-      const detail::PointingInput turned = polar_samples.input();
-      pixels += polar_backend_->normal(detector, turned, std::vector<double>(turned.size(), 1.0));
-      adjoint_polar_ = true;
-      polar_samples_ += polar_samples.index.size();
+      std::vector<double> values(polar_samples->index.size());
+      const std::uint64_t t = next_ticket_++;
+      backend_->submit(detector, polar_samples->input(), values, false, t);
+      pixels += backend_->wait(t);
+      polar_adjoints_.push_back({detector, polar_samples, std::move(values)});
+      polar_samples_ += polar_samples->index.size();
     }
   } catch (const detail::SubmissionError& e) {
     throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
@@ -716,10 +724,19 @@ void Engine::take_adjoint(const StokesMaps& maps) {
     add(part);
     adjoint_main_ = false;
   }
-  if (adjoint_polar_) {
-    const Sky part = collect(*polar_backend_, nside);
-    add(detail::polar_sky_adjoint(part, weighs_cap_boundaries(options_), polar_reach_));
-    adjoint_polar_ = false;
+  if (!polar_adjoints_.empty()) {
+    // The backend's maps hold the sky's part no more: the polar samples scattered into them afresh,
+    // then taken through the copy's transpose.
+    std::vector<PolarAdjoint> work = std::move(polar_adjoints_);
+    polar_adjoints_.clear();
+    for (const PolarAdjoint& a : work) {
+      detail::PointingInput turned = a.samples->input();
+      turned.sky = 0;  // the scatter reads the pixels' positions, the same in the copy
+      pixels_ += backend_->adjoint(a.detector, turned, a.values);
+    }
+    const Sky part = collect(*backend_, nside);
+    const auto [first, count] = detail::polar_band(nside, polar_reach_);
+    add(detail::polar_sky_adjoint(detail::band_of(part, first, count), weighs_cap_boundaries(options_), polar_reach_));
   }
   if (adjoint_outer_) {
     Sky part = collect(*outer_backend_, outer_nside_);

@@ -428,14 +428,61 @@ void make_plans(const Cap& cap, Plans& plans) {
 
 bool polar_copy_fits(int nside, double reach) { return reach > 0.0 && reach < 88.0 * pi / 180.0 && rings_needed(nside, reach) > 0; }
 
-Sky polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads) {
+std::array<std::size_t, 2> polar_band(int nside, double reach) {
+  check_reach(nside, reach, "the polar copy's band");
+  const Base base(nside, RING, SET_NSIDE);
+  int64 lo = base.Npix(), hi = 0;
+  for (const int sign : {1, -1}) {
+    rangeset<int64> set;
+    base.query_disc(pointing(vec3(double(sign), 0.0, 0.0)), reach, set);
+    if (set.nranges() == 0) continue;
+    lo = std::min(lo, set.ivbegin(0));
+    hi = std::max(hi, set.ivend(set.nranges() - 1));
+  }
+  // Whole rings, then the first pixel down to a multiple of 64.
+  int64 start = 0, n = 0;
+  double theta = 0.0;
+  bool shifted = false;
+  base.get_ring_info2(base.pix2ring(lo), start, n, theta, shifted);
+  const auto first = std::size_t(start) / 64 * 64;
+  base.get_ring_info2(base.pix2ring(hi - 1), start, n, theta, shifted);
+  return {first, std::size_t(start + n) - first};
+}
+
+SkyBand band_of(const SkyView& maps, std::size_t first, std::size_t count) {
+  SkyBand band;
+  band.nside = maps.nside();
+  band.first = first;
+  for (int c = 0; c < 4; ++c) {
+    const std::span<const double> m = maps.stokes(StokesIndex(c));
+    if (m.empty()) band.maps[std::size_t(c)].assign(count, 0.0);
+    else band.maps[std::size_t(c)].assign(m.begin() + std::ptrdiff_t(first), m.begin() + std::ptrdiff_t(first + count));
+  }
+  return band;
+}
+
+namespace {
+// weigh_cap_boundaries (poles.hpp) on a band's pixels.
+void weigh_band(SkyBand& band) {
+  const CapBoundary b = cap_boundary(band.nside, Quadrature::corrected);
+  const std::size_t end = band.first + band.size();
+  for (const std::size_t ring : {std::size_t(b.north), std::size_t(b.south)})
+    for (auto& map : band.maps)
+      for (std::size_t p = std::max(ring, band.first); p < std::min(ring + b.count, end); ++p) map[p - band.first] *= b.weight;
+}
+}  // namespace
+
+SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads) {
   check_reach(sky.nside(), reach, "the sky's polar copy");
   const Base base(sky.nside(), RING, SET_NSIDE);
-  Sky out(sky.nside(), sky.units());
+  const auto [first, count] = polar_band(sky.nside(), reach);
+  SkyBand out;
+  out.nside = sky.nside();
+  out.first = first;
   double mean = 0.0;
   for (const double x : sky.I()) mean += x;
   mean /= double(sky.npix());
-  std::fill(out.I().begin(), out.I().end(), mean);
+  for (int c = 0; c < 4; ++c) out.maps[std::size_t(c)].assign(count, c == 0 ? mean : 0.0);
 
   ThreadPool pool(threads ? threads : std::max(1u, std::thread::hardware_concurrency()));
   Plans plans;
@@ -498,27 +545,32 @@ Sky polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned 
           b += st.weight[k] * cap.values[1][st.index[k]];
         }
         const cd qu = st.rotation * b;
-        const auto p = static_cast<std::size_t>(pixels[i]);
-        out.I()[p] = a.real();
-        out.V()[p] = a.imag();
-        out.Q()[p] = qu.real();
-        out.U()[p] = qu.imag();
+        const std::size_t p = static_cast<std::size_t>(pixels[i]) - first;
+        out.maps[0][p] = a.real();
+        out.maps[3][p] = a.imag();
+        out.maps[1][p] = qu.real();
+        out.maps[2][p] = qu.imag();
       }
     });
   }
-  if (weigh_boundaries) weigh_cap_boundaries(out);
+  if (weigh_boundaries) weigh_band(out);
   return out;
 }
 
-Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, double reach) {
-  check_reach(maps.nside(), reach, "the adjoint of the sky's polar copy");
-  const Base base(maps.nside(), RING, SET_NSIDE);
-  Sky in(maps);
-  if (weigh_boundaries) weigh_cap_boundaries(in);
-  Sky out(maps.nside(), maps.units());
-  // The mean-I fill of the pixels outside the caps: each pixel's I gets their sum / Npix.
+Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach) {
+  check_reach(maps.nside, reach, "the adjoint of the sky's polar copy");
+  const auto [first, count] = polar_band(maps.nside, reach);
+  if (maps.first != first || maps.size() != count)
+    throw Error("the adjoint of the sky's polar copy: a band of pixels " + std::to_string(maps.first) + " to " +
+                std::to_string(maps.first + maps.size()) + "; expected " + std::to_string(first) + " to " +
+                std::to_string(first + count));
+  const Base base(maps.nside, RING, SET_NSIDE);
+  SkyBand in = maps;
+  if (weigh_boundaries) weigh_band(in);
+  Sky out(maps.nside);
+  // The mean-I fill of the band's pixels outside the caps: each pixel's I gets their sum / Npix.
   double rest = 0.0;
-  for (const double x : in.I()) rest += x;
+  for (const double x : in.maps[0]) rest += x;
   Plans plans;
   for (const int sign : {1, -1}) {
     Cap cap = make_cap(base, sign, reach);
@@ -526,11 +578,11 @@ Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, double reach) 
     const std::size_t K = cap.rings.size();
     // 5. The copy's pixels onto the stencils.
     for (const int64 pixel : targets(base, sign, reach)) {
-      const auto p = static_cast<std::size_t>(pixel);
-      rest -= in.I()[p];
+      const std::size_t p = static_cast<std::size_t>(pixel) - first;
+      rest -= in.maps[0][p];
       const Stencil st = stencil(base, cap, pixel);
-      const cd a(in.I()[p], in.V()[p]);
-      const cd b = std::conj(st.rotation) * cd(in.Q()[p], in.U()[p]);
+      const cd a(in.maps[0][p], in.maps[3][p]);
+      const cd b = std::conj(st.rotation) * cd(in.maps[1][p], in.maps[2][p]);
       for (int k = 0; k < st.count; ++k) {
         cap.values[0][st.index[k]] += st.weight[k] * a;
         cap.values[1][st.index[k]] += st.weight[k] * b;
@@ -575,7 +627,7 @@ Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, double reach) 
       }
     }
   }
-  const double fill = rest / double(maps.npix());
+  const double fill = rest / double(out.npix());
   for (double& x : out.I()) x += fill;
   return out;
 }

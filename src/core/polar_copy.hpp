@@ -11,20 +11,40 @@
 // into the copy's own frame. The copy is linear in the sky; polar_sky_adjoint is its exact transpose.
 #pragma once
 
+#include <array>
 #include <cstddef>
+#include <vector>
 
 #include "pisco/sky.hpp"
 
 namespace pisco::detail {
 
+// The part of the copy that samples can read, as the backends keep it beside the sky: whole rings
+// around the copy's equator, pixels [first, first + size()) (RING), first a multiple of 64 so that
+// every backend's rows keep their alignment. About sin(reach) of the sky (docs/physics.md, "The
+// quadrature", has its memory).
+struct SkyBand {
+  int nside = 0;
+  std::size_t first = 0;
+  std::array<std::vector<double>, 4> maps;  // I, Q, U, V
+  std::size_t size() const noexcept { return maps[0].size(); }
+  double value(int stokes, std::size_t pixel) const { return maps[std::size_t(stokes)][pixel - first]; }
+};
+
+// The band of a copy of `reach` at `nside`: its first pixel and its number of pixels.
+std::array<std::size_t, 2> polar_band(int nside, double reach);
+
 // S'(R p) = S(p) on the copy's pixels within `reach` (radians) of (+-1, 0, 0), where the north and
-// south poles land; I elsewhere is the sky's mean I (so that the copy's monopole is the sky's, for the
-// float32 backends' precision), Q, U and V 0. Its own cap-boundary rings weighted when
+// south poles land, held in the band polar_band(nside, reach); the band's other pixels, which no sample
+// reads, hold the sky's mean I, and Q, U and V 0. Its own cap-boundary rings weighted when
 // `weigh_boundaries`. `reach` below 88 deg. Runs on `threads` threads (0: all the host's).
-Sky polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads = 0);
+SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads = 0);
 // Its transpose (docs/physics.md, "The adjoint"): <polar_sky(s), m> = <s, polar_sky_adjoint(m)> to
-// rounding, in the inner product sum_p of the four maps.
-Sky polar_sky_adjoint(const SkyView& maps, bool weigh_boundaries, double reach);
+// rounding, in the inner product sum_p of the four maps over the band. `maps` is a band of the same
+// extent; the result is the whole sky.
+Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach);
+// The band's pixels of whole-sky maps (the adjoint's maps as the backends give them).
+SkyBand band_of(const SkyView& maps, std::size_t first, std::size_t count);
 // Whether a copy of that reach can be made at `nside`: its stencils need kHalfWidth + 1 rings beyond
 // reach and 40 rings at least (polar_copy.cpp), fewer than the sky's 4 NSIDE - 1.
 bool polar_copy_fits(int nside, double reach);

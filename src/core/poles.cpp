@@ -38,6 +38,7 @@ PointingInput PolarSamples::input() const {
   in.quaternions = true;
   in.quats = QuatPointingView{quats};
   in.plate_angle = plate_angle;
+  in.sky = 1;
   return in;
 }
 
@@ -82,6 +83,23 @@ bool find_polar_samples(const PointingInput& in, const DetectorOffset& offset, d
     if (!in.plate_angle.empty()) out.plate_angle.push_back(in.plate_angle[i]);
   }
   return !out.index.empty();
+}
+
+std::vector<std::array<std::size_t, 2>> sky_runs(const std::vector<std::size_t>& polar, std::size_t n,
+                                                 std::size_t gap) {
+  std::vector<std::array<std::size_t, 2>> runs;
+  std::size_t begin = 0;  // the first sample not yet in a run or a skipped gap
+  for (std::size_t k = 0; k < polar.size();) {
+    std::size_t e = k + 1;  // polar[k .. e) consecutive
+    while (e < polar.size() && polar[e] == polar[e - 1] + 1) ++e;
+    if (e - k >= gap) {
+      if (polar[k] > begin) runs.push_back({begin, polar[k]});
+      begin = polar[e - 1] + 1;
+    }
+    k = e;
+  }
+  if (begin < n) runs.push_back({begin, n});
+  return runs;
 }
 
 }  // namespace pisco::detail

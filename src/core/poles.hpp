@@ -10,6 +10,7 @@
 //   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -40,8 +41,8 @@ inline constexpr Q4 polar_rotation{0.0, 0.70710678118654752440, 0.0, 0.707106781
 double polar_cut(double rho_max, int nside);
 
 // The samples of one submission within `cut` of a pole (the detector's line of sight, its offset
-// applied), and their pointing turned by R as boresight quaternions: q' = R q_boresight, so that the
-// detector's q' q_offset = R q. Plate angles follow their samples.
+// applied), ascending, and their pointing turned by R as boresight quaternions: q' = R q_boresight, so
+// that the detector's q' q_offset = R q. Plate angles follow their samples; input() has sky = 1.
 struct PolarSamples {
   std::vector<std::size_t> index;
   std::vector<Quat> quats;
@@ -54,5 +55,12 @@ struct PolarSamples {
 // composing their rotation.
 bool find_polar_samples(const PointingInput& in, const DetectorOffset& offset, double offset_angle, double cut,
                         PolarSamples& out);
+
+// The runs [begin, end) of samples [0, n) that the sky's own pass sums when `polar` (ascending) go to
+// the polar copy: every sample but those in runs of at least `gap` consecutive polar samples. A
+// shorter run stays in its neighbours' submission, its values written over by the copy's: fewer,
+// longer submissions, and no sample summed twice but those. Empty runs are left out.
+std::vector<std::array<std::size_t, 2>> sky_runs(const std::vector<std::size_t>& polar, std::size_t n,
+                                                 std::size_t gap = 64);
 
 }  // namespace pisco::detail

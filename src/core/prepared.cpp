@@ -87,28 +87,30 @@ PreparedSky prepare_sky(const SkyView& sky) {
   return p;
 }
 
-std::vector<double> reference_pixels(const SkyView& sky, unsigned threads) {
-  const std::size_t npix = sky.npix();
-  std::vector<double> pixels(npix * 8);
-  const PixelVectors vectors(sky.nside());
+std::vector<double> reference_pixels(int nside, std::size_t first_pixel,
+                                     const std::array<std::span<const double>, 4>& maps, unsigned threads) {
+  const std::size_t count = maps[0].size();
+  std::vector<double> pixels(count * 8);
+  const PixelVectors vectors(nside);
   constexpr std::size_t piece = std::size_t(1) << 16;
   std::vector<double> xyz(3 * piece);
-  for (std::size_t first = 0; first < npix; first += piece) {
-    const std::size_t n = std::min(piece, npix - first);
-    vectors.get(first, n, xyz.data(), threads);
+  for (std::size_t first = 0; first < count; first += piece) {
+    const std::size_t n = std::min(piece, count - first);
+    vectors.get(first_pixel + first, n, xyz.data(), threads);
     for (std::size_t j = 0; j < n; ++j) {
       double* px = &pixels[(first + j) * 8];
       px[0] = xyz[3 * j];
       px[1] = xyz[3 * j + 1];
       px[2] = xyz[3 * j + 2];
       px[3] = 0.0;
-      px[4] = sky.I()[first + j];
-      px[5] = sky.Q()[first + j];
-      px[6] = sky.U()[first + j];
-      px[7] = sky.V()[first + j];
+      for (int c = 0; c < 4; ++c) px[4 + c] = maps[std::size_t(c)].empty() ? 0.0 : maps[std::size_t(c)][first + j];
     }
   }
   return pixels;
+}
+
+std::vector<double> reference_pixels(const SkyView& sky, unsigned threads) {
+  return reference_pixels(sky.nside(), 0, {sky.I(), sky.Q(), sky.U(), sky.V()}, threads);
 }
 
 namespace {

@@ -7,8 +7,10 @@
 #pragma once
 
 #include <cstddef>
+#include <array>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "core/disc.hpp"
@@ -79,6 +81,10 @@ PreparedSky prepare_sky(const SkyView& sky);
 // The float64 reference's pixel table: 8 doubles per pixel, the unit vector kx, ky, kz, 0, then
 // I, Q, U, V (one cache line per pixel).
 std::vector<double> reference_pixels(const SkyView& sky, unsigned threads);
+// The same for pixels [first, first + count) of maps of that many values each (a band of the sky,
+// core/polar_copy.hpp).
+std::vector<double> reference_pixels(int nside, std::size_t first, const std::array<std::span<const double>, 4>& maps,
+                                     unsigned threads);
 // The detector's weights in float32 for the float32 backends (vulkan, cuda), 4 per node, with those
 // below 2^-64 of the largest (and any below float32's smallest normal number) set to zero.
 // A Gaussian's tail reaches float32's subnormal range within a Table 1 disc (below 1.2e-38 from

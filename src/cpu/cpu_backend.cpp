@@ -192,10 +192,17 @@ class CpuBackend final : public Backend {
     const PreparedDetector& det = in_->detectors.at(detector);
     std::atomic<std::uint64_t> pixels{0};
     const bool per_sample = in_->normalization == Normalization::per_sample;
+    const double* table = pointing.sky ? band_indexed(polar_.data(), 8 * polar_first_) : pixels_.data();
     pool_.parallel_for(pointing.size(), 64, [&](std::size_t begin, std::size_t end) {
-      pixels += convolve_samples(in_->sky, pixels_.data(), det, per_sample, pointing, tod.data(), accumulate, begin, end);
+      pixels += convolve_samples(in_->sky, table, det, per_sample, pointing, tod.data(), accumulate, begin, end);
     });
     evaluated_ += pixels;
+  }
+
+  void set_polar_sky(const SkyBand& band) override {
+    polar_ = reference_pixels(band.nside, band.first, {band.maps[0], band.maps[1], band.maps[2], band.maps[3]},
+                              unsigned(pool_.size()));
+    polar_first_ = band.first;
   }
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
@@ -245,6 +252,8 @@ class CpuBackend final : public Backend {
   std::shared_ptr<const EngineInputs> in_;
   ThreadPool pool_;
   std::vector<double> pixels_;  // reference_pixels(): 8 doubles a pixel
+  std::vector<double> polar_;   // the polar copy's band, likewise, from pixel polar_first_
+  std::size_t polar_first_ = 0;
   std::uint64_t evaluated_ = 0;
 };
 

@@ -96,6 +96,18 @@ class CudaBackend final : public Backend {
     return device_.description() + ", chunks of " + std::to_string(capacity_) + " samples";
   }
 
+  // Beside the sky, on the same device and with the same ring table, read through the sky's pixel
+  // numbers (band_indexed).
+  void set_polar_sky(const SkyBand& band) override {
+    make_current(device_);
+    const std::array<std::span<const double>, 4> maps{band.maps[0], band.maps[1], band.maps[2], band.maps[3]};
+    polar_pixels_ = upload(pixel_records(band.nside, band.first, maps, sky_.monopole, sky_.boundary));
+    if (sky_.vectors) polar_vectors_ = upload(pixel_vectors(band.nside, band.first, band.size()));
+    polar_sky_ = sky_;
+    polar_sky_.pixels = band_indexed(polar_pixels_.data(), band.first);
+    polar_sky_.vectors = sky_.vectors ? band_indexed(polar_vectors_.data(), 4 * band.first) : nullptr;
+  }
+
   void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
               std::uint64_t ticket) override {
     make_current(device_);
@@ -280,7 +292,7 @@ class CudaBackend final : public Backend {
     stage(s, plate, pointing);
     const ChunkArgs args{s.dev_in.data(), pointing.quaternions, s.dev_in.data() + 4 * count, s.dev_out.data(),
                          s.dev_pixels.data(), std::uint32_t(count)};
-    launch_convolve(sky_, det, args, radial, monopole_term_, per_sample_, plate, stream);
+    launch_convolve(pointing.sky ? polar_sky_ : sky_, det, args, radial, monopole_term_, per_sample_, plate, stream);
     PISCO_CUDA_CHECK(
         cudaMemcpyAsync(s.host_out.data(), s.dev_out.data(), count * sizeof(double), cudaMemcpyDeviceToHost, stream));
     PISCO_CUDA_CHECK(cudaMemcpyAsync(s.host_pixels.data(), s.dev_pixels.data(), sizeof(unsigned long long),
@@ -294,6 +306,10 @@ class CudaBackend final : public Backend {
   DeviceArray<double> vectors_;
   DeviceArray<RingEntry> rings_;
   KernelSky sky_{};
+  // The polar copy's band (set_polar_sky).
+  DeviceArray<PixelRecord> polar_pixels_;
+  DeviceArray<double> polar_vectors_;
+  KernelSky polar_sky_{};
   std::vector<DetectorData> detectors_;
   std::size_t capacity_ = 0;
   std::vector<Slot> slots_;

@@ -9,38 +9,46 @@
 
 namespace pisco::detail::cuda {
 
-std::vector<PixelRecord> pixel_records(const SkyView& sky, double monopole, const CapBoundary& boundary) {
-  const std::size_t npix = sky.npix();
-  std::vector<PixelRecord> out(npix);
-  const PixelVectors vectors(sky.nside());
+std::vector<PixelRecord> pixel_records(int nside, std::size_t first_pixel,
+                                       const std::array<std::span<const double>, 4>& maps, double monopole,
+                                       const CapBoundary& boundary) {
+  const std::size_t count = maps[0].size();
+  std::vector<PixelRecord> out(count);
+  const PixelVectors vectors(nside);
   constexpr std::size_t piece = std::size_t(1) << 16;
   std::vector<double> xyz(3 * piece);
-  for (std::size_t first = 0; first < npix; first += piece) {
-    const std::size_t n = std::min(piece, npix - first);
-    vectors.get(first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
+  for (std::size_t first = 0; first < count; first += piece) {
+    const std::size_t n = std::min(piece, count - first);
+    vectors.get(first_pixel + first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
     for (std::size_t j = 0; j < n; ++j) {
       const std::size_t i = first + j;
-      out[i] = {float(xyz[3 * j]), float(xyz[3 * j + 1]), float(xyz[3 * j + 2]), float(sky.I()[i] - monopole * boundary.at(i)),
-                float(sky.Q()[i]),  float(sky.U()[i]),      float(sky.V()[i]),      0.0f};
+      out[i] = {float(xyz[3 * j]),   float(xyz[3 * j + 1]), float(xyz[3 * j + 2]),
+                float(maps[0][i] - monopole * boundary.at(first_pixel + i)),
+                float(maps[1][i]),   float(maps[2][i]),     float(maps[3][i]), 0.0f};
     }
   }
   return out;
 }
 
-std::vector<double> pixel_vectors(const SkyView& sky) {
-  const std::size_t npix = sky.npix();
-  std::vector<double> out(npix * 4, 0.0);
-  const PixelVectors vectors(sky.nside());
+std::vector<PixelRecord> pixel_records(const SkyView& sky, double monopole, const CapBoundary& boundary) {
+  return pixel_records(sky.nside(), 0, {sky.I(), sky.Q(), sky.U(), sky.V()}, monopole, boundary);
+}
+
+std::vector<double> pixel_vectors(int nside, std::size_t first_pixel, std::size_t count) {
+  std::vector<double> out(count * 4, 0.0);
+  const PixelVectors vectors(nside);
   constexpr std::size_t piece = std::size_t(1) << 16;
   std::vector<double> xyz(3 * piece);
-  for (std::size_t first = 0; first < npix; first += piece) {
-    const std::size_t n = std::min(piece, npix - first);
-    vectors.get(first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
+  for (std::size_t first = 0; first < count; first += piece) {
+    const std::size_t n = std::min(piece, count - first);
+    vectors.get(first_pixel + first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
     for (std::size_t j = 0; j < n; ++j)
       for (int c = 0; c < 3; ++c) out[(first + j) * 4 + c] = xyz[3 * j + c];
   }
   return out;
 }
+
+std::vector<double> pixel_vectors(const SkyView& sky) { return pixel_vectors(sky.nside(), 0, sky.npix()); }
 
 std::vector<float> float_weights(const PreparedDetector& det) { return float32_weights(det); }
 

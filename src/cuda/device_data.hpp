@@ -3,6 +3,8 @@
 // float64 sums need them. Plain C++: the unit tests use it without a GPU.
 #pragma once
 
+#include <array>
+#include <span>
 #include <vector>
 
 #include "core/prepared.hpp"
@@ -14,9 +16,13 @@ namespace pisco::detail::cuda {
 // One record per pixel, I - monopole in float32.
 // The sky's pixels with monopole x boundary.at(p) taken out of I (core/cap_boundary.hpp).
 std::vector<PixelRecord> pixel_records(const SkyView& sky, double monopole, const CapBoundary& boundary = {});
+// The same for pixels [first, first + count) of maps of count values each (a band, core/polar_copy.hpp).
+std::vector<PixelRecord> pixel_records(int nside, std::size_t first, const std::array<std::span<const double>, 4>& maps,
+                                       double monopole, const CapBoundary& boundary);
 
 // 4 doubles per pixel (kx, ky, kz, 0), the unit vectors of the reference.
 std::vector<double> pixel_vectors(const SkyView& sky);
+std::vector<double> pixel_vectors(int nside, std::size_t first, std::size_t count);
 
 // The detector's weights converted to float32, 4 per node as in the reference.
 std::vector<float> float_weights(const PreparedDetector& det);

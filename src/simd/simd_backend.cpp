@@ -172,7 +172,7 @@ class SimdBackend final : public Backend {
     boundary_ = cap_boundary(sky.nside(), in_->quadrature);
     per_sample_ = in_->normalization == Normalization::per_sample;
     exact_ = monopole_ != 0.0 || per_sample_;
-    pack_sky(sky);
+    pack_sky(sky.nside(), 0, {sky.I(), sky.Q(), sky.U(), sky.V()}, sky_);
     tables_.reserve(in_->detectors.size());
     for (std::size_t d = 0; d < in_->detectors.size(); ++d) tables_.push_back(detector_tables(in_->detectors[d], d, exact_));
   }
@@ -196,6 +196,10 @@ class SimdBackend final : public Backend {
   }
 
   std::uint64_t wait(std::uint64_t) override { return std::exchange(evaluated_, 0); }
+
+  void set_polar_sky(const SkyBand& band) override {
+    pack_sky(band.nside, band.first, {band.maps[0], band.maps[1], band.maps[2], band.maps[3]}, polar_);
+  }
 
   // A task's plan (its samples' frames, ranges and their rings): about 12 bytes a range of the sample's
   // disc, which crosses at most 3 rho NSIDE + 1 rings (their spacing in colatitude is 2 / (3 NSIDE)
@@ -310,38 +314,45 @@ class SimdBackend final : public Backend {
     });
   }
 
-  // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores).
-  void pack_sky(const SkyView& sky) {
-    const std::size_t npix = sky.npix();
-    for (auto* c : {&kx_, &ky_, &kz_, &i_, &q_, &u_, &v_}) c->assign(npix + simd::pad_floats, 0.0f);
+  // The sky in the kernel's layout, a piece of pixels at a time (their unit vectors on all cores):
+  // pixels [first, first + count) of `maps` (count values each), read through the sky's pixel numbers.
+  struct PackedSky {
+    std::vector<float> kx, ky, kz, i, q, u, v;
+    std::vector<double> vx, vy, vz;  // float64 path only
+    KernelSky view{};
+  };
+  void pack_sky(int nside, std::size_t first_pixel, const std::array<std::span<const double>, 4>& maps,
+                PackedSky& out) const {
+    const std::size_t count = maps[0].size();
+    for (auto* c : {&out.kx, &out.ky, &out.kz, &out.i, &out.q, &out.u, &out.v}) c->assign(count + simd::pad_floats, 0.0f);
     if (exact_)
-      for (auto* c : {&vx_, &vy_, &vz_}) c->assign(npix + simd::pad_floats, 0.0);
-    const PixelVectors vectors(sky.nside());
+      for (auto* c : {&out.vx, &out.vy, &out.vz}) c->assign(count + simd::pad_floats, 0.0);
+    const PixelVectors vectors(nside);
     constexpr std::size_t piece = std::size_t(1) << 16;
-    std::vector<double> xyz(3 * std::min(piece, npix));
-    for (std::size_t first = 0; first < npix; first += piece) {
-      const std::size_t n = std::min(piece, npix - first);
-      vectors.get(first, n, xyz.data(), unsigned(pool_.size()));
+    std::vector<double> xyz(3 * std::min(piece, count));
+    for (std::size_t first = 0; first < count; first += piece) {
+      const std::size_t n = std::min(piece, count - first);
+      vectors.get(first_pixel + first, n, xyz.data(), unsigned(pool_.size()));
       for (std::size_t j = 0; j < n; ++j) {
         const std::size_t p = first + j;
-        kx_[p] = float(xyz[3 * j]);
-        ky_[p] = float(xyz[3 * j + 1]);
-        kz_[p] = float(xyz[3 * j + 2]);
-        i_[p] = float(sky.I()[p] - monopole_ * boundary_.at(p));
-        q_[p] = float(sky.Q()[p]);
-        u_[p] = float(sky.U()[p]);
-        v_[p] = float(sky.V()[p]);
+        out.kx[p] = float(xyz[3 * j]);
+        out.ky[p] = float(xyz[3 * j + 1]);
+        out.kz[p] = float(xyz[3 * j + 2]);
+        out.i[p] = float(maps[0][p] - monopole_ * boundary_.at(first_pixel + p));
+        out.q[p] = float(maps[1][p]);
+        out.u[p] = float(maps[2][p]);
+        out.v[p] = float(maps[3][p]);
       }
       if (exact_)
         for (std::size_t j = 0; j < n; ++j) {
-          vx_[first + j] = xyz[3 * j];
-          vy_[first + j] = xyz[3 * j + 1];
-          vz_[first + j] = xyz[3 * j + 2];
+          out.vx[first + j] = xyz[3 * j];
+          out.vy[first + j] = xyz[3 * j + 1];
+          out.vz[first + j] = xyz[3 * j + 2];
         }
     }
-    sky_ = {kx_.data(), ky_.data(), kz_.data(), i_.data(), q_.data(), u_.data(), v_.data(),
-            exact_ ? vx_.data() : nullptr, exact_ ? vy_.data() : nullptr, exact_ ? vz_.data() : nullptr, monopole_,
-            boundary_};
+    const auto at = [&](const auto& c) { return c.empty() ? nullptr : band_indexed(c.data(), first_pixel); };
+    out.view = {at(out.kx), at(out.ky), at(out.kz), at(out.i), at(out.q), at(out.u), at(out.v),
+                at(out.vx), at(out.vy), at(out.vz), monopole_, boundary_};
   }
 
   // One adjoint task's plan: samples [begin, end)'s frames, values and ranges, and the window's rows
@@ -383,7 +394,7 @@ class SimdBackend final : public Backend {
       if (per_sample_) {  // the norm as the forward computes it (its float64 path)
         const simd::SampleInput in{&s.f, w.disc.data(), c / 2, plate ? m : nullptr, false, true};
         simd::SampleSums sums;
-        simd::convolve_sample(kernel_, sky_, kd, in, sums);
+        simd::convolve_sample(kernel_, sky_.view, kd, in, sums);
         if (!(sums.norm > 0)) continue;
         s.value /= sums.norm;
       }
@@ -434,7 +445,7 @@ class SimdBackend final : public Backend {
       if (normal && s.count != c) {
         const simd::SampleInput in{&s.f, w.disc.data(), c / 2, plate ? m : nullptr, false, false};
         simd::SampleSums sums;
-        simd::convolve_sample(kernel_, sky_, kd, in, sums);
+        simd::convolve_sample(kernel_, sky_.view, kd, in, sums);
         s.value = sums.sum + monopole_ * sums.monopole_weight;
         s.summed = true;
       }
@@ -488,7 +499,7 @@ class SimdBackend final : public Backend {
         in.pixels = s.pixels;
         in.scratch = scratch.data();
       }
-      simd::scatter_sample(kernel_, sky_, kd, in);
+      simd::scatter_sample(kernel_, sky_.view, kd, in);
     }
   }
 
@@ -510,7 +521,7 @@ class SimdBackend final : public Backend {
       for (std::size_t r = 0; r < n; r += 2) count += ranges[r + 1] - ranges[r];
       const simd::SampleInput sample{&f, ranges.data(), n / 2, plate ? m : nullptr, monopole_ != 0.0, per_sample_};
       simd::SampleSums sums;
-      simd::convolve_sample(kernel_, sky_, kd, sample, sums);
+      simd::convolve_sample(kernel_, in.sky ? polar_.view : sky_.view, kd, sample, sums);
       // As the reference and the GPU kernels: float32 sum plus I0 sum w_I, over the normalization.
       double d = sums.sum + monopole_ * sums.monopole_weight;
       if (per_sample_) d = sums.norm > 0 ? d / sums.norm : 0.0;
@@ -526,9 +537,7 @@ class SimdBackend final : public Backend {
   double monopole_ = 0.0;
   CapBoundary boundary_;
   bool per_sample_ = false, exact_ = false;
-  std::vector<float> kx_, ky_, kz_, i_, q_, u_, v_;
-  std::vector<double> vx_, vy_, vz_;  // float64 path only
-  KernelSky sky_{};
+  PackedSky sky_, polar_;  // the sky, and its polar copy's band (set_polar_sky)
   std::vector<DetectorTables> tables_;
   std::uint64_t evaluated_ = 0;
   std::array<std::vector<double>, 4> adjoint_;  // I, Q, U, V

@@ -30,7 +30,7 @@ class ComputePipeline {
   VkDescriptorSet make_set(std::span<const Buffer* const> buffers);
   // Values of the kernels' specialization constants, by constant_id (booleans as 0 or 1); a kernel
   // ignores those it does not declare.
-  using Specialization = std::array<std::uint32_t, 7>;
+  using Specialization = std::array<std::uint32_t, 8>;
   // Creates the pipeline specialized with `spec` now rather than at its first use.
   void prepare(const Specialization& spec) { pipeline(spec); }
   // Records: bind the pipeline specialized with `spec`, bind `set`, push `push`, dispatch (x, y)

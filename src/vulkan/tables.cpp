@@ -66,19 +66,24 @@ KernelMode kernel_mode(const EngineInputs& in, const SkyView& sky, bool ff) {
   return m;
 }
 
-void pack_sky(const SkyView& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out) {
+void pack_sky(const std::array<std::span<const double>, 4>& maps, std::size_t maps_first, const KernelMode& mode,
+              std::size_t first, std::size_t n, const double* xyz, float* out) {
   for (std::size_t j = 0; j < n; ++j) {
-    const std::size_t p = first + j;
+    const std::size_t p = first + j, i = p - maps_first;
     float* rec = out + 8 * j;
     rec[0] = float(xyz[3 * j]);
     rec[1] = float(xyz[3 * j + 1]);
     rec[2] = float(xyz[3 * j + 2]);
-    rec[3] = float(sky.I()[p] - mode.monopole * mode.boundary.at(p));
-    rec[4] = float(sky.Q()[p]);
-    rec[5] = float(sky.U()[p]);
-    rec[6] = float(sky.V()[p]);
+    rec[3] = float(maps[0][i] - mode.monopole * mode.boundary.at(p));
+    rec[4] = float(maps[1][i]);
+    rec[5] = float(maps[2][i]);
+    rec[6] = float(maps[3][i]);
     rec[7] = 0.0f;
   }
+}
+
+void pack_sky(const SkyView& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out) {
+  pack_sky({sky.I(), sky.Q(), sky.U(), sky.V()}, 0, mode, first, n, xyz, out);
 }
 
 void pack_sky_lo(std::size_t n, const double* xyz, float* out) {

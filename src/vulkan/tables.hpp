@@ -5,6 +5,7 @@
 // device gets.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -43,6 +44,9 @@ KernelMode kernel_mode(const EngineInputs& in, const SkyView& sky, bool ff);
 
 // Pixels [first, first + n): 8 floats each (kx, ky, kz, I - I0, Q, U, V, 0), from their unit vectors xyz.
 void pack_sky(const SkyView& sky, const KernelMode& mode, std::size_t first, std::size_t n, const double* xyz, float* out);
+// The same from maps whose first value is pixel maps_first's (a band of the sky, core/polar_copy.hpp).
+void pack_sky(const std::array<std::span<const double>, 4>& maps, std::size_t maps_first, const KernelMode& mode,
+              std::size_t first, std::size_t n, const double* xyz, float* out);
 // 4 floats a pixel: k - float(k), 0.
 void pack_sky_lo(std::size_t n, const double* xyz, float* out);
 // One texel a ring: z (two words), first pixel, count | shifted << 31.

@@ -52,6 +52,7 @@ class VulkanBackend final : public Backend {
   void submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod, bool accumulate,
               std::uint64_t ticket) override;
   std::uint64_t wait(std::uint64_t ticket) override;
+  void set_polar_sky(const SkyBand& band) override;
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override;
   void take_adjoint(const std::array<std::span<double>, 4>& maps) override;
@@ -62,6 +63,7 @@ class VulkanBackend final : public Backend {
     VkCommandBuffer cmd = VK_NULL_HANDLE;
     VkFence fence = VK_NULL_HANDLE;
     VkDescriptorSet set = VK_NULL_HANDLE;
+    VkDescriptorSet polar_set = VK_NULL_HANDLE;  // the same with the polar copy's band as the sky
     SlotJob job;
     // The adjoint's, made at its first use: the scaled values, and the set with the maps.
     Buffer values;
@@ -121,6 +123,9 @@ class VulkanBackend final : public Backend {
   std::unique_ptr<vk::ComputePipeline> pipeline_;
   VkCommandPool pool_ = VK_NULL_HANDLE;
   Buffer sky_, sky_lo_, rings_, weights_, weights64_;
+  // The polar copy's band in the sky's layout (set_polar_sky): its tables start at pixel polar_first_.
+  Buffer polar_sky_, polar_sky_lo_;
+  std::uint32_t polar_first_ = 0;
   vk::Grids grids_;      // the beam grids' offsets and layouts (their tables are on the device)
   vk::KernelMode mode_;  // the float64 path, and float-float or float64 numbers
   std::size_t chunk_ = 0;
@@ -158,7 +163,8 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, c
   const std::span<const std::uint32_t> spirv =
       ff ? std::span<const std::uint32_t>(pisco_spv_convolve_ff, sizeof(pisco_spv_convolve_ff) / sizeof(std::uint32_t))
          : std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t));
-  pipeline_ = std::make_unique<vk::ComputePipeline>(*device_, spirv, PISCO_BINDINGS, std::uint32_t(slots_.size()));
+  // A set a slot for the sky, another for its polar copy.
+  pipeline_ = std::make_unique<vk::ComputePipeline>(*device_, spirv, PISCO_BINDINGS, std::uint32_t(2 * slots_.size()));
 
   // The sky in float32 without its monopole I0, which float32 cannot carry next to micro-kelvin
   // anisotropies (docs/vulkan.md, "Precision"): I0 sum_k w_I(k) is added back by the kernel's float64
@@ -337,7 +343,7 @@ void VulkanBackend::release() noexcept {
   for (Slot& s : slots_)
     if (s.fence) fn.vkDestroyFence(device_->handle(), s.fence, nullptr);
   for (Slot& s : slots_) s = Slot{};
-  for (Buffer* b : {&sky_, &sky_lo_, &rings_, &weights_, &weights64_}) *b = Buffer();
+  for (Buffer* b : {&sky_, &sky_lo_, &rings_, &weights_, &weights64_, &polar_sky_, &polar_sky_lo_}) *b = Buffer();
   pipeline_.reset();
   if (adjoint_.fence) fn.vkDestroyFence(device_->handle(), adjoint_.fence, nullptr);
   adjoint_ = Adjoint{};
@@ -444,11 +450,50 @@ void VulkanBackend::fail(const SlotJob& job, const std::string& what, ErrorKind 
                         kind);
 }
 
+// The band packed as the sky is (setup), uploaded beside it, and a descriptor set a slot that binds it
+// in the sky's place; the kernel reads it from pixel SKY_FIRST (shaders/kernel.glsl).
+void VulkanBackend::set_polar_sky(const SkyBand& band) {
+  if (polar_sky_.handle() != VK_NULL_HANDLE) throw Error("vulkan: the polar copy is given once per sky");
+  const std::array<std::span<const double>, 4> maps{band.maps[0], band.maps[1], band.maps[2], band.maps[3]};
+  const PixelVectors vectors(band.nside);
+  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
+  std::vector<double> xyz;
+  polar_sky_ = upload_records(
+      band.size(), 8 * sizeof(float),
+      [&](std::size_t first, std::size_t n, void* dst) {
+        xyz.resize(3 * n);
+        vectors.get(band.first + first, n, xyz.data(), threads);
+        vk::pack_sky(maps, band.first, mode_, band.first + first, n, xyz.data(), static_cast<float*>(dst));
+      },
+      "the sky's polar copy");
+  polar_sky_lo_ = upload_records(
+      mode_.vectors64() ? band.size() : 1, 4 * sizeof(float),
+      [&](std::size_t first, std::size_t n, void* dst) {
+        auto* out = static_cast<float*>(dst);
+        if (!mode_.vectors64()) {
+          std::fill(out, out + 4 * n, 0.0f);
+          return;
+        }
+        xyz.resize(3 * n);
+        vectors.get(band.first + first, n, xyz.data(), threads);
+        vk::pack_sky_lo(n, xyz.data(), out);
+      },
+      "the polar copy's float64 pixel vectors");
+  polar_first_ = std::uint32_t(band.first);
+  for (Slot& s : slots_) {
+    auto all = bindings(s);
+    all[PISCO_BINDING_SKY] = &polar_sky_;
+    all[PISCO_BINDING_SKY_LO] = &polar_sky_lo_;
+    s.polar_set = pipeline_->make_set(std::span<const Buffer* const>(all).first(PISCO_BINDINGS));
+  }
+}
+
 void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, std::span<double> tod,
                            bool accumulate, std::uint64_t ticket) {
   const PreparedDetector& det = in_->detectors.at(detector);
   const vk::PushConstants push = push_constants(detector, pointing.quaternions);
-  const vk::ComputePipeline::Specialization spec = specialization(detector);
+  vk::ComputePipeline::Specialization spec = specialization(detector);
+  if (pointing.sky) spec[PISCO_SPEC_SKY_FIRST] = polar_first_;
   const std::size_t chunk = chunk_for(det);
   SlotJob current;
   try {
@@ -459,7 +504,7 @@ void VulkanBackend::submit(std::size_t detector, const PointingInput& pointing, 
         return collect(s);
       });
       current = SlotJob{false, ticket, detector, begin, pointing.size(), tod.subspan(begin, n), accumulate};
-      dispatch(slot, *pipeline_, slot.set, spec, push, pointing.subspan(begin, n));
+      dispatch(slot, *pipeline_, pointing.sky ? slot.polar_set : slot.set, spec, push, pointing.subspan(begin, n));
       slot.job = current;
       slot.job.busy = true;
     }
