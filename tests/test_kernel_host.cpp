@@ -21,6 +21,8 @@
 
 #include "backend_fixtures.hpp"
 #include "support.hpp"
+#include "core/polar_copy.hpp"
+#include "core/poles.hpp"
 #include "core/prepared.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/quaternion.hpp"
@@ -235,6 +237,74 @@ TEST(KernelOnHost, MatchesTheReferenceAndQueryDisc) {
           }
       }
   EXPECT_EQ(checked, 2 * 3 * 2 * 5);
+}
+
+// The polar copy's band as the backend binds it (its tables from pixel SKY_FIRST): the kernel reads
+// nothing outside it (texelFetch here throws out of range) and sums what it would sum from a whole-sky
+// table holding the same copy, bit for bit, for samples near both poles turned onto it as the engine
+// turns them, on the float64 path (a monopole) and without.
+TEST(KernelOnHost, ThePolarCopysBandReadsAsTheWholeCopy) {
+  const int nside = 32;
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  pisco::Pointing p;
+  for (int i = 0; i < 600; ++i) {
+    const double t = 20.0 * deg * std::sqrt(u(rng));  // beyond the cut: its edge reached
+    p.theta.push_back(i % 2 ? t : pi - t);
+    p.phi.push_back(2 * pi * u(rng));
+    p.psi.push_back(2 * pi * u(rng));
+  }
+  int checked = 0;
+  for (const double monopole : {0.0, 2.725}) {
+    const pisco_test::Scene s = pisco_test::backend_scene(nside, monopole);
+    std::vector<pisco::Detector> dets = s.focal_plane.detectors();
+    for (std::size_t i = 0; i < dets.size(); ++i) dets[i].set_offset(1.5 * deg * double(i % 3), -1.0 * deg, 0.4 * double(i));
+    const pisco::FocalPlane fp(dets);
+    const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, fp, pisco::Normalization::integral);
+    double reach = 0.0;
+    for (const auto& d : in.detectors)
+      reach = std::max(reach, pisco::detail::polar_cut(d.rho_max, nside) + d.rho_max + 2.0 * std::sqrt(pi / 3) / nside);
+    const pisco::detail::SkyBand band = pisco::detail::polar_sky(s.sky, false, reach);
+    const vk::KernelMode mode = vk::kernel_mode(in, s.sky, PISCO_FF != 0);
+    const vk::Grids grids = vk::pack_grids(in, mode);
+    glsl::weight_pairs = texels(grids.w32);
+    glsl::weights64 = texels(grids.w64);
+    glsl::rings = texels(vk::pack_rings(in.sky, mode.ff));
+    // The tables of pixels [first, first + count) of the maps (whose values start at maps_first).
+    const auto tables = [&](const std::array<std::span<const double>, 4>& maps, std::size_t maps_first,
+                            std::size_t first, std::size_t count) {
+      const pisco::detail::PixelVectors vectors(nside);
+      std::vector<double> xyz(3 * count);
+      vectors.get(first, count, xyz.data(), 2);
+      std::vector<float> records(8 * count), lo(4 * count);
+      vk::pack_sky(maps, maps_first, mode, first, count, xyz.data(), records.data());
+      vk::pack_sky_lo(count, xyz.data(), lo.data());
+      glsl::sky = texels(records);
+      glsl::sky_lo = texels(lo);
+      glsl::SKY_FIRST = std::uint32_t(first);
+    };
+    pisco::Sky copy(nside);  // the same copy in a whole sky
+    for (int c = 0; c < 4; ++c)
+      std::copy(band.maps[std::size_t(c)].begin(), band.maps[std::size_t(c)].end(),
+                copy.stokes(pisco::StokesIndex(c)).begin() + std::ptrdiff_t(band.first));
+    for (std::size_t d = 0; d < fp.size(); ++d) {
+      pisco::detail::PointingInput input;
+      input.angles = p;
+      pisco::detail::PolarSamples polar;
+      ASSERT_TRUE(pisco::detail::find_polar_samples(input, in.detectors[d].offset, pi,
+                                                    pisco::detail::polar_cut(in.detectors[d].rho_max, nside), polar));
+      const pisco::detail::PointingInput turned = polar.input();
+      tables({band.maps[0], band.maps[1], band.maps[2], band.maps[3]}, band.first, band.first, band.size());
+      const std::vector<double> from_band = host_kernel(in, mode, grids, d, turned);
+      tables({copy.I(), copy.Q(), copy.U(), copy.V()}, 0, 0, copy.npix());
+      const std::vector<double> from_whole = host_kernel(in, mode, grids, d, turned);
+      ASSERT_EQ(from_band, from_whole) << fp[d].name << (monopole ? ", monopole" : "");
+      EXPECT_GT(turned.size(), 100u);
+      ++checked;
+    }
+  }
+  glsl::SKY_FIRST = 0;
+  EXPECT_EQ(checked, 10);
 }
 
 // The disc walk alone (the kernel's ring bounds and ranges) against query_disc, pixel for pixel, from
