@@ -429,6 +429,51 @@ TEST(Engine, EveryPartQueuedBeforeAnyWaitAndPreparedAtSetUp) {
   }
 }
 
+// A scan across the north pole: the samples within the polar cut are summed once, on the polar copy
+// that the sky's own backend holds, and the others once on the sky. The pixels the engine reports are
+// exactly those of each sample's disc where it is summed (HEALPix's query_disc around its line of
+// sight, turned by R for the polar ones), on every backend here; the TOD is that of an engine given
+// the samples one by one (every one in a run of its own, short runs summed on both).
+TEST(Engine, PolarSamplesAreSummedOnceBesideTheSky) {
+  Scene s;
+  const int nside = s.sky.nside();
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  const std::size_t det = 3;  // "round": on the boresight
+  const double rho = 8 * deg, cut = rho + 4.0 * std::sqrt(pi / 3) / nside;
+  pisco::Pointing ptg;
+  for (int i = 0; i < 300; ++i) ptg.push_back(pi / 2 + 0.2 * std::sin(i), 0.01 * i, 0.3);
+  for (int i = 0; i <= 1000; ++i) {  // colatitude 25 deg, across the pole, 25 deg on the other side
+    const double t = (-25.0 + 0.05 * i) * deg;
+    ptg.push_back(std::abs(t), t < 0 ? 0.3 + pi : 0.3, 0.1 * i);
+  }
+  std::uint64_t expected = 0;
+  std::size_t polar = 0;
+  std::vector<int> pix;
+  for (std::size_t i = 0; i < ptg.size(); ++i) {
+    const double th = ptg.theta[i], ph = ptg.phi[i];
+    const vec3 v(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th));
+    const bool near = th < cut || th > pi - cut;
+    polar += near;
+    base.query_disc(near ? pointing(vec3(v.z, v.y, -v.x)) : pointing(v), rho, pix);
+    expected += pix.size();
+  }
+  ASSERT_GT(polar, 400u);
+  for (const std::string backend : {"cpu", "simd", "vulkan"}) {
+    if (const std::string why = pisco_test::backend_unavailable(backend); !why.empty()) {
+      ADD_FAILURE() << backend << " is not available: " << why;
+      continue;
+    }
+    pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = backend});
+    std::vector<double> tod(ptg.size()), one(ptg.size());
+    engine.convolve(det, ptg, tod);
+    EXPECT_EQ(engine.polar_samples(), polar) << backend;
+    EXPECT_EQ(std::llround(engine.mean_disc_pixels() * double(ptg.size())), std::int64_t(expected)) << backend;
+    pisco::Engine by_sample(s.sky, s.beams, s.fp, {.backend = backend});
+    for (std::size_t i = 0; i < ptg.size(); ++i) by_sample.convolve(det, ptg.view().subspan(i, 1), std::span(one).subspan(i, 1));
+    EXPECT_EQ(tod, one) << backend;
+  }
+}
+
 TEST(Engine, BadQuaternionsAndOffsetsAreNamed) {
   Scene s;
   const auto message = pisco_test::error_of;
