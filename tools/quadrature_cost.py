@@ -4,16 +4,19 @@
 For each NSIDE: a band-limited random sky (lmax 2 NSIDE), a 6-pixel-per-FWHM Gaussian beam (rho_max 2.5
 FWHM), one detector; the engine made with quadrature="plain" and with "corrected", then the same N random
 pointings over the sphere through each (the fraction near the poles that a uniform scan has). The
-corrected engine makes its polar copy (resampled around each pole, then a second sky in the backend)
-from its construction on a thread of its own; `prepare()` waits for it: the "copy ready" column is
-the wait after construction. Prints the set-up and convolution times, their ratios, the samples on
-the polar copy and the sky memory of each, measured in one run.
+corrected engine makes its polar copy (resampled around each pole, then packed by the backend beside
+the sky as a band of rings) from its construction on a thread of its own; `prepare()` waits for it:
+the "copy ready" column is the wait after construction. Prints the set-up and convolution times, their
+ratios, the samples on the polar copy, and the memory the engine holds once prepared (the process's
+resident memory then, less before the engine was made: the backend's sky, band and beams), measured
+in one run.
 
 Run with the Python package built in build/ (scripts/run-tests.sh builds it into build/python):
     PYTHONPATH=build/python build/python-venv/bin/python tools/quadrature_cost.py [--backend simd] [--nside 256 512]
 """
 
 import argparse
+import gc
 import math
 import time
 
@@ -21,6 +24,15 @@ import healpy as hp
 import numpy as np
 
 import pisco
+
+
+def resident_mib():
+    """The process's resident memory (Linux), MiB."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
 
 
 def main():
@@ -36,7 +48,7 @@ def main():
     phi = 2 * math.pi * rng.random(args.samples)
     psi = 2 * math.pi * rng.random(args.samples)
     print(f"backend {args.backend}, {args.samples:,} random pointings, 6 pixels per FWHM, rho_max 2.5 FWHM")
-    print("| NSIDE | quadrature | engine made | copy ready | convolution | total | polar samples | sky bytes per pixel |")
+    print("| NSIDE | quadrature | engine made | copy ready | convolution | total | polar samples | engine memory |")
     print("|---|---|---|---|---|---|---|---|")
     for nside in args.nside:
         lmax = 2 * nside
@@ -45,22 +57,27 @@ def main():
         sky = pisco.Sky.from_maps(np.ascontiguousarray(maps))
         fwhm = 6 * math.sqrt(math.pi / 3) / nside
         beam = pisco.Beamsor.gaussian(fwhm, rho_max=2.5 * fwhm)
-        times = {}
+        del maps
+        times, memory = {}, {}
         for quadrature in ("plain", "corrected"):
+            gc.collect()
+            before = resident_mib()
             t0 = time.perf_counter()
             with pisco.Engine(sky, beam, fp, backend=args.backend, quadrature=quadrature) as engine:
                 t1 = time.perf_counter()
                 engine.prepare()
                 t2 = time.perf_counter()
+                held = resident_mib() - before
                 engine.convolve(0, theta, phi, psi)
                 t3 = time.perf_counter()
                 polar = engine.polar_samples
             times[quadrature] = (t2 - t0, t3 - t2)
-            per_pixel = 32 * (2 if quadrature == "corrected" else 1)
+            memory[quadrature] = held
             print(f"| {nside} | {quadrature} | {t1 - t0:.2f} s | {t2 - t1:.2f} s | {t3 - t2:.2f} s | {t3 - t0:.2f} s | "
-                  f"{polar:,} | {per_pixel} |", flush=True)
+                  f"{polar:,} | {held:.0f} MiB |", flush=True)
         (sp, cp), (sc, cc) = times["plain"], times["corrected"]
-        print(f"|  | corrected / plain | {sc / sp:.2f} (set-up) |  | {cc / cp:.2f} | {(sc + cc) / (sp + cp):.2f} |  |  |")
+        print(f"|  | corrected / plain | {sc / sp:.2f} (set-up) |  | {cc / cp:.2f} | {(sc + cc) / (sp + cp):.2f} |  | "
+              f"{memory['corrected'] / memory['plain']:.2f} |")
 
 
 if __name__ == "__main__":

@@ -171,9 +171,9 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
     }
     if (any) {
       polar_setup_ = std::make_unique<PolarSetup>();
-      polar_setup_->sky = std::async(std::launch::async, [source = Sky(sky), weigh = weighs_cap_boundaries(options),
-                                                           reach = polar_reach_] {
-        return detail::polar_sky(source, weigh, reach);
+      polar_setup_->sky = std::async(std::launch::async, [source = detail::polar_source(sky, polar_reach_),
+                                                           weigh = weighs_cap_boundaries(options)] {
+        return detail::polar_sky(source, weigh);
       });
     }
   }

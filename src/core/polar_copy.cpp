@@ -416,8 +416,6 @@ void check_reach(int nside, double reach, const char* what) {
                 " rad; expected more than 0, less than 88 deg and within the rings of NSIDE " + std::to_string(nside));
 }
 
-double value(std::span<const double> m, int64 p) { return m.empty() ? 0.0 : m[static_cast<std::size_t>(p)]; }
-
 void make_plans(const Cap& cap, Plans& plans) {
   for (const Ring& r : cap.rings) {
     plans.make(r.n);
@@ -472,16 +470,38 @@ void weigh_band(SkyBand& band) {
 }
 }  // namespace
 
-SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads) {
+PolarSource polar_source(const SkyView& sky, double reach) {
   check_reach(sky.nside(), reach, "the sky's polar copy");
   const Base base(sky.nside(), RING, SET_NSIDE);
-  const auto [first, count] = polar_band(sky.nside(), reach);
+  const int K = rings_needed(sky.nside(), reach);
+  int64 start = 0, n = 0;
+  double theta = 0.0;
+  bool shifted = false;
+  base.get_ring_info2(K, start, n, theta, shifted);
+  const auto cap = std::size_t(start + n);  // the pixels of rings 1 to K
+  PolarSource s;
+  s.nside = sky.nside();
+  s.reach = reach;
+  for (const double x : sky.I()) s.mean += x;
+  s.mean /= double(sky.npix());
+  s.north = band_of(sky, 0, cap);
+  s.south = band_of(sky, sky.npix() - cap, cap);
+  return s;
+}
+
+SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads) {
+  return polar_sky(polar_source(sky, reach), weigh_boundaries, threads);
+}
+
+SkyBand polar_sky(const PolarSource& source, bool weigh_boundaries, unsigned threads) {
+  const double reach = source.reach;
+  check_reach(source.nside, reach, "the sky's polar copy");
+  const Base base(source.nside, RING, SET_NSIDE);
+  const auto [first, count] = polar_band(source.nside, reach);
   SkyBand out;
-  out.nside = sky.nside();
+  out.nside = source.nside;
   out.first = first;
-  double mean = 0.0;
-  for (const double x : sky.I()) mean += x;
-  mean /= double(sky.npix());
+  const double mean = source.mean;
   for (int c = 0; c < 4; ++c) out.maps[std::size_t(c)].assign(count, c == 0 ? mean : 0.0);
 
   ThreadPool pool(threads ? threads : std::max(1u, std::thread::hardware_concurrency()));
@@ -496,10 +516,11 @@ SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsig
       for (std::size_t i = begin; i < end; ++i) {
         const Ring& r = cap.rings[i];
         std::array<std::vector<cd>, 2> x{std::vector<cd>(std::size_t(r.n)), std::vector<cd>(std::size_t(r.n))};
+        const SkyBand& rings = sign > 0 ? source.north : source.south;
         for (int j = 0; j < r.n; ++j) {
-          const int64 p = r.start + j;
-          x[0][j] = cd(value(sky.I(), p), value(sky.V(), p));
-          x[1][j] = to_pole_frame(sign, r.phi0 + 2.0 * pi * j / double(r.n)) * cd(value(sky.Q(), p), value(sky.U(), p));
+          const auto p = std::size_t(r.start + j);
+          x[0][j] = cd(rings.value(0, p), rings.value(3, p));
+          x[1][j] = to_pole_frame(sign, r.phi0 + 2.0 * pi * j / double(r.n)) * cd(rings.value(1, p), rings.value(2, p));
         }
         for (int f = 0; f < 2; ++f) {
           spectra[f][i].resize(std::size_t(r.n));

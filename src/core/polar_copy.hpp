@@ -34,11 +34,22 @@ struct SkyBand {
 // The band of a copy of `reach` at `nside`: its first pixel and its number of pixels.
 std::array<std::size_t, 2> polar_band(int nside, double reach);
 
+// What the copy is made from: the sky's mean I and its pixels on the rings around each pole that the
+// copy reads (a few percent of the sky at most), so that a copy made on another thread holds no whole
+// sky of its own.
+struct PolarSource {
+  int nside = 0;
+  double reach = 0.0, mean = 0.0;
+  SkyBand north, south;
+};
+PolarSource polar_source(const SkyView& sky, double reach);
+
 // S'(R p) = S(p) on the copy's pixels within `reach` (radians) of (+-1, 0, 0), where the north and
 // south poles land, held in the band polar_band(nside, reach); the band's other pixels, which no sample
 // reads, hold the sky's mean I, and Q, U and V 0. Its own cap-boundary rings weighted when
 // `weigh_boundaries`. `reach` below 88 deg. Runs on `threads` threads (0: all the host's).
 SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsigned threads = 0);
+SkyBand polar_sky(const PolarSource& source, bool weigh_boundaries, unsigned threads = 0);
 // Its transpose (docs/physics.md, "The adjoint"): <polar_sky(s), m> = <s, polar_sky_adjoint(m)> to
 // rounding, in the inner product sum_p of the four maps over the band. `maps` is a band of the same
 // extent; the result is the whole sky.
