@@ -89,6 +89,8 @@ class VulkanBackend final : public Backend {
   // of the whole table is ever made.
   Buffer upload_records(std::size_t count, std::size_t record_bytes,
                         const std::function<void(std::size_t, std::size_t, void*)>& fill, const char* what);
+  void upload_sky(int nside, const std::array<std::span<const double>, 4>& maps, std::size_t first, Buffer& records,
+                  Buffer& lo, const std::string& what);
   void make_slots(std::size_t chunk);
   // The buffers of a slot's descriptor sets by binding: the first PISCO_BINDINGS the forward kernel's,
   // all of them the adjoint's.
@@ -180,30 +182,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, c
     throw Error("vulkan: an NSIDE " + std::to_string(sky.nside) + " sky needs " + std::to_string(2 * npix) +
                 " texels in one texel buffer, but " + info.name + " binds at most " +
                 std::to_string(std::uint64_t(max_texels)) + " (maxTexelBufferElements); use the cpu backend", ErrorKind::device);
-  const PixelVectors vectors(sky.nside);
-  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<double> xyz;
-  sky_ = upload_records(
-      npix, 8 * sizeof(float),
-      [&](std::size_t first, std::size_t n, void* dst) {
-        xyz.resize(3 * n);
-        vectors.get(first, n, xyz.data(), threads);
-        vk::pack_sky(sky_maps, mode_, first, n, xyz.data(), static_cast<float*>(dst));
-      },
-      "the sky");
-  sky_lo_ = upload_records(
-      mode_.vectors64() ? npix : 1, 4 * sizeof(float),
-      [&](std::size_t first, std::size_t n, void* dst) {
-        auto* out = static_cast<float*>(dst);
-        if (!mode_.vectors64()) {
-          std::fill(out, out + 4 * n, 0.0f);
-          return;
-        }
-        xyz.resize(3 * n);
-        vectors.get(first, n, xyz.data(), threads);
-        vk::pack_sky_lo(n, xyz.data(), out);
-      },
-      "the sky's float64 pixel vectors");
+  upload_sky(sky.nside, {sky_maps.I(), sky_maps.Q(), sky_maps.U(), sky_maps.V()}, 0, sky_, sky_lo_, "the sky");
   const std::vector<std::uint32_t> rings = vk::pack_rings(sky, mode_.ff);
   rings_ = upload(rings.data(), rings.size() * sizeof(std::uint32_t), "the ring table");
 
@@ -450,35 +429,46 @@ void VulkanBackend::fail(const SlotJob& job, const std::string& what, ErrorKind 
                         kind);
 }
 
-// The band packed as the sky is (setup), uploaded beside it, and a descriptor set a slot that binds it
-// in the sky's place; the kernel reads it from pixel SKY_FIRST (shaders/kernel.glsl).
-void VulkanBackend::set_polar_sky(const SkyBand& band) {
-  if (polar_sky_.handle() != VK_NULL_HANDLE) throw Error("vulkan: the polar copy is given once per sky");
-  const std::array<std::span<const double>, 4> maps{band.maps[0], band.maps[1], band.maps[2], band.maps[3]};
-  const PixelVectors vectors(band.nside);
+// The sky's tables for pixels [first, first + maps' size) of the maps: the records (vectors and
+// Stokes values) and the float64 vectors' residuals, packed straight into the staging buffer a piece at
+// a time.
+void VulkanBackend::upload_sky(int nside, const std::array<std::span<const double>, 4>& maps, std::size_t first,
+                               Buffer& records, Buffer& lo, const std::string& what) {
+  const std::size_t count = maps[0].size();
+  const PixelVectors vectors(nside);
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
   std::vector<double> xyz;
-  polar_sky_ = upload_records(
-      band.size(), 8 * sizeof(float),
-      [&](std::size_t first, std::size_t n, void* dst) {
-        xyz.resize(3 * n);
-        vectors.get(band.first + first, n, xyz.data(), threads);
-        vk::pack_sky(maps, band.first, mode_, band.first + first, n, xyz.data(), static_cast<float*>(dst));
+  const auto positions = [&](std::size_t at, std::size_t n) {
+    xyz.resize(3 * n);
+    vectors.get(first + at, n, xyz.data(), threads);
+  };
+  records = upload_records(
+      count, 8 * sizeof(float),
+      [&](std::size_t at, std::size_t n, void* dst) {
+        positions(at, n);
+        vk::pack_sky(maps, first, mode_, first + at, n, xyz.data(), static_cast<float*>(dst));
       },
-      "the sky's polar copy");
-  polar_sky_lo_ = upload_records(
-      mode_.vectors64() ? band.size() : 1, 4 * sizeof(float),
-      [&](std::size_t first, std::size_t n, void* dst) {
+      what.c_str());
+  lo = upload_records(
+      mode_.vectors64() ? count : 1, 4 * sizeof(float),
+      [&](std::size_t at, std::size_t n, void* dst) {
         auto* out = static_cast<float*>(dst);
         if (!mode_.vectors64()) {
           std::fill(out, out + 4 * n, 0.0f);
           return;
         }
-        xyz.resize(3 * n);
-        vectors.get(band.first + first, n, xyz.data(), threads);
+        positions(at, n);
         vk::pack_sky_lo(n, xyz.data(), out);
       },
-      "the polar copy's float64 pixel vectors");
+      (what + "'s float64 pixel vectors").c_str());
+}
+
+// The band packed as the sky is (upload_sky), uploaded beside it, and a descriptor set a slot that binds it
+// in the sky's place; the kernel reads it from pixel SKY_FIRST (shaders/kernel.glsl).
+void VulkanBackend::set_polar_sky(const SkyBand& band) {
+  if (polar_sky_.handle() != VK_NULL_HANDLE) throw Error("vulkan: the polar copy is given once per sky");
+  upload_sky(band.nside, {band.maps[0], band.maps[1], band.maps[2], band.maps[3]}, band.first, polar_sky_,
+             polar_sky_lo_, "the sky's polar copy");
   polar_first_ = std::uint32_t(band.first);
   for (Slot& s : slots_) {
     auto all = bindings(s);
