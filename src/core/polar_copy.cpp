@@ -497,7 +497,8 @@ SkyBand polar_sky(const PolarSource& source, bool weigh_boundaries, unsigned thr
   const double reach = source.reach;
   check_reach(source.nside, reach, "the sky's polar copy");
   const Base base(source.nside, RING, SET_NSIDE);
-  const auto [first, count] = polar_band(source.nside, reach);
+  const auto band = polar_band(source.nside, reach);
+  const std::size_t first = band[0], count = band[1];
   SkyBand out;
   out.nside = source.nside;
   out.first = first;
