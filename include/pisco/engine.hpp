@@ -128,6 +128,7 @@ namespace detail {
 class Backend;
 struct BackendEntry;
 struct EngineInputs;
+class SkyPass;
 }  // namespace detail
 
 // Thread safety: one Engine is used by one thread at a time. Its members that change it (convolve,
@@ -248,7 +249,7 @@ class Engine {
   int sidelobe_nside() const noexcept { return outer_nside_; }
   // Whether samples near the poles are summed on the sky's polar copy (EngineOptions::quadrature), and how
   // many submitted so far were.
-  bool polar_copy() const noexcept { return polar_ready_ || polar_setup_ != nullptr; }
+  bool polar_copy() const noexcept;
   std::uint64_t polar_samples() const noexcept { return polar_samples_; }
 
   // Backends compiled into the library, with availability on this machine.
@@ -298,7 +299,6 @@ class Engine {
   void add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
                         const std::vector<SourceTrack>& sources, std::span<double> tod,
                         std::span<const double> hwp_angle) const;
-  void attach_polar_copy();
   void load_sky(const SkyView& sky, const std::vector<Beamsor>* beams);
 
   // Work the engine itself completes when a submission is done (plates between the optics and the
@@ -309,40 +309,24 @@ class Engine {
 
   FocalPlane focal_plane_;
   std::shared_ptr<const detail::EngineInputs> inputs_;
-  std::unique_ptr<detail::Backend> backend_;
+  // The sky summed by the chosen backend, with its polar copy for the samples near the poles
+  // (core/sky_pass.hpp). Its tickets are the engine's.
+  std::unique_ptr<detail::SkyPass> main_;
   std::uint64_t samples_ = 0, pixels_ = 0;
   double host_seconds_ = 0.0;
-  std::uint64_t next_ticket_ = 1;
   std::vector<std::unique_ptr<Pending>> pending_;
   std::vector<std::uint32_t> masked_;  // UnseenPolicy::flag: the sky's UNSEEN pixels, ascending
   std::size_t unseen_pixels_ = 0;
-  // Split beams: their outer parts on the band-limited sky, through a backend of their own, run as
-  // each submission is made and added when it completes.
+  // Split beams: their outer parts on the band-limited sky, through a pass of their own (with its own
+  // polar copy), queued with each submission and added when it completes.
   std::shared_ptr<const detail::EngineInputs> outer_inputs_;
-  std::unique_ptr<detail::Backend> outer_backend_;
+  std::unique_ptr<detail::SkyPass> outer_;
   std::vector<bool> split_;  // per detector
   int outer_nside_ = 0;
-  std::uint64_t outer_ticket_ = 1;
-  // Samples near the poles: their pointing turned onto the polar copy's equator and summed there, by
-  // the same backend, which holds the copy's band beside the sky (Backend::set_polar_sky); their values
-  // are written over the sky's when the submission completes. The copy's transform runs in the
-  // background from set-up (polar_setup_); the backend receives it at prepare() or when a submission
-  // first needs it.
-  struct PolarSetup;
-  std::unique_ptr<PolarSetup> polar_setup_;
-  bool polar_ready_ = false;
+  int outer_band_ = 0;  // the split beams' band limit l_pass
   const detail::BackendEntry* entry_ = nullptr;
   EngineOptions options_;
-  std::vector<double> polar_cut_, offset_angle_;  // per prepared detector (row detectors included)
-  double polar_reach_ = 0.0;  // the polar copy's radius around each turned pole (polar_copy.hpp)
   std::uint64_t polar_samples_ = 0;
-  // The adjoint's polar samples, scattered by the backend into maps of their own at take_adjoint, after
-  // it has handed over the sky's.
-  struct PolarAdjoint;
-  std::vector<PolarAdjoint> polar_adjoints_;
-  // Which backends hold adjoint maps not yet taken.
-  bool adjoint_main_ = false, adjoint_outer_ = false;
-  int outer_band_ = 0;  // the split beams' band limit l_pass
 };
 
 }  // namespace pisco

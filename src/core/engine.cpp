@@ -11,6 +11,7 @@
 #include "core/polar_copy.hpp"
 #include "core/poles.hpp"
 #include "core/prepared.hpp"
+#include "core/sky_pass.hpp"
 #include "core/sources.hpp"
 #include "beams/sidelobes.hpp"
 #include "core/text.hpp"
@@ -95,19 +96,6 @@ std::shared_ptr<const detail::EngineInputs> prepared(const SkyView& sky, const s
 }
 }  // namespace
 
-// The polar copy's transform (detail::polar_sky), running from set-up until the backend takes it.
-struct Engine::PolarSetup {
-  std::future<detail::SkyBand> sky;
-  std::exception_ptr error;  // the transform's or the backend's, once reported
-};
-
-// One adjoint call's samples near the poles, turned, and their values (a row detector's, with a plate).
-struct Engine::PolarAdjoint {
-  std::size_t detector = 0;
-  std::shared_ptr<const detail::PolarSamples> samples;
-  std::vector<double> values;
-};
-
 Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& focal_plane,
                const EngineOptions& options)
     : focal_plane_(focal_plane) {
@@ -123,7 +111,7 @@ void Engine::set_sky(const SkyView& sky) {
     throw Error("set_sky: the sky has NSIDE " + std::to_string(sky.nside()) + "; the engine was made for NSIDE " +
                 std::to_string(inputs_->sky.nside));
   wait();
-  if (adjoint_main_ || adjoint_outer_ || !polar_adjoints_.empty())
+  if (main_->holds_adjoint() || (outer_ && outer_->holds_adjoint()))
     throw Error("set_sky: the engine holds adjoint maps not yet taken; call take_adjoint first");
   load_sky(sky, nullptr);
 }
@@ -142,41 +130,12 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(weighted);
   if (beams) inputs_ = prepared(weighted, *beams, focal_plane_, options);
   else weighted.check_finite("sky");
-  backend_.reset();  // a device holds one sky at a time
-  backend_ = entry.create(inputs_, weighted, options);
-
-  // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator.
-  polar_ready_ = false;
-  polar_setup_.reset();  // waits for a transform still running from the previous sky
-  polar_cut_.clear();
-  polar_reach_ = 0.0;
-  offset_angle_.clear();
-  if (options.quadrature == Quadrature::corrected && unseen_pixels_ == 0) {
-    bool any = false;
-    for (const detail::PreparedDetector& d : inputs_->detectors) {
-      polar_cut_.push_back(detail::polar_cut(d.rho_max, sky.nside()));
-      const double z = d.offset.active ? detail::rotation_matrix(d.offset.quat).ez.z : 1.0;
-      offset_angle_.push_back(std::acos(std::clamp(z, -1.0, 1.0)) + 1e-9);
-      any = any || polar_cut_.back() > 0.0;
-      // The copy's pixels that such a sample's disc can reach, two pixels more for the disc's edge.
-      if (polar_cut_.back() > 0.0)
-        polar_reach_ = std::max(polar_reach_, polar_cut_.back() + d.rho_max + 2.0 * std::sqrt(sky.pixel_area()));
-    }
-    // Its transform starts now on a thread of its own, beside the rest of the set-up and whatever the
-    // caller does next; the backend takes it at prepare() or at the first submission with such a sample
-    // (a ground scan far from the poles never waits for it), beside the sky, with the same detectors.
-    if (any && !detail::polar_copy_fits(sky.nside(), polar_reach_)) {
-      any = false;
-      std::fill(polar_cut_.begin(), polar_cut_.end(), 0.0);
-    }
-    if (any) {
-      polar_setup_ = std::make_unique<PolarSetup>();
-      polar_setup_->sky = std::async(std::launch::async, [source = detail::polar_source(sky, polar_reach_),
-                                                           weigh = weighs_cap_boundaries(options)] {
-        return detail::polar_sky(source, weigh);
-      });
-    }
-  }
+  // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator (a masked sky
+  // has none: its copy would interpolate across the UNSEEN pixels).
+  const bool polar = options.quadrature == Quadrature::corrected;
+  main_.reset();  // a device holds one sky at a time
+  main_ = std::make_unique<detail::SkyPass>(entry, inputs_, weighted, sky, options, polar && unseen_pixels_ == 0,
+                                            weighs_cap_boundaries(options));
 
   // Split beams: their outer parts on a band-limited copy of the sky at a coarser NSIDE.
   std::vector<Beamsor> outer;
@@ -203,18 +162,20 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   if (options.unseen != UnseenPolicy::error && unseen_pixels_ > 0)
     throw Error("engine: the sky has UNSEEN pixels, which a band-limited copy for the beams' sidelobes cannot hold; "
                 "fill the mask or do not split the beams");
-  Sky coarse = detail::band_limited_sky(sky, outer_nside_, outer_band_);
-  if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(coarse);
-  if (beams) outer_inputs_ = prepared(coarse, outer, focal_plane_, options);
-  outer_backend_.reset();
-  outer_backend_ = entry.create(outer_inputs_, coarse, options);
+  const Sky coarse = detail::band_limited_sky(sky, outer_nside_, outer_band_);
+  Sky summed = coarse;
+  if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(summed);
+  if (beams) outer_inputs_ = prepared(summed, outer, focal_plane_, options);
+  outer_.reset();
+  outer_ = std::make_unique<detail::SkyPass>(entry, outer_inputs_, summed, coarse, options, polar,
+                                             weighs_cap_boundaries(options));
 }
 
 Engine::~Engine() {
   // Nothing still in flight may write into the pending submissions' buffers once they are gone (a
   // plate's rows, the polar samples', a split beam's outer part): every backend finishes first.
-  if (backend_ && next_ticket_ > 1) try {
-      backend_->wait(next_ticket_ - 1);
+  if (main_ && main_->last_ticket() > 0) try {
+      main_->wait(main_->last_ticket());
     } catch (...) {  // the caller's wait() reports errors; a destructor cannot
     }
   drop_pending();
@@ -224,9 +185,9 @@ Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 
 struct Engine::Pending {
-  std::uint64_t ticket = 0;  // the last main-backend submission it needs (its polar samples' included)
-  // Its last submission to the outer backend (0: none), waited for when it completes, so that
-  // submit() queues every part and returns without waiting.
+  std::uint64_t ticket = 0;  // the last main-pass submission it needs (its polar samples' included)
+  // Its last submission to the outer pass (0: none), waited for when it completes, so that submit()
+  // queues every part and returns without waiting.
   std::uint64_t outer_ticket = 0;
   std::size_t detector = 0;
   std::span<double> tod;
@@ -236,11 +197,9 @@ struct Engine::Pending {
   // A split beam's outer part: its TOD (or its rows), added when the submission completes.
   std::vector<double> outer;
   std::array<std::vector<double>, 4> outer_rows;
-  // Samples near the poles: their TOD (or rows) from the polar copy, and with `accumulate` what tod
-  // held before, written over the main backend's when the submission completes.
-  detail::PolarSamples polar;
-  std::vector<double> polar_tod, polar_base;
-  std::array<std::vector<double>, 4> polar_rows;
+  // Each pass's samples near the poles and their values from its polar copy, written over the sky's
+  // when the submission completes.
+  detail::SkyPass::Work main, outer_work;
 };
 
 namespace {
@@ -330,20 +289,12 @@ void Engine::add_sources(std::size_t detector, const QuatPointingView& boresight
   add_sources_view(detector, boresight, time, sources, tod, hwp_angle);
 }
 
-void Engine::attach_polar_copy() {
-  if (polar_ready_ || !polar_setup_) return;
-  if (polar_setup_->error) std::rethrow_exception(polar_setup_->error);  // every later call fails alike
-  try {
-    backend_->set_polar_sky(polar_setup_->sky.get());
-  } catch (...) {
-    polar_setup_->error = std::current_exception();
-    throw;
-  }
-  polar_setup_.reset();
-  polar_ready_ = true;
-}
+bool Engine::polar_copy() const noexcept { return main_->polar_copy(); }
 
-void Engine::prepare() { attach_polar_copy(); }
+void Engine::prepare() {
+  main_->prepare();
+  if (outer_) outer_->prepare();
+}
 
 template <class View>
 std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
@@ -360,71 +311,41 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
                     " at sample " + std::to_string(i) + "; the TOD added to must be finite");
   detail::PointingInput input = input_of(boresight);
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = pending->plate_angle;
-  std::uint64_t ticket = 0;
   const bool split = !split_.empty() && split_[detector];
-  const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
-                                                                polar_cut_.at(detector), pending->polar);
-  // The sky's own pass over every sample but the runs that go to the polar copy (detail::sky_runs).
-  std::vector<std::array<std::size_t, 2>> runs{{0, tod.size()}};
-  if (polar) runs = detail::sky_runs(pending->polar.index, tod.size());
-  host_seconds_ += seconds_since(host_start);
-  if (polar) attach_polar_copy();
-  const auto submit_runs = [&](std::size_t target, std::span<double> out, bool add) {
-    for (const auto& [b, e] : runs) {
-      ticket = next_ticket_++;
-      backend_->submit(target, input.subspan(b, e - b), out.subspan(b, e - b), add, ticket);
-    }
-  };
   try {
+    // Each pass finds its samples near the poles (detail::SkyPass::begin), whose polar copy it hands to
+    // its backend first when it has not yet.
+    main_->begin(detector, input, pending->main, false);
+    if (split) outer_->begin(detector, input, pending->outer_work, false);
+    host_seconds_ += seconds_since(host_start);
+    if (pending->main.polar) main_->prepare();
+    if (split && pending->outer_work.polar) outer_->prepare();
     if (det.plate == detail::PreparedDetector::Plate::detector) {
       // d = D(0) M(theta) s, s_r from row detector r: completed by finish_pending().
       for (int r = 0; r < 4; ++r) {
         pending->rows[r].assign(tod.size(), 0.0);
-        submit_runs(det.rows[r], pending->rows[r], false);
+        main_->submit(pending->main, det.rows[r], input, pending->rows[r], false);
       }
-      if (split) {
-        std::uint64_t t = 0;
+      if (split)
         for (int r = 0; r < 4; ++r) {
           pending->outer_rows[r].assign(tod.size(), 0.0);
-          t = outer_ticket_++;
-          outer_backend_->submit(det.rows[r], input, pending->outer_rows[r], false, t);
+          outer_->submit(pending->outer_work, det.rows[r], input, pending->outer_rows[r], false);
         }
-        pending->outer_ticket = t;
-      }
-      if (polar) {
-        const detail::PointingInput turned = pending->polar.input();
-        for (int r = 0; r < 4; ++r) {
-          pending->polar_rows[r].assign(turned.size(), 0.0);
-          ticket = next_ticket_++;
-          backend_->submit(det.rows[r], turned, pending->polar_rows[r], false, ticket);
-        }
-      }
     } else {
-      if (polar && accumulate) {
-        pending->polar_base.resize(pending->polar.index.size());
-        for (std::size_t k = 0; k < pending->polar.index.size(); ++k)
-          pending->polar_base[k] = tod[pending->polar.index[k]];
-      }
-      submit_runs(detector, tod, accumulate);
+      main_->submit(pending->main, detector, input, tod, accumulate);
       if (split) {
         pending->outer.assign(tod.size(), 0.0);
-        const std::uint64_t t = outer_ticket_++;
-        outer_backend_->submit(detector, input, pending->outer, false, t);
-        pending->outer_ticket = t;
-      }
-      if (polar) {
-        pending->polar_tod.assign(pending->polar.index.size(), 0.0);
-        ticket = next_ticket_++;
-        backend_->submit(detector, pending->polar.input(), pending->polar_tod, false, ticket);
+        outer_->submit(pending->outer_work, detector, input, pending->outer, false);
       }
     }
     // Every submission is completed, or at least checked, by finish_pending().
-    pending->ticket = ticket;
+    pending->ticket = pending->main.ticket;
+    pending->outer_ticket = pending->outer_work.ticket;
     pending->detector = detector;
     pending->tod = tod;
     pending->accumulate = accumulate;
+    if (pending->main.polar) polar_samples_ += pending->main.polar->index.size();
     pending_.push_back(std::move(pending));
-    if (polar) polar_samples_ += pending_.back()->polar.index.size();
   } catch (const detail::SubmissionError& e) {
     throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
                 e.kind());
@@ -432,7 +353,7 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
     throw Error("convolving detector '" + name + "': " + e.what(), e.kind());
   }
   samples_ += boresight.size();
-  return ticket;
+  return pending_.back()->ticket;
 }
 
 // The submissions done by `ticket`: their TOD completed (the polar samples, a split beam's outer
@@ -445,7 +366,7 @@ void Engine::finish_pending(std::uint64_t ticket) {
   for (; done < pending_.size() && pending_[done]->ticket <= ticket; ++done) {
     Pending& p = *pending_[done];
     try {
-      if (p.outer_ticket) pixels_ += outer_backend_->wait(p.outer_ticket);
+      if (p.outer_ticket) pixels_ += outer_->wait(p.outer_ticket);
     } catch (const detail::SubmissionError& e) {
       drop_pending();
       throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " +
@@ -459,12 +380,12 @@ void Engine::finish_pending(std::uint64_t ticket) {
       if (!std::isfinite(p.tod[i])) {
         const std::string& name = focal_plane_[p.detector].name;
         // The cpu backend sums in float64; the others sum the pixels in float32 (docs/simd.md).
-        const bool wide = backend_->name() == "cpu";
+        const bool wide = main_->backend().name() == "cpu";
         problem = "convolving detector '" + name + "': sample " + std::to_string(i) + " of the TOD is " +
                   detail::number_text(p.tod[i]) + ": the convolution overflowed " + (wide ? "float64" : "float32") +
                   "; the sky, the detector's gain or the beam's or half-wave plate's Mueller entries are too large "
                   "for " + (wide ? "float64 (their products exceed 1.8e308)" :
-                                   "the " + backend_->name() + " backend's float32 sums (beyond 3.4e38)") +
+                                   "the " + main_->backend().name() + " backend's float32 sums (beyond 3.4e38)") +
                   (p.accumulate ? ", or so is the TOD accumulated into" : "");
       }
     host_seconds_ += seconds_since(host_start);
@@ -476,24 +397,21 @@ void Engine::finish_pending(std::uint64_t ticket) {
 // After a failed submission: every part's backend finished with the buffers of the pending
 // submissions (their own errors are the same failure's), then the submissions dropped.
 void Engine::drop_pending() noexcept {
-  if (outer_backend_ && outer_ticket_ > 1) try {
-      outer_backend_->wait(outer_ticket_ - 1);
+  if (outer_ && outer_->last_ticket() > 0) try {
+      outer_->wait(outer_->last_ticket());
     } catch (...) {
     }
   pending_.clear();
 }
 
 void Engine::complete(Pending& p) {
-  const std::vector<std::size_t>& polar = p.polar.index;
-  if (p.rows[0].empty()) {  // no plate before the detector: the polar samples, then a split beam's outer part
-    for (std::size_t k = 0; k < polar.size(); ++k)
-      p.tod[polar[k]] = (p.accumulate ? p.polar_base[k] : 0.0) + p.polar_tod[k];
+  detail::SkyPass::finish(p.main);
+  detail::SkyPass::finish(p.outer_work);
+  if (p.rows[0].empty()) {  // no plate before the detector: a split beam's outer part added
     if (!p.outer.empty())
       for (std::size_t i = 0; i < p.tod.size(); ++i) p.tod[i] += p.outer[i];
     return;
   }
-  for (std::size_t k = 0; k < polar.size(); ++k)
-    for (int r = 0; r < 4; ++r) p.rows[r][polar[k]] = p.polar_rows[r][k];
   if (!p.outer_rows[0].empty())
     for (int r = 0; r < 4; ++r)
       for (std::size_t i = 0; i < p.tod.size(); ++i) p.rows[r][i] += p.outer_rows[r][i];
@@ -521,7 +439,7 @@ std::uint64_t Engine::submit(std::size_t detector, const QuatPointingView& bores
 
 void Engine::wait(std::uint64_t ticket) {
   try {
-    pixels_ += backend_->wait(ticket);
+    pixels_ += main_->wait(ticket);
   } catch (const detail::SubmissionError& e) {
     drop_pending();
     throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
@@ -530,7 +448,7 @@ void Engine::wait(std::uint64_t ticket) {
   finish_pending(ticket);
 }
 
-void Engine::wait() { wait(next_ticket_ - 1); }
+void Engine::wait() { wait(main_->last_ticket()); }
 
 void Engine::convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate,
                       std::span<const double> hwp_angle) {
@@ -564,12 +482,9 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
   // The diagonal leaves out the outer parts and the polar copy (the main backend's plain sum instead).
   const bool split = !squares && !split_.empty() && split_[detector];
-  auto polar_samples = std::make_shared<detail::PolarSamples>();
-  const bool polar = !squares && polar_copy() &&
-                     detail::find_polar_samples(input, det.offset, offset_angle_.at(detector), polar_cut_.at(detector),
-                                                *polar_samples);
-  std::vector<std::array<std::size_t, 2>> runs{{0, tod.size()}};
-  if (polar) runs = detail::sky_runs(polar_samples->index, tod.size());
+  detail::SkyPass::Work main, outer;
+  if (!squares) main_->begin(detector, input, main, false);
+  if (split) outer_->begin(detector, input, outer, false);
   // The TOD of each row detector (or of the detector itself): d, or d times the plate's coefficient.
   std::array<std::vector<double>, 4> rows;
   std::vector<std::size_t> targets;
@@ -589,26 +504,8 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
   }
   try {
     for (std::size_t r = 0; r < targets.size(); ++r) {
-      const std::vector<double>& d = rows[r];
-      if (split) {
-        pixels_ += outer_backend_->adjoint(targets[r], input, d);
-        adjoint_outer_ = true;
-      }
-      if (polar) {
-        // The sky's part over its runs (a short run of polar samples inside one scatters 0), the
-        // polar samples' at take_adjoint.
-        std::vector<double> near(polar_samples->index.size()), away = d;
-        for (std::size_t k = 0; k < near.size(); ++k) {
-          near[k] = d[polar_samples->index[k]];
-          away[polar_samples->index[k]] = 0.0;
-        }
-        for (const auto& [b, e] : runs)
-          pixels_ += backend_->adjoint(targets[r], input.subspan(b, e - b), std::span(away).subspan(b, e - b));
-        polar_adjoints_.push_back({targets[r], polar_samples, std::move(near)});
-      } else {
-        pixels_ += backend_->adjoint(targets[r], input, d, squares);
-      }
-      adjoint_main_ = true;
+      if (split) pixels_ += outer_->adjoint(outer, targets[r], input, rows[r], false);
+      pixels_ += main_->adjoint(main, targets[r], input, rows[r], squares);
     }
   } catch (const detail::SubmissionError& e) {
     throw Error("adjoint of detector '" + name + "': " + e.what(), e.kind());
@@ -648,40 +545,25 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
   const bool split = !split_.empty() && split_[detector];
   detail::PointingInput input = input_of(boresight);
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = plate_angle;
-  auto polar_samples = std::make_shared<detail::PolarSamples>();
-  const bool polar = polar_copy() && detail::find_polar_samples(input, det.offset, offset_angle_.at(detector),
-                                                                polar_cut_.at(detector), *polar_samples);
-  if (polar) attach_polar_copy();
   // The two passes where a sample's value comes from more than one backend's sum (a split beam's
   // outer part, a plate's four row detectors) or the backend has no normal pass.
-  if (split || det.plate == detail::PreparedDetector::Plate::detector || !backend_->has_normal()) {
+  if (split || det.plate == detail::PreparedDetector::Plate::detector || !main_->has_normal()) {
     std::vector<double> tod(boresight.size());
     convolve(detector, boresight, tod, false, hwp_angle);
     adjoint_view(detector, boresight, tod, hwp_angle, false);
     return;
   }
-  // The samples near the poles are the polar copy's, the rest the sky's, as convolve has them: the
-  // copy's forward values now, scattered at take_adjoint with the adjoint's polar samples.
-  std::vector<double> main(boresight.size(), 1.0);
-  for (const std::size_t i : polar_samples->index) main[i] = 0.0;
-  std::uint64_t pixels = 0;
   try {
-    pixels += backend_->normal(detector, input, main);
-    adjoint_main_ = true;
-    if (polar) {
-      std::vector<double> values(polar_samples->index.size());
-      const std::uint64_t t = next_ticket_++;
-      backend_->submit(detector, polar_samples->input(), values, false, t);
-      pixels += backend_->wait(t);
-      polar_adjoints_.push_back({detector, polar_samples, std::move(values)});
-      polar_samples_ += polar_samples->index.size();
-    }
+    detail::SkyPass::Work work;
+    main_->begin(detector, input, work, false);
+    if (work.polar) main_->prepare();
+    pixels_ += main_->normal(work, detector, input);
+    if (work.polar) polar_samples_ += work.polar->index.size();
   } catch (const detail::SubmissionError& e) {
     throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
   } catch (const Error& e) {
     throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
   }
-  pixels_ += pixels;
   samples_ += boresight.size();
 }
 
@@ -712,42 +594,18 @@ void Engine::take_adjoint(const StokesMaps& maps) {
       if (!out[c].empty())
         for (std::size_t p = 0; p < n; ++p) out[c][p] += part.stokes(StokesIndex(c))[p];
   };
-  // Each part on its own maps, then through the transpose of what the forward did to the sky.
-  const auto collect = [&](detail::Backend& b, int part_nside) {
-    Sky part(part_nside);
-    b.take_adjoint({part.I(), part.Q(), part.U(), part.V()});
-    return part;
-  };
-  if (adjoint_main_) {
-    Sky part = collect(*backend_, nside);
-    if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(part);
-    add(part);
-    adjoint_main_ = false;
-  }
-  if (!polar_adjoints_.empty()) {
-    // The backend's maps hold the sky's part no more: the polar samples scattered into them afresh,
-    // then taken through the copy's transpose.
-    std::vector<PolarAdjoint> work = std::move(polar_adjoints_);
-    polar_adjoints_.clear();
-    for (const PolarAdjoint& a : work) {
-      detail::PointingInput turned = a.samples->input();
-      turned.sky = 0;  // the scatter reads the pixels' positions, the same in the copy
-      pixels_ += backend_->adjoint(a.detector, turned, a.values);
-    }
-    const Sky part = collect(*backend_, nside);
-    const auto [first, count] = detail::polar_band(nside, polar_reach_);
-    add(detail::polar_sky_adjoint(detail::band_of(part, first, count), weighs_cap_boundaries(options_), polar_reach_));
-  }
-  if (adjoint_outer_) {
-    Sky part = collect(*outer_backend_, outer_nside_);
-    if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(part);
-    add(detail::band_limited_sky_adjoint(part, nside, outer_band_));
-    adjoint_outer_ = false;
-  }
+  // Each pass's maps, through the transposes of its polar copy and cap-boundary weights, then of what
+  // the engine did to the sky before it (the outer pass's band-limited coarse sky).
+  std::uint64_t pixels = 0;
+  if (const std::optional<Sky> part = main_->take_adjoint(pixels)) add(*part);
+  if (outer_)
+    if (const std::optional<Sky> part = outer_->take_adjoint(pixels))
+      add(detail::band_limited_sky_adjoint(*part, nside, outer_band_));
+  pixels_ += pixels;
 }
 
-std::string Engine::backend_name() const { return backend_->name(); }
-std::string Engine::device_name() const { return backend_->device(); }
+std::string Engine::backend_name() const { return main_->backend().name(); }
+std::string Engine::device_name() const { return main_->backend().device(); }
 double Engine::mean_disc_pixels() const noexcept {
   return samples_ ? double(pixels_) / double(samples_) : 0.0;
 }
