@@ -76,10 +76,11 @@ struct EngineOptions {
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
   // hold one.
   UnseenPolicy unseen = UnseenPolicy::error;
-  // The polar copy is made once, when a submission first has a sample near a pole (until then the
-  // engine keeps a copy of the sky): HEALPix's map2alm with 3 iterations and one alm rotation at band
-  // limit 2 NSIDE (7 s at NSIDE 512 on two cores, 55 s at 1024), and the backend holds a second sky.
-  // A masked sky (UNSEEN pixels) has no band-limited copy: its polar samples stay plain.
+  // The polar copy is resampled from the pixels around each pole on a thread of its own from set-up
+  // (under a second at any NSIDE; Engine::prepare), and the backend holds the band of rings it lies on
+  // beside the sky (1% to 2% more memory at NSIDE 1024 and 2048 for a 6-pixel-per-FWHM beam). Split
+  // beams' outer parts have their own, on their coarse sky. A masked sky (UNSEEN pixels) has no copy:
+  // its polar samples stay plain.
   Quadrature quadrature = Quadrature::corrected;
 
   // The settings that a simulation file's [engine] table, the command line and Python give by one
