@@ -5,8 +5,10 @@ A 1 deg FWHM Gaussian main beam with a -30 dB ring of 3 deg FWHM at 10 deg (the 
 docs/validation.md, K3) on a sky of NSIDE 512 (8.7 pixels per FWHM), 5,000 random pointings, one
 detector: the main beam alone to rho_max = 5 deg (5 FWHM), then the whole beam to rho_max = 10, 15, 20,
 30 deg summed over the whole disc, and split at 5 deg (the outer part on the band-limited sky at the
-NSIDE the engine chooses). Prints the convolution time of each (set-up apart), its pixel evaluations
-per second and its ratio to the main beam alone, measured in one run.
+NSIDE the engine chooses). Prints the set-up (the engine's construction and prepare(): the polar
+copies of the sky and, for a split beam, of its coarse sky), the convolution time of each, its pixel
+evaluations per second and its ratio to the main beam alone, measured in one run. --quadrature plain
+leaves both polar copies out (docs/physics.md, "The quadrature").
 
 Run with the Python package built in build/ (scripts/run-tests.sh builds it into build/python):
     PYTHONPATH=build/python build/python-venv/bin/python tools/sidelobe_cost.py [--backend simd] [--nside 512]
@@ -41,6 +43,7 @@ def main():
     p.add_argument("--whole", action=argparse.BooleanOptionalAction, default=True,
                    help="also time the whole discs (slow at large rho_max)")
     p.add_argument("--repeat", type=int, default=2, help="convolutions timed per case (the fastest is kept)")
+    p.add_argument("--quadrature", default="corrected", choices=["corrected", "plain"])
     a = p.parse_args()
     rng = np.random.default_rng(1)
     npix = 12 * a.nside**2
@@ -56,13 +59,18 @@ def main():
         if a.whole:
             cases.append(("whole disc", r, None))
         cases.append(("split at 5 deg", r, 5.0))
-    print(f"backend {a.backend}, sky NSIDE {a.nside}, {a.samples} samples; beam: 1 deg Gaussian + -30 dB ring at 10 deg")
-    print(f"{'case':<16} {'rho_max':>7} {'outer NSIDE':>11} {'pixels/sample':>13} {'time s':>8} {'eval/s':>9} {'x main':>7}")
+    print(f"backend {a.backend}, sky NSIDE {a.nside}, {a.samples} samples, quadrature {a.quadrature}; "
+          "beam: 1 deg Gaussian + -30 dB ring at 10 deg")
+    print(f"{'case':<16} {'rho_max':>7} {'outer NSIDE':>11} {'set-up s':>8} {'pixels/sample':>13} {'time s':>8} "
+          f"{'eval/s':>9} {'x main':>7}")
     base = None
     for name, rho, split in cases:
         beam = pisco.Beamsor.from_field(ring_beam, rho * deg, step, "ring beam",
                                         sidelobes=None if split is None else split * deg)
-        engine = pisco.Engine(sky, beam, fp, backend=a.backend)
+        t0 = time.perf_counter()
+        engine = pisco.Engine(sky, beam, fp, backend=a.backend, quadrature=a.quadrature)
+        engine.prepare()
+        setup = time.perf_counter() - t0
         engine.convolve(0, theta[:100], phi[:100], psi[:100])  # warm up
         best = float("inf")
         for _ in range(a.repeat):
@@ -72,7 +80,7 @@ def main():
         pixels = engine.mean_disc_pixels
         if base is None:
             base = best
-        print(f"{name:<16} {rho:7.1f} {engine.sidelobe_nside or '-':>11} {pixels:13.0f} {best:8.3f} "
+        print(f"{name:<16} {rho:7.1f} {engine.sidelobe_nside or '-':>11} {setup:8.2f} {pixels:13.0f} {best:8.3f} "
               f"{pixels * a.samples / best:9.2e} {best / base:7.2f}", flush=True)
         engine.close()
     ducc0_peer(a, theta, phi, psi)
