@@ -160,13 +160,15 @@ class Engine {
   // pointing's size. Every sample of tod is written, or, with `accumulate`, added to what tod holds
   // (as a framework operator adds a signal into its detector data). A detector with a half-wave plate
   // (Detector::hwp) needs `hwp_angle`, the plate's angle per sample in the focal-plane frame
-  // (radians, TOAST's `hwp_angle`); others must be given none. Throws pisco::Error on a bad sample
-  // (naming the detector and the sample's index), and on a TOD sample that is not finite once complete
-  // (float64 overflowed: the error names the detector, the sample and the value).
+  // (radians, TOAST's `hwp_angle`); others must be given none. A detector whose beam changes with time
+  // (Detector::beam_sequence) needs `time`, each sample's time in seconds on the clock of its nodes;
+  // others ignore it. Throws pisco::Error on a bad sample (naming the detector and the sample's index),
+  // and on a TOD sample that is not finite once complete (float64 overflowed: the error names the
+  // detector, the sample and the value).
   void convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate = false,
-                std::span<const double> hwp_angle = {});
+                std::span<const double> hwp_angle = {}, std::span<const double> time = {});
   void convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                bool accumulate = false, std::span<const double> hwp_angle = {});
+                bool accumulate = false, std::span<const double> hwp_angle = {}, std::span<const double> time = {});
 
   // The same, asynchronously: the pointing is read (copied to the device's staging memory) before
   // submit() returns, and the call returns a ticket as soon as the work is queued; tod must stay
@@ -177,9 +179,11 @@ class Engine {
   // submit() that finds both busy first completes the oldest.
   // (The plate angles, like the pointing, are read before submit() returns.)
   std::uint64_t submit(std::size_t detector, const PointingView& boresight, std::span<double> tod,
-                       bool accumulate = false, std::span<const double> hwp_angle = {});
+                       bool accumulate = false, std::span<const double> hwp_angle = {},
+                       std::span<const double> time = {});
   std::uint64_t submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                       bool accumulate = false, std::span<const double> hwp_angle = {});
+                       bool accumulate = false, std::span<const double> hwp_angle = {},
+                       std::span<const double> time = {});
   // Waits for submission `ticket` and every earlier one; without a ticket, for all. Rethrows the
   // error of a failed submission, or of a TOD sample that is not finite (every submission waited for
   // is complete all the same: a later wait() does not report it again).
@@ -196,27 +200,31 @@ class Engine {
   // pisco::Error of kind unavailable where the backend has no adjoint (capabilities().adjoint), and
   // of kind input for bad arguments (as convolve; a TOD sample that is not finite is one).
   void adjoint(std::size_t detector, const PointingView& boresight, std::span<const double> tod,
-               std::span<const double> hwp_angle = {});
+               std::span<const double> hwp_angle = {}, std::span<const double> time = {});
   void adjoint(std::size_t detector, const QuatPointingView& boresight, std::span<const double> tod,
-               std::span<const double> hwp_angle = {});
+               std::span<const double> hwp_angle = {}, std::span<const double> time = {});
   // The diagonal of A^T A for these samples (per pixel and Stokes parameter, the sum over samples of
   // the squared weights with which adjoint() scatters), added into the same maps: what a
   // preconditioner needs (DeconvolvingMapmaker). Exact on the main beam's plain pixel sum; samples
   // near the poles are counted on the sky rather than its polar copy, split beams' outer parts are
   // left out, and a plate between the optics and the detector counts its four row detectors' squares
-  // without their cross terms. Take the maps before mixing it with adjoint().
-  void adjoint_diagonal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle = {});
+  // without their cross terms, as a beam that changes with time its two nodes' at each sample. Take the
+  // maps before mixing it with adjoint().
+  void adjoint_diagonal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle = {},
+                        std::span<const double> time = {});
   void adjoint_diagonal(std::size_t detector, const QuatPointingView& boresight,
-                        std::span<const double> hwp_angle = {});
+                        std::span<const double> hwp_angle = {}, std::span<const double> time = {});
   // A^T A s for the engine's sky s (set_sky's, or the constructor's): adds the adjoint of the
   // detector's own convolution of s into the same maps: what convolve() into a TOD followed by
   // adjoint() of that TOD adds (an iteration of DeconvolvingMapmaker), the same bits. Where the
   // backend can (simd without its float64 path: no monopole taken out of the sky, no per-sample
   // normalization), each sample's disc is evaluated once instead of twice (docs/physics.md,
-  // "Map-making with the beams"); elsewhere, and for split beams and plates between the optics and
-  // the detector, it convolves and scatters in two passes. Errors as adjoint().
-  void normal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle = {});
-  void normal(std::size_t detector, const QuatPointingView& boresight, std::span<const double> hwp_angle = {});
+  // "Map-making with the beams"); elsewhere, and for split beams, plates between the optics and the
+  // detector and beams that change with time, it convolves and scatters in two passes. Errors as adjoint().
+  void normal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle = {},
+              std::span<const double> time = {});
+  void normal(std::size_t detector, const QuatPointingView& boresight, std::span<const double> hwp_angle = {},
+              std::span<const double> time = {});
   // maps.I, Q, U (and V unless empty) must have npix() samples each.
   void take_adjoint(const StokesMaps& maps);
   // Replaces the sky, keeping the beams, the detectors and the options: what an iterative solver
@@ -261,7 +269,8 @@ class Engine {
   // with inclusive = false) holds a pixel that is UNSEEN in the sky, 0 elsewhere; returns the number
   // flagged. flags.size() must equal the pointing's size. Computed on the host at the call; with no
   // UNSEEN pixel (or another policy) every flag is 0. Such samples are convolved with those pixels
-  // taken as 0: leave them out of maps (BinnedMapmaker::add's flags).
+  // taken as 0: leave them out of maps (BinnedMapmaker::add's flags). A beam that changes with time
+  // flags the samples whose disc holds one under any of its nodes' beams.
   std::size_t flag_samples(std::size_t detector, const PointingView& boresight, std::span<std::uint8_t> flags) const;
   std::size_t flag_samples(std::size_t detector, const QuatPointingView& boresight,
                            std::span<std::uint8_t> flags) const;
@@ -269,7 +278,8 @@ class Engine {
   // response at these samples, the detector's beam (a split beam's outer part included) evaluated at
   // the source's direction, with the half-wave plate, exactly: no pixelization of the source, the same
   // near the poles as anywhere. `time` is each sample's time on the sources' clock. Computed on the
-  // host in float64, the same bits whatever the backend. Needs the integral normalization. Throws
+  // host in float64, the same bits whatever the backend; a beam that changes with time at these
+  // times (Detector::beam_sequence). Needs the integral normalization. Throws
   // pisco::Error naming the detector, the source or the sample (a time outside a source's track).
   void add_sources(std::size_t detector, const PointingView& boresight, std::span<const double> time,
                    const std::vector<SourceTrack>& sources, std::span<double> tod,
@@ -283,23 +293,43 @@ class Engine {
   static unsigned max_threads() noexcept;
 
  private:
+  // `node`: one of the engine's own detectors for a node of a beam that changes with time.
   template <class View>
   std::uint64_t submit_view(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
-                            std::span<const double> hwp_angle);
+                            std::span<const double> hwp_angle, std::span<const double> time, bool node = false);
+  template <class View>
+  std::uint64_t submit_sequence(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
+                                std::span<const double> hwp_angle, std::span<const double> time);
   void finish_pending(std::uint64_t ticket);
   template <class View>
   void adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
-                    std::span<const double> hwp_angle, bool squares);
+                    std::span<const double> hwp_angle, std::span<const double> time, bool squares, bool node = false);
   template <class View>
-  void normal_view(std::size_t detector, const View& boresight, std::span<const double> hwp_angle);
+  void normal_view(std::size_t detector, const View& boresight, std::span<const double> hwp_angle,
+                   std::span<const double> time);
   // Checks a submission's arguments; fills plate_angle (hwp_angle - gamma) for a detector with a plate.
+  // A detector whose beam changes with time needs `time` (unless `node`).
   template <class View>
   void check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
-                        std::span<const double> hwp_angle, std::vector<double>& plate_angle) const;
+                        std::span<const double> hwp_angle, std::vector<double>& plate_angle,
+                        std::span<const double> time, bool node = false) const;
   template <class View>
   void add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
                         const std::vector<SourceTrack>& sources, std::span<double> tod,
-                        std::span<const double> hwp_angle) const;
+                        std::span<const double> hwp_angle, bool node = false) const;
+  // A beam that changes with time: the runs of samples between the same two nodes, and each sample's
+  // weight w of the later node (focal_plane.hpp, BeamNode).
+  struct SequenceRun {
+    std::size_t begin = 0, end = 0, node = 0;  // samples [begin, end) between nodes `node` and `node` + 1
+  };
+  std::vector<SequenceRun> sequence_runs(const char* what, std::size_t detector, std::span<const double> time,
+                                         std::vector<double>& weight) const;
+  bool has_sequence(std::size_t detector) const noexcept {
+    return detector < sequences_.size() && !sequences_[detector].empty();
+  }
+  // After a failed submission of a beam that changes with time: the parts already queued finished and
+  // dropped (pending_ from `mark` on).
+  void abandon(std::size_t mark) noexcept;
   void load_sky(const SkyView& sky, const std::vector<Beamsor>* beams);
 
   // Work the engine itself completes when a submission is done (plates between the optics and the
@@ -309,6 +339,10 @@ class Engine {
   void drop_pending() noexcept;
 
   FocalPlane focal_plane_;
+  // The detectors the engine prepares: the focal plane's, then one for each node of each beam that
+  // changes with time (the detector with that node's beam), whose indices sequences_ holds.
+  FocalPlane detectors_;
+  std::vector<std::vector<std::size_t>> sequences_;  // per detector of the focal plane; empty: a fixed beam
   std::shared_ptr<const detail::EngineInputs> inputs_;
   // The sky summed by the chosen backend, with its polar copy for the samples near the poles
   // (core/sky_pass.hpp). Its tickets are the engine's.

@@ -12,6 +12,13 @@
 
 namespace pisco {
 
+// One node of a beam that changes with time (Detector::beam_sequence): from `time` on, the beam
+// `beam` (an index into the engine's beam list), linearly interpolated towards the next node's.
+struct BeamNode {
+  double time = 0.0;  // seconds, on the clock of the sample times given with the pointing
+  std::size_t beam = 0;
+};
+
 struct Detector {
   std::string name;
   double zeta = 0.0;     // polarization angle from theta' towards phi', radians
@@ -31,6 +38,12 @@ struct Detector {
   // A half-wave plate in front of the detector (hwp.hpp): its TOD is then modulated per sample by the
   // plate's angle, which the caller gives with every pointing chunk.
   std::optional<HalfWavePlate> hwp;
+  // A beam that changes with time (docs/beams.md, "Beams that change with time"): at least two nodes,
+  // their times strictly ascending; at a sample's time t between nodes k and k + 1 the detector's TOD is
+  // (1 - w) times node k's beam's plus w times node k + 1's, w = (t - t_k) / (t_k+1 - t_k): the beams,
+  // each normalized as the engine normalizes a beam, interpolated linearly. Empty (the default): the
+  // fixed beam `beam`, which such a detector does not use. The engine then needs every sample's time.
+  std::vector<BeamNode> beam_sequence;
 };
 
 // The gamma a detector's half-wave plate takes when its table gives none (no hwp_gamma_deg, no TOAST

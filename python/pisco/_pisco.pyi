@@ -265,6 +265,7 @@ class Detector:
         beam: int = 0,
         offset: ArrayLike | None = None,
         hwp: HalfWavePlate | None = None,
+        beam_sequence: Sequence[tuple[float, int]] | None = None,
     ) -> None: ...
     @property
     def offset(self) -> Float64Array:
@@ -277,6 +278,12 @@ class Detector:
         """The detector's half-wave plate (a copy), or None."""
     @hwp.setter
     def hwp(self, value: HalfWavePlate | None, /) -> None: ...
+    @property
+    def beam_sequence(self) -> list[tuple[float, int]]:
+        """A beam that changes with time: [(time, beam), ...], seconds strictly ascending, two nodes or more,
+        linearly interpolated between them (docs/beams.md); empty: the fixed beam `beam`."""
+    @beam_sequence.setter
+    def beam_sequence(self, value: Sequence[tuple[float, int]] | None, /) -> None: ...
     def set_offset(self, xi: float, eta: float, gamma: float) -> None: ...
     def offset_xi_eta_gamma(self) -> tuple[float, float, float]: ...
 
@@ -293,6 +300,7 @@ class FocalPlane:
         beam: int = 0,
         offset: ArrayLike | None = None,
         hwp: HalfWavePlate | None = None,
+        beam_sequence: Sequence[tuple[float, int]] | None = None,
     ) -> int: ...
     def add_pair(
         self,
@@ -440,11 +448,13 @@ class Engine:
         out: Float64Array | None = None,
         accumulate: bool = False,
         hwp_angle: Float64Array | None = None,
+        time: Float64Array | None = None,
     ) -> Float64Array:
         """The TOD of one detector for a chunk of boresight pointing (angles or quaternions).
 
         hwp_angle: the plate's angle per sample (1-D float64, radians, focal-plane frame), required
-        for a detector with a plate and refused for one without.
+        for a detector with a plate and refused for one without. time: each sample's time (seconds),
+        required for a detector whose beam changes with time (Detector.beam_sequence), ignored otherwise.
         """
     def adjoint(
         self,
@@ -457,6 +467,7 @@ class Engine:
         boresight_quats: Float64Array | None = None,
         out: Float64Array | None = None,
         hwp_angle: Float64Array | None = None,
+        time: Float64Array | None = None,
     ) -> Float64Array:
         """The adjoint of convolve(): A^T tod added into out ((4, npix): I, Q, U, V) or new zeros.
 
@@ -472,6 +483,7 @@ class Engine:
         boresight_quats: Float64Array | None = None,
         out: Float64Array | None = None,
         hwp_angle: Float64Array | None = None,
+        time: Float64Array | None = None,
     ) -> Float64Array:
         """The diagonal of A^T A for these samples, added into out ((4, npix)) or new zeros."""
     def normal(
@@ -484,6 +496,7 @@ class Engine:
         boresight_quats: Float64Array | None = None,
         out: Float64Array | None = None,
         hwp_angle: Float64Array | None = None,
+        time: Float64Array | None = None,
     ) -> Float64Array:
         """A^T A sky for these samples (adjoint of convolve of the engine's sky), added into out ((4, npix)) or new zeros.
 
@@ -506,6 +519,7 @@ class Engine:
         out: Float64Array | None = None,
         accumulate: bool = False,
         hwp_angle: Float64Array | None = None,
+        time: Float64Array | None = None,
     ) -> int:
         """convolve(), asynchronously; `out` (required) is written by the time wait(ticket) returns."""
     def flag_samples(

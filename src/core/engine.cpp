@@ -101,6 +101,18 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
     : focal_plane_(focal_plane) {
   detail::check_engine_options(options);
   check_focal_plane(focal_plane, beams.size());  // before the sky's set-up, which takes time
+  // Beams that change with time: a detector of the engine's own for each node.
+  std::vector<Detector> all = focal_plane.detectors();
+  sequences_.resize(all.size());
+  for (std::size_t d = 0; d < focal_plane.size(); ++d)
+    for (const BeamNode& n : focal_plane[d].beam_sequence) {
+      Detector node = focal_plane[d];
+      node.beam = n.beam;
+      node.beam_sequence.clear();
+      sequences_[d].push_back(all.size());
+      all.push_back(std::move(node));
+    }
+  detectors_ = FocalPlane(std::move(all));
   entry_ = &detail::choose_backend(options.backend);
   options_ = options;
   load_sky(sky, &beams);
@@ -128,7 +140,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   Sky weighted(detail::sky_for_backends(sky, options.unseen, zeroed, masked_, unseen_pixels_));
   zeroed.reset();
   if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(weighted);
-  if (beams) inputs_ = prepared(weighted, *beams, focal_plane_, options);
+  if (beams) inputs_ = prepared(weighted, *beams, detectors_, options);
   else weighted.check_finite("sky");
   // Samples near the poles: on the sky turned by 90 deg, where they lie on its equator (a masked sky
   // has none: its copy would interpolate across the UNSEEN pixels).
@@ -153,9 +165,9 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
         if (!placeholder) placeholder = b.sidelobes();
       }
     for (const Beamsor& b : *beams) outer.push_back(b.sidelobes() ? *b.sidelobes() : *placeholder);
-    split_.resize(focal_plane_.size());
-    for (std::size_t d = 0; d < focal_plane_.size(); ++d)
-      split_[d] = (*beams).at(focal_plane_[d].beam).sidelobes() != nullptr;
+    split_.resize(detectors_.size());
+    for (std::size_t d = 0; d < detectors_.size(); ++d)
+      split_[d] = (*beams).at(detectors_[d].beam).sidelobes() != nullptr;
     outer_band_ = std::min(band, 2 * outer_nside_);
   }
   if (outer_nside_ == 0) return;
@@ -165,7 +177,7 @@ void Engine::load_sky(const SkyView& sky, const std::vector<Beamsor>* beams) {
   const Sky coarse = detail::band_limited_sky(sky, outer_nside_, outer_band_);
   Sky summed = coarse;
   if (weighs_cap_boundaries(options_)) detail::weigh_cap_boundaries(summed);
-  if (beams) outer_inputs_ = prepared(summed, outer, focal_plane_, options);
+  if (beams) outer_inputs_ = prepared(summed, outer, detectors_, options);
   outer_.reset();
   outer_ = std::make_unique<detail::SkyPass>(entry, outer_inputs_, summed, coarse, options, polar,
                                              weighs_cap_boundaries(options));
@@ -200,6 +212,9 @@ struct Engine::Pending {
   // Each pass's samples near the poles and their values from its polar copy, written over the sky's
   // when the submission completes.
   detail::SkyPass::Work main, outer_work;
+  // A beam that changes with time: each sample's weight of the later node, and the two nodes' TOD.
+  std::vector<double> weight;
+  std::array<std::vector<double>, 2> nodes;
 };
 
 namespace {
@@ -213,12 +228,22 @@ detail::PointingInput input_of(const QuatPointingView& v) { return {{}, v, true,
 
 template <class View>
 void Engine::check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
-                              std::span<const double> hwp_angle, std::vector<double>& plate_angle) const {
+                              std::span<const double> hwp_angle, std::vector<double>& plate_angle,
+                              std::span<const double> time, bool node) const {
   const std::string op = what;
-  if (detector >= focal_plane_.size())
+  if (detector >= (node ? detectors_.size() : focal_plane_.size()))
     throw Error(op + ": detector index " + std::to_string(detector) + " but the focal plane has " +
                 std::to_string(focal_plane_.size()) + " detectors");
-  const std::string& name = focal_plane_[detector].name;
+  const std::string& name = detectors_[detector].name;
+  if (!node && has_sequence(detector)) {
+    if (time.size() != tod_size)
+      throw Error(op + ": detector '" + name + "' has a beam that changes with time (beam_sequence): expected " +
+                  std::to_string(tod_size) + " sample times (time), got " + std::to_string(time.size()));
+    for (std::size_t i = 0; i < time.size(); ++i)
+      if (!std::isfinite(time[i]))
+        throw Error(op + ": detector '" + name + "': the time of sample " + std::to_string(i) + " is " +
+                    detail::number_text(time[i]) + "; expected a finite number");
+  }
   if (tod_size != boresight.size())
     throw Error(op + ": the TOD buffer of detector '" + name + "' has " + std::to_string(tod_size) +
                 " samples but the pointing has " + std::to_string(boresight.size()));
@@ -244,10 +269,10 @@ void Engine::check_submission(const char* what, std::size_t detector, const View
 template <class View>
 void Engine::add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
                               const std::vector<SourceTrack>& sources, std::span<double> tod,
-                              std::span<const double> hwp_angle) const {
+                              std::span<const double> hwp_angle, bool node) const {
   std::vector<double> plate_angle;
-  check_submission("add_sources", detector, boresight, tod.size(), hwp_angle, plate_angle);
-  const std::string& name = focal_plane_[detector].name;
+  check_submission("add_sources", detector, boresight, tod.size(), hwp_angle, plate_angle, {}, node);
+  const std::string& name = detectors_[detector].name;
   if (time.size() != tod.size())
     throw Error("add_sources: detector '" + name + "': " + std::to_string(time.size()) + " sample times for " +
                 std::to_string(tod.size()) + " samples");
@@ -259,6 +284,22 @@ void Engine::add_sources_view(std::size_t detector, const View& boresight, std::
     throw Error("add_sources: point sources need the integral normalization; a per-sample normalization divides "
                 "each sample by its own disc's sum, which a source outside the sky does not change");
   for (const SourceTrack& s : sources) s.check("add_sources");
+  if (!node && has_sequence(detector)) {
+    // Each node's response at its samples, weighted, summed apart and added once all are made (an
+    // error leaves the TOD as it was).
+    std::vector<double> weight, total(tod.size(), 0.0), part;
+    for (const SequenceRun& r : sequence_runs("add_sources", detector, time, weight))
+      for (int j = 0; j < 2; ++j) {
+        const std::size_t n = r.end - r.begin;
+        part.assign(n, 0.0);
+        add_sources_view(sequences_[detector][r.node + std::size_t(j)], boresight.subspan(r.begin, n),
+                         time.subspan(r.begin, n), sources, part,
+                         hwp_angle.empty() ? hwp_angle : hwp_angle.subspan(r.begin, n), true);
+        for (std::size_t i = 0; i < n; ++i) total[r.begin + i] += (j ? weight[r.begin + i] : 1.0 - weight[r.begin + i]) * part[i];
+      }
+    for (std::size_t i = 0; i < tod.size(); ++i) tod[i] += total[i];
+    return;
+  }
   const auto part = [&](const detail::EngineInputs& in) {
     detail::SourcePart p;
     p.detector = &in.detectors.at(detector);
@@ -296,13 +337,91 @@ void Engine::prepare() {
   if (outer_) outer_->prepare();
 }
 
+// The runs of samples between the same two nodes of the detector's beam sequence, and each sample's
+// weight of the later node: w = (t - t_k) / (t_k+1 - t_k).
+std::vector<Engine::SequenceRun> Engine::sequence_runs(const char* what, std::size_t detector,
+                                                       std::span<const double> time, std::vector<double>& weight) const {
+  const std::vector<BeamNode>& nodes = focal_plane_[detector].beam_sequence;
+  weight.resize(time.size());
+  std::vector<SequenceRun> runs;
+  for (std::size_t i = 0; i < time.size(); ++i) {
+    const double t = time[i];
+    if (!(t >= nodes.front().time && t <= nodes.back().time))
+      throw Error(std::string(what) + ": detector '" + focal_plane_[detector].name + "': sample " + std::to_string(i) +
+                  " is at time " + detail::number_text(t, 12) + " s, outside its beam_sequence's nodes (" +
+                  detail::number_text(nodes.front().time, 12) + " to " + detail::number_text(nodes.back().time, 12) +
+                  " s)");
+    // The node k with t_k <= t < t_k+1 (the last interval holds its end).
+    const auto after = std::upper_bound(nodes.begin(), nodes.end(), t,
+                                        [](double v, const BeamNode& n) { return v < n.time; });
+    const std::size_t k = std::min(std::size_t(after - nodes.begin()), nodes.size() - 1) - 1;
+    weight[i] = (t - nodes[k].time) / (nodes[k + 1].time - nodes[k].time);
+    if (runs.empty() || runs.back().node != k) runs.push_back({i, i, k});
+    runs.back().end = i + 1;
+  }
+  return runs;
+}
+
+void Engine::abandon(std::size_t mark) noexcept {
+  try {
+    if (main_->last_ticket() > 0) main_->wait(main_->last_ticket());
+  } catch (...) {  // the failure being reported is this one
+  }
+  try {
+    if (outer_ && outer_->last_ticket() > 0) outer_->wait(outer_->last_ticket());
+  } catch (...) {
+  }
+  pending_.erase(pending_.begin() + std::ptrdiff_t(mark), pending_.end());
+}
+
+// A beam that changes with time: each run of samples submitted for its two nodes' detectors into
+// buffers of the submission's own, combined with the samples' weights when it completes.
+template <class View>
+std::uint64_t Engine::submit_sequence(std::size_t detector, const View& boresight, std::span<double> tod,
+                                      bool accumulate, std::span<const double> hwp_angle,
+                                      std::span<const double> time) {
+  auto pending = std::make_unique<Pending>();
+  std::vector<double> plate_angle;
+  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, plate_angle, time);
+  const std::string& name = detectors_[detector].name;
+  if (accumulate)
+    for (std::size_t i = 0; i < tod.size(); ++i)
+      if (!std::isfinite(tod[i]))
+        throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
+                    " at sample " + std::to_string(i) + "; the TOD added to must be finite");
+  const std::vector<SequenceRun> runs = sequence_runs("convolve", detector, time, pending->weight);
+  for (auto& v : pending->nodes) v.assign(tod.size(), 0.0);
+  const std::size_t mark = pending_.size();
+  try {
+    for (const SequenceRun& r : runs)
+      for (int j = 0; j < 2; ++j) {
+        const std::size_t n = r.end - r.begin;
+        submit_view(sequences_[detector][r.node + std::size_t(j)], boresight.subspan(r.begin, n),
+                    std::span(pending->nodes[std::size_t(j)]).subspan(r.begin, n), false,
+                    hwp_angle.empty() ? hwp_angle : hwp_angle.subspan(r.begin, n), {}, true);
+      }
+  } catch (...) {
+    abandon(mark);
+    throw;
+  }
+  samples_ -= tod.size();  // each sample once, with both nodes' pixels
+  pending->ticket = main_->last_ticket();
+  pending->detector = detector;
+  pending->tod = tod;
+  pending->accumulate = accumulate;
+  pending_.push_back(std::move(pending));
+  return pending_.back()->ticket;
+}
+
 template <class View>
 std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
-                                  bool accumulate, std::span<const double> hwp_angle) {
+                                  bool accumulate, std::span<const double> hwp_angle, std::span<const double> time,
+                                  bool node) {
+  if (!node && has_sequence(detector)) return submit_sequence(detector, boresight, tod, accumulate, hwp_angle, time);
   const auto host_start = std::chrono::steady_clock::now();
   auto pending = std::make_unique<Pending>();
-  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle);
-  const std::string& name = focal_plane_[detector].name;
+  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle, time, node);
+  const std::string& name = detectors_[detector].name;
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   if (accumulate)
     for (std::size_t i = 0; i < tod.size(); ++i)
@@ -347,7 +466,7 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
     if (pending->main.polar) polar_samples_ += pending->main.polar->index.size();
     pending_.push_back(std::move(pending));
   } catch (const detail::SubmissionError& e) {
-    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
+    throw Error("convolving detector '" + detectors_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
                 e.kind());
   } catch (const Error& e) {
     throw Error("convolving detector '" + name + "': " + e.what(), e.kind());
@@ -369,7 +488,7 @@ void Engine::finish_pending(std::uint64_t ticket) {
       if (p.outer_ticket) pixels_ += outer_->wait(p.outer_ticket);
     } catch (const detail::SubmissionError& e) {
       drop_pending();
-      throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " +
+      throw Error("convolving detector '" + detectors_[inputs_->detectors.at(e.detector).owner].name + "': " +
                       e.what(),
                   e.kind());
     }
@@ -378,7 +497,7 @@ void Engine::finish_pending(std::uint64_t ticket) {
     // One pass over the chunk: the arithmetic overflowed somewhere in the sum (every input was finite).
     for (std::size_t i = 0; i < p.tod.size() && problem.empty(); ++i)
       if (!std::isfinite(p.tod[i])) {
-        const std::string& name = focal_plane_[p.detector].name;
+        const std::string& name = detectors_[p.detector].name;
         // The cpu backend sums in float64; the others sum the pixels in float32 (docs/simd.md).
         const bool wide = main_->backend().name() == "cpu";
         problem = "convolving detector '" + name + "': sample " + std::to_string(i) + " of the TOD is " +
@@ -405,6 +524,13 @@ void Engine::drop_pending() noexcept {
 }
 
 void Engine::complete(Pending& p) {
+  if (!p.weight.empty()) {  // a beam that changes with time: its nodes' submissions completed before it
+    for (std::size_t i = 0; i < p.tod.size(); ++i) {
+      const double v = (1.0 - p.weight[i]) * p.nodes[0][i] + p.weight[i] * p.nodes[1][i];
+      p.tod[i] = p.accumulate ? p.tod[i] + v : v;
+    }
+    return;
+  }
   detail::SkyPass::finish(p.main);
   detail::SkyPass::finish(p.outer_work);
   if (p.rows[0].empty()) {  // no plate before the detector: a split beam's outer part added
@@ -428,13 +554,13 @@ void Engine::complete(Pending& p) {
 }
 
 std::uint64_t Engine::submit(std::size_t detector, const PointingView& boresight, std::span<double> tod,
-                             bool accumulate, std::span<const double> hwp_angle) {
-  return submit_view(detector, boresight, tod, accumulate, hwp_angle);
+                             bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {
+  return submit_view(detector, boresight, tod, accumulate, hwp_angle, time);
 }
 
 std::uint64_t Engine::submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                             bool accumulate, std::span<const double> hwp_angle) {
-  return submit_view(detector, boresight, tod, accumulate, hwp_angle);
+                             bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {
+  return submit_view(detector, boresight, tod, accumulate, hwp_angle, time);
 }
 
 void Engine::wait(std::uint64_t ticket) {
@@ -442,7 +568,7 @@ void Engine::wait(std::uint64_t ticket) {
     pixels_ += main_->wait(ticket);
   } catch (const detail::SubmissionError& e) {
     drop_pending();
-    throw Error("convolving detector '" + focal_plane_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
+    throw Error("convolving detector '" + detectors_[inputs_->detectors.at(e.detector).owner].name + "': " + e.what(),
                 e.kind());
   }
   finish_pending(ticket);
@@ -451,13 +577,13 @@ void Engine::wait(std::uint64_t ticket) {
 void Engine::wait() { wait(main_->last_ticket()); }
 
 void Engine::convolve(std::size_t detector, const PointingView& boresight, std::span<double> tod, bool accumulate,
-                      std::span<const double> hwp_angle) {
-  wait(submit(detector, boresight, tod, accumulate, hwp_angle));
+                      std::span<const double> hwp_angle, std::span<const double> time) {
+  wait(submit(detector, boresight, tod, accumulate, hwp_angle, time));
 }
 
 void Engine::convolve(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
-                      bool accumulate, std::span<const double> hwp_angle) {
-  wait(submit(detector, boresight, tod, accumulate, hwp_angle));
+                      bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {
+  wait(submit(detector, boresight, tod, accumulate, hwp_angle, time));
 }
 
 // The adjoint of submit_view, term by term (docs/physics.md, "The adjoint"): A = A_main W_cb on the
@@ -468,14 +594,33 @@ void Engine::convolve(std::size_t detector, const QuatPointingView& boresight, s
 // transposes of W_cb, C and B.
 template <class View>
 void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
-                          std::span<const double> hwp_angle, bool squares) {
+                          std::span<const double> hwp_angle, std::span<const double> time, bool squares, bool node) {
   std::vector<double> plate_angle;
-  check_submission(squares ? "adjoint_diagonal" : "adjoint", detector, boresight, tod.size(), hwp_angle, plate_angle);
-  const std::string& name = focal_plane_[detector].name;
+  const char* what = squares ? "adjoint_diagonal" : "adjoint";
+  check_submission(what, detector, boresight, tod.size(), hwp_angle, plate_angle, time, node);
+  const std::string& name = detectors_[detector].name;
   for (std::size_t i = 0; i < tod.size(); ++i)
     if (!std::isfinite(tod[i]))
       throw Error("adjoint: detector '" + name + "': TOD sample " + std::to_string(i) + " is " +
                   detail::number_text(tod[i]) + "; the adjoint needs finite values");
+  if (!node && has_sequence(detector)) {
+    // A^T d = sum over the nodes of A_k^T (c_k d), c_k = 1 - w and w at each sample (the diagonal:
+    // each node's squares, c_k^2 times its own).
+    std::vector<double> weight, part;
+    for (const SequenceRun& r : sequence_runs(what, detector, time, weight))
+      for (int j = 0; j < 2; ++j) {
+        const std::size_t n = r.end - r.begin;
+        part.resize(n);
+        for (std::size_t i = 0; i < n; ++i) {
+          const double w = weight[r.begin + i];
+          part[i] = (j ? w : 1.0 - w) * tod[r.begin + i];
+        }
+        adjoint_view(sequences_[detector][r.node + std::size_t(j)], boresight.subspan(r.begin, n), part,
+                     hwp_angle.empty() ? hwp_angle : hwp_angle.subspan(r.begin, n), {}, squares, true);
+      }
+    samples_ -= tod.size();  // each sample once, with both nodes' pixels
+    return;
+  }
   wait();
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   detail::PointingInput input = input_of(boresight);
@@ -516,30 +661,38 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
 }
 
 void Engine::adjoint(std::size_t detector, const PointingView& boresight, std::span<const double> tod,
-                     std::span<const double> hwp_angle) {
-  adjoint_view(detector, boresight, tod, hwp_angle, false);
+                     std::span<const double> hwp_angle, std::span<const double> time) {
+  adjoint_view(detector, boresight, tod, hwp_angle, time, false);
 }
 
 void Engine::adjoint(std::size_t detector, const QuatPointingView& boresight, std::span<const double> tod,
-                     std::span<const double> hwp_angle) {
-  adjoint_view(detector, boresight, tod, hwp_angle, false);
+                     std::span<const double> hwp_angle, std::span<const double> time) {
+  adjoint_view(detector, boresight, tod, hwp_angle, time, false);
 }
 
-void Engine::adjoint_diagonal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle) {
+void Engine::adjoint_diagonal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle,
+                              std::span<const double> time) {
   const std::vector<double> ones(boresight.size(), 1.0);
-  adjoint_view(detector, boresight, ones, hwp_angle, true);
+  adjoint_view(detector, boresight, ones, hwp_angle, time, true);
 }
 
 void Engine::adjoint_diagonal(std::size_t detector, const QuatPointingView& boresight,
-                              std::span<const double> hwp_angle) {
+                              std::span<const double> hwp_angle, std::span<const double> time) {
   const std::vector<double> ones(boresight.size(), 1.0);
-  adjoint_view(detector, boresight, ones, hwp_angle, true);
+  adjoint_view(detector, boresight, ones, hwp_angle, time, true);
 }
 
 template <class View>
-void Engine::normal_view(std::size_t detector, const View& boresight, std::span<const double> hwp_angle) {
+void Engine::normal_view(std::size_t detector, const View& boresight, std::span<const double> hwp_angle,
+                         std::span<const double> time) {
   std::vector<double> plate_angle;
-  check_submission("normal", detector, boresight, boresight.size(), hwp_angle, plate_angle);
+  check_submission("normal", detector, boresight, boresight.size(), hwp_angle, plate_angle, time);
+  if (has_sequence(detector)) {  // two passes, through the nodes
+    std::vector<double> tod(boresight.size());
+    convolve(detector, boresight, tod, false, hwp_angle, time);
+    adjoint_view(detector, boresight, tod, hwp_angle, time, false);
+    return;
+  }
   wait();
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   const bool split = !split_.empty() && split_[detector];
@@ -550,7 +703,7 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
   if (split || det.plate == detail::PreparedDetector::Plate::detector || !main_->has_normal()) {
     std::vector<double> tod(boresight.size());
     convolve(detector, boresight, tod, false, hwp_angle);
-    adjoint_view(detector, boresight, tod, hwp_angle, false);
+    adjoint_view(detector, boresight, tod, hwp_angle, {}, false);
     return;
   }
   try {
@@ -560,19 +713,21 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
     pixels_ += main_->normal(work, detector, input);
     if (work.polar) polar_samples_ += work.polar->index.size();
   } catch (const detail::SubmissionError& e) {
-    throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
+    throw Error("normal pass of detector '" + detectors_[detector].name + "': " + e.what(), e.kind());
   } catch (const Error& e) {
-    throw Error("normal pass of detector '" + focal_plane_[detector].name + "': " + e.what(), e.kind());
+    throw Error("normal pass of detector '" + detectors_[detector].name + "': " + e.what(), e.kind());
   }
   samples_ += boresight.size();
 }
 
-void Engine::normal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle) {
-  normal_view(detector, boresight, hwp_angle);
+void Engine::normal(std::size_t detector, const PointingView& boresight, std::span<const double> hwp_angle,
+                    std::span<const double> time) {
+  normal_view(detector, boresight, hwp_angle, time);
 }
 
-void Engine::normal(std::size_t detector, const QuatPointingView& boresight, std::span<const double> hwp_angle) {
-  normal_view(detector, boresight, hwp_angle);
+void Engine::normal(std::size_t detector, const QuatPointingView& boresight, std::span<const double> hwp_angle,
+                    std::span<const double> time) {
+  normal_view(detector, boresight, hwp_angle, time);
 }
 
 std::size_t Engine::npix() const noexcept { return inputs_->sky.npix; }

@@ -60,6 +60,20 @@ void check_focal_plane(const FocalPlane& focal_plane, std::size_t beams) {
       throw Error(who + ": beam index " + std::to_string(d.beam) + " but only " + std::to_string(beams) +
                   " beamsors were given");
     if (d.hwp) d.hwp->check(who);
+    if (d.beam_sequence.size() == 1)
+      throw Error(who + ": its beam_sequence has one node; a beam that changes with time needs two or more (a fixed "
+                  "beam is `beam`)");
+    for (std::size_t k = 0; k < d.beam_sequence.size(); ++k) {
+      const BeamNode& n = d.beam_sequence[k];
+      const std::string node = who + ": beam_sequence node " + std::to_string(k);
+      if (!std::isfinite(n.time)) throw Error(node + ": time = " + number_text(n.time) + " is not finite");
+      if (k > 0 && !(n.time > d.beam_sequence[k - 1].time))
+        throw Error(node + ": time = " + number_text(n.time, 12) + " s is not after node " + std::to_string(k - 1) +
+                    "'s " + number_text(d.beam_sequence[k - 1].time, 12) + " s (expected strictly ascending times)");
+      if (n.beam >= beams)
+        throw Error(node + ": beam index " + std::to_string(n.beam) + " but only " + std::to_string(beams) +
+                    " beamsors were given");
+    }
   }
 }
 

@@ -99,26 +99,42 @@ void check_engine_options(const EngineOptions& options) {
 
 // ---- Engine: masked skies (declared in pisco/engine.hpp)
 
+static const std::vector<std::size_t> no_nodes;
+
+// A beam that changes with time (`nodes`: its nodes' detectors): a sample is flagged where any node's
+// disc holds an UNSEEN pixel.
 template <class View>
 static std::size_t flag_view(const FocalPlane& fp, const detail::EngineInputs& in,
-                             const std::vector<std::uint32_t>& masked, std::size_t detector, const View& boresight,
+                             const std::vector<std::uint32_t>& masked, std::size_t detector,
+                             const std::vector<std::size_t>& nodes, const View& boresight,
                              std::span<std::uint8_t> flags) {
   if (detector >= fp.size())
     throw Error("flag_samples: detector index " + std::to_string(detector) + " but the focal plane has " +
                 std::to_string(fp.size()) + " detectors");
   const std::string origin = "flag_samples: pointing of detector '" + fp[detector].name + "'";
   check_pointing(boresight, origin.c_str());
-  return detail::flag_discs(in.sky, in.detectors.at(detector), masked, boresight, flags);
+  if (nodes.empty()) return detail::flag_discs(in.sky, in.detectors.at(detector), masked, boresight, flags);
+  std::vector<std::uint8_t> node(flags.size());
+  std::fill(flags.begin(), flags.end(), std::uint8_t(0));
+  for (const std::size_t k : nodes) {
+    detail::flag_discs(in.sky, in.detectors.at(k), masked, boresight, node);
+    for (std::size_t i = 0; i < flags.size(); ++i) flags[i] |= node[i];
+  }
+  std::size_t n = 0;
+  for (const std::uint8_t f : flags) n += f;
+  return n;
 }
 
 std::size_t Engine::flag_samples(std::size_t detector, const PointingView& boresight,
                                  std::span<std::uint8_t> flags) const {
-  return flag_view(focal_plane_, *inputs_, masked_, detector, boresight, flags);
+  return flag_view(focal_plane_, *inputs_, masked_, detector, has_sequence(detector) ? sequences_[detector] : no_nodes,
+                   boresight, flags);
 }
 
 std::size_t Engine::flag_samples(std::size_t detector, const QuatPointingView& boresight,
                                  std::span<std::uint8_t> flags) const {
-  return flag_view(focal_plane_, *inputs_, masked_, detector, boresight, flags);
+  return flag_view(focal_plane_, *inputs_, masked_, detector, has_sequence(detector) ? sequences_[detector] : no_nodes,
+                   boresight, flags);
 }
 
 unsigned Engine::max_threads() noexcept {

@@ -114,6 +114,17 @@ std::optional<ConstVector> hwp_args(nb::handle hwp_angle, std::size_t n) {
   return v;
 }
 
+// Each sample's time (a beam that changes with time, Detector.beam_sequence), or none: a 1-D float64
+// array of the pointing's length. Detectors without a beam sequence ignore it.
+std::optional<ConstVector> time_args(nb::handle time, std::size_t n) {
+  if (time.is_none()) return std::nullopt;
+  ConstVector v = const_vector(time, "time");
+  if (v.shape(0) != n)
+    throw nb::value_error(("time: " + std::to_string(v.shape(0)) + " samples, but the pointing has " +
+                           std::to_string(n)).c_str());
+  return v;
+}
+
 std::span<const double> span_of(const std::optional<ConstVector>& v) {
   if (!v) return {};
   return {v->data(), v->shape(0)};
@@ -233,19 +244,20 @@ class PyEngine {
   PyEngine& operator=(const PyEngine&) = delete;
 
   nb::object convolve(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
-                      nb::handle out, bool accumulate, nb::handle hwp_angle) {
+                      nb::handle out, bool accumulate, nb::handle hwp_angle, nb::handle time_arg) {
     const std::size_t d = detector_index(detector);
     const PointingArgs p = pointing_args(theta, phi, psi, quats);
     const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    const std::optional<ConstVector> time = time_args(time_arg, p.size);
     nb::object result = output(out, p.size, accumulate);
     Vector tod = vector(result, "out");
     bool out_of_memory = false;
     const std::string problem = checked_run(p, h, [&](Engine& e) {
       try {
         if (p.theta)
-          e.convolve(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h));
+          e.convolve(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h), span_of(time));
         else
-          e.convolve(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+          e.convolve(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h), span_of(time));
       } catch (const std::bad_alloc&) {
         out_of_memory = true;
       }
@@ -284,11 +296,12 @@ class PyEngine {
   // engine's sky s (normal), added into `out` ((4, npix) float64: I, Q, U, V), or into new zeros.
   enum class Scatter { adjoint, diagonal, normal };
   nb::object adjoint(nb::handle detector, nb::handle tod_arg, nb::handle theta, nb::handle phi, nb::handle psi,
-                     nb::handle quats, nb::handle out, nb::handle hwp_angle, Scatter what) {
+                     nb::handle quats, nb::handle out, nb::handle hwp_angle, nb::handle time_arg, Scatter what) {
     const std::size_t d = detector_index(detector);
     const char* call = what == Scatter::diagonal ? "adjoint_diagonal" : what == Scatter::normal ? "normal" : "adjoint";
     const PointingArgs p = pointing_args(theta, phi, psi, quats, call);
     const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    const std::optional<ConstVector> time = time_args(time_arg, p.size);
     std::optional<ConstVector> tod;
     if (what == Scatter::adjoint) {
       tod = const_vector(tod_arg, "tod");
@@ -324,15 +337,15 @@ class PyEngine {
         Engine& e = open();
         try {
           if (what == Scatter::diagonal) {
-            if (p.theta) e.adjoint_diagonal(d, p.angles(), span_of(h));
-            else e.adjoint_diagonal(d, p.quaternions(), span_of(h));
+            if (p.theta) e.adjoint_diagonal(d, p.angles(), span_of(h), span_of(time));
+            else e.adjoint_diagonal(d, p.quaternions(), span_of(h), span_of(time));
           } else if (what == Scatter::normal) {
-            if (p.theta) e.normal(d, p.angles(), span_of(h));
-            else e.normal(d, p.quaternions(), span_of(h));
+            if (p.theta) e.normal(d, p.angles(), span_of(h), span_of(time));
+            else e.normal(d, p.quaternions(), span_of(h), span_of(time));
           } else {
             const std::span<const double> t{tod->data(), p.size};
-            if (p.theta) e.adjoint(d, p.angles(), t, span_of(h));
-            else e.adjoint(d, p.quaternions(), t, span_of(h));
+            if (p.theta) e.adjoint(d, p.angles(), t, span_of(h), span_of(time));
+            else e.adjoint(d, p.quaternions(), t, span_of(h), span_of(time));
           }
           e.take_adjoint({{rows[0].data(), npix}, {rows[1].data(), npix}, {rows[2].data(), npix}, {rows[3].data(), npix}});
         } catch (const std::bad_alloc&) {
@@ -358,10 +371,11 @@ class PyEngine {
   }
 
   std::uint64_t submit(nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
-                       nb::handle out, bool accumulate, nb::handle hwp_angle) {
+                       nb::handle out, bool accumulate, nb::handle hwp_angle, nb::handle time_arg) {
     const std::size_t d = detector_index(detector);
     const PointingArgs p = pointing_args(theta, phi, psi, quats);
     const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    const std::optional<ConstVector> time = time_args(time_arg, p.size);
     if (out.is_none()) throw nb::type_error("submit: out is required (the array the TOD is written to by wait())");
     check_output_size(out, p.size);
     Vector tod = vector(out, "out");
@@ -370,8 +384,8 @@ class PyEngine {
     const std::string problem = checked_run(p, h, [&](Engine& e) {
       // The plate's angles, like the pointing, are read before submit() returns.
       try {
-        ticket = p.theta ? e.submit(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h))
-                         : e.submit(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h));
+        ticket = p.theta ? e.submit(d, p.angles(), {tod.data(), p.size}, accumulate, span_of(h), span_of(time))
+                         : e.submit(d, p.quaternions(), {tod.data(), p.size}, accumulate, span_of(h), span_of(time));
       } catch (const std::bad_alloc&) {
         out_of_memory = true;
       }
@@ -777,7 +791,7 @@ void bind_engine(nb::module_& m) {
            "quadrature"_a = "corrected")
       .def("convolve", &PyEngine::convolve, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
-           "accumulate"_a = false, "hwp_angle"_a = nb::none(),
+           "accumulate"_a = false, "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
            "The TOD of one detector (an index or its name) for a chunk of boresight pointing.\n\n"
            "Pointing: theta, phi, psi (1-D float64 arrays, radians), or boresight_quats ((n, 4) float64,\n"
            "x, y, z, w, TOAST's and litebird_sim's layout); the engine applies the detector's offset.\n"
@@ -786,7 +800,9 @@ void bind_engine(nb::module_& m) {
            "TypeError, a wrong shape, a strided or read-only array or a non-finite value ValueError.\n"
            "hwp_angle: the half-wave plate's angle per sample (1-D float64, radians, in the focal-plane\n"
            "frame: TOAST's hwp_angle), required for a detector with a plate (Detector.hwp) and refused for\n"
-           "one without (pisco.Error). The GIL is released while the engine runs.")
+           "one without (pisco.Error). time: each sample's time (1-D float64, seconds), required for a\n"
+           "detector whose beam changes with time (Detector.beam_sequence) and ignored for others. The GIL\n"
+           "is released while the engine runs.")
       .def("add_sources", &PyEngine::add_sources, "detector"_a, "time"_a, "sources"_a, "theta"_a = nb::none(),
            "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),
            "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
@@ -799,32 +815,32 @@ void bind_engine(nb::module_& m) {
            "the same whatever the backend.")
       .def("adjoint",
            [](PyEngine& e, nb::handle detector, nb::handle tod, nb::handle theta, nb::handle phi, nb::handle psi,
-              nb::handle quats, nb::handle out, nb::handle hwp) {
-             return e.adjoint(detector, tod, theta, phi, psi, quats, out, hwp, PyEngine::Scatter::adjoint);
+              nb::handle quats, nb::handle out, nb::handle hwp, nb::handle time) {
+             return e.adjoint(detector, tod, theta, phi, psi, quats, out, hwp, time, PyEngine::Scatter::adjoint);
            },
            "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
-           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
            "The adjoint of convolve(): A^T tod, the TOD of one detector scattered back onto the sky with the\n"
            "same weights, offsets, plates and quadrature, so that sum(sky * A^T d) = sum(A sky * d).\n\n"
-           "Pointing and hwp_angle as for convolve(); tod: 1-D float64, one value per sample. out: a (4, npix)\n"
+           "Pointing, hwp_angle and time as for convolve(); tod: 1-D float64, one value per sample. out: a (4, npix)\n"
            "float64 array (I, Q, U, V at the engine's NSIDE) the result is added into; None: new zeros.\n"
            "Returns out. Backends without it raise pisco.UnavailableError (capabilities['adjoint']).")
       .def("adjoint_diagonal",
            [](PyEngine& e, nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
-              nb::handle out, nb::handle hwp) {
-             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, PyEngine::Scatter::diagonal);
+              nb::handle out, nb::handle hwp, nb::handle time) {
+             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, time, PyEngine::Scatter::diagonal);
            },
            "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
-           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
            "The diagonal of A^T A for these samples (squared scatter weights per pixel and Stokes parameter),\n"
            "added into out ((4, npix)) or new zeros: a preconditioner for iterative map-making.")
       .def("normal",
            [](PyEngine& e, nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
-              nb::handle out, nb::handle hwp) {
-             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, PyEngine::Scatter::normal);
+              nb::handle out, nb::handle hwp, nb::handle time) {
+             return e.adjoint(detector, nb::none(), theta, phi, psi, quats, out, hwp, time, PyEngine::Scatter::normal);
            },
            "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
-           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
+           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
            "A^T A sky for these samples: adjoint(convolve(...)) of the engine's sky (set_sky's), added into\n"
            "out ((4, npix)) or new zeros; one pass over each disc where the backend can (simd), the same\n"
            "result as the two calls. An iterative map-maker's step.")
@@ -836,8 +852,8 @@ void bind_engine(nb::module_& m) {
       .def_prop_ro("npix", [](PyEngine& e) { return e.npix(); }, "Pixels of the engine's sky (12 NSIDE^2).")
       .def("submit", &PyEngine::submit, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
-           "accumulate"_a = false, "hwp_angle"_a = nb::none(),
-           "Like convolve(), asynchronously: the pointing (and hwp_angle) are read before submit() returns\n"
+           "accumulate"_a = false, "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
+           "Like convolve(), asynchronously: the pointing (hwp_angle, time) are read before submit() returns\n"
            "a ticket; out (required) is written by the time wait(ticket) returns.")
       .def("flag_samples", &PyEngine::flag_samples, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),

@@ -556,15 +556,47 @@ void bind_hwp(nb::module_& m) {
       "R(a) having rows (1,0,0,0), (0,cos2a,sin2a,0), (0,-sin2a,cos2a,0), (0,0,0,1).");
 }
 
+// A beam that changes with time (Detector.beam_sequence): pairs (time in seconds, beam index), or None
+// for a fixed beam. Their order and count are the engine's to check (pisco.Error).
+std::vector<BeamNode> sequence_arg(nb::handle v) {
+  std::vector<BeamNode> nodes;
+  if (v.is_none()) return nodes;
+  if (nb::isinstance<nb::str>(v) || !nb::hasattr(v, "__iter__"))
+    throw nb::type_error(("beam_sequence: expected a list of (time, beam) pairs, got " + describe(v)).c_str());
+  std::size_t k = 0;
+  for (nb::handle item : v) {
+    const std::string where = "beam_sequence[" + std::to_string(k++) + "]";
+    nb::tuple pair;
+    if (!nb::try_cast(item, pair) || pair.size() != 2)
+      throw nb::type_error((where + ": expected a (time, beam) pair, got " + describe(item)).c_str());
+    double time = 0;
+    long long beam = 0;
+    if (!nb::try_cast(pair[0], time) || nb::isinstance<nb::bool_>(pair[0]))
+      throw nb::type_error((where + ": the time must be a number (seconds), got " + describe(pair[0])).c_str());
+    if (!nb::isinstance<nb::int_>(pair[1]) || nb::isinstance<nb::bool_>(pair[1]) || !nb::try_cast(pair[1], beam))
+      throw nb::type_error((where + ": the beam must be an index (int), got " + describe(pair[1])).c_str());
+    const std::string what = where + " beam";
+    nodes.push_back({time, unsigned_arg<std::size_t>(beam, what.c_str())});
+  }
+  return nodes;
+}
+
+nb::list sequence_list(const std::vector<BeamNode>& nodes) {
+  nb::list out;
+  for (const BeamNode& n : nodes) out.append(nb::make_tuple(n.time, n.beam));
+  return out;
+}
+
 void bind_focal_plane(nb::module_& m) {
   nb::class_<Detector>(m, "Detector",
                        "A detector: name, polarization angle zeta (radians, from theta' towards phi'), cross-polar\n"
                        "leakage epsilon (efficiency 1 - epsilon), gain, the index of its beam, its offset from the\n"
                        "boresight as a quaternion (x, y, z, w), and its half-wave plate (a pisco.HalfWavePlate, or\n"
-                       "None: then the engine's convolve() needs the plate's angles, hwp_angle).")
+                       "None: then the engine's convolve() needs the plate's angles, hwp_angle). beam_sequence: a beam\n"
+                       "that changes with time, [(time, beam), ...] (seconds, beam indices; docs/beams.md).")
       .def("__init__",
            [](Detector* self, std::string name, double zeta, double epsilon, double gain, long long beam,
-              nb::handle offset, nb::handle hwp) {
+              nb::handle offset, nb::handle hwp, nb::handle beam_sequence) {
              Detector d{};
              d.name = std::move(name);
              d.zeta = zeta;
@@ -573,10 +605,11 @@ void bind_focal_plane(nb::module_& m) {
              d.beam = unsigned_arg<std::size_t>(beam, "beam");
              if (!offset.is_none()) d.offset = quat_from(offset, "offset");
              d.hwp = plate_arg(hwp);
+             d.beam_sequence = sequence_arg(beam_sequence);
              new (self) Detector(std::move(d));
            },
            "name"_a, "zeta"_a = 0.0, "epsilon"_a = 0.0, "gain"_a = 1.0, "beam"_a = 0, "offset"_a = nb::none(),
-           "hwp"_a = nb::none())
+           "hwp"_a = nb::none(), "beam_sequence"_a = nb::none())
       .def_rw("name", &Detector::name)
       .def_rw("zeta", &Detector::zeta)
       .def_rw("epsilon", &Detector::epsilon)
@@ -593,6 +626,13 @@ void bind_focal_plane(nb::module_& m) {
           "hwp", [](const Detector& d) { return d.hwp ? nb::cast(*d.hwp, nb::rv_policy::copy) : nb::none(); },
           [](Detector& d, nb::handle v) { d.hwp = plate_arg(v); },
           nb::for_setter(nb::arg("value").none()), "The detector's half-wave plate (a copy of it), or None.")
+      .def_prop_rw(
+          "beam_sequence", [](const Detector& d) { return sequence_list(d.beam_sequence); },
+          [](Detector& d, nb::handle v) { d.beam_sequence = sequence_arg(v); },
+          nb::for_setter(nb::arg("value").none()),
+          "A beam that changes with time: [(time, beam), ...], times in seconds strictly ascending, at least\n"
+          "two nodes; between two nodes the TOD is the two beams' linearly interpolated (docs/beams.md).\n"
+          "Empty: the fixed beam `beam`. The engine's calls then need each sample's time (time=).")
       .def("set_offset", &Detector::set_offset, "xi"_a, "eta"_a, "gamma"_a,
            "Sets the offset from focal-plane coordinates (xi, eta, gamma), radians (pisco.offset_quat).")
       .def("offset_xi_eta_gamma",
@@ -604,7 +644,10 @@ void bind_focal_plane(nb::module_& m) {
       .def("__repr__", [](const Detector& d) {
         return "pisco.Detector('" + d.name + "', zeta=" + format_double(d.zeta) + ", epsilon=" +
                format_double(d.epsilon) + ", gain=" + format_double(d.gain) + ", beam=" + std::to_string(d.beam) +
-               (d.hwp ? ", hwp=" + plate_repr(*d.hwp) : std::string()) + ")";
+               (d.hwp ? ", hwp=" + plate_repr(*d.hwp) : std::string()) +
+               (d.beam_sequence.empty() ? std::string()
+                                        : ", beam_sequence=[" + std::to_string(d.beam_sequence.size()) + " nodes]") +
+               ")";
       });
 
   nb::class_<FocalPlane>(m, "FocalPlane",
@@ -614,10 +657,11 @@ void bind_focal_plane(nb::module_& m) {
       .def(
           "add",
           [](FocalPlane& fp, nb::handle detector_or_name, double zeta, double epsilon, double gain, long long beam,
-             nb::handle offset, nb::handle hwp) {
+             nb::handle offset, nb::handle hwp, nb::handle beam_sequence) {
             if (nb::isinstance<Detector>(detector_or_name)) {
               Detector d = nb::cast<Detector>(detector_or_name);
               if (!hwp.is_none()) d.hwp = plate_arg(hwp);
+              if (!beam_sequence.is_none()) d.beam_sequence = sequence_arg(beam_sequence);
               return fp.add(std::move(d));
             }
             if (!nb::isinstance<nb::str>(detector_or_name))
@@ -631,12 +675,14 @@ void bind_focal_plane(nb::module_& m) {
             d.beam = unsigned_arg<std::size_t>(beam, "beam");
             if (!offset.is_none()) d.offset = quat_from(offset, "offset");
             d.hwp = plate_arg(hwp);
+            d.beam_sequence = sequence_arg(beam_sequence);
             return fp.add(std::move(d));
           },
           "detector"_a, "zeta"_a = 0.0, "epsilon"_a = 0.0, "gain"_a = 1.0, "beam"_a = 0, "offset"_a = nb::none(),
-          "hwp"_a = nb::none(),
+          "hwp"_a = nb::none(), "beam_sequence"_a = nb::none(),
           "Adds a Detector, or one built from a name and these fields; returns its index. hwp: a\n"
-          "pisco.HalfWavePlate for the detector (given with a Detector, it replaces the Detector's).")
+          "pisco.HalfWavePlate for the detector (given with a Detector, it replaces the Detector's);\n"
+          "beam_sequence: [(time, beam), ...], a beam that changes with time (Detector.beam_sequence).")
       .def(
           "add_pair",
           [](FocalPlane& fp, const std::string& name, double zeta, long long beam_a_arg, long long beam_b_arg,
