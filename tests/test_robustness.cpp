@@ -117,11 +117,16 @@ std::string variant(const std::string& name) {
   if (name == "hwp_detectors") return variant("detectors") + plate;
   if (name == "hwp_ces") return variant("ces") + "[hwp]\nrpm = 10\n";  // the scan's own sample rate
   if (name == "hwp_file") return with_table(c, "[scan]", "type = \"file\"\nfile = \"bore_hwp.h5\"\n") + "[hwp]\n";
+  if (name == "sequence") {  // a beam that changes with time over the ces scan's 72 s
+    c = with_table(variant("ces"), "[beams.side]", "type = \"gaussian\"\nfwhm_deg = 12.0\nrho_max_deg = 20.0\n");
+    c = with_table(c, "[beams.drift]", "type = \"sequence\"\ntimes_s = [0, 100]\nbeams = [\"main\", \"side\"]\n");
+    return with_table(c, "[[focal_plane.pairs]]", "name = \"p\"\nbeam = \"drift\"\n");
+  }
   ADD_FAILURE() << "no variant " << name;
   return c;
 }
 
-enum class Kind { integer, number, string, boolean, numbers, choice, path };
+enum class Kind { integer, number, string, boolean, numbers, strings, choice, path };
 
 struct Key {
   std::string variant, table, key;
@@ -136,6 +141,7 @@ std::vector<std::string> wrong_values(const Key& k) {
     case Kind::number: return {"\"1\"", "true", "[1]", "{ a = 1 }", "nan", "inf", "-inf", "\"\""};
     case Kind::boolean: return {"\"true\"", "1", "[true]", "nan", "\"\""};
     case Kind::numbers: return {"1", "\"x\"", "[]", "[\"a\"]", "[nan]", "[inf]", "[[1]]", "\"\"", "[true]"};
+    case Kind::strings: return {"1", "\"x\"", "[]", "[1]", "[true]", "[[\"a\"]]", "\"\"", "{ a = 1 }"};
     case Kind::string:
     case Kind::choice:
     case Kind::path: {
@@ -189,6 +195,9 @@ std::vector<Key> keys() {
       {"split", beam, "sidelobe_split_deg", K::number, {"0", "-1", "20", "30"}},
       {"split", beam, "sidelobe_taper_deg", K::number, {"-1", "13"}},
       {"split", beam, "sidelobe_nside", K::integer, {"3", "-2", "16384"}},
+      {"sequence", "[beams.drift]", "times_s", K::numbers, {"[0]", "[5, 1]", "[0, 0]", "[0, 10, 20]"}},
+      {"sequence", "[beams.drift]", "beams", K::strings,
+       {"[\"main\"]", "[\"main\", \"nope\"]", "[\"main\", \"drift\"]", "[\"main\", \"\"]"}},
       {"base", pair, "name", K::string, {}},
       {"base", pair, "zeta_deg", K::number, {}},
       {"base", pair, "epsilon", K::number, {"-0.1", "1.1"}},
@@ -398,7 +407,7 @@ TEST_F(Robustness, VariantsRun) {
                               "split", "detectors", "pair_ab",
                               "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file", "hwp",
                               "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file", "ces_rotating",
-                              "hwp_ces"}) {
+                              "hwp_ces", "sequence"}) {
     const fs::path cfg = write("variant.toml", variant(v));
     const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "variant-out").string()}, {}, 60);
     EXPECT_TRUE(r.exited && r.status == 0) << v << ": " << r.describe() << "\n" << r.output << "\n" << variant(v);

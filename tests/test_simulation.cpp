@@ -151,6 +151,90 @@ TEST_F(SimulationTest, SourcesAddWhatTheirPixelWould) {
   }
 }
 
+// A beam that changes with time ([beams.NAME] type = "sequence", docs/beams.md): a detector whose beam
+// drifts from "round" at 0 s to "oval" at the run's end has, at each sample, the two beams' TOD
+// (detectors of their own beside it, with the same angle and offset) linearly interpolated in the
+// sample's time i / the scan's rate; the file's mistakes are refused naming the table and key.
+TEST_F(SimulationTest, BeamsThatChangeWithTimeAreInterpolated) {
+  const auto config = [&](const std::string& name, const std::string& drift, const std::string& scan) {
+    const fs::path p = dir_ / (name + ".toml");
+    const std::string det = "zeta_deg = 30\nxi_deg = 1\neta_deg = -0.5\ngamma_deg = 10\n";
+    std::ofstream(p) << "[sky]\nnside = 32\nlmax = 64\nseed = 3\n"
+                        "[beams.round]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n"
+                        "[beams.oval]\ntype = \"elliptical\"\nfwhm_x_deg = 3.5\nfwhm_y_deg = 4.5\nangle_deg = 20\n"
+                        "rho_max_deg = 8.0\n"
+                     << drift
+                     << "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"drift\"\n" << det
+                     << "[[focal_plane.detectors]]\nname = \"r\"\nbeam = \"round\"\n" << det
+                     << "[[focal_plane.detectors]]\nname = \"o\"\nbeam = \"oval\"\n" << det << scan
+                     << "[engine]\nbackend = \"cpu\"\nchunk_samples = 50\n"
+                        "[output]\ndir = \""
+                     << (dir_ / name).string() << "\"\nmaps = false\nspectra = false\nplots = false\n";
+    return p;
+  };
+  // 144 samples at 2 Hz: the nodes at 0 and 71.5 s, the run's first and last samples.
+  const std::string ces = "[scan]\ntype = \"ces\"\nsample_rate_hz = 2\nduration_hours = 0.02\naz_throw_deg = 40\nnside = 8\n";
+  const std::string drift = "[beams.drift]\ntype = \"sequence\"\ntimes_s = [0, 71.5]\nbeams = [\"round\", \"oval\"]\n";
+  pisco::Simulation::from_file(config("drift", drift, ces)).run();
+  const fs::path tod = dir_ / "drift" / "tod.h5";
+  const std::vector<double> d = pisco::read_tod_signal(tod, "d"), r = pisco::read_tod_signal(tod, "r"),
+                            o = pisco::read_tod_signal(tod, "o");
+  ASSERT_EQ(d.size(), 144u);
+  double worst = 0, rms = 0, apart = 0;
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const double w = double(i) / 2.0 / 71.5;
+    worst = std::max(worst, std::abs(d[i] - ((1 - w) * r[i] + w * o[i])));
+    apart = std::max(apart, std::abs(r[i] - o[i]));
+    rms += d[i] * d[i];
+  }
+  rms = std::sqrt(rms / double(d.size()));
+  EXPECT_LE(worst, 1e-12 * rms);
+  EXPECT_GT(apart, 1e-3 * rms);  // the two beams do differ
+  EXPECT_EQ(d.front(), r.front());
+  EXPECT_EQ(d.back(), o.back());
+
+  const auto refused = [&](const std::string& name, const std::string& drift_table, const std::string& scan) {
+    try {
+      (void)pisco::read_simulation_file(config(name, drift_table, scan));
+    } catch (const pisco::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(refused("unknown", "[beams.drift]\ntype = \"sequence\"\ntimes_s = [0, 10]\nbeams = [\"round\", \"ovl\"]\n", ces)
+                .find("[beams.drift] beams: beam 1 is \"ovl\", which is not a [beams] table (expected one of: oval, round)"),
+            std::string::npos);
+  EXPECT_NE(refused("nested", "[beams.drift]\ntype = \"sequence\"\ntimes_s = [0, 10]\nbeams = [\"round\", \"drift\"]\n", ces)
+                .find("beam 1 is \"drift\", itself a beam that changes with time"),
+            std::string::npos);
+  EXPECT_NE(refused("order", "[beams.drift]\ntype = \"sequence\"\ntimes_s = [10, 0]\nbeams = [\"round\", \"oval\"]\n", ces)
+                .find("[beams.drift] times_s: time 1 (0 s) is not after time 0 (10 s)"),
+            std::string::npos);
+  EXPECT_NE(refused("count", "[beams.drift]\ntype = \"sequence\"\ntimes_s = [0]\nbeams = [\"round\", \"oval\"]\n", ces)
+                .find("times_s: expected one time (seconds from the run's first sample) for each of the 2 beams, got 1"),
+            std::string::npos);
+  EXPECT_NE(refused("extra", "[beams.drift]\ntype = \"sequence\"\ntimes_s = [0, 1]\nbeams = [\"round\", \"oval\"]\n"
+                             "fwhm_deg = 2\n", ces)
+                .find("unknown key 'fwhm_deg'"),
+            std::string::npos);
+  EXPECT_NE(refused("timeless", drift, "[scan]\ntype = \"pixel_centres\"\nnside = 8\n")
+                .find("[beams.drift] type: a beam that changes with time needs each sample's time: a ces or satellite "
+                      "scan"),
+            std::string::npos);
+  // A run longer than the sequence: the first sample past its last node is named (by its index in
+  // its chunk, and its time), and no output is left.
+  const std::string short_drift = "[beams.drift]\ntype = \"sequence\"\ntimes_s = [0, 30]\nbeams = [\"round\", \"oval\"]\n";
+  try {
+    pisco::Simulation::from_file(config("short", short_drift, ces)).run();
+    FAIL() << "samples past the sequence's last node";
+  } catch (const pisco::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("is at time 30.5 s, outside its beam_sequence's nodes (0 to 30 s)"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "short" / "tod.h5"));
+}
+
 TEST_F(SimulationTest, WritesWhatTheCommandLineWrites) {
   const fs::path file = write_config();
   const fs::path cli_dir = dir_ / "cli", lib_dir = dir_ / "lib";

@@ -50,13 +50,15 @@ struct DeconvolutionOptions {
 };
 
 // One chunk of a survey as the solver replays it: a detector, its boresight pointing (angles or
-// quaternions) and, for a detector with a half-wave plate, the plate's angles.
+// quaternions), for a detector with a half-wave plate the plate's angles, and for a beam that changes
+// with time (Detector::beam_sequence) each sample's time.
 struct SurveyChunk {
   std::size_t detector = 0;
   PointingView angles;
   QuatPointingView quats;
   bool quaternions = false;
   std::span<const double> hwp_angle;
+  std::span<const double> time;
   std::size_t size() const noexcept { return quaternions ? quats.size() : angles.size(); }
 };
 

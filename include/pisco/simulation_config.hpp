@@ -37,7 +37,7 @@ struct SkyConfig {
 };
 
 // [beams.NAME] type.
-enum class BeamKind { gaussian, elliptical, file, grasp, blm };
+enum class BeamKind { gaussian, elliptical, file, grasp, blm, sequence };
 // Its name in simulation files ("gaussian", ...).
 const char* beam_kind_name(BeamKind kind) noexcept;
 
@@ -49,6 +49,10 @@ struct BeamConfig {
   std::filesystem::path file;
   int set = 0;                   // grasp: the beam of the file (1-based; 0 = its only one)
   bool temperature_only = false; // blm: a T-only file meant for polarized detectors (else an error)
+  // sequence: a beam that changes with time (docs/beams.md), the beams named `nodes` (other [beams]
+  // tables, not sequences) at `node_times` (seconds from the run's first sample), interpolated linearly.
+  std::vector<double> node_times;
+  std::vector<std::string> nodes;
   // grasp and blm: the beam turns with each detector (its co-polar axis along the detector's zeta)
   bool turns_with_detector() const { return kind == BeamKind::grasp || kind == BeamKind::blm; }
 };
@@ -137,10 +141,11 @@ struct SimulationConfig {
   OutputConfig output;
   MapmakerConfig mapmaker;
   // [[sources]]: point sources added to every detector's TOD (docs/sources.md), their times seconds
-  // from the run's first sample; sources_rate the samples' rate (Hz) that gives each sample's time
-  // (the scan's; 0 when the scan has none, which only fixed sources allow).
+  // from the run's first sample.
   std::vector<SourceTrack> sources;
-  double sources_rate = 0.0;
+  // The samples' rate (Hz) that gives each sample's time, i / sample_rate, for the sources and for beams
+  // that change with time (the scan's; 0 when the scan has none, which only fixed sources and beams allow).
+  double sample_rate = 0.0;
 };
 
 // Reads and checks a simulation file (docs/config.md). Relative paths inside it are relative to its

@@ -177,6 +177,20 @@ class Table {
     }
     return out;
   }
+  std::vector<std::string> strings(const std::string& key, std::vector<std::string> fallback) {
+    used_.insert(key);
+    const toml::node* n = t_.get(key);
+    if (!n) return fallback;
+    const toml::array* a = n->as_array();
+    if (!a || a->empty()) fail(key, "expected a non-empty array of strings");
+    std::vector<std::string> out;
+    for (const auto& e : *a) {
+      auto v = e.value<std::string>();
+      if (!v) fail(key + "[" + std::to_string(out.size()) + "]", "expected a string");
+      out.push_back(*v);
+    }
+    return out;
+  }
   // A number or a non-empty array of numbers (a number read as an array of one); none when absent.
   std::optional<std::vector<double>> numbers_or_number(const std::string& key) {
     const toml::node* n = t_.get(key);

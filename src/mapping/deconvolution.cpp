@@ -39,18 +39,18 @@ void axpy(Sky& y, double a, const Sky& x) {
 StokesMaps maps_of(Sky& s) { return {s.I(), s.Q(), s.U(), s.V()}; }
 
 void normal_chunk(Engine& engine, const SurveyChunk& c) {
-  if (c.quaternions) engine.normal(c.detector, c.quats, c.hwp_angle);
-  else engine.normal(c.detector, c.angles, c.hwp_angle);
+  if (c.quaternions) engine.normal(c.detector, c.quats, c.hwp_angle, c.time);
+  else engine.normal(c.detector, c.angles, c.hwp_angle, c.time);
 }
 
 void adjoint_chunk(Engine& engine, const SurveyChunk& c, std::span<const double> tod) {
-  if (c.quaternions) engine.adjoint(c.detector, c.quats, tod, c.hwp_angle);
-  else engine.adjoint(c.detector, c.angles, tod, c.hwp_angle);
+  if (c.quaternions) engine.adjoint(c.detector, c.quats, tod, c.hwp_angle, c.time);
+  else engine.adjoint(c.detector, c.angles, tod, c.hwp_angle, c.time);
 }
 
 void diagonal_chunk(Engine& engine, const SurveyChunk& c) {
-  if (c.quaternions) engine.adjoint_diagonal(c.detector, c.quats, c.hwp_angle);
-  else engine.adjoint_diagonal(c.detector, c.angles, c.hwp_angle);
+  if (c.quaternions) engine.adjoint_diagonal(c.detector, c.quats, c.hwp_angle, c.time);
+  else engine.adjoint_diagonal(c.detector, c.angles, c.hwp_angle, c.time);
 }
 }  // namespace
 

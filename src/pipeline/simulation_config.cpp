@@ -27,6 +27,7 @@ const char* beam_kind_name(BeamKind kind) noexcept {
     case BeamKind::file: return "file";
     case BeamKind::grasp: return "grasp";
     case BeamKind::blm: return "blm";
+    case BeamKind::sequence: return "sequence";
   }
   return "?";
 }
@@ -89,12 +90,32 @@ SkyConfig read_sky(Table t) {
 BeamConfig read_beam(Table t, const std::string& name) {
   BeamConfig b;
   b.name = name;
-  const std::string type = t.choice("type", "gaussian", {"gaussian", "elliptical", "file", "grasp", "blm"});
+  const std::string type = t.choice("type", "gaussian", {"gaussian", "elliptical", "file", "grasp", "blm", "sequence"});
   b.kind = type == "gaussian"     ? BeamKind::gaussian
            : type == "elliptical" ? BeamKind::elliptical
            : type == "file"       ? BeamKind::file
            : type == "grasp"      ? BeamKind::grasp
-                                  : BeamKind::blm;
+           : type == "blm"        ? BeamKind::blm
+                                  : BeamKind::sequence;
+  if (b.kind == BeamKind::sequence) {
+    // A beam that changes with time (docs/beams.md): other beams at times; their names are checked
+    // once every table is read (check_sequences).
+    b.node_times = t.numbers("times_s", {});
+    b.nodes = t.strings("beams", {});
+    if (b.nodes.size() < 2) t.fail("beams", "a beam that changes with time needs two or more beams (names of [beams] tables)");
+    if (b.node_times.size() != b.nodes.size())
+      t.fail("times_s", "expected one time (seconds from the run's first sample) for each of the " +
+                            std::to_string(b.nodes.size()) + " beams, got " + std::to_string(b.node_times.size()));
+    for (std::size_t k = 0; k < b.node_times.size(); ++k) {
+      if (!std::isfinite(b.node_times[k])) t.fail("times_s", "time " + std::to_string(k) + " is not finite");
+      if (k > 0 && !(b.node_times[k] > b.node_times[k - 1]))
+        t.fail("times_s", "time " + std::to_string(k) + " (" + Table::format(b.node_times[k]) + " s) is not after time " +
+                              std::to_string(k - 1) + " (" + Table::format(b.node_times[k - 1]) +
+                              " s); expected strictly ascending times");
+    }
+    t.finish();
+    return b;
+  }
   b.options.rho_max = t.positive("rho_max_deg", 5.0) * deg;
   if (b.options.rho_max >= std::numbers::pi / 2) t.fail("rho_max_deg", "expected less than 90 deg");
   b.options.grid_step = t.number("grid_step_arcmin", 0.0) * arcmin;
@@ -183,6 +204,31 @@ BeamConfig read_beam(Table t, const std::string& name) {
   }
   t.finish();
   return b;
+}
+
+// The beams that change with time: each node a [beams] table that is not itself a sequence, and a
+// scan whose samples have times.
+void check_sequences(const SimulationConfig& c, const toml::table& beams, const fs::path& file) {
+  for (const BeamConfig& b : c.beams) {
+    if (b.kind != BeamKind::sequence) continue;
+    Table t(*beams.get(b.name)->as_table(), "beams." + b.name, file);
+    for (std::size_t k = 0; k < b.nodes.size(); ++k) {
+      const auto it = std::find_if(c.beams.begin(), c.beams.end(), [&](const BeamConfig& x) { return x.name == b.nodes[k]; });
+      if (it == c.beams.end()) {
+        std::string names;
+        for (const BeamConfig& x : c.beams)
+          if (x.kind != BeamKind::sequence) names += (names.empty() ? "" : ", ") + x.name;
+        t.fail("beams", "beam " + std::to_string(k) + " is \"" + b.nodes[k] + "\", which is not a [beams] table (expected one of: " +
+                            names + ")");
+      }
+      if (it->kind == BeamKind::sequence)
+        t.fail("beams", "beam " + std::to_string(k) + " is \"" + b.nodes[k] + "\", itself a beam that changes with time; "
+                        "name fixed beams");
+    }
+    if (c.sample_rate <= 0)
+      t.fail("type", "a beam that changes with time needs each sample's time: a ces or satellite scan (sample i at i / "
+                     "its sample rate), not " + std::string(scan_kind_name(c.scan.kind)));
+  }
 }
 
 // "YYYY-MM-DDTHH:MM:SSZ" (UTC) to seconds since 1970-01-01.
@@ -625,9 +671,10 @@ SimulationConfig read_simulation_file(const fs::path& file) {
     }
   }
   assign_plates(c, file);
-  c.sources_rate = scan_sample_rate(c.scan);
+  c.sample_rate = scan_sample_rate(c.scan);
+  check_sequences(c, *beams, file);
   if (const toml::array* sources = t.array_of_tables("sources")) {
-    c.sources = read_sources(*sources, file, c.sources_rate);
+    c.sources = read_sources(*sources, file, c.sample_rate);
     if (c.engine.options.normalization != pisco::Normalization::integral)
       t.fail("sources", "point sources need [engine] normalization = \"integral\"");
   }

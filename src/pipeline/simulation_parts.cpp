@@ -140,45 +140,54 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
   std::vector<std::string>& beam_names = out.names;
   std::vector<Detector>& detectors = out.detectors;
   detectors = c.detectors;
-  for (std::size_t k = 0; k < c.beams.size(); ++k) {
-    const auto& b = c.beams[k];
-    if (!b.turns_with_detector()) {
-      beams.push_back(make_beam(b, c.source, 0.0, log));
+  // Each table's beams as made: one, or one per detector's zeta for a beam that turns with the
+  // detector (made when a detector, or a sequence of a detector, first needs it).
+  std::vector<std::vector<std::pair<double, std::size_t>>> made(c.beams.size());  // (zeta, beam index)
+  const auto beam_for = [&](std::size_t k, double zeta, const Detector* d, bool quiet = false) {
+    const BeamConfig& b = c.beams[k];
+    if (!b.turns_with_detector()) zeta = 0.0;
+    for (const auto& [z, index] : made[k])
+      if (z == zeta) return index;
+    beams.push_back(make_beam(b, c.source, zeta, log));
+    beam_names.push_back(b.name);
+    if (!quiet && b.turns_with_detector() && d)
+      say("beam %s for zeta %g deg: %s\n", b.name.c_str(), zeta * 180 / std::numbers::pi, beams.back().description().c_str());
+    else if (!quiet)
       say("beam %s: %s\n", b.name.c_str(), beams.back().description().c_str());
-      beam_names.push_back(b.name);
-      for (std::size_t i = 0; i < detectors.size(); ++i)
-        if (c.detectors[i].beam == k) detectors[i].beam = beams.size() - 1;
-      continue;
-    }
-    std::vector<std::pair<double, std::size_t>> made;  // zeta -> beam index
+    // A b_lm file of T alone gives a polarized detector no polarization response: said, unless the
+    // table says that this is meant.
+    const Beamsor& made_beam = beams.back();
+    if (d && b.kind == BeamKind::blm && !b.temperature_only && d->epsilon < 1.0 && !made_beam.has_element(1, 1) &&
+        !made_beam.has_element(1, 2) && !made_beam.has_element(2, 1) && !made_beam.has_element(2, 2))
+      throw pisco::Error(c.source.string() + ": [beams." + b.name + "] " + b.file.string() +
+                         " holds T coefficients alone, so detector '" + d->name +
+                         "' (polarization efficiency " + detail::printf_text("%g", 1.0 - d->epsilon) +
+                         ") would see no polarization; give a file with T, E and B, or set temperature_only = "
+                         "true if a beam without polarization response is meant");
+    made[k].emplace_back(zeta, beams.size() - 1);
+    return beams.size() - 1;
+  };
+  for (std::size_t k = 0; k < c.beams.size(); ++k) {
+    if (c.beams[k].kind == BeamKind::sequence) continue;
+    if (!c.beams[k].turns_with_detector()) beam_for(k, 0.0, nullptr);
+    for (std::size_t i = 0; i < detectors.size(); ++i)
+      if (c.detectors[i].beam == k) detectors[i].beam = beam_for(k, c.detectors[i].zeta, &c.detectors[i]);
+    if (made[k].empty()) beam_for(k, 0.0, nullptr, true);  // checked, though no detector uses it
+  }
+  // Beams that change with time: each detector's nodes, the beams of the tables they name.
+  for (std::size_t k = 0; k < c.beams.size(); ++k) {
+    const BeamConfig& b = c.beams[k];
+    if (b.kind != BeamKind::sequence) continue;
     for (std::size_t i = 0; i < detectors.size(); ++i) {
       if (c.detectors[i].beam != k) continue;
-      const double zeta = c.detectors[i].zeta;
-      auto it = std::find_if(made.begin(), made.end(), [&](const auto& m) { return m.first == zeta; });
-      if (it == made.end()) {
-        beams.push_back(make_beam(b, c.source, zeta, log));
-        beam_names.push_back(b.name);
-        say("beam %s for zeta %g deg: %s\n", b.name.c_str(), zeta * 180 / std::numbers::pi,
-            beams.back().description().c_str());
-        // A b_lm file of T alone gives a polarized detector no polarization response: said, unless
-        // the table says that this is meant.
-        const Beamsor& made_beam = beams.back();
-        if (b.kind == BeamKind::blm && !b.temperature_only && c.detectors[i].epsilon < 1.0 &&
-            !made_beam.has_element(1, 1) && !made_beam.has_element(1, 2) && !made_beam.has_element(2, 1) &&
-            !made_beam.has_element(2, 2))
-          throw pisco::Error(c.source.string() + ": [beams." + b.name + "] " + b.file.string() +
-                             " holds T coefficients alone, so detector '" + c.detectors[i].name +
-                             "' (polarization efficiency " + detail::printf_text("%g", 1.0 - c.detectors[i].epsilon) +
-                             ") would see no polarization; give a file with T, E and B, or set temperature_only = "
-                             "true if a beam without polarization response is meant");
-        made.emplace_back(zeta, beams.size() - 1);
-        it = made.end() - 1;
+      detectors[i].beam_sequence.clear();
+      for (std::size_t n = 0; n < b.nodes.size(); ++n) {
+        const auto j = std::size_t(std::find_if(c.beams.begin(), c.beams.end(),
+                                                [&](const BeamConfig& x) { return x.name == b.nodes[n]; }) -
+                                   c.beams.begin());
+        detectors[i].beam_sequence.push_back({b.node_times[n], beam_for(j, c.detectors[i].zeta, &c.detectors[i])});
       }
-      detectors[i].beam = it->second;
-    }
-    if (made.empty()) {  // checked, though no detector uses it
-      beams.push_back(make_beam(b, c.source, 0.0, log));
-      beam_names.push_back(b.name);
+      detectors[i].beam = detectors[i].beam_sequence.front().beam;
     }
   }
   return out;

@@ -230,6 +230,14 @@ class JobPointing {
       chunk.quats = pisco::QuatPointingView{b.quats};
       if (plate) chunk.hwp_angle = b.hwp;
     }
+    // A beam that changes with time: sample i of the run at time i / the scan's rate.
+    if (!fp_[job.detector].beam_sequence.empty()) {
+      time_slot_ ^= 1;
+      std::vector<double>& t = time_[std::size_t(time_slot_)];
+      t.resize(job.count);
+      for (std::size_t i = 0; i < job.count; ++i) t[i] = double(job.first + i) / c_.sample_rate;
+      chunk.time = t;
+    }
     return chunk;
   }
 
@@ -257,6 +265,8 @@ class JobPointing {
   int chunk_slot_ = 0;
   std::array<BoresightChunk, 2> bore_;
   std::array<pisco::Pointing, 2> file_;
+  std::array<std::vector<double>, 2> time_;  // the chunks' sample times, alternately (a beam that changes with time)
+  int time_slot_ = 0;
   std::size_t loaded_ = static_cast<std::size_t>(-1);  // the detector or the first sample loaded last
   int slot_ = 1;
 };
@@ -348,7 +358,7 @@ class JobStream {
       j.pointing_slot = pointing_.chunk_slot();
       const std::span<double> t(tod_[j.slot].data(), span.count);
       j.ticket = with_view(j.chunk, [&](const auto& view) {
-        return engine_.submit(span.detector, view, t, false, j.chunk.hwp_angle);
+        return engine_.submit(span.detector, view, t, false, j.chunk.hwp_angle, j.chunk.time);
       });
       if (pending_) finish(*pending_);
       pending_ = j;
@@ -368,7 +378,7 @@ class JobStream {
     const pisco::SurveyChunk& chunk = j.chunk;
     times_.resize(chunk.size());
     for (std::size_t i = 0; i < times_.size(); ++i)
-      times_[i] = c_.sources_rate > 0 ? double(j.first + i) / c_.sources_rate : 0.0;
+      times_[i] = c_.sample_rate > 0 ? double(j.first + i) / c_.sample_rate : 0.0;
     try {
       with_view(chunk, [&](const auto& view) {
         engine_.add_sources(chunk.detector, view, times_, c_.sources, t, chunk.hwp_angle);
