@@ -6,6 +6,7 @@
 // adjoint's dot-product identity, accumulation, and the errors.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -60,6 +61,11 @@ pisco::FocalPlane sequence_plane() {
   fixed.name = "fixed";
   fixed.beam = 1;
   fp.add(fixed);
+  // With a half-wave plate between the optics and the detector: four row detectors per node.
+  pisco::Detector plated = d;
+  plated.name = "plated";
+  plated.hwp = pisco::HalfWavePlate::ideal(0.3, pisco::HwpPlacement::detector);
+  fp.add(plated);
   return fp;
 }
 
@@ -120,29 +126,37 @@ TEST_P(BeamSequence, EqualsTheInterpolatedBeamBuiltDirectly) {
   }
 }
 
-// <A s, d> = <s, A^T d> for the sequence detector, its samples spread over all three nodes' times.
+// <A s, d> = <s, A^T d> for the sequence detectors (one with a plate between the optics and the
+// detector), their samples' times spread over all three nodes' in no order (the samples between two
+// nodes gathered).
 TEST_P(BeamSequence, ItsAdjointIsItsTranspose) {
   const int nside = 32;
   const pisco::Sky sky = pisco_test::cmb_like_sky(nside, 4, 5.0);
   std::vector<Beamsor> beams;
   for (int k = 0; k < 3; ++k) beams.push_back(node_beam(k));
   const pisco::Pointing p = pisco_test::random_pointing(400, 3);
-  std::vector<double> time(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) time[i] = 300.0 * double(i) / double(p.size() - 1);
+  std::vector<double> time(p.size()), plate(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    time[i] = 300.0 * double((i * 37) % p.size()) / double(p.size() - 1);
+    plate[i] = 0.05 * double(i);
+  }
   pisco::Engine engine(sky, beams, sequence_plane(), options);
-  std::vector<double> tod(p.size()), d(p.size());
-  engine.convolve(0, p, tod, false, {}, time);
   std::mt19937 g(2);
   std::normal_distribution<double> n(0, 1);
   double forward = 0, t2 = 0, d2 = 0;
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    d[i] = n(g);
-    forward += tod[i] * d[i];
-    t2 += tod[i] * tod[i];
-    d2 += d[i] * d[i];
-  }
   pisco::Sky at(nside);
-  engine.adjoint(0, p, d, {}, time);
+  for (const std::size_t det : {std::size_t(0), std::size_t(2)}) {
+    const std::span<const double> h = det == 2 ? std::span<const double>(plate) : std::span<const double>();
+    std::vector<double> tod(p.size()), d(p.size());
+    engine.convolve(det, p, tod, false, h, time);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      d[i] = n(g);
+      forward += tod[i] * d[i];
+      t2 += tod[i] * tod[i];
+      d2 += d[i] * d[i];
+    }
+    engine.adjoint(det, p, d, h, time);
+  }
   engine.take_adjoint({at.I(), at.Q(), at.U(), at.V()});
   double back = 0;
   for (int c = 0; c < 4; ++c)
@@ -178,6 +192,35 @@ TEST_P(BeamSequence, AccumulatesAndQueues) {
     EXPECT_NEAR(added[i] - 2.5, once[i], 1e-12 * std::max(1.0, std::abs(once[i]))) << i;
     EXPECT_EQ(fixed[i], fixed_timed[i]) << i;
   }
+  // The plated detector, its samples between two nodes gathered with their plate angles: the nodes'
+  // beams as fixed detectors with the same plate, combined by hand.
+  std::vector<double> plate(p.size()), plated(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) plate[i] = 0.07 * double(i);
+  engine.convolve(2, p, plated, false, plate, time);
+  pisco::FocalPlane nodes_fp;
+  for (int k = 0; k < 3; ++k) {
+    pisco::Detector d = sequence_plane()[2];
+    d.name = "node" + std::to_string(k);
+    d.beam_sequence.clear();
+    d.beam = std::size_t(k);
+    nodes_fp.add(d);
+  }
+  pisco::Engine fixed_engine(sky, beams, nodes_fp, options);
+  std::array<std::vector<double>, 3> node_tod;
+  for (int k = 0; k < 3; ++k) {
+    node_tod[k].resize(p.size());
+    fixed_engine.convolve(std::size_t(k), p, node_tod[k], false, plate);
+  }
+  double worst = 0, norm = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const std::size_t k = time[i] < 100.0 ? 0 : 1;
+    const double w = (time[i] - node_times[k]) / (node_times[k + 1] - node_times[k]);
+    const double want = (1 - w) * node_tod[k][i] + w * node_tod[k + 1][i];
+    worst = std::max(worst, std::abs(plated[i] - want));
+    norm = std::max(norm, std::abs(want));
+  }
+  EXPECT_LE(worst, 1e-12 * norm);
+  EXPECT_GT(norm, 0.0);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, BeamSequence, ::testing::Values("cpu", "simd", "vulkan", "cuda"),

@@ -317,13 +317,15 @@ class Engine {
   void add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
                         const std::vector<SourceTrack>& sources, std::span<double> tod,
                         std::span<const double> hwp_angle, bool node = false) const;
-  // A beam that changes with time: the runs of samples between the same two nodes, and each sample's
-  // weight w of the later node (focal_plane.hpp, BeamNode).
-  struct SequenceRun {
-    std::size_t begin = 0, end = 0, node = 0;  // samples [begin, end) between nodes `node` and `node` + 1
+  // A beam that changes with time: the samples between each two nodes, and each sample's weight w of
+  // the later node (focal_plane.hpp, BeamNode).
+  struct SequenceGroup {
+    std::size_t node = 0;            // between nodes `node` and `node` + 1
+    std::vector<std::size_t> index;  // its samples, ascending
+    bool contiguous() const noexcept { return index.back() - index.front() + 1 == index.size(); }
   };
-  std::vector<SequenceRun> sequence_runs(const char* what, std::size_t detector, std::span<const double> time,
-                                         std::vector<double>& weight) const;
+  std::vector<SequenceGroup> sequence_groups(const char* what, std::size_t detector, std::span<const double> time,
+                                             std::vector<double>& weight) const;
   bool has_sequence(std::size_t detector) const noexcept {
     return detector < sequences_.size() && !sequences_[detector].empty();
   }

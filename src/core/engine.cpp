@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <future>
+#include <type_traits>
 
 #include "core/backend.hpp"
 #include "core/masked_sky.hpp"
@@ -212,9 +213,11 @@ struct Engine::Pending {
   // Each pass's samples near the poles and their values from its polar copy, written over the sky's
   // when the submission completes.
   detail::SkyPass::Work main, outer_work;
-  // A beam that changes with time: each sample's weight of the later node, and the two nodes' TOD.
+  // A beam that changes with time: each sample's weight of the later node, and for each group of
+  // samples between the same two nodes, the two nodes' TOD.
   std::vector<double> weight;
-  std::array<std::vector<double>, 2> nodes;
+  std::vector<SequenceGroup> groups;
+  std::vector<std::array<std::vector<double>, 2>> values;
 };
 
 namespace {
@@ -224,6 +227,33 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 detail::PointingInput input_of(const PointingView& v) { return {v, {}, false, {}}; }
 detail::PointingInput input_of(const QuatPointingView& v) { return {{}, v, true, {}}; }
+
+// A group's samples of a chunk: the chunk's own span where they are contiguous, else copied (the
+// engine reads pointing and plate angles before a submission returns).
+PointingView group_view(const PointingView& v, const std::vector<std::size_t>& index, bool contiguous, Pointing& own) {
+  if (contiguous) return v.subspan(index.front(), index.size());
+  own = Pointing{};
+  own.reserve(index.size());
+  for (const std::size_t i : index) own.push_back(v.theta[i], v.phi[i], v.psi[i]);
+  return own.view();
+}
+QuatPointingView group_view(const QuatPointingView& v, const std::vector<std::size_t>& index, bool contiguous,
+                            std::vector<Quat>& own) {
+  if (contiguous) return v.subspan(index.front(), index.size());
+  own.clear();
+  for (const std::size_t i : index) own.push_back(v.quats[i]);
+  return QuatPointingView{own};
+}
+std::span<const double> group_values(std::span<const double> v, const std::vector<std::size_t>& index, bool contiguous,
+                                     std::vector<double>& own) {
+  if (v.empty()) return v;
+  if (contiguous) return v.subspan(index.front(), index.size());
+  own.clear();
+  for (const std::size_t i : index) own.push_back(v[i]);
+  return own;
+}
+template <class View>
+using GroupStorage = std::conditional_t<std::is_same_v<View, PointingView>, Pointing, std::vector<Quat>>;
 }  // namespace
 
 template <class View>
@@ -287,16 +317,22 @@ void Engine::add_sources_view(std::size_t detector, const View& boresight, std::
   if (!node && has_sequence(detector)) {
     // Each node's response at its samples, weighted, summed apart and added once all are made (an
     // error leaves the TOD as it was).
-    std::vector<double> weight, total(tod.size(), 0.0), part;
-    for (const SequenceRun& r : sequence_runs("add_sources", detector, time, weight))
-      for (int j = 0; j < 2; ++j) {
-        const std::size_t n = r.end - r.begin;
-        part.assign(n, 0.0);
-        add_sources_view(sequences_[detector][r.node + std::size_t(j)], boresight.subspan(r.begin, n),
-                         time.subspan(r.begin, n), sources, part,
-                         hwp_angle.empty() ? hwp_angle : hwp_angle.subspan(r.begin, n), true);
-        for (std::size_t i = 0; i < n; ++i) total[r.begin + i] += (j ? weight[r.begin + i] : 1.0 - weight[r.begin + i]) * part[i];
+    std::vector<double> weight, total(tod.size(), 0.0), part, plate, times;
+    GroupStorage<View> own;
+    for (const SequenceGroup& group : sequence_groups("add_sources", detector, time, weight)) {
+      const bool contiguous = group.contiguous();
+      const View view = group_view(boresight, group.index, contiguous, own);
+      const std::span<const double> h = group_values(hwp_angle, group.index, contiguous, plate);
+      const std::span<const double> t = group_values(time, group.index, contiguous, times);
+      for (std::size_t j = 0; j < 2; ++j) {
+        part.assign(group.index.size(), 0.0);
+        add_sources_view(sequences_[detector][group.node + j], view, t, sources, part, h, true);
+        for (std::size_t m = 0; m < part.size(); ++m) {
+          const std::size_t i = group.index[m];
+          total[i] += (j ? weight[i] : 1.0 - weight[i]) * part[m];
+        }
       }
+    }
     for (std::size_t i = 0; i < tod.size(); ++i) tod[i] += total[i];
     return;
   }
@@ -337,13 +373,15 @@ void Engine::prepare() {
   if (outer_) outer_->prepare();
 }
 
-// The runs of samples between the same two nodes of the detector's beam sequence, and each sample's
-// weight of the later node: w = (t - t_k) / (t_k+1 - t_k).
-std::vector<Engine::SequenceRun> Engine::sequence_runs(const char* what, std::size_t detector,
-                                                       std::span<const double> time, std::vector<double>& weight) const {
+// The samples between each two nodes of the detector's beam sequence (the groups in the order of their
+// first sample), and each sample's weight of the later node: w = (t - t_k) / (t_k+1 - t_k).
+std::vector<Engine::SequenceGroup> Engine::sequence_groups(const char* what, std::size_t detector,
+                                                           std::span<const double> time,
+                                                           std::vector<double>& weight) const {
   const std::vector<BeamNode>& nodes = focal_plane_[detector].beam_sequence;
   weight.resize(time.size());
-  std::vector<SequenceRun> runs;
+  std::vector<SequenceGroup> groups;
+  std::vector<std::size_t> group_of(nodes.size() - 1, std::size_t(-1));
   for (std::size_t i = 0; i < time.size(); ++i) {
     const double t = time[i];
     if (!(t >= nodes.front().time && t <= nodes.back().time))
@@ -356,11 +394,15 @@ std::vector<Engine::SequenceRun> Engine::sequence_runs(const char* what, std::si
                                         [](double v, const BeamNode& n) { return v < n.time; });
     const std::size_t k = std::min(std::size_t(after - nodes.begin()), nodes.size() - 1) - 1;
     weight[i] = (t - nodes[k].time) / (nodes[k + 1].time - nodes[k].time);
-    if (runs.empty() || runs.back().node != k) runs.push_back({i, i, k});
-    runs.back().end = i + 1;
+    if (group_of[k] == std::size_t(-1)) {
+      group_of[k] = groups.size();
+      groups.push_back({k, {}});
+    }
+    groups[group_of[k]].index.push_back(i);
   }
-  return runs;
+  return groups;
 }
+
 
 void Engine::abandon(std::size_t mark) noexcept {
   try {
@@ -389,17 +431,22 @@ std::uint64_t Engine::submit_sequence(std::size_t detector, const View& boresigh
       if (!std::isfinite(tod[i]))
         throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
                     " at sample " + std::to_string(i) + "; the TOD added to must be finite");
-  const std::vector<SequenceRun> runs = sequence_runs("convolve", detector, time, pending->weight);
-  for (auto& v : pending->nodes) v.assign(tod.size(), 0.0);
+  pending->groups = sequence_groups("convolve", detector, time, pending->weight);
+  pending->values.resize(pending->groups.size());
   const std::size_t mark = pending_.size();
   try {
-    for (const SequenceRun& r : runs)
-      for (int j = 0; j < 2; ++j) {
-        const std::size_t n = r.end - r.begin;
-        submit_view(sequences_[detector][r.node + std::size_t(j)], boresight.subspan(r.begin, n),
-                    std::span(pending->nodes[std::size_t(j)]).subspan(r.begin, n), false,
-                    hwp_angle.empty() ? hwp_angle : hwp_angle.subspan(r.begin, n), {}, true);
+    GroupStorage<View> own;
+    std::vector<double> plate;
+    for (std::size_t g = 0; g < pending->groups.size(); ++g) {
+      const SequenceGroup& group = pending->groups[g];
+      const bool contiguous = group.contiguous();
+      const View view = group_view(boresight, group.index, contiguous, own);
+      const std::span<const double> h = group_values(hwp_angle, group.index, contiguous, plate);
+      for (std::size_t j = 0; j < 2; ++j) {
+        pending->values[g][j].assign(group.index.size(), 0.0);
+        submit_view(sequences_[detector][group.node + j], view, pending->values[g][j], false, h, {}, true);
       }
+    }
   } catch (...) {
     abandon(mark);
     throw;
@@ -524,11 +571,13 @@ void Engine::drop_pending() noexcept {
 }
 
 void Engine::complete(Pending& p) {
-  if (!p.weight.empty()) {  // a beam that changes with time: its nodes' submissions completed before it
-    for (std::size_t i = 0; i < p.tod.size(); ++i) {
-      const double v = (1.0 - p.weight[i]) * p.nodes[0][i] + p.weight[i] * p.nodes[1][i];
-      p.tod[i] = p.accumulate ? p.tod[i] + v : v;
-    }
+  if (!p.groups.empty()) {  // a beam that changes with time: its nodes' submissions completed before it
+    for (std::size_t g = 0; g < p.groups.size(); ++g)
+      for (std::size_t m = 0; m < p.groups[g].index.size(); ++m) {
+        const std::size_t i = p.groups[g].index[m];
+        const double v = (1.0 - p.weight[i]) * p.values[g][0][m] + p.weight[i] * p.values[g][1][m];
+        p.tod[i] = p.accumulate ? p.tod[i] + v : v;
+      }
     return;
   }
   detail::SkyPass::finish(p.main);
@@ -606,18 +655,21 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
   if (!node && has_sequence(detector)) {
     // A^T d = sum over the nodes of A_k^T (c_k d), c_k = 1 - w and w at each sample (the diagonal:
     // each node's squares, c_k^2 times its own).
-    std::vector<double> weight, part;
-    for (const SequenceRun& r : sequence_runs(what, detector, time, weight))
-      for (int j = 0; j < 2; ++j) {
-        const std::size_t n = r.end - r.begin;
-        part.resize(n);
-        for (std::size_t i = 0; i < n; ++i) {
-          const double w = weight[r.begin + i];
-          part[i] = (j ? w : 1.0 - w) * tod[r.begin + i];
+    std::vector<double> weight, part, plate;
+    GroupStorage<View> own;
+    for (const SequenceGroup& group : sequence_groups(what, detector, time, weight)) {
+      const bool contiguous = group.contiguous();
+      const View view = group_view(boresight, group.index, contiguous, own);
+      const std::span<const double> h = group_values(hwp_angle, group.index, contiguous, plate);
+      for (std::size_t j = 0; j < 2; ++j) {
+        part.resize(group.index.size());
+        for (std::size_t m = 0; m < part.size(); ++m) {
+          const std::size_t i = group.index[m];
+          part[m] = (j ? weight[i] : 1.0 - weight[i]) * tod[i];
         }
-        adjoint_view(sequences_[detector][r.node + std::size_t(j)], boresight.subspan(r.begin, n), part,
-                     hwp_angle.empty() ? hwp_angle : hwp_angle.subspan(r.begin, n), {}, squares, true);
+        adjoint_view(sequences_[detector][group.node + j], view, part, h, {}, squares, true);
       }
+    }
     samples_ -= tod.size();  // each sample once, with both nodes' pixels
     return;
   }
