@@ -785,6 +785,50 @@ TEST_F(Cli, DeconvolveExampleAsTheReadmeSays) {
   EXPECT_NE(readme_row("deconvolve.toml").find(quoted), std::string::npos) << quoted;
 }
 
+// rms P / rms I (mean removed) over the solved pixels of a run's maps.fits.
+double polarization_figure(const fs::path& maps_file) {
+  const pisco::Sky maps = pisco::Sky::read_fits(maps_file, pisco::UnseenPolicy::flag);
+  double mean = 0, ii = 0, pp = 0;
+  std::size_t n = 0;
+  for (std::size_t p = 0; p < maps.npix(); ++p)
+    if (!pisco::is_unseen(maps.I()[p])) {
+      mean += maps.I()[p];
+      ++n;
+    }
+  mean /= double(n);
+  for (std::size_t p = 0; p < maps.npix(); ++p)
+    if (!pisco::is_unseen(maps.I()[p])) {
+      ii += (maps.I()[p] - mean) * (maps.I()[p] - mean);
+      pp += maps.Q()[p] * maps.Q()[p] + maps.U()[p] * maps.U()[p];
+    }
+  return std::sqrt(pp / ii);
+}
+
+// assets/examples/beam_drift.toml, whole, as README.md says a user runs it: the README's figures; on
+// its unpolarized sky the maps' polarization is the drifting beam's leakage, as README.md quotes it
+// (two digits, within 2%), and it is zero to rounding when the B detector's beam is held round.
+TEST_F(Cli, BeamDriftExampleAsTheReadmeSays) {
+  run_satellite_example(dir_, "beam_drift.toml");
+  const double drift = polarization_figure(dir_ / "out" / "maps.fits");
+  const std::string row = readme_row("beam_drift.toml"), key = "rms P / rms I = ";
+  ASSERT_NE(row.find(key), std::string::npos) << row;
+  const double quoted = std::stod(row.substr(row.find(key) + key.size()));
+  EXPECT_NEAR(drift, quoted, 0.02 * quoted) << "README.md quotes " << quoted;
+  std::ifstream in(fs::path(PISCO_TEST_ASSETS_DIR) / "examples" / "beam_drift.toml");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string from = "beam_b = \"drift\"";
+  ASSERT_NE(text.find(from), std::string::npos);
+  text.replace(text.find(from), from.size(), "beam_b = \"round\"");
+  const fs::path held = dir_ / "held.toml";
+  std::ofstream(held) << text;
+  const Result r = run("run " + held.string() + " -o " + (dir_ / "held").string() + " --no-plots --backend cpu -q");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const double round = polarization_figure(dir_ / "held" / "maps.fits");
+  std::cout << "beam_drift.toml: rms P / rms I = " << drift << " drifting, " << round << " held round\n";
+  EXPECT_LT(round, 1e-12);
+  EXPECT_GT(drift, 1e-2);
+}
+
 // assets/examples/hwp_satellite.toml, whole: the README's figures, and its leakage figure as README.md
 // and docs/validation.md (H4) quote it, to two digits.
 TEST_F(Cli, HwpSatelliteExampleAsTheReadmeSays) {
