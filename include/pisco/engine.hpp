@@ -298,8 +298,8 @@ class Engine {
   std::uint64_t submit_view(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
                             std::span<const double> hwp_angle, std::span<const double> time, bool node = false);
   template <class View>
-  std::uint64_t submit_sequence(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
-                                std::span<const double> hwp_angle, std::span<const double> time);
+  std::uint64_t submit_nodes(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
+                             std::span<const double> hwp_angle, std::span<const double> time);
   void finish_pending(std::uint64_t ticket);
   template <class View>
   void adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
@@ -308,7 +308,8 @@ class Engine {
   void normal_view(std::size_t detector, const View& boresight, std::span<const double> hwp_angle,
                    std::span<const double> time);
   // Checks a submission's arguments; fills plate_angle (hwp_angle - gamma) for a detector with a plate.
-  // A detector whose beam changes with time needs `time` (unless `node`).
+  // A detector whose beam changes with time needs `time`, one whose beam turns with the plate
+  // `hwp_angle` (unless `node`: one of the engine's own detectors for their beams).
   template <class View>
   void check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
                         std::span<const double> hwp_angle, std::vector<double>& plate_angle,
@@ -317,20 +318,24 @@ class Engine {
   void add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
                         const std::vector<SourceTrack>& sources, std::span<double> tod,
                         std::span<const double> hwp_angle, bool node = false) const;
-  // A beam that changes with time: the samples between each two nodes, and each sample's weight w of
-  // the later node (focal_plane.hpp, BeamNode).
-  struct SequenceGroup {
-    std::size_t node = 0;            // between nodes `node` and `node` + 1
-    std::vector<std::size_t> index;  // its samples, ascending
+  // A detector whose beam is a per-sample combination of beams (one that changes with time, one that
+  // turns with the plate): its samples in groups, each summed by some of the engine's own detectors
+  // (nodes_), with a coefficient per node and sample (docs/changing.md).
+  struct NodeGroup {
+    std::vector<std::size_t> nodes;                // the engine's detectors
+    std::vector<std::size_t> index;                // the group's samples, ascending
+    std::vector<std::vector<double>> coefficient;  // per node, per sample of the group
     bool contiguous() const noexcept { return index.back() - index.front() + 1 == index.size(); }
   };
-  std::vector<SequenceGroup> sequence_groups(const char* what, std::size_t detector, std::span<const double> time,
-                                             std::vector<double>& weight) const;
-  bool has_sequence(std::size_t detector) const noexcept {
-    return detector < sequences_.size() && !sequences_[detector].empty();
+  std::vector<NodeGroup> node_groups(const char* what, std::size_t detector, std::span<const double> time,
+                                     std::span<const double> hwp_angle) const;
+  std::span<const double> node_plate(std::size_t detector, std::span<const double> hwp_angle, const NodeGroup& group,
+                                     bool contiguous, std::vector<double>& own) const;
+  bool has_nodes(std::size_t detector) const noexcept {
+    return detector < nodes_.size() && !nodes_[detector].empty();
   }
-  // After a failed submission of a beam that changes with time: the parts already queued finished and
-  // dropped (pending_ from `mark` on).
+  // After a failed submission of such a detector: the parts already queued finished and dropped
+  // (pending_ from `mark` on).
   void abandon(std::size_t mark) noexcept;
   void load_sky(const SkyView& sky, const std::vector<Beamsor>* beams);
 
@@ -341,10 +346,12 @@ class Engine {
   void drop_pending() noexcept;
 
   FocalPlane focal_plane_;
-  // The detectors the engine prepares: the focal plane's, then one for each node of each beam that
-  // changes with time (the detector with that node's beam), whose indices sequences_ holds.
+  // The detectors the engine prepares: the focal plane's, then one for each beam of each beam that
+  // changes with time or turns with the plate (the detector with that beam, without a plate), whose
+  // indices nodes_ holds, and, for the plate's beams, each one's Omega~ over their mean (node_scale_).
   FocalPlane detectors_;
-  std::vector<std::vector<std::size_t>> sequences_;  // per detector of the focal plane; empty: a fixed beam
+  std::vector<std::vector<std::size_t>> nodes_;  // per detector of the focal plane; empty: a fixed beam
+  std::vector<std::vector<double>> node_scale_;
   std::shared_ptr<const detail::EngineInputs> inputs_;
   // The sky summed by the chosen backend, with its polar copy for the samples near the poles
   // (core/sky_pass.hpp). Its tickets are the engine's.

@@ -19,6 +19,17 @@ struct BeamNode {
   std::size_t beam = 0;
 };
 
+// A beam that turns with a half-wave plate (Detector::plate_beams): the optics and the plate simulated
+// together at N plate angles, each a beam with the plate in it.
+struct PlateBeams {
+  // The beams (indices into the engine's beam list) at plate angles gamma + k period / N, k = 0 .. N - 1.
+  std::vector<std::size_t> beams;
+  // radians: pi for a half-wave plate, whose turn by pi is the same plate (harmonics of 2 theta); 2 pi
+  // for a plate whose turn by pi is not (a wedge, a tilt: every harmonic of theta).
+  double period = 3.14159265358979323846;
+  double gamma = 0.0;  // radians: the plate angle (hwp_angle, focal-plane frame) of the first beam
+};
+
 struct Detector {
   std::string name;
   double zeta = 0.0;     // polarization angle from theta' towards phi', radians
@@ -44,6 +55,12 @@ struct Detector {
   // each normalized as the engine normalizes a beam, interpolated linearly. Empty (the default): the
   // fixed beam `beam`, which such a detector does not use. The engine then needs every sample's time.
   std::vector<BeamNode> beam_sequence;
+  // A beam that turns with a half-wave plate (docs/changing.md, "Beams that turn with the plate"): at
+  // each sample's plate angle theta (hwp_angle), the beams' trigonometric interpolant in
+  // 2 pi (theta - gamma) / period through the N beams, exact for beams whose dependence on the plate
+  // holds no harmonic of 2 pi theta / period above (N - 1) / 2. The plate is in the beams: such a
+  // detector has no `hwp` (which would count it twice), and the engine needs hwp_angle.
+  std::optional<PlateBeams> plate_beams;
 };
 
 // The gamma a detector's half-wave plate takes when its table gives none (no hwp_gamma_deg, no TOAST

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <future>
+#include <numbers>
 #include <type_traits>
 
 #include "core/backend.hpp"
@@ -102,17 +103,34 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
     : focal_plane_(focal_plane) {
   detail::check_engine_options(options);
   check_focal_plane(focal_plane, beams.size());  // before the sky's set-up, which takes time
-  // Beams that change with time: a detector of the engine's own for each node.
+  // Beams that change with time or turn with the plate: a detector of the engine's own for each of their
+  // beams, without a plate (a plate's beams hold it).
   std::vector<Detector> all = focal_plane.detectors();
-  sequences_.resize(all.size());
-  for (std::size_t d = 0; d < focal_plane.size(); ++d)
-    for (const BeamNode& n : focal_plane[d].beam_sequence) {
-      Detector node = focal_plane[d];
-      node.beam = n.beam;
-      node.beam_sequence.clear();
-      sequences_[d].push_back(all.size());
-      all.push_back(std::move(node));
+  nodes_.resize(all.size());
+  node_scale_.resize(all.size());
+  const auto add_node = [&](std::size_t d, std::size_t beam) {
+    Detector node = focal_plane[d];
+    node.beam = beam;
+    node.beam_sequence.clear();
+    node.plate_beams.reset();
+    nodes_[d].push_back(all.size());
+    all.push_back(std::move(node));
+  };
+  for (std::size_t d = 0; d < focal_plane.size(); ++d) {
+    for (const BeamNode& n : focal_plane[d].beam_sequence) add_node(d, n.beam);
+    if (const auto& p = focal_plane[d].plate_beams) {
+      if (options.normalization != Normalization::integral)
+        throw Error("detector '" + focal_plane[d].name + "': plate_beams need the integral normalization (the "
+                    "plate's beams share their mean Omega~; a per-sample normalization would take the plate's "
+                    "modulation of the total power out)");
+      double mean = 0.0;
+      for (const std::size_t b : p->beams) mean += beams[b].omega_tilde() / double(p->beams.size());
+      for (const std::size_t b : p->beams) {
+        add_node(d, b);
+        node_scale_[d].push_back(beams[b].omega_tilde() / mean);
+      }
     }
+  }
   detectors_ = FocalPlane(std::move(all));
   entry_ = &detail::choose_backend(options.backend);
   options_ = options;
@@ -213,11 +231,10 @@ struct Engine::Pending {
   // Each pass's samples near the poles and their values from its polar copy, written over the sky's
   // when the submission completes.
   detail::SkyPass::Work main, outer_work;
-  // A beam that changes with time: each sample's weight of the later node, and for each group of
-  // samples between the same two nodes, the two nodes' TOD.
-  std::vector<double> weight;
-  std::vector<SequenceGroup> groups;
-  std::vector<std::array<std::vector<double>, 2>> values;
+  // A beam that changes with time or turns with the plate: its groups of samples, and each group's
+  // nodes' TOD.
+  std::vector<NodeGroup> groups;
+  std::vector<std::vector<std::vector<double>>> values;
 };
 
 namespace {
@@ -265,7 +282,7 @@ void Engine::check_submission(const char* what, std::size_t detector, const View
     throw Error(op + ": detector index " + std::to_string(detector) + " but the focal plane has " +
                 std::to_string(focal_plane_.size()) + " detectors");
   const std::string& name = detectors_[detector].name;
-  if (!node && has_sequence(detector)) {
+  if (!node && !focal_plane_[detector].beam_sequence.empty()) {
     if (time.size() != tod_size)
       throw Error(op + ": detector '" + name + "' has a beam that changes with time (beam_sequence): expected " +
                   std::to_string(tod_size) + " sample times (time), got " + std::to_string(time.size()));
@@ -279,7 +296,9 @@ void Engine::check_submission(const char* what, std::size_t detector, const View
                 " samples but the pointing has " + std::to_string(boresight.size()));
   check_pointing(boresight, ("pointing of detector '" + name + "'").c_str());
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
-  const bool plate = det.plate != detail::PreparedDetector::Plate::none;
+  // A beam that turns with the plate: the plate is in its beams, whose angle it needs all the same.
+  const std::optional<PlateBeams>& plate_beams = node ? std::nullopt : focal_plane_[detector].plate_beams;
+  const bool plate = det.plate != detail::PreparedDetector::Plate::none || plate_beams.has_value();
   if (plate && hwp_angle.size() != tod_size)
     throw Error(op + ": detector '" + name + "' has a half-wave plate: expected " + std::to_string(tod_size) +
                 " plate angles (hwp_angle), got " + std::to_string(hwp_angle.size()));
@@ -291,7 +310,7 @@ void Engine::check_submission(const char* what, std::size_t detector, const View
       if (!std::isfinite(hwp_angle[i]))
         throw Error(op + ": detector '" + name + "': plate angle (hwp_angle) of sample " + std::to_string(i) +
                     " is not finite");
-      plate_angle[i] = hwp_angle[i] - det.plate_gamma;
+      plate_angle[i] = hwp_angle[i] - (plate_beams ? plate_beams->gamma : det.plate_gamma);
     }
   }
 }
@@ -314,23 +333,20 @@ void Engine::add_sources_view(std::size_t detector, const View& boresight, std::
     throw Error("add_sources: point sources need the integral normalization; a per-sample normalization divides "
                 "each sample by its own disc's sum, which a source outside the sky does not change");
   for (const SourceTrack& s : sources) s.check("add_sources");
-  if (!node && has_sequence(detector)) {
+  if (!node && has_nodes(detector)) {
     // Each node's response at its samples, weighted, summed apart and added once all are made (an
     // error leaves the TOD as it was).
-    std::vector<double> weight, total(tod.size(), 0.0), part, plate, times;
+    std::vector<double> total(tod.size(), 0.0), part, times, plate;
     GroupStorage<View> own;
-    for (const SequenceGroup& group : sequence_groups("add_sources", detector, time, weight)) {
+    for (const NodeGroup& group : node_groups("add_sources", detector, time, hwp_angle)) {
       const bool contiguous = group.contiguous();
       const View view = group_view(boresight, group.index, contiguous, own);
-      const std::span<const double> h = group_values(hwp_angle, group.index, contiguous, plate);
       const std::span<const double> t = group_values(time, group.index, contiguous, times);
-      for (std::size_t j = 0; j < 2; ++j) {
+      const std::span<const double> h = node_plate(detector, hwp_angle, group, contiguous, plate);
+      for (std::size_t j = 0; j < group.nodes.size(); ++j) {
         part.assign(group.index.size(), 0.0);
-        add_sources_view(sequences_[detector][group.node + j], view, t, sources, part, h, true);
-        for (std::size_t m = 0; m < part.size(); ++m) {
-          const std::size_t i = group.index[m];
-          total[i] += (j ? weight[i] : 1.0 - weight[i]) * part[m];
-        }
+        add_sources_view(group.nodes[j], view, t, sources, part, h, true);
+        for (std::size_t m = 0; m < part.size(); ++m) total[group.index[m]] += group.coefficient[j][m] * part[m];
       }
     }
     for (std::size_t i = 0; i < tod.size(); ++i) tod[i] += total[i];
@@ -373,36 +389,76 @@ void Engine::prepare() {
   if (outer_) outer_->prepare();
 }
 
-// The samples between each two nodes of the detector's beam sequence (the groups in the order of their
-// first sample), and each sample's weight of the later node: w = (t - t_k) / (t_k+1 - t_k).
-std::vector<Engine::SequenceGroup> Engine::sequence_groups(const char* what, std::size_t detector,
-                                                           std::span<const double> time,
-                                                           std::vector<double>& weight) const {
-  const std::vector<BeamNode>& nodes = focal_plane_[detector].beam_sequence;
-  weight.resize(time.size());
-  std::vector<SequenceGroup> groups;
-  std::vector<std::size_t> group_of(nodes.size() - 1, std::size_t(-1));
+// The plate angles a group's nodes take: a beam that changes with time hands its own on (its nodes have
+// its plate); the beams that turn with the plate hold it, and take none.
+std::span<const double> Engine::node_plate(std::size_t detector, std::span<const double> hwp_angle,
+                                           const NodeGroup& group, bool contiguous, std::vector<double>& own) const {
+  if (focal_plane_[detector].plate_beams) return {};
+  return group_values(hwp_angle, group.index, contiguous, own);
+}
+
+// The detector's samples in groups, each with its nodes and their coefficients (docs/changing.md):
+// - a beam that changes with time: the samples between each two nodes k and k + 1 (the groups in the
+//   order of their first sample), with 1 - w and w, w = (t - t_k) / (t_k+1 - t_k);
+// - a beam that turns with the plate: every sample with every beam, with the trigonometric
+//   interpolant's weights at x = 2 pi (theta - gamma) / period, times each beam's Omega~ over their
+//   mean (the nodes are normalized each by its own).
+std::vector<Engine::NodeGroup> Engine::node_groups(const char* what, std::size_t detector,
+                                                   std::span<const double> time,
+                                                   std::span<const double> hwp_angle) const {
+  const Detector& d = focal_plane_[detector];
+  const std::vector<std::size_t>& nodes = nodes_[detector];
+  std::vector<NodeGroup> groups;
+  if (const auto& p = d.plate_beams) {
+    const std::size_t n = hwp_angle.size(), beams = nodes.size();
+    if (n == 0) return groups;
+    NodeGroup& g = groups.emplace_back();
+    g.nodes = nodes;
+    g.index.resize(n);
+    for (std::size_t i = 0; i < n; ++i) g.index[i] = i;
+    g.coefficient.assign(beams, std::vector<double>(n));
+    // N points, harmonics m < N / 2, and for an even N the Nyquist term as cos(N x / 2) alone.
+    const std::size_t top = (beams - 1) / 2;
+    const bool nyquist = beams % 2 == 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double x = 2 * std::numbers::pi * (hwp_angle[i] - p->gamma) / p->period;
+      for (std::size_t k = 0; k < beams; ++k) {
+        const double u = x - 2 * std::numbers::pi * double(k) / double(beams);
+        double c = 1.0;
+        for (std::size_t m = 1; m <= top; ++m) c += 2.0 * std::cos(double(m) * u);
+        if (nyquist) c += std::cos(double(beams / 2) * u);
+        g.coefficient[k][i] = c / double(beams) * node_scale_[detector][k];
+      }
+    }
+    return groups;
+  }
+  const std::vector<BeamNode>& seq = d.beam_sequence;
+  std::vector<std::size_t> group_of(seq.size() - 1, std::size_t(-1));
   for (std::size_t i = 0; i < time.size(); ++i) {
     const double t = time[i];
-    if (!(t >= nodes.front().time && t <= nodes.back().time))
-      throw Error(std::string(what) + ": detector '" + focal_plane_[detector].name + "': sample " + std::to_string(i) +
-                  " is at time " + detail::number_text(t, 12) + " s, outside its beam_sequence's nodes (" +
-                  detail::number_text(nodes.front().time, 12) + " to " + detail::number_text(nodes.back().time, 12) +
+    if (!(t >= seq.front().time && t <= seq.back().time))
+      throw Error(std::string(what) + ": detector '" + d.name + "': sample " + std::to_string(i) + " is at time " +
+                  detail::number_text(t, 12) + " s, outside its beam_sequence's nodes (" +
+                  detail::number_text(seq.front().time, 12) + " to " + detail::number_text(seq.back().time, 12) +
                   " s)");
     // The node k with t_k <= t < t_k+1 (the last interval holds its end).
-    const auto after = std::upper_bound(nodes.begin(), nodes.end(), t,
+    const auto after = std::upper_bound(seq.begin(), seq.end(), t,
                                         [](double v, const BeamNode& n) { return v < n.time; });
-    const std::size_t k = std::min(std::size_t(after - nodes.begin()), nodes.size() - 1) - 1;
-    weight[i] = (t - nodes[k].time) / (nodes[k + 1].time - nodes[k].time);
+    const std::size_t k = std::min(std::size_t(after - seq.begin()), seq.size() - 1) - 1;
+    const double w = (t - seq[k].time) / (seq[k + 1].time - seq[k].time);
     if (group_of[k] == std::size_t(-1)) {
       group_of[k] = groups.size();
-      groups.push_back({k, {}});
+      NodeGroup& g = groups.emplace_back();
+      g.nodes = {nodes[k], nodes[k + 1]};
+      g.coefficient.resize(2);
     }
-    groups[group_of[k]].index.push_back(i);
+    NodeGroup& g = groups[group_of[k]];
+    g.index.push_back(i);
+    g.coefficient[0].push_back(1.0 - w);
+    g.coefficient[1].push_back(w);
   }
   return groups;
 }
-
 
 void Engine::abandon(std::size_t mark) noexcept {
   try {
@@ -416,12 +472,12 @@ void Engine::abandon(std::size_t mark) noexcept {
   pending_.erase(pending_.begin() + std::ptrdiff_t(mark), pending_.end());
 }
 
-// A beam that changes with time: each run of samples submitted for its two nodes' detectors into
-// buffers of the submission's own, combined with the samples' weights when it completes.
+// A beam that changes with time or turns with the plate: each group of samples submitted for its
+// nodes' detectors into buffers of the submission's own, combined with the samples' coefficients when it
+// completes.
 template <class View>
-std::uint64_t Engine::submit_sequence(std::size_t detector, const View& boresight, std::span<double> tod,
-                                      bool accumulate, std::span<const double> hwp_angle,
-                                      std::span<const double> time) {
+std::uint64_t Engine::submit_nodes(std::size_t detector, const View& boresight, std::span<double> tod,
+                                   bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {
   auto pending = std::make_unique<Pending>();
   std::vector<double> plate_angle;
   check_submission("convolve", detector, boresight, tod.size(), hwp_angle, plate_angle, time);
@@ -431,27 +487,28 @@ std::uint64_t Engine::submit_sequence(std::size_t detector, const View& boresigh
       if (!std::isfinite(tod[i]))
         throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
                     " at sample " + std::to_string(i) + "; the TOD added to must be finite");
-  pending->groups = sequence_groups("convolve", detector, time, pending->weight);
+  pending->groups = node_groups("convolve", detector, time, hwp_angle);
   pending->values.resize(pending->groups.size());
   const std::size_t mark = pending_.size();
   try {
     GroupStorage<View> own;
     std::vector<double> plate;
     for (std::size_t g = 0; g < pending->groups.size(); ++g) {
-      const SequenceGroup& group = pending->groups[g];
+      const NodeGroup& group = pending->groups[g];
       const bool contiguous = group.contiguous();
       const View view = group_view(boresight, group.index, contiguous, own);
-      const std::span<const double> h = group_values(hwp_angle, group.index, contiguous, plate);
-      for (std::size_t j = 0; j < 2; ++j) {
+      const std::span<const double> h = node_plate(detector, hwp_angle, group, contiguous, plate);
+      pending->values[g].resize(group.nodes.size());
+      for (std::size_t j = 0; j < group.nodes.size(); ++j) {
         pending->values[g][j].assign(group.index.size(), 0.0);
-        submit_view(sequences_[detector][group.node + j], view, pending->values[g][j], false, h, {}, true);
+        submit_view(group.nodes[j], view, pending->values[g][j], false, h, {}, true);
       }
     }
   } catch (...) {
     abandon(mark);
     throw;
   }
-  samples_ -= tod.size();  // each sample once, with both nodes' pixels
+  samples_ -= tod.size() * (pending->groups.empty() ? 0 : pending->groups.front().nodes.size() - 1);
   pending->ticket = main_->last_ticket();
   pending->detector = detector;
   pending->tod = tod;
@@ -464,7 +521,7 @@ template <class View>
 std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
                                   bool accumulate, std::span<const double> hwp_angle, std::span<const double> time,
                                   bool node) {
-  if (!node && has_sequence(detector)) return submit_sequence(detector, boresight, tod, accumulate, hwp_angle, time);
+  if (!node && has_nodes(detector)) return submit_nodes(detector, boresight, tod, accumulate, hwp_angle, time);
   const auto host_start = std::chrono::steady_clock::now();
   auto pending = std::make_unique<Pending>();
   check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle, time, node);
@@ -571,13 +628,16 @@ void Engine::drop_pending() noexcept {
 }
 
 void Engine::complete(Pending& p) {
-  if (!p.groups.empty()) {  // a beam that changes with time: its nodes' submissions completed before it
-    for (std::size_t g = 0; g < p.groups.size(); ++g)
-      for (std::size_t m = 0; m < p.groups[g].index.size(); ++m) {
-        const std::size_t i = p.groups[g].index[m];
-        const double v = (1.0 - p.weight[i]) * p.values[g][0][m] + p.weight[i] * p.values[g][1][m];
+  if (!p.groups.empty()) {  // a beam combined from nodes: their submissions completed before it
+    for (std::size_t g = 0; g < p.groups.size(); ++g) {
+      const NodeGroup& group = p.groups[g];
+      for (std::size_t m = 0; m < group.index.size(); ++m) {
+        double v = 0.0;
+        for (std::size_t j = 0; j < group.nodes.size(); ++j) v += group.coefficient[j][m] * p.values[g][j][m];
+        const std::size_t i = group.index[m];
         p.tod[i] = p.accumulate ? p.tod[i] + v : v;
       }
+    }
     return;
   }
   detail::SkyPass::finish(p.main);
@@ -652,25 +712,22 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
     if (!std::isfinite(tod[i]))
       throw Error("adjoint: detector '" + name + "': TOD sample " + std::to_string(i) + " is " +
                   detail::number_text(tod[i]) + "; the adjoint needs finite values");
-  if (!node && has_sequence(detector)) {
-    // A^T d = sum over the nodes of A_k^T (c_k d), c_k = 1 - w and w at each sample (the diagonal:
-    // each node's squares, c_k^2 times its own).
-    std::vector<double> weight, part, plate;
+  if (!node && has_nodes(detector)) {
+    // A^T d = sum over the nodes of A_k^T (c_k d), c_k each sample's coefficients (the diagonal: each
+    // node's squares, c_k^2 times its own).
+    std::vector<double> part, plate;
     GroupStorage<View> own;
-    for (const SequenceGroup& group : sequence_groups(what, detector, time, weight)) {
+    for (const NodeGroup& group : node_groups(what, detector, time, hwp_angle)) {
       const bool contiguous = group.contiguous();
       const View view = group_view(boresight, group.index, contiguous, own);
-      const std::span<const double> h = group_values(hwp_angle, group.index, contiguous, plate);
-      for (std::size_t j = 0; j < 2; ++j) {
+      const std::span<const double> h = node_plate(detector, hwp_angle, group, contiguous, plate);
+      for (std::size_t j = 0; j < group.nodes.size(); ++j) {
         part.resize(group.index.size());
-        for (std::size_t m = 0; m < part.size(); ++m) {
-          const std::size_t i = group.index[m];
-          part[m] = (j ? weight[i] : 1.0 - weight[i]) * tod[i];
-        }
-        adjoint_view(sequences_[detector][group.node + j], view, part, h, {}, squares, true);
+        for (std::size_t m = 0; m < part.size(); ++m) part[m] = group.coefficient[j][m] * tod[group.index[m]];
+        adjoint_view(group.nodes[j], view, part, h, {}, squares, true);
       }
+      samples_ -= group.index.size() * (group.nodes.size() - 1);  // each sample once, with its nodes' pixels
     }
-    samples_ -= tod.size();  // each sample once, with both nodes' pixels
     return;
   }
   wait();
@@ -739,7 +796,7 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
                          std::span<const double> time) {
   std::vector<double> plate_angle;
   check_submission("normal", detector, boresight, boresight.size(), hwp_angle, plate_angle, time);
-  if (has_sequence(detector)) {  // two passes, through the nodes
+  if (has_nodes(detector)) {  // two passes, through the nodes
     std::vector<double> tod(boresight.size());
     convolve(detector, boresight, tod, false, hwp_angle, time);
     adjoint_view(detector, boresight, tod, hwp_angle, time, false);

@@ -74,6 +74,24 @@ void check_focal_plane(const FocalPlane& focal_plane, std::size_t beams) {
         throw Error(node + ": beam index " + std::to_string(n.beam) + " but only " + std::to_string(beams) +
                     " beamsors were given");
     }
+    if (const auto& p = d.plate_beams) {
+      if (d.hwp)
+        throw Error(who + ": has both plate_beams (beams with the plate in them) and a half-wave plate (hwp), which "
+                          "would count the plate twice; give one");
+      if (!d.beam_sequence.empty())
+        throw Error(who + ": has both plate_beams and a beam_sequence; a detector's beam changes with one of them");
+      if (p->beams.size() < 2)
+        throw Error(who + ": plate_beams has " + std::to_string(p->beams.size()) +
+                    " beams; a beam that turns with the plate needs two or more (a fixed beam is `beam`)");
+      if (!(std::isfinite(p->period) && p->period > 0))
+        throw Error(who + ": plate_beams period = " + number_text(p->period) +
+                    " rad; expected a positive period (pi for a half-wave plate)");
+      if (!std::isfinite(p->gamma)) throw Error(who + ": plate_beams gamma = " + number_text(p->gamma) + " is not finite");
+      for (std::size_t k = 0; k < p->beams.size(); ++k)
+        if (p->beams[k] >= beams)
+          throw Error(who + ": plate_beams beam " + std::to_string(k) + ": index " + std::to_string(p->beams[k]) +
+                      " but only " + std::to_string(beams) + " beamsors were given");
+    }
   }
 }
 

@@ -101,8 +101,8 @@ void check_engine_options(const EngineOptions& options) {
 
 static const std::vector<std::size_t> no_nodes;
 
-// A beam that changes with time (`nodes`: its nodes' detectors): a sample is flagged where any node's
-// disc holds an UNSEEN pixel.
+// A beam that changes with time or turns with the plate (`nodes`: the engine's detectors for its beams):
+// a sample is flagged where any of their discs holds an UNSEEN pixel.
 template <class View>
 static std::size_t flag_view(const FocalPlane& fp, const detail::EngineInputs& in,
                              const std::vector<std::uint32_t>& masked, std::size_t detector,
@@ -127,13 +127,13 @@ static std::size_t flag_view(const FocalPlane& fp, const detail::EngineInputs& i
 
 std::size_t Engine::flag_samples(std::size_t detector, const PointingView& boresight,
                                  std::span<std::uint8_t> flags) const {
-  return flag_view(focal_plane_, *inputs_, masked_, detector, has_sequence(detector) ? sequences_[detector] : no_nodes,
+  return flag_view(focal_plane_, *inputs_, masked_, detector, has_nodes(detector) ? nodes_[detector] : no_nodes,
                    boresight, flags);
 }
 
 std::size_t Engine::flag_samples(std::size_t detector, const QuatPointingView& boresight,
                                  std::span<std::uint8_t> flags) const {
-  return flag_view(focal_plane_, *inputs_, masked_, detector, has_sequence(detector) ? sequences_[detector] : no_nodes,
+  return flag_view(focal_plane_, *inputs_, masked_, detector, has_nodes(detector) ? nodes_[detector] : no_nodes,
                    boresight, flags);
 }
 
