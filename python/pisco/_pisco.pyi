@@ -247,6 +247,18 @@ def ideal_hwp_mueller() -> Float64Array:
 def rotated_mueller(m0: ArrayLike, angle: float) -> Float64Array:
     """R(-angle) m0 R(angle): a Mueller element turned by `angle` (radians) from the detector's axis."""
 
+class PlateBeams:
+    """A beam that turns with a half-wave plate: the engine's beams at plate angles gamma + k period / N,
+    interpolated trigonometrically in each sample's hwp_angle (docs/changing.md). The plate is in the beams."""
+
+    def __init__(self, beams: Sequence[int], period: float = ..., gamma: float = 0.0) -> None: ...
+    @property
+    def beams(self) -> list[int]: ...
+    @beams.setter
+    def beams(self, value: Sequence[int], /) -> None: ...
+    period: float
+    gamma: float
+
 class Detector:
     """A detector: name, zeta, epsilon, gain, beam index, offset quaternion (x, y, z, w) and plate."""
 
@@ -266,6 +278,7 @@ class Detector:
         offset: ArrayLike | None = None,
         hwp: HalfWavePlate | None = None,
         beam_sequence: Sequence[tuple[float, int]] | None = None,
+        plate_beams: PlateBeams | None = None,
     ) -> None: ...
     @property
     def offset(self) -> Float64Array:
@@ -284,6 +297,11 @@ class Detector:
         linearly interpolated between them (docs/beams.md); empty: the fixed beam `beam`."""
     @beam_sequence.setter
     def beam_sequence(self, value: Sequence[tuple[float, int]] | None, /) -> None: ...
+    @property
+    def plate_beams(self) -> PlateBeams | None:
+        """A beam that turns with a half-wave plate (a copy), or None."""
+    @plate_beams.setter
+    def plate_beams(self, value: PlateBeams | None, /) -> None: ...
     def set_offset(self, xi: float, eta: float, gamma: float) -> None: ...
     def offset_xi_eta_gamma(self) -> tuple[float, float, float]: ...
 
@@ -301,6 +319,7 @@ class FocalPlane:
         offset: ArrayLike | None = None,
         hwp: HalfWavePlate | None = None,
         beam_sequence: Sequence[tuple[float, int]] | None = None,
+        plate_beams: PlateBeams | None = None,
     ) -> int: ...
     def add_pair(
         self,

@@ -581,6 +581,29 @@ std::vector<BeamNode> sequence_arg(nb::handle v) {
   return nodes;
 }
 
+// None or a PlateBeams, for Detector.plate_beams and the `plate_beams` arguments.
+std::optional<PlateBeams> plate_beams_arg(nb::handle obj) {
+  if (obj.is_none()) return std::nullopt;
+  if (!nb::isinstance<PlateBeams>(obj))
+    throw nb::type_error(("plate_beams: expected a pisco.PlateBeams or None, got " + describe(obj)).c_str());
+  return nb::cast<PlateBeams>(obj);
+}
+
+std::vector<std::size_t> beam_indices_arg(nb::handle v, const char* what) {
+  std::vector<std::size_t> out;
+  if (nb::isinstance<nb::str>(v) || !nb::hasattr(v, "__iter__"))
+    throw nb::type_error((std::string(what) + ": expected a list of beam indices, got " + describe(v)).c_str());
+  std::size_t k = 0;
+  for (nb::handle item : v) {
+    const std::string where = std::string(what) + "[" + std::to_string(k++) + "]";
+    long long b = 0;
+    if (!nb::isinstance<nb::int_>(item) || nb::isinstance<nb::bool_>(item) || !nb::try_cast(item, b))
+      throw nb::type_error((where + ": expected a beam index (int), got " + describe(item)).c_str());
+    out.push_back(unsigned_arg<std::size_t>(b, where.c_str()));
+  }
+  return out;
+}
+
 nb::list sequence_list(const std::vector<BeamNode>& nodes) {
   nb::list out;
   for (const BeamNode& n : nodes) out.append(nb::make_tuple(n.time, n.beam));
@@ -588,15 +611,50 @@ nb::list sequence_list(const std::vector<BeamNode>& nodes) {
 }
 
 void bind_focal_plane(nb::module_& m) {
+  nb::class_<PlateBeams>(m, "PlateBeams",
+                         "A beam that turns with a half-wave plate (docs/changing.md): the optics and the plate\n"
+                         "simulated together at N plate angles.\n\n"
+                         "PlateBeams(beams, period=pi, gamma=0.0)\n\n"
+                         "beams: the engine's beam indices at plate angles gamma + k period / N (k = 0 .. N - 1;\n"
+                         "two or more); period: pi for a half-wave plate (radians; 2 pi for one whose turn by pi is\n"
+                         "not the same plate); gamma: the plate angle (hwp_angle) of the first beam. At each\n"
+                         "sample's hwp_angle the detector's beam is their trigonometric interpolant. The plate is in\n"
+                         "the beams: give the detector no hwp.")
+      .def("__init__",
+           [](PlateBeams* self, nb::handle beams, double period, double gamma) {
+             PlateBeams p;
+             p.beams = beam_indices_arg(beams, "beams");
+             p.period = finite_arg(period, "period");
+             p.gamma = finite_arg(gamma, "gamma");
+             new (self) PlateBeams(std::move(p));
+           },
+           "beams"_a, "period"_a = std::numbers::pi, "gamma"_a = 0.0)
+      .def_prop_rw(
+          "beams", [](const PlateBeams& p) { return p.beams; },
+          [](PlateBeams& p, nb::handle v) { p.beams = beam_indices_arg(v, "beams"); },
+          "The beam indices at plate angles gamma + k period / N.")
+      .def_prop_rw(
+          "period", [](const PlateBeams& p) { return p.period; },
+          [](PlateBeams& p, double v) { p.period = finite_arg(v, "period"); }, "The plate's period, radians.")
+      .def_prop_rw(
+          "gamma", [](const PlateBeams& p) { return p.gamma; },
+          [](PlateBeams& p, double v) { p.gamma = finite_arg(v, "gamma"); },
+          "The plate angle of the first beam, radians (focal-plane frame).")
+      .def("__repr__", [](const PlateBeams& p) {
+        return "pisco.PlateBeams(" + std::to_string(p.beams.size()) + " beams, period=" + format_double(p.period) +
+               ", gamma=" + format_double(p.gamma) + ")";
+      });
+
   nb::class_<Detector>(m, "Detector",
                        "A detector: name, polarization angle zeta (radians, from theta' towards phi'), cross-polar\n"
                        "leakage epsilon (efficiency 1 - epsilon), gain, the index of its beam, its offset from the\n"
                        "boresight as a quaternion (x, y, z, w), and its half-wave plate (a pisco.HalfWavePlate, or\n"
                        "None: then the engine's convolve() needs the plate's angles, hwp_angle). beam_sequence: a beam\n"
-                       "that changes with time, [(time, beam), ...] (seconds, beam indices; docs/beams.md).")
+                       "that changes with time, [(time, beam), ...] (seconds, beam indices; docs/changing.md);\n"
+                       "plate_beams: a beam that turns with a half-wave plate (a pisco.PlateBeams).")
       .def("__init__",
            [](Detector* self, std::string name, double zeta, double epsilon, double gain, long long beam,
-              nb::handle offset, nb::handle hwp, nb::handle beam_sequence) {
+              nb::handle offset, nb::handle hwp, nb::handle beam_sequence, nb::handle plate_beams) {
              Detector d{};
              d.name = std::move(name);
              d.zeta = zeta;
@@ -606,10 +664,11 @@ void bind_focal_plane(nb::module_& m) {
              if (!offset.is_none()) d.offset = quat_from(offset, "offset");
              d.hwp = plate_arg(hwp);
              d.beam_sequence = sequence_arg(beam_sequence);
+             d.plate_beams = plate_beams_arg(plate_beams);
              new (self) Detector(std::move(d));
            },
            "name"_a, "zeta"_a = 0.0, "epsilon"_a = 0.0, "gain"_a = 1.0, "beam"_a = 0, "offset"_a = nb::none(),
-           "hwp"_a = nb::none(), "beam_sequence"_a = nb::none())
+           "hwp"_a = nb::none(), "beam_sequence"_a = nb::none(), "plate_beams"_a = nb::none())
       .def_rw("name", &Detector::name)
       .def_rw("zeta", &Detector::zeta)
       .def_rw("epsilon", &Detector::epsilon)
@@ -633,6 +692,11 @@ void bind_focal_plane(nb::module_& m) {
           "A beam that changes with time: [(time, beam), ...], times in seconds strictly ascending, at least\n"
           "two nodes; between two nodes the TOD is the two beams' linearly interpolated (docs/beams.md).\n"
           "Empty: the fixed beam `beam`. The engine's calls then need each sample's time (time=).")
+      .def_prop_rw(
+          "plate_beams",
+          [](const Detector& d) { return d.plate_beams ? nb::cast(*d.plate_beams, nb::rv_policy::copy) : nb::none(); },
+          [](Detector& d, nb::handle v) { d.plate_beams = plate_beams_arg(v); }, nb::for_setter(nb::arg("value").none()),
+          "A beam that turns with a half-wave plate (a copy of the pisco.PlateBeams), or None.")
       .def("set_offset", &Detector::set_offset, "xi"_a, "eta"_a, "gamma"_a,
            "Sets the offset from focal-plane coordinates (xi, eta, gamma), radians (pisco.offset_quat).")
       .def("offset_xi_eta_gamma",
@@ -657,11 +721,12 @@ void bind_focal_plane(nb::module_& m) {
       .def(
           "add",
           [](FocalPlane& fp, nb::handle detector_or_name, double zeta, double epsilon, double gain, long long beam,
-             nb::handle offset, nb::handle hwp, nb::handle beam_sequence) {
+             nb::handle offset, nb::handle hwp, nb::handle beam_sequence, nb::handle plate_beams) {
             if (nb::isinstance<Detector>(detector_or_name)) {
               Detector d = nb::cast<Detector>(detector_or_name);
               if (!hwp.is_none()) d.hwp = plate_arg(hwp);
               if (!beam_sequence.is_none()) d.beam_sequence = sequence_arg(beam_sequence);
+              if (!plate_beams.is_none()) d.plate_beams = plate_beams_arg(plate_beams);
               return fp.add(std::move(d));
             }
             if (!nb::isinstance<nb::str>(detector_or_name))
@@ -676,13 +741,15 @@ void bind_focal_plane(nb::module_& m) {
             if (!offset.is_none()) d.offset = quat_from(offset, "offset");
             d.hwp = plate_arg(hwp);
             d.beam_sequence = sequence_arg(beam_sequence);
+            d.plate_beams = plate_beams_arg(plate_beams);
             return fp.add(std::move(d));
           },
           "detector"_a, "zeta"_a = 0.0, "epsilon"_a = 0.0, "gain"_a = 1.0, "beam"_a = 0, "offset"_a = nb::none(),
-          "hwp"_a = nb::none(), "beam_sequence"_a = nb::none(),
+          "hwp"_a = nb::none(), "beam_sequence"_a = nb::none(), "plate_beams"_a = nb::none(),
           "Adds a Detector, or one built from a name and these fields; returns its index. hwp: a\n"
           "pisco.HalfWavePlate for the detector (given with a Detector, it replaces the Detector's);\n"
-          "beam_sequence: [(time, beam), ...], a beam that changes with time (Detector.beam_sequence).")
+          "beam_sequence: [(time, beam), ...], a beam that changes with time (Detector.beam_sequence);\n"
+          "plate_beams: a pisco.PlateBeams, a beam that turns with a half-wave plate (Detector.plate_beams).")
       .def(
           "add_pair",
           [](FocalPlane& fp, const std::string& name, double zeta, long long beam_a_arg, long long beam_b_arg,

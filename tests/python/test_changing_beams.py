@@ -90,3 +90,60 @@ def test_bad_sequences_and_times_are_refused():
         engine.convolve("drift", theta, phi, psi, time=np.zeros(4))
     with pytest.raises(pisco.Error, match=r"sample 2 is at time 11 s, outside its beam_sequence's nodes \(0 to 10 s\)"):
         engine.convolve("drift", theta, phi, psi, time=np.array([0.0, 1.0, 11.0, 2.0, 3.0]))
+
+
+def trig_weights(x, n):
+    """The weights of the n samples at 2 pi k / n in the trigonometric interpolant at x, from numpy's FFT:
+    the interpolant of the k-th unit vector (the Nyquist term of an even n as its cosine)."""
+    w = np.empty(n)
+    for k in range(n):
+        e = np.zeros(n)
+        e[k] = 1.0
+        c = np.fft.rfft(e) / n
+        v = c[0].real
+        for m in range(1, n // 2 + 1):
+            f = 1.0 if (n % 2 == 0 and m == n // 2) else 2.0
+            v += f * (c[m] * np.exp(1j * m * x)).real
+        w[k] = v
+    return w
+
+
+@pytest.mark.parametrize("backend", backends())
+def test_plate_beams_are_their_beams_interpolated_in_the_plate_angle(backend):
+    """A beam that turns with the plate (pisco.PlateBeams): at each sample's hwp_angle, the beams'
+    trigonometric interpolant, against the beams as fixed detectors combined by hand with weights from
+    numpy's FFT, each beam's TOD scaled by its Omega~ over their mean."""
+    n = 4
+    beams = [pisco.Beamsor.elliptical_gaussian(2.0 * deg, (1.4 + 0.1 * k) * deg, angle=0.4 * k) for k in range(n)]
+    fp = pisco.FocalPlane()
+    fp.add("turning", zeta=0.2, plate_beams=pisco.PlateBeams(list(range(n)), gamma=0.3))
+    for k in range(n):
+        fp.add(f"beam{k}", zeta=0.2, beam=k)
+    engine = pisco.Engine(sky(), beams, fp, backend=backend)
+    theta, phi, psi = scan()
+    h = np.random.default_rng(8).uniform(0, 2 * np.pi, theta.size)
+    tod = engine.convolve("turning", theta, phi, psi, hwp_angle=h)
+    each = np.array([engine.convolve(f"beam{k}", theta, phi, psi) for k in range(n)])
+    omega = np.array([b.omega_tilde for b in beams])
+    scale = omega / omega.mean()
+    want = np.array([trig_weights(2 * np.pi * (h[i] - 0.3) / np.pi, n) @ (scale * each[:, i]) for i in range(h.size)])
+    assert np.max(np.abs(tod - want)) <= 1e-12 * np.sqrt(np.mean(want**2))
+
+
+def test_bad_plate_beams_are_refused():
+    beams = [pisco.Beamsor.gaussian(3 * deg), pisco.Beamsor.gaussian(4 * deg)]
+    s = sky(16)
+    with pytest.raises(TypeError, match=r"beams\[1\]: expected a beam index"):
+        pisco.PlateBeams([0, "b"])
+    with pytest.raises(TypeError, match="plate_beams: expected a pisco.PlateBeams or None"):
+        pisco.Detector("x", plate_beams=[0, 1])
+    twice = pisco.FocalPlane()
+    twice.add("x", plate_beams=pisco.PlateBeams([0, 1]), hwp=pisco.HalfWavePlate())
+    with pytest.raises(pisco.Error, match="would count the plate twice"):
+        pisco.Engine(s, beams, twice)
+    fp = pisco.FocalPlane()
+    fp.add("x", plate_beams=pisco.PlateBeams([0, 1]))
+    engine = pisco.Engine(s, beams, fp)
+    theta, phi, psi = scan(5)
+    with pytest.raises(pisco.Error, match="has a half-wave plate: expected 5 plate angles"):
+        engine.convolve("x", theta, phi, psi)
