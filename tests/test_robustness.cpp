@@ -117,6 +117,11 @@ std::string variant(const std::string& name) {
   if (name == "hwp_detectors") return variant("detectors") + plate;
   if (name == "hwp_ces") return variant("ces") + "[hwp]\nrpm = 10\n";  // the scan's own sample rate
   if (name == "hwp_file") return with_table(c, "[scan]", "type = \"file\"\nfile = \"bore_hwp.h5\"\n") + "[hwp]\n";
+  if (name == "plate") {  // a beam that turns with the plate, over the hwp_frequency variant's plate
+    c = with_table(variant("hwp_frequency"), "[beams.side]", "type = \"gaussian\"\nfwhm_deg = 12.0\nrho_max_deg = 20.0\n");
+    c = with_table(c, "[beams.turning]", "type = \"plate\"\nbeams = [\"main\", \"side\", \"main\"]\nperiod_deg = 180\n");
+    return with_table(c, "[[focal_plane.pairs]]", "name = \"p\"\nbeam = \"turning\"\n");
+  }
   if (name == "sequence") {  // a beam that changes with time over the ces scan's 72 s
     c = with_table(variant("ces"), "[beams.side]", "type = \"gaussian\"\nfwhm_deg = 12.0\nrho_max_deg = 20.0\n");
     c = with_table(c, "[beams.drift]", "type = \"sequence\"\ntimes_s = [0, 100]\nbeams = [\"main\", \"side\"]\n");
@@ -196,6 +201,9 @@ std::vector<Key> keys() {
       {"split", beam, "sidelobe_taper_deg", K::number, {"-1", "13"}},
       {"split", beam, "sidelobe_nside", K::integer, {"3", "-2", "16384"}},
       {"sequence", "[beams.drift]", "times_s", K::numbers, {"[0]", "[5, 1]", "[0, 0]", "[0, 10, 20]"}},
+      {"plate", "[beams.turning]", "beams", K::strings,
+       {"[\"main\"]", "[\"main\", \"nope\"]", "[\"main\", \"turning\"]", "[\"main\", \"\"]"}},
+      {"plate", "[beams.turning]", "period_deg", K::number, {"0", "-180", "721", "1e300"}},
       {"sequence", "[beams.drift]", "beams", K::strings,
        {"[\"main\"]", "[\"main\", \"nope\"]", "[\"main\", \"drift\"]", "[\"main\", \"\"]"}},
       {"base", pair, "name", K::string, {}},
@@ -407,7 +415,7 @@ TEST_F(Robustness, VariantsRun) {
                               "split", "detectors", "pair_ab",
                               "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file", "hwp",
                               "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file", "ces_rotating",
-                              "hwp_ces", "sequence"}) {
+                              "hwp_ces", "sequence", "plate"}) {
     const fs::path cfg = write("variant.toml", variant(v));
     const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "variant-out").string()}, {}, 60);
     EXPECT_TRUE(r.exited && r.status == 0) << v << ": " << r.describe() << "\n" << r.output << "\n" << variant(v);

@@ -235,6 +235,88 @@ TEST_F(SimulationTest, BeamsThatChangeWithTimeAreInterpolated) {
   EXPECT_FALSE(fs::exists(dir_ / "short" / "tod.h5"));
 }
 
+// A beam that turns with the half-wave plate ([beams.NAME] type = "plate", docs/changing.md): a
+// detector whose beams at four plate angles over 180 deg alternate between a round and an elliptical
+// beam has, at each sample, their trigonometric interpolant in the plate's angle ([hwp]'s stream, from
+// the detector's own plate gamma): against the two beams' TOD on detectors without a plate in the same
+// run, combined with the interpolant's weights and each beam's Omega~ over their mean. The file's
+// mistakes are refused naming the table and key.
+TEST_F(SimulationTest, BeamsThatTurnWithThePlateAreInterpolated) {
+  const auto config = [&](const std::string& name, const std::string& plate, const std::string& hwp) {
+    const fs::path p = dir_ / (name + ".toml");
+    const std::string det = "zeta_deg = 30\nxi_deg = 1\neta_deg = -0.5\ngamma_deg = 10\n";
+    std::ofstream(p) << "[sky]\nnside = 32\nlmax = 64\nseed = 3\n"
+                        "[beams.round]\ntype = \"gaussian\"\nfwhm_deg = 4.0\nrho_max_deg = 8.0\n"
+                        "[beams.oval]\ntype = \"elliptical\"\nfwhm_x_deg = 3.5\nfwhm_y_deg = 4.5\nangle_deg = 20\n"
+                        "rho_max_deg = 8.0\n"
+                     << plate
+                     << "[focal_plane]\n[[focal_plane.detectors]]\nname = \"t\"\nbeam = \"turning\"\n" << det
+                     << "[[focal_plane.detectors]]\nname = \"r\"\nbeam = \"round\"\nhwp = false\n" << det
+                     << "[[focal_plane.detectors]]\nname = \"o\"\nbeam = \"oval\"\nhwp = false\n" << det
+                     << "[scan]\ntype = \"ces\"\nsample_rate_hz = 2\nduration_hours = 0.02\naz_throw_deg = 40\nnside = 8\n"
+                     << hwp << "[engine]\nbackend = \"cpu\"\nchunk_samples = 50\n"
+                        "[output]\ndir = \""
+                     << (dir_ / name).string() << "\"\nmaps = false\nspectra = false\nplots = false\n";
+    return p;
+  };
+  const std::string plate = "[beams.turning]\ntype = \"plate\"\nbeams = [\"round\", \"oval\", \"round\", \"oval\"]\n";
+  const std::string hwp = "[hwp]\nfrequency_hz = 0.13\n";
+  const fs::path file = config("plate", plate, hwp);
+  pisco::Simulation::from_file(file).run();
+  const fs::path tod = dir_ / "plate" / "tod.h5";
+  const std::vector<double> t = pisco::read_tod_signal(tod, "t"), r = pisco::read_tod_signal(tod, "r"),
+                            o = pisco::read_tod_signal(tod, "o");
+  const pisco::SimulationConfig c = pisco::read_simulation_file(file);
+  const pisco::SimulationBeams made = pisco::make_beams(c);
+  ASSERT_TRUE(made.detectors[0].plate_beams.has_value());
+  EXPECT_FALSE(made.detectors[0].hwp.has_value());  // the plate is in the beams
+  const double gamma = made.detectors[0].plate_beams->gamma;
+  EXPECT_NEAR(gamma, pisco::default_hwp_gamma(c.detectors[0]), 1e-15);
+  const double omega_r = made.beams[made.detectors[1].beam].omega_tilde(),
+               omega_o = made.beams[made.detectors[2].beam].omega_tilde(), mean = (omega_r + omega_o) / 2;
+  std::vector<double> angle;
+  c.hwp.stream.generate(0, t.size(), angle);
+  double worst = 0, rms = 0, apart = 0;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    // Four points over the period: weights (1 + 2 cos u + cos 2u) / 4 at u = x - k pi / 2.
+    const double x = 2 * (angle[i] - gamma);
+    double want = 0;
+    for (int k = 0; k < 4; ++k) {
+      const double u = x - k * std::numbers::pi / 2;
+      const double w = (1 + 2 * std::cos(u) + std::cos(2 * u)) / 4;
+      want += w * (k % 2 ? o[i] * omega_o : r[i] * omega_r) / mean;
+    }
+    worst = std::max(worst, std::abs(t[i] - want));
+    apart = std::max(apart, std::abs(r[i] - o[i]));
+    rms += t[i] * t[i];
+  }
+  rms = std::sqrt(rms / double(t.size()));
+  EXPECT_LE(worst, 1e-12 * rms);
+  EXPECT_GT(apart, 1e-3 * rms);
+
+  const auto refused = [&](const std::string& name, const std::string& plate_table, const std::string& hwp_table) {
+    try {
+      (void)pisco::read_simulation_file(config(name, plate_table, hwp_table));
+    } catch (const pisco::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(refused("no_hwp", plate, "").find("[beams.turning] type: a beam that turns with the plate needs the plate's "
+                                              "angles: an [hwp] table"),
+            std::string::npos);
+  EXPECT_NE(refused("one", "[beams.turning]\ntype = \"plate\"\nbeams = [\"round\"]\n", hwp)
+                .find("[beams.turning] beams: a beam that turns with the plate needs two or more beams"),
+            std::string::npos);
+  EXPECT_NE(refused("period", "[beams.turning]\ntype = \"plate\"\nbeams = [\"round\", \"oval\"]\nperiod_deg = 0\n", hwp)
+                .find("[beams.turning] period_deg: expected a period in (0, 720] deg"),
+            std::string::npos);
+  EXPECT_NE(refused("nested",
+                    "[beams.turning]\ntype = \"plate\"\nbeams = [\"round\", \"turning\"]\n", hwp)
+                .find("beam 1 is \"turning\", itself a beam that turns with the plate"),
+            std::string::npos);
+}
+
 TEST_F(SimulationTest, WritesWhatTheCommandLineWrites) {
   const fs::path file = write_config();
   const fs::path cli_dir = dir_ / "cli", lib_dir = dir_ / "lib";

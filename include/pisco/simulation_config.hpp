@@ -37,7 +37,7 @@ struct SkyConfig {
 };
 
 // [beams.NAME] type.
-enum class BeamKind { gaussian, elliptical, file, grasp, blm, sequence };
+enum class BeamKind { gaussian, elliptical, file, grasp, blm, sequence, plate };
 // Its name in simulation files ("gaussian", ...).
 const char* beam_kind_name(BeamKind kind) noexcept;
 
@@ -49,10 +49,14 @@ struct BeamConfig {
   std::filesystem::path file;
   int set = 0;                   // grasp: the beam of the file (1-based; 0 = its only one)
   bool temperature_only = false; // blm: a T-only file meant for polarized detectors (else an error)
-  // sequence: a beam that changes with time (docs/beams.md), the beams named `nodes` (other [beams]
-  // tables, not sequences) at `node_times` (seconds from the run's first sample), interpolated linearly.
+  // sequence: a beam that changes with time (docs/changing.md), the beams named `nodes` (other [beams]
+  // tables, neither sequences nor plate beams) at `node_times` (seconds from the run's first sample),
+  // interpolated linearly. plate: a beam that turns with the half-wave plate, the beams named `nodes`
+  // at plate angles k plate_period / N from each detector's plate gamma, interpolated trigonometrically.
   std::vector<double> node_times;
   std::vector<std::string> nodes;
+  double plate_period = 3.14159265358979323846;  // radians
+  bool combines_beams() const { return kind == BeamKind::sequence || kind == BeamKind::plate; }
   // grasp and blm: the beam turns with each detector (its co-polar axis along the detector's zeta)
   bool turns_with_detector() const { return kind == BeamKind::grasp || kind == BeamKind::blm; }
 };

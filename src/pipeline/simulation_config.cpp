@@ -28,6 +28,7 @@ const char* beam_kind_name(BeamKind kind) noexcept {
     case BeamKind::grasp: return "grasp";
     case BeamKind::blm: return "blm";
     case BeamKind::sequence: return "sequence";
+    case BeamKind::plate: return "plate";
   }
   return "?";
 }
@@ -90,13 +91,26 @@ SkyConfig read_sky(Table t) {
 BeamConfig read_beam(Table t, const std::string& name) {
   BeamConfig b;
   b.name = name;
-  const std::string type = t.choice("type", "gaussian", {"gaussian", "elliptical", "file", "grasp", "blm", "sequence"});
+  const std::string type =
+      t.choice("type", "gaussian", {"gaussian", "elliptical", "file", "grasp", "blm", "sequence", "plate"});
   b.kind = type == "gaussian"     ? BeamKind::gaussian
            : type == "elliptical" ? BeamKind::elliptical
            : type == "file"       ? BeamKind::file
            : type == "grasp"      ? BeamKind::grasp
            : type == "blm"        ? BeamKind::blm
-                                  : BeamKind::sequence;
+           : type == "sequence"   ? BeamKind::sequence
+                                  : BeamKind::plate;
+  if (b.kind == BeamKind::plate) {
+    // A beam that turns with the half-wave plate (docs/changing.md): other beams at plate angles; their
+    // names are checked once every table is read (check_combined_beams).
+    b.nodes = t.strings("beams", {});
+    if (b.nodes.size() < 2)
+      t.fail("beams", "a beam that turns with the plate needs two or more beams (names of [beams] tables, at plate "
+                      "angles k period / N)");
+    b.plate_period = t.number_in("period_deg", 180.0, 1e-6, 720.0, "a period in (0, 720] deg (180 for a half-wave plate)") * deg;
+    t.finish();
+    return b;
+  }
   if (b.kind == BeamKind::sequence) {
     // A beam that changes with time (docs/beams.md): other beams at times; their names are checked
     // once every table is read (check_sequences).
@@ -206,24 +220,31 @@ BeamConfig read_beam(Table t, const std::string& name) {
   return b;
 }
 
-// The beams that change with time: each node a [beams] table that is not itself a sequence, and a
-// scan whose samples have times.
-void check_sequences(const SimulationConfig& c, const toml::table& beams, const fs::path& file) {
+// The beams that change with time or turn with the plate: each of their beams a [beams] table that
+// combines none, and a scan whose samples have times or an [hwp] table that gives the plate's angles.
+void check_combined_beams(const SimulationConfig& c, const toml::table& beams, const fs::path& file) {
   for (const BeamConfig& b : c.beams) {
-    if (b.kind != BeamKind::sequence) continue;
+    if (!b.combines_beams()) continue;
     Table t(*beams.get(b.name)->as_table(), "beams." + b.name, file);
     for (std::size_t k = 0; k < b.nodes.size(); ++k) {
       const auto it = std::find_if(c.beams.begin(), c.beams.end(), [&](const BeamConfig& x) { return x.name == b.nodes[k]; });
       if (it == c.beams.end()) {
         std::string names;
         for (const BeamConfig& x : c.beams)
-          if (x.kind != BeamKind::sequence) names += (names.empty() ? "" : ", ") + x.name;
+          if (!x.combines_beams()) names += (names.empty() ? "" : ", ") + x.name;
         t.fail("beams", "beam " + std::to_string(k) + " is \"" + b.nodes[k] + "\", which is not a [beams] table (expected one of: " +
                             names + ")");
       }
-      if (it->kind == BeamKind::sequence)
-        t.fail("beams", "beam " + std::to_string(k) + " is \"" + b.nodes[k] + "\", itself a beam that changes with time; "
-                        "name fixed beams");
+      if (it->combines_beams())
+        t.fail("beams", "beam " + std::to_string(k) + " is \"" + b.nodes[k] + "\", itself a " +
+                            (it->kind == BeamKind::sequence ? "beam that changes with time" : "beam that turns with the plate") +
+                            "; name fixed beams");
+    }
+    if (b.kind == BeamKind::plate) {
+      if (!c.hwp.enabled)
+        t.fail("type", "a beam that turns with the plate needs the plate's angles: an [hwp] table (rpm, frequency_hz or "
+                       "steps_deg, or a pointing file's angles); the plate itself is in the beams");
+      continue;
     }
     if (c.sample_rate <= 0)
       t.fail("type", "a beam that changes with time needs each sample's time: a ces or satellite scan (sample i at i / "
@@ -672,7 +693,7 @@ SimulationConfig read_simulation_file(const fs::path& file) {
   }
   assign_plates(c, file);
   c.sample_rate = scan_sample_rate(c.scan);
-  check_sequences(c, *beams, file);
+  check_combined_beams(c, *beams, file);
   if (const toml::array* sources = t.array_of_tables("sources")) {
     c.sources = read_sources(*sources, file, c.sample_rate);
     if (c.engine.options.normalization != pisco::Normalization::integral)

@@ -168,26 +168,39 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
     return beams.size() - 1;
   };
   for (std::size_t k = 0; k < c.beams.size(); ++k) {
-    if (c.beams[k].kind == BeamKind::sequence) continue;
+    if (c.beams[k].combines_beams()) continue;
     if (!c.beams[k].turns_with_detector()) beam_for(k, 0.0, nullptr);
     for (std::size_t i = 0; i < detectors.size(); ++i)
       if (c.detectors[i].beam == k) detectors[i].beam = beam_for(k, c.detectors[i].zeta, &c.detectors[i]);
     if (made[k].empty()) beam_for(k, 0.0, nullptr, true);  // checked, though no detector uses it
   }
-  // Beams that change with time: each detector's nodes, the beams of the tables they name.
+  // Beams that change with time or turn with the plate: each detector's beams, those of the tables
+  // they name.
   for (std::size_t k = 0; k < c.beams.size(); ++k) {
     const BeamConfig& b = c.beams[k];
-    if (b.kind != BeamKind::sequence) continue;
+    if (!b.combines_beams()) continue;
     for (std::size_t i = 0; i < detectors.size(); ++i) {
       if (c.detectors[i].beam != k) continue;
-      detectors[i].beam_sequence.clear();
-      for (std::size_t n = 0; n < b.nodes.size(); ++n) {
-        const auto j = std::size_t(std::find_if(c.beams.begin(), c.beams.end(),
-                                                [&](const BeamConfig& x) { return x.name == b.nodes[n]; }) -
-                                   c.beams.begin());
-        detectors[i].beam_sequence.push_back({b.node_times[n], beam_for(j, c.detectors[i].zeta, &c.detectors[i])});
+      std::vector<std::size_t> made_nodes;
+      for (const std::string& name : b.nodes) {
+        const auto j = std::size_t(
+            std::find_if(c.beams.begin(), c.beams.end(), [&](const BeamConfig& x) { return x.name == name; }) -
+            c.beams.begin());
+        made_nodes.push_back(beam_for(j, c.detectors[i].zeta, &c.detectors[i]));
       }
-      detectors[i].beam = detectors[i].beam_sequence.front().beam;
+      Detector& d = detectors[i];
+      d.beam = made_nodes.front();
+      if (b.kind == BeamKind::sequence) {
+        d.beam_sequence.clear();
+        for (std::size_t n = 0; n < made_nodes.size(); ++n) d.beam_sequence.push_back({b.node_times[n], made_nodes[n]});
+        continue;
+      }
+      // The plate is in the beams, at plate angles from the detector's own plate gamma ([hwp]'s).
+      if (!d.hwp)
+        throw pisco::Error(c.source.string() + ": detector '" + d.name + "' has the beam " + b.name +
+                           ", which turns with the plate, but its half-wave plate is off (hwp = false)");
+      d.plate_beams = pisco::PlateBeams{made_nodes, b.plate_period, d.hwp->gamma};
+      d.hwp.reset();
     }
   }
   return out;

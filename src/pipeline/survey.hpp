@@ -216,7 +216,8 @@ class JobPointing {
     pisco::SurveyChunk chunk;
     chunk.detector = job.detector;
     chunk_slot_ = slot_;
-    const bool plate = fp_[job.detector].hwp.has_value();
+    // A plate's angles for a detector with a plate, or with beams that turn with it.
+    const bool plate = fp_[job.detector].hwp.has_value() || fp_[job.detector].plate_beams.has_value();
     if (per_detector) {
       chunk.angles = file_[slot_].view().subspan(job.first, job.count);
       if (plate) {
@@ -296,10 +297,13 @@ class JobStream {
         modelled_(fp.detectors()), host_(host_threads), pointing_(c, fp, scan, &host_) {
     for (auto& t : tod_) t.resize(chunk);
     // The detectors as the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in
-    // place of the real one).
+    // place of the real one; beams that turn with the plate: an ideal plate at the aperture, at their
+    // plate angles).
     if (c.hwp.ideal_mapmaker)
       for (auto& d : modelled_)
         if (d.hwp) d.hwp->mueller = pisco::ideal_hwp_mueller();
+    for (auto& d : modelled_)
+      if (d.plate_beams) d.hwp = pisco::HalfWavePlate::ideal(d.plate_beams->gamma);
   }
 
   // This process's jobs of `plan`. Under MPI, a check for an error on another process after every
