@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
-"""Cost of a beam that changes with time against a fixed beam (docs/changing.md).
+"""Cost of a beam that changes with time, and of one that turns with the plate, against a fixed beam (docs/changing.md).
 
 One engine holds a fixed elliptical beam and a detector whose beam drifts between two elliptical
 beams (Detector.beam_sequence: the first at the first and last samples' times, the second halfway). The same samples (random
 pointings over the sphere, 5 deg discs by default) are convolved, scattered back (adjoint) and, for
 the sequence, also with its samples' times shuffled, so that neighbouring samples fall between
 different nodes (runs of one sample: the worst case of the submission's bookkeeping). Prints the
-best of --repeat times of each and the ratios to the fixed beam, measured in one run.
+best of --repeat times of each and the ratios to the fixed beam, measured in one run. Then a beam that
+turns with a half-wave plate (pisco.PlateBeams, five beams over the plate's period: harmonics up to
+4 theta) against the fixed beam behind the engine's own plate model (Detector.hwp), at plate angles
+turning through the samples.
 
 Run with the Python package built in build/ (scripts/run-tests.sh builds it into build/python):
     PYTHONPATH=build/python build/python-venv/bin/python tools/sequence_cost.py [--backend simd]
@@ -52,6 +55,9 @@ def main():
     fp = pisco.FocalPlane()
     fp.add("fixed", beam=0)
     fp.add("drift", beam_sequence=[(0.0, 0), (1800.0, 1), (3600.0, 0)])
+    fp.add("plated", beam=0, hwp=pisco.HalfWavePlate())
+    fp.add("turning", plate_beams=pisco.PlateBeams([0, 1, 0, 1, 0]))
+    h = np.linspace(0.0, 200.0, n)
     tod = np.zeros(n)
     with pisco.Engine(sky, beams, fp, backend=a.backend) as engine:
         engine.prepare()
@@ -63,6 +69,10 @@ def main():
              lambda: engine.convolve("drift", theta, phi, psi, out=tod, time=shuffled)),
         ]
         info = {b.name: b for b in pisco.devices()}
+        cases += [
+            ("plate, fixed beam and plate model", lambda: engine.convolve("plated", theta, phi, psi, out=tod, hwp_angle=h)),
+            ("plate, five plate beams", lambda: engine.convolve("turning", theta, phi, psi, out=tod, hwp_angle=h)),
+        ]
         if info[engine.backend].capabilities["adjoint"]:
             cases += [
                 ("adjoint, fixed beam", lambda: engine.adjoint("fixed", tod, theta, phi, psi)),
