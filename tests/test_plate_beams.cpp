@@ -109,9 +109,10 @@ TEST_P(PlateBeams, MatchTheTurningBeamBuiltAtEachAngle) {
 }
 
 // An ideal plate at the aperture, as beams: a round Gaussian times the plate's Mueller matrix at each
-// node's plate angle (the plate in front of the optics: the beam's weights times M(theta)), N = 5
-// over pi; against the same Gaussian with the engine's own plate (Detector::hwp), whose matrix holds
-// harmonics 0, 2 and 4 theta alone.
+// node's plate angle (the plate in front of the optics: the beam's weights times M(theta), in the
+// beam's frame, whose x axis is the detector's polarization axis), N = 5 over pi, from the detector's
+// plate gamma; against the same Gaussian with the engine's own plate (Detector::hwp), whose matrix
+// holds harmonics 0, 2 and 4 theta alone.
 TEST_P(PlateBeams, AnIdealPlateAsBeamsIsThePlateModel) {
   const pisco::Sky sky = pisco_test::cmb_like_sky(64, 5, 10.0);
   const double s = 2.0 * deg / std::sqrt(8 * std::log(2.0));
@@ -119,7 +120,7 @@ TEST_P(PlateBeams, AnIdealPlateAsBeamsIsThePlateModel) {
     const double g = std::exp(-rho * rho / (2 * s * s));
     return Beamsor::stokes_mueller(g, 0.98 * g, 0.0, 0.0);
   };
-  const pisco::HalfWavePlate plate = pisco::HalfWavePlate::ideal(0.0);
+  const pisco::HalfWavePlate plate = pisco::HalfWavePlate::ideal();
   std::vector<Beamsor> beams;
   pisco::PlateBeams p;
   for (int k = 0; k < 5; ++k) {
@@ -137,13 +138,19 @@ TEST_P(PlateBeams, AnIdealPlateAsBeamsIsThePlateModel) {
     p.beams.push_back(std::size_t(k));
   }
   beams.push_back(Beamsor::from_field(gauss, rho_max, step, "without"));
+  // A detector turned (zeta) and offset (with its own gamma): the plate's angle from the detector's
+  // axis, h - gamma with gamma its polarization angle in the focal plane, for both.
   pisco::Detector as_beams;
   as_beams.name = "as beams";
+  as_beams.zeta = 0.5;
+  as_beams.set_offset(1.5 * deg, 0.5 * deg, 0.3);
+  p.gamma = pisco::default_hwp_gamma(as_beams);
   as_beams.plate_beams = p;
-  pisco::Detector modelled;
+  pisco::Detector modelled = as_beams;
   modelled.name = "modelled";
+  modelled.plate_beams.reset();
   modelled.beam = 5;
-  modelled.hwp = plate;
+  modelled.hwp = pisco::HalfWavePlate::ideal(pisco::default_hwp_gamma(as_beams));
   pisco::Engine engine(sky, beams, pisco::FocalPlane({as_beams, modelled}), options);
   const pisco::Pointing pointing = pisco_test::random_pointing(300, 4);
   std::vector<double> h(pointing.size());
