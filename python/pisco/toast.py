@@ -27,6 +27,11 @@ the focal-plane frame, as ``SimSatellite`` and ``SimGround`` make it) puts a pla
 detector: ideal, or the Mueller matrix ``hwp_mueller``, with each detector's ``gamma`` from the focal
 plane (TOAST's own plate angle origin, the one its ``StokesWeights`` use), so that an ideal plate gives
 TOAST's ``I + eta (Q cos 2b + U sin 2b)``, ``b = a + 2 (hwp_angle - gamma)``.
+
+Beams that turn with the plate (docs/changing.md): ``plate_beams`` gives a detector, by name, a list of
+``pisco.Beamsor`` simulated with the plate in them at plate angles ``gamma + k plate_beams_period / N``
+from its focal-plane ``gamma``; at each sample they are interpolated in ``hwp_angle``, and that detector
+gets no plate model (the plate is in its beams). Such detectors need the observation's ``hwp_angle``.
 """
 
 import os
@@ -43,7 +48,7 @@ from toast.utils import Logger
 
 from ._blm import detector_beam, read_blm_file, resize_blm
 from ._focal_plane import focal_plane_from_toast
-from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, Sky
+from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, PlateBeams, Sky
 
 __all__ = ["PixelConvolve"]
 
@@ -134,6 +139,13 @@ class PixelConvolve(Operator):
 
     mc = Int(None, allow_none=True, help="Monte Carlo index for the {mc} field of beam_file")
 
+    plate_beams = Dict(
+        {}, help="By detector name, a list of pisco.Beamsor with the plate in them at plate angles gamma + k "
+        "plate_beams_period / N (gamma the focal plane's): the detector's beam turns with the plate"
+    )
+
+    plate_beams_period = Float(np.pi, help="The plate's period for plate_beams (radians): pi for a half-wave plate")
+
     boresight = Unicode(defaults.boresight_radec, help="Observation shared key for boresight quaternions")
 
     hwp_angle = Unicode(
@@ -205,6 +217,23 @@ class PixelConvolve(Operator):
     def _check_hwp_placement(self, proposal):
         if proposal["value"] not in ("aperture", "detector"):
             raise traitlets.TraitError(f"hwp_placement must be 'aperture' or 'detector', not {proposal['value']!r}")
+        return proposal["value"]
+
+    @traitlets.validate("plate_beams")
+    def _check_plate_beams(self, proposal):
+        for name, beams in proposal["value"].items():
+            if isinstance(beams, (str, Beamsor)) or not hasattr(beams, "__iter__"):
+                raise traitlets.TraitError(f"plate_beams['{name}'] is not a list of pisco.Beamsor")
+            beams = list(beams)
+            if len(beams) < 2 or not all(isinstance(b, Beamsor) for b in beams):
+                raise traitlets.TraitError(f"plate_beams['{name}']: expected two or more pisco.Beamsor at the plate's "
+                                           f"angles, got {beams!r}")
+        return proposal["value"]
+
+    @traitlets.validate("plate_beams_period")
+    def _check_plate_beams_period(self, proposal):
+        if not (np.isfinite(proposal["value"]) and proposal["value"] > 0):
+            raise traitlets.TraitError("plate_beams_period must be positive (pi for a half-wave plate)")
         return proposal["value"]
 
     @traitlets.validate("beams")
@@ -328,6 +357,27 @@ class PixelConvolve(Operator):
             out.add(d)
         return beams, out, missing
 
+    def _with_plate_beams(self, beams, fp, plates):
+        """The engine's beams and focal plane with plate_beams' detectors given their beams at the plate's
+        angles, from the plate gamma the focal plane gives them, and no plate model."""
+        unknown = [n for n in self.plate_beams if n not in fp.names]
+        if unknown:
+            raise RuntimeError(f"PixelConvolve: plate_beams names detectors the focal plane does not hold: {unknown}")
+        if not plates:
+            raise RuntimeError("PixelConvolve: plate_beams need the observation's plate angle "
+                               f"('{self.hwp_angle}' in its shared data)")
+        beams = list(beams)
+        out = FocalPlane()
+        for d in fp.detectors:
+            if d.name in self.plate_beams:
+                first = len(beams)
+                beams.extend(self.plate_beams[d.name])
+                d.plate_beams = PlateBeams(list(range(first, len(beams))), period=self.plate_beams_period,
+                                           gamma=d.hwp.gamma)
+                d.hwp = None
+            out.add(d)
+        return beams, out
+
     def _plate(self):
         """The plate model (its gamma set per detector from the focal plane)."""
         mueller = _mueller_matrix(self.hwp_mueller) if self.hwp_mueller else None
@@ -339,7 +389,9 @@ class PixelConvolve(Operator):
         # With plates, the plate model is part of the key: traits changed between calls take effect.
         model = (tuple(_mueller_matrix(self.hwp_mueller).ravel()) if self.hwp_mueller else None,
                  self.hwp_placement) if plates else None
-        key = (id(focalplane), model)
+        # And the plate beams, by the beams' identities.
+        turning = tuple(sorted((n, tuple(id(b) for b in bs)) for n, bs in self.plate_beams.items()))
+        key = (id(focalplane), model, turning)
         if key not in self._engines:
             names = [str(n) for n in focalplane.detector_data["name"]]
             plate = self._plate() if plates else None
@@ -354,6 +406,8 @@ class PixelConvolve(Operator):
             else:
                 beams, index = self._beams_for(focalplane, names)
                 fp = focal_plane_from_toast(focalplane, beam=index, hwp=plate)
+            if len(self.plate_beams) > 0:
+                beams, fp = self._with_plate_beams(beams, fp, plates)
             engine = Engine(self._get_sky(), beams, fp, backend=self.backend, device=self.device)
             # The focal plane is held too, so that its id cannot be reused by another while cached.
             self._engines[key] = (engine, {n: i for i, n in enumerate(names)}, missing, focalplane)

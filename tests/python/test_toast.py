@@ -18,6 +18,7 @@ from astropy import units as u  # noqa: E402
 import toast  # noqa: E402
 import toast.ops  # noqa: E402
 import toast.qarray as qa  # noqa: E402
+import traitlets  # noqa: E402
 from toast.instrument import GroundSite, SpaceSite, Telescope  # noqa: E402
 from toast.instrument_sim import fake_hexagon_focalplane  # noqa: E402
 from toast.intervals import IntervalList  # noqa: E402
@@ -407,6 +408,47 @@ def test_pixel_convolve_through_a_plate_matches_toast(tmp_path):
     print(f"TOAST SimTotalconvolve with hwp_angle vs PISCO-VK's ideal plate at 2 h, gamma 0: relative RMS "
           f"{tc_rms:.2e}; SimTotalconvolve vs TOAST's own StokesWeights plate: {tc_toast:.2f}")
     assert tc_rms <= 1e-4
+
+
+def test_plate_beams_of_an_ideal_plate_are_the_plate_model(tmp_path):
+    """PixelConvolve's plate_beams (docs/changing.md): each detector's beam given as five beams with an
+    ideal plate in them (a 1 deg Gaussian times the plate's Mueller matrix at plate angles k pi / 5 from
+    the detector's axis) on a satellite observation with TOAST's plate turning at 20 rpm and detectors
+    turned so that gamma matters, against the same Gaussian behind PixelConvolve's ideal plate model
+    (itself checked against TOAST's plate above): the same TOD to rounding."""
+    nside = 128
+    fp = turned_focalplane(focalplane(), np.radians(10.0))
+    data = satellite_data(fp, seconds=300.0, hwp_rpm=20.0)
+    ob = data.obs[0]
+    dets = list(ob.local_detectors)
+    sky = pisco.Sky.from_maps(hp.alm2map(smooth_sky_alm(2 * nside, seed=5, smoothing_fwhm=np.radians(0.5)), nside,
+                                         lmax=2 * nside, pol=True), units="K")
+    s = FWHM / np.sqrt(8 * np.log(2.0))
+    rho, step = 2.5 * FWHM, FWHM / 16
+
+    def gauss(r, sigma):
+        g = np.exp(-r * r / (2 * s * s))
+        return np.diag([g, g, g, g])
+
+    plain = pisco.Beamsor.from_field(gauss, rho, step, "gaussian")
+    turning = []
+    for k in range(5):
+        m = np.array(pisco.rotated_mueller(pisco.ideal_hwp_mueller(), np.pi * k / 5))
+        turning.append(pisco.Beamsor.from_field(lambda r, sigma, m=m: gauss(r, sigma) @ m, rho, step, f"plate {k}"))
+    pisco.toast.PixelConvolve(sky=sky, det_data="modelled", beams={d: plain for d in dets}, backend="cpu",
+                              zero=True).apply(data)
+    pisco.toast.PixelConvolve(sky=sky, det_data="turning", beams={d: plain for d in dets},
+                              plate_beams={d: turning for d in dets}, backend="cpu", zero=True).apply(data)
+    modelled = np.array([ob.detdata["modelled"][d] for d in dets])
+    ours = np.array([ob.detdata["turning"][d] for d in dets])
+    rms = relative_rms(ours, modelled)
+    print(f"PixelConvolve plate_beams (an ideal plate as five beams) vs its plate model: relative RMS {rms:.2e}")
+    assert rms <= 1e-12
+    assert relative_rms(modelled[0::2] - modelled[1::2], modelled[0::2]) > 1e-3  # the plate modulates the pairs
+    with pytest.raises(traitlets.TraitError, match="expected two or more pisco.Beamsor"):
+        pisco.toast.PixelConvolve(plate_beams={dets[0]: [plain]})
+    with pytest.raises(RuntimeError, match="plate_beams names detectors the focal plane does not hold"):
+        pisco.toast.PixelConvolve(sky=sky, det_data="x", plate_beams={"nobody": turning}, backend="cpu").apply(data)
 
 
 def binned_map(data, nside, det_data, tmp_path, name):
