@@ -26,6 +26,11 @@ the HWP object, ``IdealHWP(ang_speed_radpsec, start_angle_rad)``, or the observa
 measured from the beam frame's x axis, each detector's plate is its ``mueller_hwp`` (a 4x4 Mueller
 matrix) or the ideal one; an ideal plate gives ``a = psi + 2 hwp_angle - pol_angle_rad``, litebird_sim's
 ``scan_map`` angle with a plate.
+
+Beams that turn with the plate (docs/changing.md): ``plate_beams`` gives detectors (by detector or
+channel name, or all) beams simulated with the plate in them at plate angles
+``pol_angle_rad + k plate_beams_period / N`` (measured as the plate's angle is, from the beam frame's x
+axis), interpolated at each sample's plate angle; those detectors get no plate model.
 """
 
 import logging
@@ -33,7 +38,7 @@ import logging
 import numpy as np
 
 from ._blm import detector_beam, resize_blm
-from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, Sky
+from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, PlateBeams, Sky
 
 __all__ = ["add_convolved_sky_to_observations"]
 
@@ -72,6 +77,25 @@ def _per_detector(value, obs, what):
     if all(c in value for c in channels):
         return [value[c] for c in channels]
     raise ValueError(f"{what} dictionary keys do not match detector/channel names.")
+
+
+def _plate_beams_of(plate_beams, obs, i):
+    """Detector i's beams at the plate's angles (plate_beams: a list for every detector, or a dict by
+    detector or channel name), or None."""
+    if plate_beams is None:
+        return None
+    found = plate_beams
+    if isinstance(plate_beams, dict):
+        name = str(obs.name[i])
+        channel = str(getattr(obs, "channel", [None] * (i + 1))[i])
+        found = plate_beams.get(name, plate_beams.get(channel))
+        if found is None:
+            return None
+    found = list(found) if hasattr(found, "__iter__") and not isinstance(found, (str, Beamsor)) else [found]
+    if len(found) < 2 or not all(isinstance(b, Beamsor) for b in found):
+        raise TypeError(f"plate_beams: detector {obs.name[i]}: expected a list of two or more pisco.Beamsor at the "
+                        f"plate's angles, got {found!r}")
+    return found
 
 
 def _default_beam(obs, i, beam_rho_max):
@@ -172,6 +196,8 @@ def add_convolved_sky_to_observations(
     convolution_params=None,
     beam_alms_rho_max=np.radians(5.0),
     beam_alms_grid_step=0.0,
+    plate_beams=None,
+    plate_beams_period=np.pi,
 ):
     """Adds the beam-convolved sky to the TOD of litebird_sim observations, in pixel space.
 
@@ -217,6 +243,13 @@ def add_convolved_sky_to_observations(
     beam_alms_rho_max, beam_alms_grid_step : float
         Beams from b_lm are summed out to this radius (radians) and sampled with this step (radians; 0:
         ``Beamsor.from_blm``'s default, 0.75 / l_eff, FWHM / 16.8 for a Gaussian).
+    plate_beams : list of pisco.Beamsor, a dict of them by detector or channel name, or None
+        Beams that turn with the plate (docs/changing.md): each listed detector's beams with the plate in
+        them at plate angles ``pol_angle_rad + k plate_beams_period / N``, interpolated at each sample's
+        plate angle, in place of its beam and plate model. They need the plate's angles (``hwp`` or the
+        observation's).
+    plate_beams_period : float
+        Their period (radians): pi for a half-wave plate.
     """
     import litebird_sim as lbs
     from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g
@@ -270,8 +303,28 @@ def add_convolved_sky_to_observations(
                 logging.warning("pisco.litebird: the sky's coordinates are unknown: assuming CoordinateSystem.Galactic")
                 frame = CoordinateSystem.Galactic
             beam_list, fp = [], FocalPlane()
+
+            def beam_index(b):
+                found = next((k for k, x in enumerate(beam_list) if x is b), None)
+                if found is None:
+                    beam_list.append(b)
+                    found = len(beam_list) - 1
+                return found
+
             for i in members:
                 zeta = float(obs.pol_angle_rad[i])
+                turning = _plate_beams_of(plate_beams, obs, i)
+                if turning is not None:
+                    if hwp_angle is None:
+                        raise ValueError(f"plate_beams: detector {obs.name[i]}'s beams turn with the plate, but the "
+                                         "observation has no plate angles (give hwp, or an observation with a plate)")
+                    eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
+                    epsilon = (1.0 - eta) / (1.0 + eta)
+                    # The plate's angle from the beam frame's x axis, its beams from the detector's axis.
+                    turns = PlateBeams([beam_index(b) for b in turning], period=plate_beams_period, gamma=zeta)
+                    fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=2.0 / (1.0 + epsilon),
+                           beam=turns.beams[0], plate_beams=turns)
+                    continue
                 b = det_beams[i] if det_beams[i] is not None else _default_beam(obs, i, beam_rho_max)
                 harmonic = isinstance(b, lbs.SphericalHarmonics)
                 if harmonic:
@@ -279,10 +332,7 @@ def add_convolved_sky_to_observations(
                 if not isinstance(b, Beamsor):
                     raise TypeError(f"beams: expected pisco.Beamsor or litebird_sim.SphericalHarmonics for detector "
                                     f"{obs.name[i]}, got {type(b).__name__}")
-                found = next((k for k, x in enumerate(beam_list) if x is b), None)
-                if found is None:
-                    beam_list.append(b)
-                    found = len(beam_list) - 1
+                found = beam_index(b)
                 eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
                 epsilon = (1.0 - eta) / (1.0 + eta)
                 gain = 2.0 / (1.0 + epsilon)

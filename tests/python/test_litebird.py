@@ -443,3 +443,49 @@ def test_a_plate_with_intensity_leakage_passes_the_monopole_which_mueller_convol
     assert np.abs(exact - expected).max() <= 1e-5
     if lbs.__version__.startswith("0.18"):  # the version this was found in
         assert theirs.std() <= 1e-6 * expected.std()
+
+
+def test_plate_beams_of_an_ideal_plate_are_the_plate_model(tmp_path):
+    """plate_beams (docs/changing.md): every detector's beam given as five beams with an ideal plate in them
+    (a 1 deg Gaussian times the plate's Mueller matrix at plate angles k pi / 5 from the detector's axis),
+    under litebird_sim's IdealHWP turning at 46 rpm from 0.3 rad, detectors at three polarization angles
+    and offsets, against the same Gaussian behind the adapter's ideal plate model (which
+    test_plates_match_litebird_sims_mueller_convolver holds against litebird_sim's MuellerConvolver):
+    the same TOD to rounding. A dict by channel name gives the same; without plate angles it is refused."""
+    hwp = lbs.IdealHWP(ang_speed_radpsec=HWP_SPEED, start_angle_rad=0.3)
+    obs = observation(tmp_path, seconds=120.0, hwp=hwp)
+    sky = pisco.Sky.from_maps(hp.alm2map(smooth_sky_alm(256, seed=4, smoothing_fwhm=np.radians(0.5)), 128,
+                                         lmax=256, pol=True))
+    fwhm = np.radians(FWHM_ARCMIN / 60.0)
+    s = fwhm / np.sqrt(8 * np.log(2.0))
+
+    def gauss(r, sigma):
+        g = np.exp(-r * r / (2 * s * s))
+        return np.diag([g, g, g, g])
+
+    plain = pisco.Beamsor.from_field(gauss, 2.5 * fwhm, fwhm / 16, "gaussian")
+    turning = []
+    for k in range(5):
+        m = np.array(pisco.rotated_mueller(pisco.ideal_hwp_mueller(), np.pi * k / 5))
+        turning.append(pisco.Beamsor.from_field(lambda r, sigma, m=m: gauss(r, sigma) @ m, 2.5 * fwhm, fwhm / 16,
+                                                f"plate {k}"))
+    galactic = lbs.CoordinateSystem.Galactic
+    for name in ("pisco", "pisco2", "tod2"):
+        getattr(obs, name)[:] = 0
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, plain, hwp=hwp, component="pisco", backend="cpu",
+                                                     coordinates=galactic)
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, plain, hwp=hwp, component="pisco2", backend="cpu",
+                                                     coordinates=galactic, plate_beams=turning)
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, plain, hwp=hwp, component="tod2", backend="cpu",
+                                                     coordinates=galactic, plate_beams={"ch": turning})
+    rms = relative_rms(obs.pisco2, obs.pisco)
+    print(f"litebird: plate_beams (an ideal plate as five beams) vs the plate model: relative RMS {rms:.2e}")
+    assert rms <= 1e-12
+    assert np.array_equal(obs.tod2, obs.pisco2)
+    plateless = observation(tmp_path / "plateless", seconds=10.0)
+    with pytest.raises(ValueError, match="beams turn with the plate, but the observation has no plate angles"):
+        pisco.litebird.add_convolved_sky_to_observations(plateless, sky, plain, component="pisco", backend="cpu",
+                                                         coordinates=galactic, plate_beams=turning)
+    with pytest.raises(TypeError, match="expected a list of two or more pisco.Beamsor"):
+        pisco.litebird.add_convolved_sky_to_observations(obs, sky, plain, hwp=hwp, component="pisco", backend="cpu",
+                                                         coordinates=galactic, plate_beams=[plain])
