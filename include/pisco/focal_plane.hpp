@@ -28,6 +28,10 @@ struct PlateBeams {
   // for a plate whose turn by pi is not (a wedge, a tilt: every harmonic of theta).
   double period = 3.14159265358979323846;
   double gamma = 0.0;  // radians: the plate angle (hwp_angle, focal-plane frame) of the first beam
+  // sr: the solid angle the beams' TOD is normalized by. 0: their mean Omega~, so that the plate's mean
+  // transmission is calibrated away (its modulation with the angle stays); the beam's own Omega~ without
+  // the plate keeps the plate's losses in the TOD, as the plate model (HalfWavePlate) does.
+  double omega = 0.0;
 };
 
 struct Detector {

@@ -251,13 +251,15 @@ class PlateBeams:
     """A beam that turns with a half-wave plate: the engine's beams at plate angles gamma + k period / N,
     interpolated trigonometrically in each sample's hwp_angle (docs/changing.md). The plate is in the beams."""
 
-    def __init__(self, beams: Sequence[int], period: float = ..., gamma: float = 0.0) -> None: ...
+    def __init__(self, beams: Sequence[int], period: float = ..., gamma: float = 0.0, omega: float = 0.0) -> None: ...
     @property
     def beams(self) -> list[int]: ...
     @beams.setter
     def beams(self, value: Sequence[int], /) -> None: ...
     period: float
     gamma: float
+    omega: float
+    """The solid angle (sr) their TOD is normalized by; 0: their mean Omega~."""
 
 class Detector:
     """A detector: name, zeta, epsilon, gain, beam index, offset quaternion (x, y, z, w) and plate."""

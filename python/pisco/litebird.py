@@ -198,6 +198,7 @@ def add_convolved_sky_to_observations(
     beam_alms_grid_step=0.0,
     plate_beams=None,
     plate_beams_period=np.pi,
+    plate_beams_omega=0.0,
 ):
     """Adds the beam-convolved sky to the TOD of litebird_sim observations, in pixel space.
 
@@ -250,6 +251,10 @@ def add_convolved_sky_to_observations(
         observation's).
     plate_beams_period : float
         Their period (radians): pi for a half-wave plate.
+    plate_beams_omega : float
+        The solid angle (sr) their TOD is normalized by: 0, their mean Omega~ (the plate's mean
+        transmission calibrated away); the beam's own Omega~ without the plate keeps the plate's losses,
+        as the plate model does (``pisco.PlateBeams``' omega).
     """
     import litebird_sim as lbs
     from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g
@@ -321,7 +326,8 @@ def add_convolved_sky_to_observations(
                     eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
                     epsilon = (1.0 - eta) / (1.0 + eta)
                     # The plate's angle from the beam frame's x axis, its beams from the detector's axis.
-                    turns = PlateBeams([beam_index(b) for b in turning], period=plate_beams_period, gamma=zeta)
+                    turns = PlateBeams([beam_index(b) for b in turning], period=plate_beams_period, gamma=zeta,
+                                       omega=plate_beams_omega)
                     fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=2.0 / (1.0 + epsilon),
                            beam=turns.beams[0], plate_beams=turns)
                     continue

@@ -146,6 +146,11 @@ class PixelConvolve(Operator):
 
     plate_beams_period = Float(np.pi, help="The plate's period for plate_beams (radians): pi for a half-wave plate")
 
+    plate_beams_omega = Float(
+        0.0, help="The solid angle (sr) plate_beams' TOD is normalized by: 0, their mean Omega~; the beam's own "
+        "Omega~ without the plate keeps the plate's losses (pisco.PlateBeams' omega)"
+    )
+
     boresight = Unicode(defaults.boresight_radec, help="Observation shared key for boresight quaternions")
 
     hwp_angle = Unicode(
@@ -373,7 +378,7 @@ class PixelConvolve(Operator):
                 first = len(beams)
                 beams.extend(self.plate_beams[d.name])
                 d.plate_beams = PlateBeams(list(range(first, len(beams))), period=self.plate_beams_period,
-                                           gamma=d.hwp.gamma)
+                                           gamma=d.hwp.gamma, omega=self.plate_beams_omega)
                 d.hwp = None
             out.add(d)
         return beams, out
@@ -390,7 +395,8 @@ class PixelConvolve(Operator):
         model = (tuple(_mueller_matrix(self.hwp_mueller).ravel()) if self.hwp_mueller else None,
                  self.hwp_placement) if plates else None
         # And the plate beams, by the beams' identities.
-        turning = tuple(sorted((n, tuple(id(b) for b in bs)) for n, bs in self.plate_beams.items()))
+        turning = (tuple(sorted((n, tuple(id(b) for b in bs)) for n, bs in self.plate_beams.items())),
+                   self.plate_beams_period, self.plate_beams_omega)
         key = (id(focalplane), model, turning)
         if key not in self._engines:
             names = [str(n) for n in focalplane.detector_data["name"]]

@@ -123,11 +123,12 @@ Engine::Engine(const SkyView& sky, const std::vector<Beamsor>& beams, const Foca
         throw Error("detector '" + focal_plane[d].name + "': plate_beams need the integral normalization (the "
                     "plate's beams share their mean Omega~; a per-sample normalization would take the plate's "
                     "modulation of the total power out)");
-      double mean = 0.0;
-      for (const std::size_t b : p->beams) mean += beams[b].omega_tilde() / double(p->beams.size());
+      double norm = p->omega;
+      if (norm == 0.0)
+        for (const std::size_t b : p->beams) norm += beams[b].omega_tilde() / double(p->beams.size());
       for (const std::size_t b : p->beams) {
         add_node(d, b);
-        node_scale_[d].push_back(beams[b].omega_tilde() / mean);
+        node_scale_[d].push_back(beams[b].omega_tilde() / norm);
       }
     }
   }

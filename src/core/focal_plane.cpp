@@ -87,6 +87,9 @@ void check_focal_plane(const FocalPlane& focal_plane, std::size_t beams) {
         throw Error(who + ": plate_beams period = " + number_text(p->period) +
                     " rad; expected a positive period (pi for a half-wave plate)");
       if (!std::isfinite(p->gamma)) throw Error(who + ": plate_beams gamma = " + number_text(p->gamma) + " is not finite");
+      if (!(std::isfinite(p->omega) && p->omega >= 0))
+        throw Error(who + ": plate_beams omega = " + number_text(p->omega) +
+                    " sr; expected 0 (their mean Omega~) or the beam's solid angle without the plate");
       for (std::size_t k = 0; k < p->beams.size(); ++k)
         if (p->beams[k] >= beams)
           throw Error(who + ": plate_beams beam " + std::to_string(k) + ": index " + std::to_string(p->beams[k]) +

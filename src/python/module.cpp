@@ -614,21 +614,23 @@ void bind_focal_plane(nb::module_& m) {
   nb::class_<PlateBeams>(m, "PlateBeams",
                          "A beam that turns with a half-wave plate (docs/changing.md): the optics and the plate\n"
                          "simulated together at N plate angles.\n\n"
-                         "PlateBeams(beams, period=pi, gamma=0.0)\n\n"
+                         "PlateBeams(beams, period=pi, gamma=0.0, omega=0.0)\n\n"
                          "beams: the engine's beam indices at plate angles gamma + k period / N (k = 0 .. N - 1;\n"
                          "two or more); period: pi for a half-wave plate (radians; 2 pi for one whose turn by pi is\n"
                          "not the same plate); gamma: the plate angle (hwp_angle) of the first beam. At each\n"
                          "sample's hwp_angle the detector's beam is their trigonometric interpolant. The plate is in\n"
-                         "the beams: give the detector no hwp.")
+                         "the beams: give the detector no hwp. omega: the solid angle (sr) the TOD is normalized by;\n"
+                         "0, their mean Omega~.")
       .def("__init__",
-           [](PlateBeams* self, nb::handle beams, double period, double gamma) {
+           [](PlateBeams* self, nb::handle beams, double period, double gamma, double omega) {
              PlateBeams p;
              p.beams = beam_indices_arg(beams, "beams");
              p.period = finite_arg(period, "period");
              p.gamma = finite_arg(gamma, "gamma");
+             p.omega = finite_arg(omega, "omega");
              new (self) PlateBeams(std::move(p));
            },
-           "beams"_a, "period"_a = std::numbers::pi, "gamma"_a = 0.0)
+           "beams"_a, "period"_a = std::numbers::pi, "gamma"_a = 0.0, "omega"_a = 0.0)
       .def_prop_rw(
           "beams", [](const PlateBeams& p) { return p.beams; },
           [](PlateBeams& p, nb::handle v) { p.beams = beam_indices_arg(v, "beams"); },
@@ -640,6 +642,11 @@ void bind_focal_plane(nb::module_& m) {
           "gamma", [](const PlateBeams& p) { return p.gamma; },
           [](PlateBeams& p, double v) { p.gamma = finite_arg(v, "gamma"); },
           "The plate angle of the first beam, radians (focal-plane frame).")
+      .def_prop_rw(
+          "omega", [](const PlateBeams& p) { return p.omega; },
+          [](PlateBeams& p, double v) { p.omega = finite_arg(v, "omega"); },
+          "The solid angle (sr) their TOD is normalized by: 0, their mean Omega~ (the plate's mean transmission\n"
+          "calibrated away); the beam's own Omega~ without the plate keeps the plate's losses, as HalfWavePlate does.")
       .def("__repr__", [](const PlateBeams& p) {
         return "pisco.PlateBeams(" + std::to_string(p.beams.size()) + " beams, period=" + format_double(p.period) +
                ", gamma=" + format_double(p.gamma) + ")";

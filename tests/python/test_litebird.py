@@ -268,10 +268,30 @@ def test_plates_match_litebird_sims_mueller_convolver(tmp_path, plate):
           f"{obs.tod.shape[1]} samples, sky NSIDE 256 (lmax 512), FWHM 1 deg, polarization angles {POL_ANGLES_DEG} "
           f"deg: relative RMS {rms:.2e} (per detector {', '.join(f'{r:.2e}' for r in per_detector)})")
     assert rms <= 1e-4 and max(per_detector) <= 2e-4
-    # The comparison tells the plate's conventions apart: the plate turning the other way (an explicit
-    # `hwp`, which replaces the observation's) misses by O(1).
     sky = lbs.HealpixMap(values=hp.alm2map(smooth_sky_alm(512, seed=5, smoothing_fwhm=np.radians(0.5)), 256,
                                            lmax=512, pol=True), nside=256, coordinates=lbs.CoordinateSystem.Galactic)
+    # The plate in the beams (docs/changing.md): the same Gaussian times the plate's M(theta_k) at five
+    # plate angles (M(theta) holds harmonics 0, 2 and 4 theta: exact), through plate_beams, normalized by
+    # the Gaussian's own Omega~ (which keeps the plate's losses, as MuellerConvolver does), against
+    # MuellerConvolver directly.
+    fwhm = np.radians(FWHM_ARCMIN / 60.0)
+    s = fwhm / np.sqrt(8 * np.log(2.0))
+
+    def gauss(r, sigma):
+        return np.exp(-r * r / (2 * s * s)) * np.eye(4)
+
+    turning = [pisco.Beamsor.from_field(
+        lambda r, sigma, k=k: gauss(r, sigma) @ np.array(pisco.rotated_mueller(m0, np.pi * k / 5)),
+        2.5 * fwhm, fwhm / 20, f"plate at {k} pi / 5") for k in range(5)]
+    omega = pisco.Beamsor.from_field(gauss, 2.5 * fwhm, fwhm / 20, "without the plate").omega_tilde
+    obs.pisco2[:] = 0
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, component="pisco2", backend="cpu", plate_beams=turning,
+                                                     plate_beams_omega=omega)
+    in_beams = relative_rms(obs.pisco2, obs.tod)
+    print(f"  the plate in five plate beams (plate_beams) vs MuellerConvolver: relative RMS {in_beams:.2e}")
+    assert in_beams <= 1e-4
+    # The comparison tells the plate's conventions apart: the plate turning the other way (an explicit
+    # `hwp`, which replaces the observation's) misses by O(1).
     obs.pisco[:] = 0
     pisco.litebird.add_convolved_sky_to_observations(obs, sky, component="pisco", backend="cpu",
                                                      hwp=lbs.IdealHWP(ang_speed_radpsec=-HWP_SPEED,
