@@ -30,6 +30,20 @@ pisco::Mueller ring_beam(double rho, double sigma) {
   return Beamsor::stokes_mueller(i, q, u, 0.0);
 }
 
+// The ring beam's main part alone, as the split at 5 deg tapers it (from 3.75 deg to 5 deg), over the
+// whole 20 deg disc.
+Beamsor main_part_beam(double step) {
+  return Beamsor::from_field(
+      [](double r, double s) {
+        pisco::Mueller m = ring_beam(r, s);
+        const double t = r <= 3.75 * deg ? 1.0 : r >= 5 * deg ? 0.0 : 0.5 * (1 + std::cos(pi * (r - 3.75 * deg) / (1.25 * deg)));
+        for (auto& row : m)
+          for (double& e : row) e *= t;
+        return m;
+      },
+      20 * deg, step, "main part");
+}
+
 pisco::Sky test_sky(int nside, bool monopole, int lmax = 0) {
   pisco::Spectra cls;
   if (lmax == 0) lmax = 3 * nside - 1;
@@ -84,15 +98,7 @@ TEST_P(Sidelobes, SplitPathMatchesTheWholeDisc) {
   EXPECT_DOUBLE_EQ(parted.rho_max(), 5 * deg);
   EXPECT_NEAR(parted.omega_tilde() / whole.omega_tilde(), 1.0, 1e-9);
   // The main part alone, with the whole beam's normalization: the full-disc TOD of the split's main part.
-  const Beamsor main_only = Beamsor::from_field(
-      [&](double r, double s) {
-        pisco::Mueller m = ring_beam(r, s);
-        const double t = r <= 3.75 * deg ? 1.0 : r >= 5 * deg ? 0.0 : 0.5 * (1 + std::cos(pi * (r - 3.75 * deg) / (1.25 * deg)));
-        for (auto& row : m)
-          for (double& e : row) e *= t;
-        return m;
-      },
-      20 * deg, step, "main part");
+  const Beamsor main_only = main_part_beam(step);
   pisco::FocalPlane fp;
   pisco::Detector d;
   d.name = "d";
@@ -166,18 +172,7 @@ TEST_P(Sidelobes, OuterPartsAreRightAtThePoles) {
   double worst = 0;
   for (const double e : err) worst = std::max(worst, std::abs(e));
   // The sidelobes' share of the TOD: the ring's integral over the whole beam's, times the TOD.
-  const double side = rms(full) * (1.0 - [&] {
-    const Beamsor main_only = Beamsor::from_field(
-        [&](double r, double s) {
-          pisco::Mueller m = ring_beam(r, s);
-          const double t = r <= 3.75 * deg ? 1.0 : r >= 5 * deg ? 0.0 : 0.5 * (1 + std::cos(pi * (r - 3.75 * deg) / (1.25 * deg)));
-          for (auto& row : m)
-            for (double& e : row) e *= t;
-          return m;
-        },
-        20 * deg, step, "main part");
-    return main_only.omega_tilde() / whole.omega_tilde();
-  }());
+  const double side = rms(full) * (1.0 - main_part_beam(step).omega_tilde() / whole.omega_tilde());
   std::printf("%s, samples within 12 deg of the poles: split vs whole disc %.2e (rms), %.2e (worst) of the sidelobes' "
               "part (%.3e), %.2e of the TOD\n",
               backend.c_str(), rms(err) / side, worst / side, side, rms(err) / rms(full));

@@ -109,7 +109,7 @@ TEST_P(SkyPassTest, ItsAdjointIsItsTranspose) {
   const auto adjoint = s.pass(s.sky, s.summed);
   for (std::size_t det = 0; det < s.fp.size(); ++det) {
     pisco::detail::SkyPass::Work w;
-    pass->begin(det, input, w, true);
+    pass->begin(det, input, w);
     ASSERT_TRUE(w.polar);
     // Some polar samples in runs of their own (the scans), some inside the sky's runs (alone).
     EXPECT_GE(w.runs.size(), 2u);
@@ -125,7 +125,7 @@ TEST_P(SkyPassTest, ItsAdjointIsItsTranspose) {
       d_norm2 += d[i] * d[i];
     }
     pisco::detail::SkyPass::Work wa;
-    adjoint->begin(det, input, wa, false);
+    adjoint->begin(det, input, wa);
     adjoint->adjoint(wa, det, input, d, false);
     EXPECT_TRUE(adjoint->holds_adjoint());
   }
@@ -156,8 +156,9 @@ TEST_P(SkyPassTest, AccumulatingAddsAtEverySample) {
   for (std::size_t i = 0; i < added.size(); ++i) added[i] = 1000.0 + double(i);
   for (const bool accumulate : {false, true}) {
     pisco::detail::SkyPass::Work w;
-    pass->begin(1, input, w, true);
+    pass->begin(1, input, w);
     ASSERT_TRUE(w.polar);
+    pass->prepare();
     pass->submit(w, 1, input, accumulate ? added : once, accumulate);
     pass->wait(pass->last_ticket());
     pisco::detail::SkyPass::finish(w);

@@ -270,6 +270,14 @@ std::span<const double> group_values(std::span<const double> v, const std::vecto
   for (const std::size_t i : index) own.push_back(v[i]);
   return own;
 }
+// A TOD to accumulate into: finite, or the error names the detector and the sample.
+void check_accumulated(const std::string& name, std::span<const double> tod) {
+  for (std::size_t i = 0; i < tod.size(); ++i)
+    if (!std::isfinite(tod[i]))
+      throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
+                  " at sample " + std::to_string(i) + "; the TOD added to must be finite");
+}
+
 template <class View>
 using GroupStorage = std::conditional_t<std::is_same_v<View, PointingView>, Pointing, std::vector<Quat>>;
 }  // namespace
@@ -402,8 +410,8 @@ std::span<const double> Engine::node_plate(std::size_t detector, std::span<const
 // - a beam that changes with time: the samples between each two nodes k and k + 1 (the groups in the
 //   order of their first sample), with 1 - w and w, w = (t - t_k) / (t_k+1 - t_k);
 // - a beam that turns with the plate: every sample with every beam, with the trigonometric
-//   interpolant's weights at x = 2 pi (theta - gamma) / period, times each beam's Omega~ over their
-//   mean (the nodes are normalized each by its own).
+//   interpolant's weights at x = 2 pi (theta - gamma) / period, times each beam's Omega~ over the
+//   plate beams' shared normalization (node_scale_; the nodes are normalized each by its own).
 std::vector<Engine::NodeGroup> Engine::node_groups(const char* what, std::size_t detector,
                                                    std::span<const double> time,
                                                    std::span<const double> hwp_angle) const {
@@ -483,11 +491,7 @@ std::uint64_t Engine::submit_nodes(std::size_t detector, const View& boresight, 
   std::vector<double> plate_angle;
   check_submission("convolve", detector, boresight, tod.size(), hwp_angle, plate_angle, time);
   const std::string& name = detectors_[detector].name;
-  if (accumulate)
-    for (std::size_t i = 0; i < tod.size(); ++i)
-      if (!std::isfinite(tod[i]))
-        throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
-                    " at sample " + std::to_string(i) + "; the TOD added to must be finite");
+  if (accumulate) check_accumulated(name, tod);
   pending->groups = node_groups("convolve", detector, time, hwp_angle);
   pending->values.resize(pending->groups.size());
   const std::size_t mark = pending_.size();
@@ -528,19 +532,15 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle, time, node);
   const std::string& name = detectors_[detector].name;
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
-  if (accumulate)
-    for (std::size_t i = 0; i < tod.size(); ++i)
-      if (!std::isfinite(tod[i]))
-        throw Error("convolve: detector '" + name + "': the TOD to accumulate into is " + detail::number_text(tod[i]) +
-                    " at sample " + std::to_string(i) + "; the TOD added to must be finite");
+  if (accumulate) check_accumulated(name, tod);
   detail::PointingInput input = input_of(boresight);
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = pending->plate_angle;
   const bool split = !split_.empty() && split_[detector];
   try {
-    // Each pass finds its samples near the poles (detail::SkyPass::begin), whose polar copy it hands to
-    // its backend first when it has not yet.
-    main_->begin(detector, input, pending->main, false);
-    if (split) outer_->begin(detector, input, pending->outer_work, false);
+    // Each pass finds its samples near the poles (detail::SkyPass::begin); one that has some hands its
+    // polar copy to its backend first, if it has not yet (outside the host work timed).
+    main_->begin(detector, input, pending->main);
+    if (split) outer_->begin(detector, input, pending->outer_work);
     host_seconds_ += seconds_since(host_start);
     if (pending->main.polar) main_->prepare();
     if (split && pending->outer_work.polar) outer_->prepare();
@@ -738,8 +738,8 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
   // The diagonal leaves out the outer parts and the polar copy (the main backend's plain sum instead).
   const bool split = !squares && !split_.empty() && split_[detector];
   detail::SkyPass::Work main, outer;
-  if (!squares) main_->begin(detector, input, main, false);
-  if (split) outer_->begin(detector, input, outer, false);
+  if (!squares) main_->begin(detector, input, main);
+  if (split) outer_->begin(detector, input, outer);
   // The TOD of each row detector (or of the detector itself): d, or d times the plate's coefficient.
   std::array<std::vector<double>, 4> rows;
   std::vector<std::size_t> targets;
@@ -818,7 +818,7 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
   }
   try {
     detail::SkyPass::Work work;
-    main_->begin(detector, input, work, false);
+    main_->begin(detector, input, work);
     if (work.polar) main_->prepare();
     pixels_ += main_->normal(work, detector, input);
     if (work.polar) polar_samples_ += work.polar->index.size();

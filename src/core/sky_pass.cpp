@@ -53,7 +53,7 @@ void SkyPass::attach() {
 
 void SkyPass::prepare() { attach(); }
 
-void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w, bool attach_copy) {
+void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w) {
   w.polar.reset();
   w.runs.assign(1, {0, input.size()});
   w.parts.clear();
@@ -65,7 +65,6 @@ void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w, b
   if (!find_polar_samples(input, det.offset, offset_angle_.at(detector), cut_.at(detector), *samples)) return;
   w.runs = sky_runs(samples->index, input.size());
   w.polar = std::move(samples);
-  if (attach_copy) attach();
 }
 
 void SkyPass::submit(Work& w, std::size_t target, const PointingInput& input, std::span<double> out,

@@ -58,9 +58,9 @@ class SkyPass {
     std::uint64_t ticket = 0;  // its last submission to the backend; 0: none
   };
   // Finds the samples of `input` near a pole for `detector` (its line of sight, its offset applied)
-  // and the runs the sky sums. With `attach`, hands the copy to the backend first when a sample needs
-  // it (the forward passes; the adjoint's scatter needs no copy).
-  void begin(std::size_t detector, const PointingInput& input, Work& w, bool attach);
+  // and the runs the sky sums. A forward pass with such samples calls prepare() before submit(); the
+  // adjoint's scatter needs no copy.
+  void begin(std::size_t detector, const PointingInput& input, Work& w);
   // Queues `target`'s values over the submission's samples: the sky's runs written into out (or
   // added, with accumulate), the polar samples' into the work's own buffer, which finish() writes over
   // out. `out` must stay valid until finish().

@@ -103,27 +103,20 @@ PointingArgs pointing_args(nb::handle theta, nb::handle phi, nb::handle psi, nb:
   return p;
 }
 
-// The plate's angles of one call (a view, no copy), or none: a 1-D float64 array of the pointing's
-// length. Whether the detector needs them is the engine's to say (pisco.Error).
-std::optional<ConstVector> hwp_args(nb::handle hwp_angle, std::size_t n) {
-  if (hwp_angle.is_none()) return std::nullopt;
-  ConstVector v = const_vector(hwp_angle, "hwp_angle");
+// A per-sample array of one call (a view, no copy), or none: a 1-D float64 array of the pointing's
+// length. Whether the detector needs it is the engine's to say (pisco.Error): the plate's angles
+// (hwp_angle) for a detector with a plate, each sample's time (time) for a beam that changes with time.
+std::optional<ConstVector> samples_arg(nb::handle arg, const char* name, std::size_t n) {
+  if (arg.is_none()) return std::nullopt;
+  ConstVector v = const_vector(arg, name);
   if (v.shape(0) != n)
-    throw nb::value_error(("hwp_angle: " + std::to_string(v.shape(0)) + " samples, but the pointing has " +
+    throw nb::value_error((std::string(name) + ": " + std::to_string(v.shape(0)) + " samples, but the pointing has " +
                            std::to_string(n)).c_str());
   return v;
 }
 
-// Each sample's time (a beam that changes with time, Detector.beam_sequence), or none: a 1-D float64
-// array of the pointing's length. Detectors without a beam sequence ignore it.
-std::optional<ConstVector> time_args(nb::handle time, std::size_t n) {
-  if (time.is_none()) return std::nullopt;
-  ConstVector v = const_vector(time, "time");
-  if (v.shape(0) != n)
-    throw nb::value_error(("time: " + std::to_string(v.shape(0)) + " samples, but the pointing has " +
-                           std::to_string(n)).c_str());
-  return v;
-}
+std::optional<ConstVector> hwp_args(nb::handle hwp_angle, std::size_t n) { return samples_arg(hwp_angle, "hwp_angle", n); }
+std::optional<ConstVector> time_args(nb::handle time, std::size_t n) { return samples_arg(time, "time", n); }
 
 std::span<const double> span_of(const std::optional<ConstVector>& v) {
   if (!v) return {};
