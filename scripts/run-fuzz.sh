@@ -16,7 +16,7 @@
 #
 # Usage: scripts/run-fuzz.sh [TARGET ...]        (default: every target; names as in tests/fuzz/)
 # Environment:
-#   PISCO_FUZZ_SECONDS  fuzzing time per target (default 90: the 11 targets, two at a time on two cores,
+#   PISCO_FUZZ_SECONDS  fuzzing time per target (default 90: the 12 targets, two at a time on two cores,
 #                       take about 10 minutes)
 #   PISCO_FUZZ_JOBS     targets fuzzed at once (default: the number of processors)
 #   PISCO_FUZZ_STRICT   1: findings inside CFITSIO or HDF5 fail the run too
@@ -37,15 +37,17 @@ jobs="${PISCO_FUZZ_JOBS:-$(nproc)}"
 declare -A max_len=(
   [fuzz_simulation_toml]=8192 [fuzz_focal_plane_csv]=4096 [fuzz_focal_plane_toml]=4096
   [fuzz_focal_plane_hdf5]=32768 [fuzz_grasp_grd]=16384 [fuzz_grasp_cut]=16384 [fuzz_blm_fits]=32768
-  [fuzz_beamsor_fits]=32768 [fuzz_sky_fits]=32768 [fuzz_pointing_hdf5]=40960 [fuzz_cl_table]=4096)
+  [fuzz_beamsor_fits]=32768 [fuzz_sky_fits]=32768 [fuzz_pointing_hdf5]=40960 [fuzz_cl_table]=4096
+  [fuzz_source_track_csv]=4096)
 declare -A dict=(
   [fuzz_simulation_toml]=simulation_toml [fuzz_focal_plane_csv]=focal_plane_csv
   [fuzz_focal_plane_toml]=focal_plane_toml [fuzz_focal_plane_hdf5]=hdf5 [fuzz_grasp_grd]=grasp
   [fuzz_grasp_cut]=grasp [fuzz_blm_fits]=fits [fuzz_beamsor_fits]=fits [fuzz_sky_fits]=fits
-  [fuzz_pointing_hdf5]=hdf5 [fuzz_cl_table]=cl_table)
+  [fuzz_pointing_hdf5]=hdf5 [fuzz_cl_table]=cl_table
+  [fuzz_source_track_csv]=source_track_csv)
 all_targets=(fuzz_simulation_toml fuzz_focal_plane_csv fuzz_focal_plane_toml fuzz_focal_plane_hdf5
              fuzz_grasp_grd fuzz_grasp_cut fuzz_blm_fits fuzz_beamsor_fits fuzz_sky_fits
-             fuzz_pointing_hdf5 fuzz_cl_table)
+             fuzz_pointing_hdf5 fuzz_cl_table fuzz_source_track_csv)
 targets=("$@")
 ((${#targets[@]})) || targets=("${all_targets[@]}")
 for t in "${targets[@]}"; do

@@ -151,6 +151,59 @@ TEST_F(SimulationTest, SourcesAddWhatTheirPixelWould) {
   }
 }
 
+// A source's track from a CSV track file ([[sources]] file, docs/formats.md "Source tracks") adds the
+// same TOD as the same track written in the table, on a constant-elevation scan that crosses it; a
+// table that gives both the file and a track's key is refused naming the key.
+TEST_F(SimulationTest, SourceTracksFromFilesAreTheTablesOwn) {
+  const auto config = [&](const std::string& name, const std::string& sources) {
+    const fs::path p = dir_ / (name + ".toml");
+    std::ofstream(p) << "[sky]\nnside = 16\n"
+                        "[beams.main]\ntype = \"gaussian\"\nfwhm_deg = 3.0\nrho_max_deg = 6.0\n"
+                        "[focal_plane]\n[[focal_plane.detectors]]\nname = \"d\"\nbeam = \"main\"\nzeta_deg = 30\n"
+                        "[scan]\ntype = \"ces\"\nsample_rate_hz = 2\nduration_hours = 0.05\naz_throw_deg = 30\nnside = 8\n"
+                        "[engine]\nbackend = \"cpu\"\nnormalization = \"integral\"\n"
+                        "[output]\ndir = \""
+                     << (dir_ / name).string() << "\"\nmaps = false\nspectra = false\nplots = false\n" << sources;
+    return p;
+  };
+  // The scan's boresight at its first sample, and a source drifting across the scan's path from there.
+  pisco::Simulation probe = pisco::Simulation::from_file(config("probe", ""));
+  pisco::Pointing first;
+  probe.config().scan.ces.generate(0, 1, first);
+  const double deg = std::numbers::pi / 180, th = first.theta[0] / deg, ph = first.phi[0] / deg;
+  std::ostringstream table, csv;
+  table << std::setprecision(17) << "[[sources]]\nname = \"planet\"\ntime_s = [0, 100, 180]\ntheta_deg = [" << th
+        << ", " << th + 1 << ", " << th + 1.5 << "]\nphi_deg = [" << ph << ", " << ph + 2 << ", " << ph + 3
+        << "]\nI = [1e-3, 1.2e-3, 1e-3]\nU = [0, 1e-4, 2e-4]\n";
+  csv << std::setprecision(17) << "# a planet\ntime_s,theta_deg,phi_deg,I,U\n0," << th << "," << ph << ",1e-3,0\n100,"
+      << th + 1 << "," << ph + 2 << ",1.2e-3,1e-4\n180," << th + 1.5 << "," << ph + 3 << ",1e-3,2e-4\n";
+  std::ofstream(dir_ / "planet.csv") << csv.str();
+  pisco::Simulation::from_file(config("table", table.str())).run();
+  pisco::Simulation::from_file(config("file", "[[sources]]\nname = \"planet\"\nfile = \"planet.csv\"\n")).run();
+  pisco::Simulation::from_file(config("none", "")).run();
+  const std::vector<double> a = pisco::read_tod_signal(dir_ / "table" / "tod.h5", "d");
+  const std::vector<double> b = pisco::read_tod_signal(dir_ / "file" / "tod.h5", "d");
+  const std::vector<double> c = pisco::read_tod_signal(dir_ / "none" / "tod.h5", "d");
+  ASSERT_EQ(a.size(), 360u);
+  ASSERT_EQ(b.size(), a.size());
+  double seen = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i], b[i]) << "sample " << i;
+    seen = std::max(seen, std::abs(a[i] - c[i]));
+  }
+  EXPECT_GT(seen, 1e-4);  // the scan does cross the source
+
+  try {
+    (void)pisco::read_simulation_file(
+        config("both", "[[sources]]\nname = \"planet\"\nfile = \"planet.csv\"\nI = 1\n"));
+    FAIL() << "a file and a key of the track";
+  } catch (const pisco::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("[sources[0]] I: a source read from a track file (file) takes name and file only"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // A beam that changes with time ([beams.NAME] type = "sequence", docs/beams.md): a detector whose beam
 // drifts from "round" at 0 s to "oval" at the run's end has, at each sample, the two beams' TOD
 // (detectors of their own beside it, with the same angle and offset) linearly interpolated in the

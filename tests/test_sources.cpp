@@ -4,10 +4,13 @@
 // Gaussian's own value at its offset, a moving source against the same source fixed where its track
 // puts it, and the errors for bad tracks and times.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <healpix_base.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <numbers>
 #include <random>
 #include <string>
@@ -281,6 +284,79 @@ TEST(Sources, BadTracksAndCallsAreRefusedByName) {
   p.push_back(1.0, 2.0, 0.0);
   std::vector<double> tod(1), time(1, 0.0);
   EXPECT_THROW(engine.add_sources(0, p, time, {pisco::SourceTrack::fixed("s", 1.0, 2.0, 1.0)}, tod), pisco::Error);
+}
+
+// Track files (docs/formats.md, "Source tracks"): a track written and read back is the same track (to
+// a rounding of its angles through degrees), a file a spreadsheet or a person writes (a byte-order mark,
+// comments, columns in any order, Q, U, V left out) reads as its table says, and every mistake is
+// refused naming the file, the line and the column.
+TEST(Sources, TrackFilesReadWhatTheySay) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("pisco-tracks-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  pisco::SourceTrack s{"jupiter", {0.0, 60.0, 120.5}, {1.0, 1.001, 1.0025}, {2.0, 2.002, 2.0031},
+                       {1e-6, 1.1e-6, 1.2e-6}, {}, {3e-9, 0.0, -1e-9}, {}};
+  s.write_csv(dir / "jupiter.csv");
+  const pisco::SourceTrack r = pisco::SourceTrack::read_csv(dir / "jupiter.csv", "jupiter");
+  EXPECT_EQ(r.name, "jupiter");
+  ASSERT_EQ(r.time.size(), 3u);
+  for (std::size_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(r.time[k], s.time[k]);
+    EXPECT_NEAR(r.theta[k], s.theta[k], 1e-15);
+    EXPECT_NEAR(r.phi[k], s.phi[k], 1e-15);
+    EXPECT_EQ(r.I[k], s.I[k]);
+    EXPECT_EQ(r.Q[k], 0.0);
+    EXPECT_EQ(r.U[k], s.U[k]);
+    EXPECT_EQ(r.V[k], 0.0);
+  }
+
+  const auto write = [&](const std::string& text) {
+    std::ofstream(dir / "t.csv", std::ios::binary) << text;
+    return dir / "t.csv";
+  };
+  const pisco::SourceTrack hand = pisco::SourceTrack::read_csv(
+      write("\xEF\xBB\xBF# Mars, by hand\n\n I , phi_deg,theta_deg ,time_s\r\n2.5, 90, 45, 0\r\n# a pause\n2.5,91,45,10\n"), "mars");
+  ASSERT_EQ(hand.time.size(), 2u);
+  EXPECT_EQ(hand.time[1], 10.0);
+  EXPECT_DOUBLE_EQ(hand.theta[0], 45 * deg);
+  EXPECT_DOUBLE_EQ(hand.phi[1], 91 * deg);
+  EXPECT_EQ(hand.I[0], 2.5);
+  EXPECT_TRUE(hand.Q.empty());
+
+  const auto refused = [&](const std::string& text) {
+    try {
+      (void)pisco::SourceTrack::read_csv(write(text), "x");
+    } catch (const pisco::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  const std::string file = (dir / "t.csv").string();
+  const auto says = [&](const std::string& text, const std::string& expected) {
+    const std::string what = refused(text);
+    EXPECT_NE(what.find(expected), std::string::npos) << what;
+  };
+  const std::string head = "time_s,theta_deg,phi_deg,I\n";
+  says("time_s,theta_deg,phi_deg,I,flux\n", file + ":1: unknown column 'flux'");
+  says("time_s,theta_deg,I\n0,1,2\n", file + ":1: the header needs a 'phi_deg' column");
+  says("time_s,theta_deg,phi_deg,I,I\n", file + ":1: column 'I' appears twice");
+  says(head + "0,10,20,1\n1,10,20\n", file + ":3: expected 4 fields, got 3");
+  says(head + "0,10,20,1\n1,10,20,1,\n", file + ":3: expected 4 fields, got 5");
+  says(head + "0,10,20,1\n1,10,twenty,1\n", file + ":3: column 'phi_deg': expected a finite number, got 'twenty'");
+  says(head + "0,10,20,nan\n", file + ":2: column 'I': expected a finite number, got 'nan'");
+  says(head + "0,10,20,1e999\n", file + ":2: column 'I': expected a finite number");
+  says(head + "0,190,20,1\n", file + ":2: column 'theta_deg': 190 is outside [0, 180]");
+  says(head + "0,10,20,1\n5,10,20,1\n5,10,21,1\n", file + ":4: column 'time_s': 5 does not follow");
+  says(head + "# nothing\n", file + ": no rows after the header");
+  says("# only a comment\n", file + ": no header");
+  says("", file + ": no header");
+  says(head + "0,30,0,1\n1,150,180,1\n", "the direction is opposite the previous point's");
+  try {
+    (void)pisco::SourceTrack::read_csv(dir / "absent.csv", "x");
+    FAIL();
+  } catch (const pisco::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("absent.csv: no such file (expected a source track"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

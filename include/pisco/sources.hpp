@@ -2,6 +2,7 @@
 // source's offset from each sample's line of sight, with no pixelization of the source.
 #pragma once
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,14 @@ struct SourceTrack {
   // wrong: sizes that differ, no point, a time or flux not finite, times not strictly increasing, a
   // colatitude outside [0, pi].
   void check(const std::string& origin) const;
+
+  // Track files (docs/formats.md, "Source tracks"): CSV with a header naming the columns time_s,
+  // theta_deg, phi_deg and I (required) and Q, U, V (optional, zero when absent), one row per time;
+  // blank lines and lines starting with '#' are skipped. read_csv returns the track `name`, checked;
+  // a bad file is a pisco::Error naming the file, its line and the column. write_csv writes every
+  // column, all digits, whole or not at all (pisco::write_file_atomically).
+  static SourceTrack read_csv(const std::filesystem::path& file, std::string name);
+  void write_csv(const std::filesystem::path& file) const;
 };
 
 }  // namespace pisco

@@ -409,6 +409,9 @@ class SourceTrack:
     theta: list[float]
     phi: list[float]
     I: list[float]
+    Q: list[float]
+    U: list[float]
+    V: list[float]
 
     def __init__(
         self,
@@ -425,6 +428,11 @@ class SourceTrack:
     @staticmethod
     def fixed(name: str, theta: float, phi: float, I: float, Q: float = 0.0, U: float = 0.0, V: float = 0.0) -> SourceTrack:
         """A source fixed at (theta, phi)."""
+    @staticmethod
+    def read_csv(path: str | os.PathLike[str], name: str) -> SourceTrack:
+        """The track in a CSV track file (columns time_s, theta_deg, phi_deg, I and optionally Q, U, V)."""
+    def write_csv(self, path: str | os.PathLike[str]) -> None:
+        """Writes the track as a CSV track file, whole or not at all."""
 
 class Engine:
     """The convolution engine: set up once for a sky, beams and focal plane; then pointing -> TOD."""

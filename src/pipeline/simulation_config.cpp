@@ -588,7 +588,8 @@ void assign_plates(SimulationConfig& c, const fs::path& file) {
 // [[sources]] (docs/config.md, docs/sources.md): each source's name, its times (time_s, seconds from the
 // run's first sample) and at each time its direction (theta_deg, phi_deg) and flux (I, Q, U, V); a
 // source without time_s is fixed, its values single numbers or arrays of one. Moving sources need the
-// samples' times: a scan with a sample rate.
+// samples' times: a scan with a sample rate. `file` instead reads the track from a CSV file
+// (SourceTrack::read_csv).
 std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& file, double rate) {
   std::vector<SourceTrack> out;
   std::size_t i = 0;
@@ -599,6 +600,16 @@ std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& f
     const auto name = t.string("name");
     if (!name || name->empty()) t.fail("name", "every source needs a name");
     s.name = *name;
+    if (t.has("file")) {
+      for (const char* key : {"time_s", "theta_deg", "phi_deg", "I", "Q", "U", "V"})
+        if (t.has(key)) t.fail(key, "a source read from a track file (file) takes name and file only");
+      s = SourceTrack::read_csv(t.input_file("file"), s.name);
+      if (s.time.size() > 1 && !(rate > 0))
+        t.fail("file", "a moving source needs the samples' times, which only a ces or satellite scan gives");
+      t.finish();
+      out.push_back(std::move(s));
+      continue;
+    }
     const auto values = [&](const std::string& key, bool required) {
       const auto v = t.numbers_or_number(key);
       if (!v && required) t.fail(key, "missing: give a number, or an array with one value per time");

@@ -22,6 +22,7 @@
 
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/filesystem.h>
 #include <nanobind/stl/function.h>
 #include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
@@ -727,6 +728,17 @@ void bind_engine(nb::module_& m) {
       .def_ro("theta", &SourceTrack::theta)
       .def_ro("phi", &SourceTrack::phi)
       .def_ro("I", &SourceTrack::I)
+      .def_ro("Q", &SourceTrack::Q)
+      .def_ro("U", &SourceTrack::U)
+      .def_ro("V", &SourceTrack::V)
+      .def_static(
+          "read_csv",
+          [](const std::filesystem::path& path, std::string name) { return SourceTrack::read_csv(path, std::move(name)); },
+          "path"_a, "name"_a,
+          "The track in a CSV track file (docs/formats.md, 'Source tracks': columns time_s, theta_deg, phi_deg,\n"
+          "I and optionally Q, U, V), named `name`; pisco.Error names the file, line and column of a fault.")
+      .def("write_csv", &SourceTrack::write_csv, "path"_a,
+           "Writes the track as a CSV track file (every column, all digits), whole or not at all.")
       .def("__repr__", [](const SourceTrack& t) {
         return "SourceTrack('" + t.name + "', " + std::to_string(t.time.size()) + " points)";
       });
