@@ -31,6 +31,13 @@ Beams that turn with the plate (docs/changing.md): ``plate_beams`` gives detecto
 channel name, or all) beams simulated with the plate in them at plate angles
 ``pol_angle_rad + k plate_beams_period / N`` (measured as the plate's angle is, from the beam frame's x
 axis), interpolated at each sample's plate angle; those detectors get no plate model.
+
+Point sources (docs/sources.md): ``sources``, a list of ``pisco.SourceTrack``, are added to every
+detector's TOD per sample, the beam evaluated at each source's direction exactly. Their directions are
+in the sky's frame (galactic unless the sky says otherwise; ``pisco.planets.planet_track(frame=
+"galactic", orbit="l2")`` gives a planet's), their times Unix seconds for an observation whose
+``start_time`` is an astropy Time (``planet_track(..., unix_times=True)``), else on the clock of its
+float ``start_time`` (``Observation.get_times()``).
 """
 
 import logging
@@ -38,7 +45,7 @@ import logging
 import numpy as np
 
 from ._blm import detector_beam, resize_blm
-from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, PlateBeams, Sky
+from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, PlateBeams, Sky, SourceTrack
 
 __all__ = ["add_convolved_sky_to_observations"]
 
@@ -132,6 +139,16 @@ def _blm_beam(alms, name, zeta, rho_max, grid_step, convolution_params):
     return detector_beam(values, lmax, mmax, zeta, rho_max, grid_step)
 
 
+def _unix_or_own_times(obs):
+    """The samples' times for sources: Unix seconds when the observation's start_time is an astropy Time,
+    else its own float clock (Observation.get_times())."""
+    import astropy.time
+
+    if isinstance(obs.start_time, astropy.time.Time):
+        return np.ascontiguousarray(obs.get_times(astropy_times=True).unix, dtype=np.float64)
+    return np.ascontiguousarray(obs.get_times(), dtype=np.float64)
+
+
 def _hwp_angle(obs, hwp, pointings_dtype):
     """The plate's angle per sample (float64, radians) as litebird_sim's own convolution takes it, or
     None without a plate: from `hwp` (its get_hwp_angle at the observation's start time and sampling
@@ -199,6 +216,7 @@ def add_convolved_sky_to_observations(
     plate_beams=None,
     plate_beams_period=np.pi,
     plate_beams_omega=0.0,
+    sources=None,
 ):
     """Adds the beam-convolved sky to the TOD of litebird_sim observations, in pixel space.
 
@@ -255,6 +273,9 @@ def add_convolved_sky_to_observations(
         The solid angle (sr) their TOD is normalized by: 0, their mean Omega~ (the plate's mean
         transmission calibrated away); the beam's own Omega~ without the plate keeps the plate's losses,
         as the plate model does (``pisco.PlateBeams``' omega).
+    sources : list of pisco.SourceTrack or None
+        Point sources added per sample (docs/sources.md), in the sky's frame; their times Unix seconds
+        when the observation's ``start_time`` is an astropy Time, else on its float clock.
     """
     import litebird_sim as lbs
     from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g
@@ -289,7 +310,12 @@ def add_convolved_sky_to_observations(
                                          convolution_params))
         return made[key][1]
 
+    sources = list(sources) if sources is not None else []
+    for k, track in enumerate(sources):
+        if not isinstance(track, SourceTrack):
+            raise TypeError(f"sources[{k}]: expected a pisco.SourceTrack, got {type(track).__name__}")
     for obs, ptg in zip(obs_list, ptg_list):
+        times = _unix_or_own_times(obs) if sources else None
         hwp_angle = _hwp_angle(obs, hwp, pointings_dtype)
         if hwp_angle is not None and not np.all(np.isfinite(hwp_angle)):
             raise ValueError("pisco.litebird: the plate's angles (hwp_angle) are not finite")
@@ -367,7 +393,11 @@ def add_convolved_sky_to_observations(
                     row = tod[i]
                     if row.dtype == np.float64 and row.flags.c_contiguous and row.flags.writeable:
                         engine.convolve(k, theta, phi, psi, out=row, accumulate=True, hwp_angle=hwp_angle)
+                        if sources:
+                            engine.add_sources(k, times, sources, theta, phi, psi, out=row, hwp_angle=hwp_angle)
                     else:
                         buffer = engine.convolve(k, theta, phi, psi, out=buffer if buffer is not None and
                                                  len(buffer) == len(theta) else None, hwp_angle=hwp_angle)
+                        if sources:
+                            engine.add_sources(k, times, sources, theta, phi, psi, out=buffer, hwp_angle=hwp_angle)
                         row += buffer.astype(row.dtype, copy=False)

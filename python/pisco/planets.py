@@ -167,9 +167,11 @@ def planet_track(
     flux: float | Sequence[float] | np.ndarray | None = None,
     polarization: tuple[float, float, float] = (0.0, 0.0, 0.0),
     name: str | None = None,
+    unix_times: bool = False,
 ) -> SourceTrack:
     """The track of `body` (a key of :data:`BODIES`) at `times` (seconds from `start`, strictly
-    increasing; sample i of a run at i / its rate), as a SourceTrack whose times are `times`.
+    increasing; sample i of a run at i / its rate), as a SourceTrack whose times are `times`, or with
+    `unix_times` the Unix times of those instants (the clock of TOAST's and litebird_sim's samples).
 
     start: the UTC time of `times`' zero: an ISO string ("2026-11-28T06:00:00"), an astropy Time or a
     Unix time (seconds). site: (latitude, east longitude) in degrees, and optionally the height in
@@ -261,7 +263,7 @@ def planet_track(
         intensity = brightness_temperature * scale * omega
     return SourceTrack(
         name if name is not None else key,
-        t.tolist(),
+        (when.unix if unix_times else t).tolist(),
         np.asarray(theta, dtype=float).tolist(),
         np.asarray(phi, dtype=float).tolist(),
         intensity.tolist(),

@@ -32,6 +32,12 @@ Beams that turn with the plate (docs/changing.md): ``plate_beams`` gives a detec
 ``pisco.Beamsor`` simulated with the plate in them at plate angles ``gamma + k plate_beams_period / N``
 from its focal-plane ``gamma``; at each sample they are interpolated in ``hwp_angle``, and that detector
 gets no plate model (the plate is in its beams). Such detectors need the observation's ``hwp_angle``.
+
+Point sources (docs/sources.md): ``sources``, a list of ``pisco.SourceTrack`` (fixed, moving or
+flaring; ``pisco.planets.planet_track`` gives the planets'), are added to every detector's TOD per
+sample, each detector's beam evaluated at each source's direction, exactly; the tracks' times are on
+the observation's clock (the shared ``times``, Unix seconds), their directions in the frame of the
+boresight quaternions (ICRS for ``boresight_radec``: ``planet_track(frame="equatorial")``).
 """
 
 import os
@@ -48,7 +54,7 @@ from toast.utils import Logger
 
 from ._blm import detector_beam, read_blm_file, resize_blm
 from ._focal_plane import focal_plane_from_toast
-from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, PlateBeams, Sky
+from ._pisco import Beamsor, Engine, FocalPlane, HalfWavePlate, PlateBeams, Sky, SourceTrack
 
 __all__ = ["PixelConvolve"]
 
@@ -151,6 +157,10 @@ class PixelConvolve(Operator):
         "Omega~ without the plate keeps the plate's losses (pisco.PlateBeams' omega)"
     )
 
+    sources = List([], help="pisco.SourceTrack point sources added per sample (times on the shared times' clock)")
+
+    times = Unicode(defaults.times, help="Observation shared key for the samples' times (Unix seconds), for sources")
+
     boresight = Unicode(defaults.boresight_radec, help="Observation shared key for boresight quaternions")
 
     hwp_angle = Unicode(
@@ -239,6 +249,13 @@ class PixelConvolve(Operator):
     def _check_plate_beams_period(self, proposal):
         if not (np.isfinite(proposal["value"]) and proposal["value"] > 0):
             raise traitlets.TraitError("plate_beams_period must be positive (pi for a half-wave plate)")
+        return proposal["value"]
+
+    @traitlets.validate("sources")
+    def _check_sources(self, proposal):
+        for i, track in enumerate(proposal["value"]):
+            if not isinstance(track, SourceTrack):
+                raise traitlets.TraitError(f"sources[{i}] is not a pisco.SourceTrack")
         return proposal["value"]
 
     @traitlets.validate("beams")
@@ -459,6 +476,12 @@ class PixelConvolve(Operator):
                         bad = int(np.argmin(np.isfinite(angles)))
                         raise ValueError(f"PixelConvolve: observation {ob.name}: '{self.hwp_angle}' is not finite "
                                          f"(view sample {bad}: {angles[bad]})")
+                times = None
+                if len(self.sources) > 0:
+                    if self.times not in ob.shared:
+                        raise RuntimeError(f"PixelConvolve: observation {ob.name} has no shared '{self.times}', "
+                                           "which sources need")
+                    times = np.ascontiguousarray(views.shared[self.times][vw], dtype=np.float64)
                 for det in dets:
                     out = views.detdata[self.det_data][vw][det]
                     direct = (
@@ -467,8 +490,14 @@ class PixelConvolve(Operator):
                     if direct:
                         engine.convolve(index[det], boresight_quats=quats, out=out, accumulate=not self.zero,
                                         hwp_angle=angles)
+                        if times is not None:
+                            engine.add_sources(index[det], times, self.sources, boresight_quats=quats, out=out,
+                                               hwp_angle=angles)
                     else:
                         tod = engine.convolve(index[det], boresight_quats=quats, hwp_angle=angles)
+                        if times is not None:
+                            engine.add_sources(index[det], times, self.sources, boresight_quats=quats, out=tod,
+                                               hwp_angle=angles)
                         if self.zero:
                             out[:] = scale * tod
                         else:
@@ -483,6 +512,8 @@ class PixelConvolve(Operator):
 
     def _requires(self):
         req = {"shared": [self.boresight], "detdata": [], "intervals": []}
+        if len(self.sources) > 0:
+            req["shared"].append(self.times)
         if not self.zero:
             req["detdata"].append(self.det_data)
         if self.view is not None:

@@ -19,12 +19,13 @@ POL_ANGLES_DEG = (0.0, 90.0, 22.5)
 HWP_SPEED = 2 * np.pi * 46 / 60  # LiteBIRD's LFT plate, 46 rpm, in rad/s
 
 
-def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=None, mueller_hwp=None, psi_deg=30.0):
+def observation(tmp_path, ellipticity=1.0, dtype=np.float64, seconds=600.0, hwp=None, mueller_hwp=None, psi_deg=30.0,
+                start_time=0.0):
     """A litebird_sim observation of three detectors at POL_ANGLES_DEG; `ellipticity` and `psi_deg` (the
     beams' major axes) for all, or one each."""
     ellipticity = np.broadcast_to(ellipticity, len(POL_ANGLES_DEG))
     psi_deg = np.broadcast_to(psi_deg, len(POL_ANGLES_DEG))
-    sim = lbs.Simulation(start_time=0.0, duration_s=seconds, random_seed=1, base_path=str(tmp_path / "lbs"),
+    sim = lbs.Simulation(start_time=start_time, duration_s=seconds, random_seed=1, base_path=str(tmp_path / "lbs"),
                          imo=lbs.Imo(flatfile_location=lbs.PTEP_IMO_LOCATION))
     sim.set_scanning_strategy(lbs.SpinningScanningStrategy(spin_sun_angle_rad=np.radians(45),
                                                            precession_rate_hz=1 / 600, spin_rate_hz=1 / 60),
@@ -509,3 +510,49 @@ def test_plate_beams_of_an_ideal_plate_are_the_plate_model(tmp_path):
     with pytest.raises(TypeError, match="expected a list of two or more pisco.Beamsor"):
         pisco.litebird.add_convolved_sky_to_observations(obs, sky, plain, hwp=hwp, component="pisco", backend="cpu",
                                                          coordinates=galactic, plate_beams=[plain])
+
+
+@pytest.mark.parametrize("clock", ["float", "astropy"])
+def test_sources_follow_the_observations_clock(tmp_path, clock):
+    """sources (docs/sources.md) in litebird_sim: a source whose track is detector 0's own line of sight
+    (galactic, as the sky's frame; a point every other sample, the clock the observation's float times or,
+    for an astropy start_time, Unix seconds) sits on that detector's beam axis all along: its TOD is
+    the beam's peak response at every sample (to the great circles between the points), which it would
+    leave within a second of a wrong clock (the spin moves the line of sight 3 deg a second); the other
+    detectors' TOD is the engine's own add_sources on their pointings."""
+    import astropy.time
+    from litebird_sim.coordinates import rotate_coordinates_e2g
+
+    if clock == "astropy":
+        obs = observation(tmp_path, seconds=60.0, start_time=astropy.time.Time("2030-04-01T00:00:00", scale="tdb"))
+        times = obs.get_times(astropy_times=True).unix
+    else:
+        obs = observation(tmp_path, seconds=60.0)
+        times = obs.get_times()
+    pointings = [rotate_coordinates_e2g(obs.get_pointings(i, pointings_dtype=np.float64)[0]) for i in range(3)]
+    step = np.unique(np.r_[0 : len(times) : 2, len(times) - 1])
+    track = pisco.SourceTrack("riding", list(times[step]), list(pointings[0][step, 0]), list(pointings[0][step, 1]),
+                              [1e-5] * len(times[step]))
+    obs.pisco[:] = 0
+    sky = pisco.Sky(64)
+    beam = pisco.Beamsor.gaussian(np.radians(FWHM_ARCMIN / 60.0), rho_max=2.5 * np.radians(FWHM_ARCMIN / 60.0))
+    galactic = lbs.CoordinateSystem.Galactic
+    pisco.litebird.add_convolved_sky_to_observations(obs, sky, beam, component="pisco", backend="cpu",
+                                                     coordinates=galactic, sources=[track])
+    last = len(times)
+    riding = obs.pisco[0][:last]
+    print(f"litebird sources ({clock} clock): detector 0's TOD from {riding.min():.6e} to {riding.max():.6e}")
+    assert riding.max() > 0 and riding.min() > 0.999 * riding.max()
+    fp = pisco.FocalPlane()
+    for i in range(3):
+        eta = float(obs.pol_efficiency[i]) if hasattr(obs, "pol_efficiency") else 1.0
+        epsilon = (1.0 - eta) / (1.0 + eta)
+        fp.add(str(obs.name[i]), zeta=float(obs.pol_angle_rad[i]), epsilon=epsilon, gain=2.0 / (1.0 + epsilon))
+    with pisco.Engine(sky, beam, fp, backend="cpu") as engine:
+        for i in (1, 2):
+            p = pointings[i][:last]
+            direct = engine.add_sources(i, times[:last], [track], p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
+            assert np.array_equal(obs.pisco[i][:last], direct)
+    with pytest.raises(TypeError, match=r"sources\[0\]: expected a pisco.SourceTrack, got str"):
+        pisco.litebird.add_convolved_sky_to_observations(obs, sky, beam, component="pisco", backend="cpu",
+                                                         coordinates=galactic, sources=["jupiter"])

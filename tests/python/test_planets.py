@@ -48,6 +48,9 @@ def test_in_the_ces_frame_a_track_is_astropys_topocentric_cirs():
         off = separation(np.array(track.theta), np.array(track.phi), math.pi / 2 - cirs.dec.rad, cirs.ra.rad)
         assert off.max() < 1.0 * ARCSEC, (body, off.max() / ARCSEC)
         assert track.time == list(times)
+    unix = planets.planet_track("jupiter", START, times, site=SITE, flux=1.0, unix_times=True)
+    assert np.allclose(np.array(unix.time) - Time(START, scale="utc").unix, times, rtol=0, atol=1e-6)
+    assert unix.theta == track.theta
 
 
 def test_celestial_frames_agree_with_astropys():
