@@ -23,7 +23,7 @@ Frames (``frame``):
 Flux: the body as a uniform disc of brightness temperature ``brightness_temperature`` (Rayleigh-Jeans,
 kelvin) over its apparent solid angle pi a b / d^2 (a, b: its equatorial and polar radii, d: its
 distance at each time), converted to the sky's ``units`` at ``frequency`` (GHz): ``"K_CMB"``
-(default) or ``"K_RJ"``. The flux is in units times steradians, as a SourceTrack holds it. Or give
+(default), ``"uK_CMB"`` (the unit of pisco-vk's synthesized skies), ``"K_RJ"`` or ``"uK_RJ"``. The flux is in units times steradians, as a SourceTrack holds it. Or give
 ``flux`` (a number, or one per time) in those units directly. A body's rings and phase are not
 modelled; the brightness temperature is the caller's (measured values depend on frequency and time).
 """
@@ -207,15 +207,15 @@ def planet_track(
             raise ValueError(f"site: {site!r}; expected (latitude_deg in [-90, 90], longitude_deg[, height_m])")
         latitude, longitude = math.radians(s[0]), math.radians(s[1])
         location = EarthLocation.from_geodetic(s[1] * _u.deg, s[0] * _u.deg, (s[2] if len(s) == 3 else 0.0) * _u.m)
-    if units not in ("K_CMB", "K_RJ"):
-        raise ValueError(f"units: {units!r}; expected 'K_CMB' or 'K_RJ'")
+    if units not in ("K_CMB", "uK_CMB", "K_RJ", "uK_RJ"):
+        raise ValueError(f"units: {units!r}; expected 'K_CMB', 'uK_CMB', 'K_RJ' or 'uK_RJ'")
     if (flux is None) == (brightness_temperature is None):
         raise ValueError("give the flux either as brightness_temperature (with frequency) or as flux, not both")
     if brightness_temperature is not None and not (
         math.isfinite(brightness_temperature) and brightness_temperature >= 0
     ):
         raise ValueError(f"brightness_temperature: {brightness_temperature!r}; expected kelvin, not negative")
-    if brightness_temperature is not None and units == "K_CMB" and frequency is None:
+    if brightness_temperature is not None and units.endswith("CMB") and frequency is None:
         raise ValueError("frequency: needed (GHz) to give a brightness temperature in K_CMB")
     fractions = tuple(float(x) for x in polarization)
     if len(fractions) != 3 or not all(math.isfinite(x) for x in fractions):
@@ -259,7 +259,7 @@ def planet_track(
     else:
         a, b = BODIES[key]
         omega = math.pi * a * b / np.asarray(distance) ** 2
-        scale = rayleigh_jeans_to_cmb(frequency) if units == "K_CMB" else 1.0
+        scale = (rayleigh_jeans_to_cmb(frequency) if units.endswith("CMB") else 1.0) * (1e6 if units[0] == "u" else 1.0)
         intensity = brightness_temperature * scale * omega
     return SourceTrack(
         name if name is not None else key,

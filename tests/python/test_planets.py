@@ -101,6 +101,9 @@ def test_the_flux_is_the_disc_at_its_brightness():
     omega = math.pi * 71492.0 * 66854.0 / d**2
     assert np.allclose(rj.I, 170.0 * omega, rtol=1e-6)
     assert np.allclose(track.I, 170.0 * omega * planets.rayleigh_jeans_to_cmb(150.0), rtol=1e-6)
+    micro = planets.planet_track("jupiter", START, times, site=SITE, brightness_temperature=170.0, frequency=150.0,
+                                 units="uK_CMB")
+    assert np.allclose(micro.I, 1e6 * np.array(track.I), rtol=1e-12)
     assert 15 / 206265 < math.sqrt(omega[0] / math.pi) < 25 / 206265  # Jupiter's radius: 15 to 25 arcsec
     assert track.Q == [0.0, 0.0]
     polarized = planets.planet_track("mars", START, [0.0], site=SITE, flux=2.0, polarization=(0.1, -0.2, 0.0))
