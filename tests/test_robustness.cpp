@@ -37,6 +37,9 @@ const std::string base_config =
     "[engine]\nbackend = \"cpu\"\nthreads = 1\n"
     "[output]\nplots = false\n";
 
+// The track file of the source_file variant: a source crossing the ces variant's 72 s.
+const std::string good_track = "time_s,theta_deg,phi_deg,I\n0,45,30,1\n60,45.5,30.5,1.1\n100,46,31,1\n";
+
 // `text` with the table `header` ("[sky]", "[[focal_plane.pairs]]") replaced by `body`.
 std::string with_table(const std::string& text, const std::string& header, const std::string& body) {
   const auto at = text.find(header + "\n");
@@ -127,6 +130,18 @@ std::string variant(const std::string& name) {
     c = with_table(c, "[beams.drift]", "type = \"sequence\"\ntimes_s = [0, 100]\nbeams = [\"main\", \"side\"]\n");
     return with_table(c, "[[focal_plane.pairs]]", "name = \"p\"\nbeam = \"drift\"\n");
   }
+  // Point sources (integral normalization): one fixed, one moving over the ces scan's 72 s, one from a
+  // track file.
+  if (name == "source")
+    return with_key(c, "[engine]", "normalization", "\"integral\"") +
+           "[[sources]]\nname = \"s\"\ntheta_deg = 45\nphi_deg = 30\nI = 1e-3\n";
+  if (name == "source_moving")
+    return with_key(variant("ces"), "[engine]", "normalization", "\"integral\"") +
+           "[[sources]]\nname = \"s\"\ntime_s = [0, 100]\ntheta_deg = [45, 46]\nphi_deg = [30, 31]\nI = [1, 1]\n"
+           "Q = [0, 0.1]\n";
+  if (name == "source_file")
+    return with_key(variant("ces"), "[engine]", "normalization", "\"integral\"") +
+           "[[sources]]\nname = \"s\"\nfile = \"track.csv\"\n";
   ADD_FAILURE() << "no variant " << name;
   return c;
 }
@@ -206,6 +221,13 @@ std::vector<Key> keys() {
       {"plate", "[beams.turning]", "period_deg", K::number, {"0", "-180", "721", "1e300"}},
       {"sequence", "[beams.drift]", "beams", K::strings,
        {"[\"main\"]", "[\"main\", \"nope\"]", "[\"main\", \"drift\"]", "[\"main\", \"\"]"}},
+      {"source", "[[sources]]", "name", K::string, {}},
+      {"source_moving", "[[sources]]", "time_s", K::numbers, {"[5, 1]", "[0, 0]", "[10, 200]", "[0, 10]"}},
+      {"source_moving", "[[sources]]", "theta_deg", K::numbers, {"[190, 45]", "[-1, 45]", "[0, 180]"}},
+      {"source_moving", "[[sources]]", "phi_deg", K::numbers, {"[1, 2, 3]"}},
+      {"source_moving", "[[sources]]", "I", K::numbers, {"[1]"}},
+      {"source_moving", "[[sources]]", "Q", K::numbers, {"[1, 2, 3]"}},
+      {"source_file", "[[sources]]", "file", K::path, {}},
       {"base", pair, "name", K::string, {}},
       {"base", pair, "zeta_deg", K::number, {}},
       {"base", pair, "epsilon", K::number, {"-0.1", "1.1"}},
@@ -333,6 +355,7 @@ class Robustness : public ::testing::Test {
     const pisco::HarmonicBeam blm = pisco_test::gaussian_blm(10 * pisco::deg, 64);
     pisco_test::write_alm_fits(dir_ / "beam_alm.fits", {&blm.t, &blm.e, &blm.b}, 64, 2);
     std::ofstream(dir_ / "fp.csv") << "name,zeta_deg,epsilon,gain,beam\nd1,0,0,1,main\nd2,90,0,1,main\n";
+    std::ofstream(dir_ / "track.csv") << good_track;
     std::vector<pisco::Quat> q;
     pisco::SatelliteScan sat;
     sat.sample_rate = 1;
@@ -415,7 +438,7 @@ TEST_F(Robustness, VariantsRun) {
                               "split", "detectors", "pair_ab",
                               "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file", "hwp",
                               "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file", "ces_rotating",
-                              "hwp_ces", "sequence", "plate"}) {
+                              "hwp_ces", "sequence", "plate", "source", "source_moving", "source_file"}) {
     const fs::path cfg = write("variant.toml", variant(v));
     const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "variant-out").string()}, {}, 60);
     EXPECT_TRUE(r.exited && r.status == 0) << v << ": " << r.describe() << "\n" << r.output << "\n" << variant(v);
@@ -491,6 +514,34 @@ TEST_F(Robustness, MalformedHalfWavePlates) {
   pisco::BoresightFile::write(dir_ / "bore_hwp.h5", q, {}, h);
   expect_clean_error("a NaN plate angle", variant("hwp_file"), "'/hwp_angle' sample 321 is not finite");
   pisco::BoresightFile::write(dir_ / "bore_hwp.h5", q, {}, plate_angles(q.size()));
+}
+
+// Source track files (docs/formats.md, "Source tracks"): every kind of bad header and row, each named
+// by the file, its line and the column.
+TEST_F(Robustness, MalformedTrackFiles) {
+  const std::string cfg = variant("source_file");
+  const std::vector<std::pair<std::string, std::string>> csv{
+      {"", "track.csv: no header"},
+      {"# nothing but this\n", "track.csv: no header"},
+      {"time_s,theta_deg,phi_deg,I\n", "track.csv: no rows after the header"},
+      {"time_s,theta_deg,phi_deg,flux\n", "track.csv:1: unknown column 'flux'"},
+      {"time_s,theta_deg,I\n0,1,2\n", "track.csv:1: the header needs a 'phi_deg' column"},
+      {"time_s,theta_deg,phi_deg,I,I\n", "track.csv:1: column 'I' appears twice"},
+      {"time_s,theta_deg,phi_deg,I\n0,10,20\n", "track.csv:2: expected 4 fields, got 3"},
+      {"time_s,theta_deg,phi_deg,I\n0,10,20,x\n", "track.csv:2: column 'I': expected a finite number, got 'x'"},
+      {"time_s,theta_deg,phi_deg,I\n0,10,nan,1\n", "track.csv:2: column 'phi_deg'"},
+      {"time_s,theta_deg,phi_deg,I\n0,10,inf,1\n", "track.csv:2: column 'phi_deg'"},
+      {"time_s,theta_deg,phi_deg,I\n0,181,20,1\n", "track.csv:2: column 'theta_deg': 181 is outside [0, 180]"},
+      {"time_s,theta_deg,phi_deg,I\n0,10,20,1\n0,10,20,1\n", "track.csv:3: column 'time_s': 0 does not follow"},
+      {"time_s,theta_deg,phi_deg,I\n0,30,0,1\n100,150,180,1\n", "opposite the previous point's"},
+      {"time_s,theta_deg,phi_deg,I\n10,30,0,1\n100,31,0,1\n", "[sources[0]] file: the track spans 10 to 100 s, but the run's samples are at 0 to 71.5 s"},
+      {std::string("\0\1\2\3\xff,\n", 7), "track.csv:1"},
+  };
+  for (const auto& [text, needle] : csv) {
+    write("track.csv", text);
+    expect_clean_error("track.csv: " + text.substr(0, 30), cfg, needle);
+  }
+  write("track.csv", good_track);
 }
 
 // Focal-plane tables: CSV and TOML files with every kind of bad row.

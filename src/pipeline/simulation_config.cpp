@@ -590,7 +590,16 @@ void assign_plates(SimulationConfig& c, const fs::path& file) {
 // source without time_s is fixed, its values single numbers or arrays of one. Moving sources need the
 // samples' times: a scan with a sample rate. `file` instead reads the track from a CSV file
 // (SourceTrack::read_csv).
-std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& file, double rate) {
+std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& file, double rate, std::size_t samples) {
+  // A moving source's track must span the run's samples, at 0 to (samples - 1) / rate seconds.
+  const auto check_span = [&](Table& t, const SourceTrack& s, const std::string& key) {
+    if (s.time.size() < 2 || samples == 0 || !(rate > 0)) return;
+    const double last = double(samples - 1) / rate;
+    if (s.time.front() > 0.0 || s.time.back() < last)
+      t.fail(key, "the track spans " + Table::format(s.time.front()) + " to " + Table::format(s.time.back()) +
+                      " s, but the run's samples are at 0 to " + Table::format(last) +
+                      " s (sample i at i / sample_rate_hz); extend it, with zero flux where the source is absent");
+  };
   std::vector<SourceTrack> out;
   std::size_t i = 0;
   for (const auto& node : list) {
@@ -606,6 +615,7 @@ std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& f
       s = SourceTrack::read_csv(t.input_file("file"), s.name);
       if (s.time.size() > 1 && !(rate > 0))
         t.fail("file", "a moving source needs the samples' times, which only a ces or satellite scan gives");
+      check_span(t, s, "file");
       t.finish();
       out.push_back(std::move(s));
       continue;
@@ -631,6 +641,7 @@ std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& f
     if (moving && s.time.size() > 1 && !(rate > 0))
       t.fail("time_s", "a moving source needs the samples' times, which only a ces or satellite scan gives; use "
                        "one, or a fixed source");
+    check_span(t, s, "time_s");
     t.finish();
     out.push_back(std::move(s));
   }
@@ -706,7 +717,10 @@ SimulationConfig read_simulation_file(const fs::path& file) {
   c.sample_rate = scan_sample_rate(c.scan);
   check_combined_beams(c, *beams, file);
   if (const toml::array* sources = t.array_of_tables("sources")) {
-    c.sources = read_sources(*sources, file, c.sample_rate);
+    const std::size_t samples = c.scan.kind == ScanKind::ces         ? c.scan.ces.samples
+                                : c.scan.kind == ScanKind::satellite ? c.scan.satellite.samples
+                                                                     : 0;
+    c.sources = read_sources(*sources, file, c.sample_rate, samples);
     if (c.engine.options.normalization != pisco::Normalization::integral)
       t.fail("sources", "point sources need [engine] normalization = \"integral\"");
   }
