@@ -48,6 +48,19 @@ enum class CrossPolarPattern {
   quadrupole,
 };
 
+// A far sidelobe added to a Gaussian beam's pattern (docs/beams.md, "Far sidelobes"): a ring of peak
+// `level` (relative to the main beam's peak, linear) at `radius` from the axis, Gaussian in rho of
+// standard deviation `width`, weighted around the axis by (1 + asymmetry cos(sigma - angle)) / (1 +
+// asymmetry): uniform at asymmetry 0, a single lobe towards `angle` (from theta' towards phi') at 1.
+// Spillover past the mirrors, which sees the ground and the Sun. Off while level is 0.
+struct FarSidelobe {
+  double level = 0.0;
+  double radius = 0.0;     // radians
+  double width = 0.0;      // radians
+  double angle = 0.0;      // radians
+  double asymmetry = 0.0;  // in [0, 1]
+};
+
 struct BeamOptions {
   double rho_max = 5 * deg;              // radians; must be in (0, pi/2)
   double grid_step = 0.0;                // radians; 0 = 1/16 of the smallest FWHM (round: 1/20)
@@ -57,6 +70,7 @@ struct BeamOptions {
   // (MuellerBounds::relative).
   Mueller mueller = identity_mueller();
   SidelobeSplit split;                   // a main and an outer part (beam_files.hpp); off by default
+  FarSidelobe far_sidelobe;              // Gaussian beams only; off by default
 };
 
 class Beamsor {

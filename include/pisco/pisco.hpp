@@ -16,5 +16,6 @@
 #include "pisco/quaternion.hpp"
 #include "pisco/sky.hpp"
 #include "pisco/sources.hpp"
+#include "pisco/ground.hpp"
 #include "pisco/units.hpp"
 #include "pisco/version.hpp"

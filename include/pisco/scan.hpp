@@ -56,6 +56,14 @@ struct CesScan {
   std::optional<TimeProblem> time_problem() const;
   // Boresight pointing of samples [first, first + count), appended to `out` (cleared first).
   void generate(std::size_t first, std::size_t count, Pointing& out) const;
+  // The same boresight in the horizon frame (docs/ground.md): z at the zenith, x to the north, y to the
+  // west, so that colatitude is 90 deg - elevation and longitude is -azimuth (TOAST's boresight_azel);
+  // psi pi + the boresight rotation, theta' towards the zenith at rotation 0 as in generate(). The
+  // two differ by the rotation from the horizon to the sky at each sample, which the ground does not
+  // take part in: a ground map in this frame turns with the Earth.
+  void generate_horizon(std::size_t first, std::size_t count, Pointing& out) const;
+  // The boresight rotation at sample i (radians): boresight_angles in turn, each held boresight_period.
+  double boresight_angle(std::size_t i) const;
   // Azimuth and elevation of the boresight at sample i (radians), for tests and diagnostics.
   double azimuth(std::size_t i) const;
   // Local sidereal time at sample i (radians).

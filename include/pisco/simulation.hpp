@@ -117,6 +117,10 @@ struct SimulationBeams {
 SimulationBeams make_beams(const SimulationConfig& config,
                            const std::function<void(const std::string&)>& log = {});
 
+// [ground]'s map in the horizon frame (docs/ground.md), in the sky's units: the file's (whose units, when
+// it gives them, must be the sky's), or the model at its NSIDE with its temperature in those units.
+Sky make_ground_sky(const GroundConfig& ground, const Sky& sky, const std::filesystem::path& origin);
+
 // The engine of a run: [engine]'s options with [sky] unseen. With several processes on a node, they
 // share it out: the cpu and simd backends' hardware threads, or the devices of a GPU backend, process
 // k on the node taking device k modulo their number.
@@ -175,6 +179,10 @@ struct SimulationResult {
   std::vector<std::string> warnings;
   // Not empty when the maps solve no pixel: why (maps.fits is all UNSEEN; no spectra were made).
   std::string nothing_solved;
+  // [ground]: what the detectors picked up from the ground (docs/ground.md), in the sky's units over
+  // every detector's samples: its mean, its scan-synchronous part (the RMS about each detector's own
+  // mean, over the detectors) and the largest peak to peak of a detector's.
+  double ground_mean = 0.0, ground_rms = 0.0, ground_peak_to_peak = 0.0;
 };
 
 class Simulation {

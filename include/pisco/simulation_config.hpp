@@ -13,6 +13,7 @@
 #include "pisco/beamsor.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/focal_plane.hpp"
+#include "pisco/ground.hpp"
 #include "pisco/sources.hpp"
 #include "pisco/focal_plane_file.hpp"
 #include "pisco/hwp.hpp"
@@ -132,6 +133,18 @@ struct MapmakerConfig {
   double target_fwhm = 0.0;     // deconvolve: radians; > 0: maps.fits reconvolved with this Gaussian
 };
 
+// [ground]: the ground through the far sidelobes of a ces scan (docs/ground.md): a map in the horizon
+// frame, read from `file` (in the sky's units) or made from the model (its brightness `temperature`
+// kelvin Rayleigh-Jeans, converted to the sky's units at `frequency_ghz`), at `nside`.
+struct GroundConfig {
+  bool enabled = false;
+  std::filesystem::path file;
+  GroundModel model;              // value filled from temperature when the run makes the map
+  double temperature = 300.0;     // K (Rayleigh-Jeans)
+  double frequency_ghz = 0.0;     // for skies in K_CMB or uK_CMB
+  int nside = 128;
+};
+
 struct SimulationConfig {
   std::filesystem::path source;  // the simulation file ("" for built-in defaults)
   std::string text;              // its contents, recorded as provenance
@@ -147,6 +160,7 @@ struct SimulationConfig {
   // [[sources]]: point sources added to every detector's TOD (docs/sources.md), their times seconds
   // from the run's first sample.
   std::vector<SourceTrack> sources;
+  GroundConfig ground;
   // The samples' rate (Hz) that gives each sample's time, i / sample_rate, for the sources and for beams
   // that change with time (the scan's; 0 when the scan has none, which only fixed sources and beams allow).
   double sample_rate = 0.0;

@@ -35,17 +35,20 @@ from ._pisco import (
     default_hwp_gamma,
     deg,
     devices,
+    ground_sky,
     ideal_hwp_mueller,
     mueller_tolerance,
     offset_quat,
     quat_from_pointing,
     quat_to_pointing,
     read_toast_focal_plane,
+    rayleigh_jeans_in,
     rotated_mueller,
     unit_quat_tolerance,
     unseen,
     valid_nside,
 )
+from ._ground import horizon_pointing
 from ._focal_plane import focal_plane_from_columns, focal_plane_from_toast, quat_multiply
 
 # The table builders are FocalPlane's own constructors as well: FocalPlane.from_columns(...).
@@ -77,12 +80,15 @@ __all__ = [
     "devices",
     "focal_plane_from_columns",
     "focal_plane_from_toast",
+    "ground_sky",
+    "horizon_pointing",
     "ideal_hwp_mueller",
     "mueller_tolerance",
     "offset_quat",
     "quat_from_pointing",
     "quat_multiply",
     "quat_to_pointing",
+    "rayleigh_jeans_in",
     "read_toast_focal_plane",
     "rotated_mueller",
     "unit_quat_tolerance",

@@ -71,6 +71,12 @@ def quat_to_pointing(q: ArrayLike) -> tuple[float, float, float]:
 def valid_nside(nside: int) -> bool:
     """Whether nside is a power of two in [1, 8192]."""
 
+def ground_sky(nside: int, value: float, horizon: Sequence[float] = ..., width: float = 0.0, units: str = "uK_CMB") -> Sky:
+    """A ground in the horizon frame: `value` below the horizon (elevations at azimuths 2 pi k / N), 0 above."""
+
+def rayleigh_jeans_in(units: str, kelvin: float, frequency_ghz: float = 0.0) -> float:
+    """A Rayleigh-Jeans brightness temperature in K_RJ, uK_RJ, K_CMB or uK_CMB (at frequency_ghz)."""
+
 def ang2pix(nside: int, theta: float, phi: float) -> int:
     """The RING pixel containing (theta, phi)."""
 
@@ -130,6 +136,7 @@ class Beamsor:
         cross_polar_pattern: str = "uniform",
         mueller: ArrayLike | None = None,
         sidelobes: float | tuple[float, ...] | None = None,
+        far_sidelobe: tuple[float, ...] | None = None,
     ) -> Beamsor:
         """A circular Gaussian beam of full width at half maximum `fwhm`, summed out to rho_max (5 deg)."""
     @staticmethod
@@ -143,6 +150,7 @@ class Beamsor:
         cross_polar_pattern: str = "uniform",
         mueller: ArrayLike | None = None,
         sidelobes: float | tuple[float, ...] | None = None,
+        far_sidelobe: tuple[float, ...] | None = None,
     ) -> Beamsor:
         """fwhm_x along the direction `angle` (from theta' towards phi'), fwhm_y across it."""
     @staticmethod

@@ -80,9 +80,15 @@ Beamsor::Field gaussian_field(double sx, double sy, double angle, const BeamOpti
   const CrossPolarPattern pattern = o.cross_polar_pattern;
   const Mueller m = o.mueller;
   const double q_scale = 0.5 / (sx * sy);  // 1 / 2 s^2 with s the geometric-mean width
+  const FarSidelobe far = o.far_sidelobe;
   return [=](double rho, double sigma) {
     const double u = rho * std::cos(sigma - angle), v = rho * std::sin(sigma - angle);
-    const double b = std::exp(-(ax * u * u + ay * v * v));
+    double b = std::exp(-(ax * u * u + ay * v * v));
+    if (far.level > 0.0) {
+      const double r = (rho - far.radius) / far.width;
+      b += far.level * std::exp(-0.5 * r * r) * (1.0 + far.asymmetry * std::cos(sigma - far.angle)) /
+           (1.0 + far.asymmetry);
+    }
     double k = kappa;
     if (pattern == CrossPolarPattern::quadrupole) {
       // rho^2 sin(2 sigma) is smooth through the axis; the radial factor peaks at rho = sqrt(2) s.
@@ -335,8 +341,11 @@ Beamsor Beamsor::split_field(const Field& field, double rho_max, double grid_ste
   // The outer part's band limit, from its mean radial profile (T to T) on the field itself; it sets
   // the outer grid's step (its features are no finer than the taper or pi / l_b): bilinear
   // interpolation at taper / 8 or 0.5 / l_b, and a grid small enough to stay in cache.
+  // Simpson's rule resolves P_l up to lcheck only with four or more nodes per period (2 pi / l): fewer
+  // alias the profile's low harmonics onto high l, which would read as a band limit near lcheck.
   const int lcheck = 4096;
-  const int steps = 2 * std::max(512, static_cast<int>(std::ceil(rho_max / (grid_step / 2) / 2)));
+  const int steps = 2 * std::max({512, static_cast<int>(std::ceil(rho_max / (grid_step / 2) / 2)),
+                                  static_cast<int>(std::ceil(lcheck * rho_max / pi))});
   const auto profile = [&](double rho) {
     double sum = 0.0;
     for (int k = 0; k < 32; ++k) sum += field(rho, 2 * pi * k / 32)[0][0];
@@ -393,10 +402,24 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
   if (!std::isfinite(angle)) throw Error("beam: angle must be finite");
   if (!std::isfinite(options.cross_polar)) throw Error("beam: cross_polar must be finite");
   check_mueller(options.mueller, "beam: the constant Mueller matrix (mueller)", MuellerBounds::relative);
+  const FarSidelobe& far = options.far_sidelobe;
+  if (!(std::isfinite(far.level) && far.level >= 0.0))
+    throw Error("beam: the far sidelobe's level must be a finite power ratio, not negative");
+  if (far.level > 0.0) {
+    if (!(std::isfinite(far.radius) && far.radius > 0.0 && far.radius <= options.rho_max))
+      throw Error("beam: the far sidelobe's radius " + degrees_text(far.radius) + " must lie in (0, rho_max = " +
+                  degrees_text(options.rho_max) + "]");
+    if (!(std::isfinite(far.width) && far.width > 0.0 && far.width <= pi))
+      throw Error("beam: the far sidelobe's width must be a positive angle, got " + degrees_text(far.width));
+    if (!std::isfinite(far.angle)) throw Error("beam: the far sidelobe's angle must be finite");
+    if (!(far.asymmetry >= 0.0 && far.asymmetry <= 1.0))
+      throw Error("beam: the far sidelobe's asymmetry must lie in [0, 1]");
+  }
   const double to_sigma = 1.0 / std::sqrt(8.0 * std::log(2.0));
   const double smallest = std::min(fwhm_x, fwhm_y);
-  const bool radial = fwhm_x == fwhm_y && (options.cross_polar == 0.0 ||
-                                           options.cross_polar_pattern == CrossPolarPattern::uniform);
+  const bool radial = fwhm_x == fwhm_y &&
+                      (options.cross_polar == 0.0 || options.cross_polar_pattern == CrossPolarPattern::uniform) &&
+                      (far.level == 0.0 || far.asymmetry == 0.0);
   // The default step: FWHM / 16 on the 2D grid (its interpolation error is of order step^3, docs/physics.md,
   // "Interpolation on the grid"), FWHM / 20 for a radial profile (sampled 64 times finer).
   const double step = options.grid_step > 0 ? options.grid_step : smallest / (radial ? 20.0 : 16.0);
@@ -406,6 +429,8 @@ Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
   else
     d << "elliptical Gaussian FWHM " << fwhm_x * 180 / pi << " x " << fwhm_y * 180 / pi
       << " deg at " << angle * 180 / pi << " deg";
+  if (far.level > 0.0)
+    d << ", far sidelobe " << 10.0 * std::log10(far.level) << " dB at " << far.radius * 180 / pi << " deg";
   if (options.cross_polar != 0.0)
     d << ", cross-polar " << options.cross_polar
       << (options.cross_polar_pattern == CrossPolarPattern::uniform ? " (uniform)" : " (quadrupole)");

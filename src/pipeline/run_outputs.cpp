@@ -211,4 +211,42 @@ MapOutputs write_binned_maps(const SimulationConfig& c, const Sky& sky, int maps
   return out;
 }
 
+std::vector<fs::path> write_ground_maps(const SimulationConfig& c, const Sky& sky, int maps_nside,
+                                        pisco::BinnedMapmaker& ground, const std::function<void(const std::string&)>& log) {
+  const BinnedMaps maps = ground.solve();
+  const fs::path maps_path = c.output.dir / "ground_maps.fits";
+  write_healpix_map(maps_path, maps_nside, {{"I_STOKES", maps.I}, {"Q_STOKES", maps.Q}, {"U_STOKES", maps.U}},
+                    sky.units());
+  std::vector<fs::path> written{maps_path};
+  double ii = 0, pp = 0, mean = 0;
+  std::size_t n = 0;
+  for (std::size_t p = 0; p < maps.I.size(); ++p)
+    if (maps.I[p] != pisco::unseen) mean += maps.I[p], ++n;
+  if (n == 0) return written;
+  mean /= double(n);
+  for (std::size_t p = 0; p < maps.I.size(); ++p)
+    if (maps.I[p] != pisco::unseen) {
+      ii += (maps.I[p] - mean) * (maps.I[p] - mean);
+      pp += maps.Q[p] * maps.Q[p] + maps.U[p] * maps.U[p];
+    }
+  log(detail::printf_text("ground: in the maps (ground_maps.fits, the ground's TOD alone binned): mean I %.4g, rms I "
+                          "about it %.4g, rms P %.4g %s\n",
+                          mean, std::sqrt(ii / double(n)), std::sqrt(pp / double(n)), sky.units().c_str()));
+  if (c.output.spectra) {
+    const int lmax = c.output.lmax > 0 ? c.output.lmax : 2 * maps_nside;
+    std::vector<double> bt, bp, pt, pw;
+    std::string note = "the ground's TOD alone, binned as maps.fits";
+    if (c.output.deconvolve_pixel_window) {
+      pt = pisco::pixel_window(maps_nside, lmax, false);
+      pw = pisco::pixel_window(maps_nside, lmax, true);
+      note += ", divided by the NSIDE " + std::to_string(maps_nside) + " pixel window";
+    }
+    const fs::path spectra_path = c.output.dir / "ground_spectra.txt";
+    write_spectra(spectra_path, pisco::deconvolve_windows(pisco::anafast(maps.I, maps.Q, maps.U, maps_nside, lmax), bt, bp, pt, pw),
+                  lmax, note);
+    written.push_back(spectra_path);
+  }
+  return written;
+}
+
 }  // namespace pisco::detail

@@ -57,4 +57,10 @@ MapOutputs write_deconvolved_maps(const SimulationConfig& c, const Sky& sky, int
 MapOutputs write_binned_maps(const SimulationConfig& c, const Sky& sky, int maps_nside, pisco::BinnedMapmaker& mapmaker,
                              bool flagging, const std::function<void(const std::string&)>& log);
 
+// [ground]: the ground's TOD alone, binned as the maps are (ground_maps.fits, I Q U) and its spectra
+// (ground_spectra.txt, the same windows divided out as spectra.txt's), and a line of the run's
+// account with their RMS beside the maps' own: what the ground leaves in the maps.
+std::vector<fs::path> write_ground_maps(const SimulationConfig& c, const Sky& sky, int maps_nside,
+                                        pisco::BinnedMapmaker& ground, const std::function<void(const std::string&)>& log);
+
 }  // namespace pisco::detail

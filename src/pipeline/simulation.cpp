@@ -152,6 +152,26 @@ std::optional<pisco::DeconvolvedMaps> deconvolve(const SimulationConfig& c, cons
   return deconvolved;
 }
 
+// [ground]: the pickup over every process's samples (SimulationResult's ground_ fields).
+void ground_summary(const std::vector<detail::JobStream::GroundStats>& stats, RunContext& cl, SimulationResult& r) {
+  double sum = 0.0, n = 0.0, variance = 0.0, detectors = 0.0, peak = 0.0;
+  for (const auto& g : stats) {
+    const double dn = cl.sum_of(double(g.n));
+    const double ds = cl.sum_of(g.sum), ds2 = cl.sum_of(g.sum2);
+    const double hi = cl.max(g.max), lo = -cl.max(-g.min);
+    if (dn == 0) continue;
+    sum += ds;
+    n += dn;
+    const double mean = ds / dn;
+    variance += std::max(0.0, ds2 / dn - mean * mean);
+    detectors += 1.0;
+    peak = std::max(peak, hi - lo);
+  }
+  r.ground_mean = n > 0 ? sum / n : 0.0;
+  r.ground_rms = detectors > 0 ? std::sqrt(variance / detectors) : 0.0;
+  r.ground_peak_to_peak = peak;
+}
+
 }  // namespace
 
 Simulation::Simulation(SimulationConfig config, SimulationOptions options)
@@ -192,6 +212,22 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   std::optional<Engine> engine_holder;
   cl.step([&] { engine_holder.emplace(make_engine(sky, beams, fp, c, cl)); });
   Engine& engine = *engine_holder;
+  // [ground]: a second engine over the ground map in the horizon frame, with the same beams.
+  std::optional<Engine> ground_engine;
+  if (c.ground.enabled) {
+    std::optional<Sky> ground_sky;
+    cl.step([&] { ground_sky.emplace(make_ground_sky(c.ground, sky, c.source)); });
+    cl.step([&] {
+      try {
+        ground_engine.emplace(make_engine(*ground_sky, beams, fp, c, cl));
+      } catch (const Error& e) {
+        throw Error(c.source.string() + ": [ground]: " + e.what(), e.kind());
+      }
+    });
+    const auto [lo, hi] = std::minmax_element(ground_sky->I().begin(), ground_sky->I().end());
+    say("ground: NSIDE %d in the horizon frame, %s, from %.6g to %.6g %s\n", ground_sky->nside(),
+        c.ground.file.empty() ? "the model" : c.ground.file.string().c_str(), *lo, *hi, sky.units().c_str());
+  }
   say("backend: %s (%s)%s\n", engine.backend_name().c_str(), engine.device_name().c_str(),
       cl.parallel() ? (", rank 0 of " + std::to_string(cl.size()) + " (" + std::to_string(cl.node_size()) +
                        " on its node)").c_str()
@@ -219,6 +255,12 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   std::optional<pisco::BinnedMapmaker> mapper;
   std::optional<pisco::DeconvolvingMapmaker> deconvolver;
   make_mapmakers(c, sky, engine, deconvolving, maps_nside, host_threads, cl, mapper, deconvolver);
+  // [ground]: its TOD alone binned as the maps are, to show what it leaves in them.
+  std::optional<pisco::BinnedMapmaker> ground_mapper;
+  if (ground_engine && mapper) {
+    ground_mapper.emplace(maps_nside, c.output.rcond_min);
+    ground_mapper->set_threads(host_threads);
+  }
   const fs::path tod_path = c.output.dir / "tod.h5";
   std::optional<pisco::TodWriter> tod_file;
   if (c.output.tod) tod_file = open_tod_file(c, tod_path, sky, made, engine, fp, samples_per_detector, flagging, cl);
@@ -235,11 +277,16 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   std::uint64_t flagged = 0;
   {
     JobStream stream(c, fp, *scan, engine,
-                     {mapper ? &*mapper : nullptr, deconvolver ? &*deconvolver : nullptr, tod_file ? &*tod_file : nullptr},
-                     flagging, chunk, host_threads, obs);
+                     {mapper ? &*mapper : nullptr, ground_mapper ? &*ground_mapper : nullptr,
+                      deconvolver ? &*deconvolver : nullptr, tod_file ? &*tod_file : nullptr},
+                     flagging, chunk, host_threads, obs, ground_engine ? &*ground_engine : nullptr);
     stream.run(plan, cl);
     flagged = stream.flagged();
+    if (ground_engine) ground_summary(stream.ground_stats(), cl, result);
   }
+  if (ground_engine)
+    say("ground: picked up through the beams: mean %.6g %s, scan-synchronous rms %.6g, largest peak to peak %.6g\n",
+        result.ground_mean, sky.units().c_str(), result.ground_rms, result.ground_peak_to_peak);
   obs.end_convolution();
   const double my_conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
   const double conv = cl.max(my_conv);  // the slowest rank's
@@ -255,6 +302,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   flagged = cl.sum(flagged);
   std::uint64_t reduced_bytes = 0;
   if (mapper) cl.step([&] { reduced_bytes = cl.sum(cl.reduce(*mapper)); });
+  if (ground_mapper) cl.step([&] { reduced_bytes += cl.sum(cl.reduce(*ground_mapper)); });
   if (flagging)
     say("flags: %llu of %llu samples flagged (their disc holds an UNSEEN pixel)%s\n",
         static_cast<unsigned long long>(flagged), static_cast<unsigned long long>(total),
@@ -274,6 +322,8 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     const MapOutputs out = deconvolved ? write_deconvolved_maps(c, sky, maps_nside, *deconvolved, *mapper, log)
                                        : write_binned_maps(c, sky, maps_nside, *mapper, flagging, log);
     written.insert(written.end(), out.written.begin(), out.written.end());
+    if (ground_mapper && out.nothing_solved.empty())
+      for (const auto& f : write_ground_maps(c, sky, maps_nside, *ground_mapper, log)) written.push_back(f);
     result.solved_pixels = out.solved;
     nothing_solved = out.nothing_solved;
   });

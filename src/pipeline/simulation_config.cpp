@@ -209,6 +209,25 @@ BeamConfig read_beam(Table t, const std::string& name) {
         t.choice("cross_polar_pattern", "uniform", {"uniform", "quadrupole"}) == "uniform"
             ? pisco::CrossPolarPattern::uniform
             : pisco::CrossPolarPattern::quadrupole;
+    if (t.has("far_sidelobe_db")) {  // docs/beams.md, "Far sidelobes"
+      const double db = t.number("far_sidelobe_db", 0.0);
+      if (!(db <= 0.0 && db >= -200.0)) t.fail("far_sidelobe_db", "expected a level in [-200, 0] dB of the main beam's peak");
+      pisco::FarSidelobe& far = b.options.far_sidelobe;
+      far.level = std::pow(10.0, db / 10.0);
+      far.radius = t.number("far_sidelobe_deg", 0.0) * deg;
+      if (!(far.radius > 0.0 && far.radius <= b.options.rho_max))
+        t.fail("far_sidelobe_deg", "expected the ring's radius in (0, rho_max_deg = " + Table::format(b.options.rho_max / deg) + "]");
+      far.width = t.number("far_sidelobe_width_deg", 0.0) * deg;
+      if (!(far.width > 0.0 && far.width <= 180.0 * deg))
+        t.fail("far_sidelobe_width_deg", "expected a positive width (deg, at most 180)");
+      far.angle = t.number("far_sidelobe_angle_deg", 0.0) * deg;
+      far.asymmetry = t.number("far_sidelobe_asymmetry", 0.0);
+      if (!(far.asymmetry >= 0.0 && far.asymmetry <= 1.0))
+        t.fail("far_sidelobe_asymmetry", "expected a number in [0, 1] (0: a uniform ring, 1: a single lobe)");
+    } else {
+      for (const char* key : {"far_sidelobe_deg", "far_sidelobe_width_deg", "far_sidelobe_angle_deg", "far_sidelobe_asymmetry"})
+        if (t.has(key)) t.fail(key, "a far sidelobe needs far_sidelobe_db");
+    }
     const std::vector<double> m = t.numbers("mueller", {});
     if (!m.empty()) {
       if (m.size() != 16) t.fail("mueller", "expected 16 numbers (a 4x4 Mueller matrix, row by row)");
@@ -648,6 +667,43 @@ std::vector<SourceTrack> read_sources(const toml::array& list, const fs::path& f
   return out;
 }
 
+// [ground] (docs/config.md, docs/ground.md): a map file in the horizon frame, or the model's keys.
+GroundConfig read_ground(Table t, const ScanConfig& scan, const fs::path& file) {
+  GroundConfig g;
+  g.enabled = true;
+  if (scan.kind != ScanKind::ces)
+    throw pisco::Error(file.string() + ": [ground]: the ground is seen from constant-elevation scans; [scan] type is \"" +
+                       std::string(scan_kind_name(scan.kind)) + "\" (expected \"ces\")");
+  g.file = t.input_file("file");
+  if (!g.file.empty()) {
+    for (const char* key : {"temperature_k", "frequency_ghz", "horizon_deg", "horizon_width_deg", "nside"})
+      if (t.has(key)) t.fail(key, "a ground map file (file) takes no model keys");
+    t.finish();
+    return g;
+  }
+  g.temperature = t.number("temperature_k", 300.0);
+  if (!(g.temperature >= 0.0 && g.temperature <= 1e4)) t.fail("temperature_k", "expected kelvin in [0, 1e4]");
+  g.frequency_ghz = t.number("frequency_ghz", 0.0);
+  if (!(g.frequency_ghz >= 0.0 && g.frequency_ghz <= 1e4)) t.fail("frequency_ghz", "expected GHz in (0, 1e4]");
+  const std::vector<double> horizon = t.numbers_or_number("horizon_deg").value_or(std::vector<double>{0.0});
+  if (horizon.empty() || horizon.size() > 36000)
+    t.fail("horizon_deg", "expected one elevation, or 1 to 36000 at equally spaced azimuths from north");
+  g.model.horizon.clear();
+  for (double h : horizon) {
+    if (!(h > -90.0 && h < 90.0)) t.fail("horizon_deg", "expected elevations within (-90, 90) deg, got " + Table::format(h));
+    g.model.horizon.push_back(h * deg);
+  }
+  g.model.width = t.number("horizon_width_deg", 1.0) * deg;
+  if (!(g.model.width >= 0.0 && g.model.width <= 90.0 * deg))
+    t.fail("horizon_width_deg", "expected a width in [0, 90] deg (0: a sharp edge)");
+  const double nside = t.number("nside", 128.0);
+  const int n = nside >= 1 && nside <= 8192 ? static_cast<int>(nside) : -1;
+  if (!(n >= 1 && nside == n && (n & (n - 1)) == 0)) t.fail("nside", "expected a power of two in [1, 8192]");
+  g.nside = n;
+  t.finish();
+  return g;
+}
+
 SimulationConfig read_simulation_file(const fs::path& file) {
   SimulationConfig c;
   c.source = file;
@@ -716,6 +772,7 @@ SimulationConfig read_simulation_file(const fs::path& file) {
   assign_plates(c, file);
   c.sample_rate = scan_sample_rate(c.scan);
   check_combined_beams(c, *beams, file);
+  if (const toml::table* ground = t.table("ground")) c.ground = read_ground(Table(*ground, "ground", file), c.scan, file);
   if (const toml::array* sources = t.array_of_tables("sources")) {
     const std::size_t samples = c.scan.kind == ScanKind::ces         ? c.scan.ces.samples
                                 : c.scan.kind == ScanKind::satellite ? c.scan.satellite.samples

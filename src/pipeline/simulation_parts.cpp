@@ -206,6 +206,25 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
   return out;
 }
 
+Sky make_ground_sky(const GroundConfig& g, const Sky& sky, const fs::path& origin) {
+  const std::string where = origin.string() + ": [ground] ";
+  if (!g.file.empty()) {
+    pisco::Sky ground = pisco::Sky::read_fits(g.file, pisco::UnseenPolicy::error);
+    if (!ground.units().empty() && !sky.units().empty() && ground.units() != sky.units())
+      throw pisco::Error(where + "file: " + g.file.string() + " is in '" + ground.units() + "', the sky in '" +
+                         sky.units() + "' (expected the sky's units: the two add up in one TOD)");
+    ground.set_units(sky.units());
+    return ground;
+  }
+  pisco::GroundModel model = g.model;
+  try {
+    model.value = pisco::rayleigh_jeans_in(sky.units(), g.temperature, g.frequency_ghz);
+  } catch (const pisco::Error& e) {
+    throw pisco::Error(where + "temperature_k: " + e.what() + (g.frequency_ghz > 0 ? "" : " (frequency_ghz)"));
+  }
+  return pisco::ground_sky(g.nside, model, sky.units());
+}
+
 Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const FocalPlane& fp, const SimulationConfig& c,
                    const RunContext& cl) {
   EngineOptions engine_options = c.engine.options;

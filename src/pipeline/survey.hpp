@@ -281,6 +281,7 @@ decltype(auto) with_view(const pisco::SurveyChunk& chunk, F&& f) {
 // What the TOD streams into: the map-makers and the TOD file (each absent when not asked for).
 struct StreamSinks {
   pisco::BinnedMapmaker* binned = nullptr;
+  pisco::BinnedMapmaker* ground = nullptr;  // [ground]: the ground's TOD alone, binned
   pisco::DeconvolvingMapmaker* deconvolver = nullptr;  // its right-hand side A^T d
   pisco::TodWriter* tod = nullptr;
 };
@@ -292,9 +293,10 @@ struct StreamSinks {
 class JobStream {
  public:
   JobStream(const SimulationConfig& c, const FocalPlane& fp, const ScanSource& scan, Engine& engine, StreamSinks sinks,
-            bool flagging, std::size_t chunk, unsigned host_threads, RunObserver& obs)
+            bool flagging, std::size_t chunk, unsigned host_threads, RunObserver& obs, Engine* ground = nullptr)
       : c_(c), fp_(fp), engine_(engine), sinks_(sinks), flagging_(flagging), obs_(obs),
-        modelled_(fp.detectors()), host_(host_threads), pointing_(c, fp, scan, &host_) {
+        modelled_(fp.detectors()), host_(host_threads), pointing_(c, fp, scan, &host_), ground_(ground),
+        ground_stats_(fp.size()) {
     for (auto& t : tod_) t.resize(chunk);
     // The detectors as the map-maker models them (with [hwp] mapmaker = "ideal": an ideal plate in
     // place of the real one; beams that turn with the plate: an ideal plate at the aperture, at their
@@ -328,6 +330,13 @@ class JobStream {
   }
 
   std::uint64_t flagged() const { return flagged_; }
+
+  // [ground]: each detector's pickup, summed over this process's samples.
+  struct GroundStats {
+    double sum = 0.0, sum2 = 0.0, min = 1e300, max = -1e300;
+    std::uint64_t n = 0;
+  };
+  const std::vector<GroundStats>& ground_stats() const { return ground_stats_; }
 
   // After an error, nothing still in flight may write into the buffers once they are gone.
   ~JobStream() {
@@ -392,6 +401,29 @@ class JobStream {
     }
   }
 
+  // [ground]: the ground map convolved with the detector's beam at the boresight's horizon pointing
+  // (docs/ground.md), added to the job's TOD.
+  void add_ground(const Job& j, std::span<double> t) {
+    const pisco::SurveyChunk& chunk = j.chunk;
+    c_.scan.ces.generate_horizon(j.first, t.size(), horizon_);
+    ground_tod_.resize(t.size());
+    try {
+      ground_->convolve(chunk.detector, horizon_.view(), ground_tod_, false, chunk.hwp_angle, chunk.time);
+    } catch (const pisco::Error& e) {
+      throw pisco::Error(c_.source.string() + ": [ground]: " + e.what(), e.kind());
+    }
+    GroundStats& g = ground_stats_[chunk.detector];
+    for (std::size_t i = 0; i < t.size(); ++i) {
+      const double x = ground_tod_[i];
+      t[i] += x;
+      g.sum += x;
+      g.sum2 += x * x;
+      g.min = std::min(g.min, x);
+      g.max = std::max(g.max, x);
+    }
+    g.n += t.size();
+  }
+
   // [sky] unseen = "flag": the samples whose disc holds an UNSEEN pixel.
   std::span<const std::uint8_t> flag_samples(const pisco::SurveyChunk& chunk) {
     flags_.resize(chunk.size());
@@ -405,6 +437,7 @@ class JobStream {
     const std::size_t count = chunk.size();
     const std::span<double> t(tod_[j.slot].data(), count);
     if (!c_.sources.empty()) add_sources(j, t);
+    if (ground_) add_ground(j, t);
     // The binned map-maker takes the boresight's quaternions (one conversion per time chunk for every
     // detector) and applies the detector's offset itself; the detector's angles are made only for the
     // TOD file's pointing or weights, or from a per-detector file.
@@ -423,6 +456,13 @@ class JobStream {
       sinks_.binned->add_from_boresight(modelled_[chunk.detector], boresight.subspan(0, count), t, chunk.hwp_angle, fl);
     else if (sinks_.binned)
       sinks_.binned->add(modelled_[chunk.detector], detector_view, t, chunk.hwp_angle, fl);
+    if (sinks_.ground && ground_) {
+      const std::span<const double> g(ground_tod_.data(), count);
+      if (from_boresight)
+        sinks_.ground->add_from_boresight(modelled_[chunk.detector], boresight.subspan(0, count), g, chunk.hwp_angle, fl);
+      else
+        sinks_.ground->add(modelled_[chunk.detector], detector_view, g, chunk.hwp_angle, fl);
+    }
     if (sinks_.deconvolver) {  // the right-hand side A^T d, chunk by chunk
       try {
         sinks_.deconvolver->add(chunk, t);
@@ -466,6 +506,10 @@ class JobStream {
   pisco::Pointing own_;
   std::vector<double> weights_;
   std::vector<double> times_;  // the sources' sample times of a job
+  Engine* ground_ = nullptr;   // [ground]: the engine over the ground map
+  pisco::Pointing horizon_;    // a job's boresight in the horizon frame
+  std::vector<double> ground_tod_;
+  std::vector<GroundStats> ground_stats_;
   std::vector<std::uint8_t> flags_;
   std::uint64_t flagged_ = 0;
 };

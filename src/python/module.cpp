@@ -120,8 +120,30 @@ pisco::SidelobeSplit split_from(nb::handle value) {
   return s;
 }
 
+// far_sidelobe: None or (level_db, radius, width[, angle[, asymmetry]]), angles in radians.
+FarSidelobe far_sidelobe_from(nb::handle far) {
+  FarSidelobe f;
+  if (far.is_none()) return f;
+  std::vector<double> v;
+  try {
+    v = nb::cast<std::vector<double>>(far);
+  } catch (const nb::cast_error&) {
+    throw nb::value_error("far_sidelobe: expected None or (level_db, radius, width[, angle[, asymmetry]])");
+  }
+  if (v.size() < 3 || v.size() > 5)
+    throw nb::value_error("far_sidelobe: expected (level_db, radius, width[, angle[, asymmetry]]), radians");
+  if (!(v[0] <= 0.0 && v[0] >= -200.0))
+    throw nb::value_error("far_sidelobe: level_db must lie in [-200, 0] (dB of the main beam's peak)");
+  f.level = std::pow(10.0, v[0] / 10.0);
+  f.radius = v[1];
+  f.width = v[2];
+  if (v.size() > 3) f.angle = v[3];
+  if (v.size() > 4) f.asymmetry = v[4];
+  return f;
+}
+
 BeamOptions beam_options(double rho_max, double grid_step, double cross_polar, const std::string& pattern,
-                         nb::handle mueller, nb::handle sidelobes = nb::none()) {
+                         nb::handle mueller, nb::handle sidelobes = nb::none(), nb::handle far = nb::none()) {
   BeamOptions o;
   o.rho_max = rho_max;
   o.grid_step = grid_step;
@@ -137,6 +159,7 @@ BeamOptions beam_options(double rho_max, double grid_step, double cross_polar, c
     check_mueller_arg(o.mueller, "mueller", MuellerBounds::relative);
   }
   o.split = split_from(sidelobes);
+  o.far_sidelobe = far_sidelobe_from(far);
   return o;
 }
 
@@ -345,23 +368,26 @@ void bind_beamsor(nb::module_& m) {
       .def_static(
           "gaussian",
           [](double fwhm, double rho_max, double grid_step, double cross_polar, const std::string& pattern,
-             nb::handle mueller, nb::handle sidelobes) {
-            return Beamsor::gaussian(fwhm, beam_options(rho_max, grid_step, cross_polar, pattern, mueller, sidelobes));
+             nb::handle mueller, nb::handle sidelobes, nb::handle far) {
+            return Beamsor::gaussian(fwhm, beam_options(rho_max, grid_step, cross_polar, pattern, mueller, sidelobes, far));
           },
           "fwhm"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "cross_polar"_a = 0.0,
           "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(), "sidelobes"_a = nb::none(),
+          "far_sidelobe"_a = nb::none(),
           "A circular Gaussian beam of full width at half maximum `fwhm` (radians), summed out to rho_max.\n"
           "grid_step 0 = fwhm / 16 (a round beam's radial profile: fwhm / 20). cross_polar: the cross-polar field ratio kappa ('uniform' or\n"
-          "'quadrupole' pattern); mueller: a constant 4x4 Mueller matrix applied after the beam.")
+          "'quadrupole' pattern); mueller: a constant 4x4 Mueller matrix applied after the beam. far_sidelobe:\n"
+          "(level_db, radius, width[, angle[, asymmetry]]), a ring of spillover (docs/beams.md, 'Far sidelobes').")
       .def_static(
           "elliptical_gaussian",
           [](double fwhm_x, double fwhm_y, double angle, double rho_max, double grid_step, double cross_polar,
-             const std::string& pattern, nb::handle mueller, nb::handle sidelobes) {
-            return Beamsor::elliptical_gaussian(fwhm_x, fwhm_y, angle,
-                                                beam_options(rho_max, grid_step, cross_polar, pattern, mueller, sidelobes));
+             const std::string& pattern, nb::handle mueller, nb::handle sidelobes, nb::handle far) {
+            return Beamsor::elliptical_gaussian(
+                fwhm_x, fwhm_y, angle, beam_options(rho_max, grid_step, cross_polar, pattern, mueller, sidelobes, far));
           },
           "fwhm_x"_a, "fwhm_y"_a, "angle"_a = 0.0, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0,
           "cross_polar"_a = 0.0, "cross_polar_pattern"_a = "uniform", "mueller"_a = nb::none(), "sidelobes"_a = nb::none(),
+          "far_sidelobe"_a = nb::none(),
           "An elliptical Gaussian: fwhm_x along the direction `angle` (from theta' towards phi', radians),\n"
           "fwhm_y across it.")
       .def_static(
@@ -888,6 +914,22 @@ void bind_helpers(nb::module_& m) {
   m.def("valid_nside", [](long long nside) { return valid_nside(nside); }, "nside"_a,
         "Whether nside is a power of two in [1, 8192].");
   m.def("ang2pix", &ang2pix, "nside"_a, "theta"_a, "phi"_a, "The RING pixel containing (theta, phi).");
+  m.def(
+      "ground_sky",
+      [](int nside, double value, std::vector<double> horizon, double width, std::string units) {
+        GroundModel g;
+        g.value = value;
+        g.horizon = std::move(horizon);
+        g.width = width;
+        return ground_sky(nside, g, units);
+      },
+      "nside"_a, "value"_a, "horizon"_a = std::vector<double>{0.0}, "width"_a = 0.0, "units"_a = "uK_CMB",
+      "A ground in the horizon frame (docs/ground.md): `value` (the map's units) below a horizon whose\n"
+      "elevations (radians) are given at azimuths 0, 2 pi / N, ... from north towards east, 0 above it, a\n"
+      "half cosine over `width` (radians) across it; HEALPix RING, colatitude pi/2 - elevation, longitude\n"
+      "-azimuth (TOAST's boresight_azel frame). pisco.Error names a bad argument.");
+  m.def("rayleigh_jeans_in", &rayleigh_jeans_in, "units"_a, "kelvin"_a, "frequency_ghz"_a = 0.0,
+        "A Rayleigh-Jeans brightness temperature in K_RJ, uK_RJ, K_CMB or uK_CMB (at frequency_ghz).");
   m.attr("deg") = deg;
   m.attr("unit_quat_tolerance") = unit_quat_tolerance;
   m.attr("mueller_tolerance") = mueller_tolerance;

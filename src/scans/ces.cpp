@@ -92,13 +92,26 @@ void CesScan::generate(std::size_t first, std::size_t count, Pointing& out) cons
     const double zx = cl * std::cos(lst), zy = cl * std::sin(lst), zz = sl;
     const double up_theta = zx * ct * cp + zy * ct * sp - zz * st;  // Z . theta^
     const double up_phi = -zx * sp + zy * cp;                       // Z . phi^
-    // check() keeps the count of boresight periods below 2^52, so the conversion is exact.
-    const double day = std::floor(double(i) / sample_rate / boresight_period);
-    const double boresight =
-        boresight_angles.size() == 1 ? boresight_angles[0]
-                                     : boresight_angles[static_cast<std::size_t>(day) % boresight_angles.size()];
-    out.push_back(theta, phi, std::atan2(up_phi, up_theta) + boresight);
+    out.push_back(theta, phi, std::atan2(up_phi, up_theta) + boresight_angle(i));
   }
+}
+
+double CesScan::boresight_angle(std::size_t i) const {
+  if (boresight_angles.size() == 1) return boresight_angles[0];
+  // check() keeps the count of boresight periods below 2^52, so the conversion is exact.
+  const double day = std::floor(double(i) / sample_rate / boresight_period);
+  return boresight_angles[static_cast<std::size_t>(day) % boresight_angles.size()];
+}
+
+void CesScan::generate_horizon(std::size_t first, std::size_t count, Pointing& out) const {
+  check();
+  out.theta.clear();
+  out.phi.clear();
+  out.psi.clear();
+  out.reserve(count);
+  // At the boresight theta^ points down (away from the zenith, the pole): theta' up is psi = pi.
+  for (std::size_t i = first; i < first + count; ++i)
+    out.push_back(pi / 2 - elevation, detail::wrap_phi(-azimuth(i)), pi + boresight_angle(i));
 }
 
 }  // namespace pisco
