@@ -142,6 +142,17 @@ std::string variant(const std::string& name) {
   if (name == "source_file")
     return with_key(variant("ces"), "[engine]", "normalization", "\"integral\"") +
            "[[sources]]\nname = \"s\"\nfile = \"track.csv\"\n";
+  // The ground through far sidelobes over the ces scan: the model, and a ground map file.
+  const std::string far_beam = "type = \"gaussian\"\nfwhm_deg = 10.0\nrho_max_deg = 60.0\nsidelobe_split_deg = 25\n"
+                               "far_sidelobe_db = -30\nfar_sidelobe_deg = 45\nfar_sidelobe_width_deg = 8\n"
+                               "far_sidelobe_angle_deg = 180\nfar_sidelobe_asymmetry = 0.5\n";
+  if (name == "far_sidelobe") return with_key(with_table(c, "[beams.main]", far_beam), "[engine]", "normalization", "\"integral\"");
+  if (name == "ground")
+    return with_key(with_table(variant("ces"), "[beams.main]", far_beam), "[engine]", "normalization", "\"integral\"") +
+           "[ground]\ntemperature_k = 270\nfrequency_ghz = 90\nhorizon_deg = [2, 8, 4]\nhorizon_width_deg = 2\nnside = 8\n";
+  if (name == "ground_file")
+    return with_key(with_table(variant("ces"), "[beams.main]", far_beam), "[engine]", "normalization", "\"integral\"") +
+           "[ground]\nfile = \"ground.fits\"\n";
   ADD_FAILURE() << "no variant " << name;
   return c;
 }
@@ -221,6 +232,17 @@ std::vector<Key> keys() {
       {"plate", "[beams.turning]", "period_deg", K::number, {"0", "-180", "721", "1e300"}},
       {"sequence", "[beams.drift]", "beams", K::strings,
        {"[\"main\"]", "[\"main\", \"nope\"]", "[\"main\", \"drift\"]", "[\"main\", \"\"]"}},
+      {"far_sidelobe", beam, "far_sidelobe_db", K::number, {"1", "-201", "1e300"}},
+      {"far_sidelobe", beam, "far_sidelobe_deg", K::number, {"0", "-5", "61", "1e300"}},
+      {"far_sidelobe", beam, "far_sidelobe_width_deg", K::number, {"0", "-1", "181"}},
+      {"far_sidelobe", beam, "far_sidelobe_angle_deg", K::number, {}},
+      {"far_sidelobe", beam, "far_sidelobe_asymmetry", K::number, {"-0.1", "1.5"}},
+      {"ground", "[ground]", "temperature_k", K::number, {"-1", "1e5"}},
+      {"ground", "[ground]", "frequency_ghz", K::number, {"-1", "1e5"}},
+      {"ground", "[ground]", "horizon_deg", K::numbers, {"[]", "[90]", "[0, -95]"}},
+      {"ground", "[ground]", "horizon_width_deg", K::number, {"-1", "91"}},
+      {"ground", "[ground]", "nside", K::integer, {"0", "3", "16384"}},
+      {"ground_file", "[ground]", "file", K::path, {}},
       {"source", "[[sources]]", "name", K::string, {}},
       {"source_moving", "[[sources]]", "time_s", K::numbers, {"[5, 1]", "[0, 0]", "[10, 200]", "[0, 10]"}},
       {"source_moving", "[[sources]]", "theta_deg", K::numbers, {"[190, 45]", "[-1, 45]", "[0, 180]"}},
@@ -356,6 +378,9 @@ class Robustness : public ::testing::Test {
     pisco_test::write_alm_fits(dir_ / "beam_alm.fits", {&blm.t, &blm.e, &blm.b}, 64, 2);
     std::ofstream(dir_ / "fp.csv") << "name,zeta_deg,epsilon,gain,beam\nd1,0,0,1,main\nd2,90,0,1,main\n";
     std::ofstream(dir_ / "track.csv") << good_track;
+    pisco::GroundModel ground;
+    ground.value = 1e6;
+    pisco::ground_sky(8, ground, "uK_CMB").write_fits(dir_ / "ground.fits");
     std::vector<pisco::Quat> q;
     pisco::SatelliteScan sat;
     sat.sample_rate = 1;
@@ -438,7 +463,8 @@ TEST_F(Robustness, VariantsRun) {
                               "split", "detectors", "pair_ab",
                               "fp_file", "random_offsets", "raster", "ces", "satellite", "scan_file", "hwp",
                               "hwp_frequency", "hwp_steps", "hwp_mueller", "hwp_detectors", "hwp_file", "ces_rotating",
-                              "hwp_ces", "sequence", "plate", "source", "source_moving", "source_file"}) {
+                              "hwp_ces", "sequence", "plate", "source", "source_moving", "source_file",
+                              "far_sidelobe", "ground", "ground_file"}) {
     const fs::path cfg = write("variant.toml", variant(v));
     const CliResult r = pisco_test::run_cli({"run", "-q", cfg.string(), "-o", (dir_ / "variant-out").string()}, {}, 60);
     EXPECT_TRUE(r.exited && r.status == 0) << v << ": " << r.describe() << "\n" << r.output << "\n" << variant(v);

@@ -685,9 +685,9 @@ GroundConfig read_ground(Table t, const ScanConfig& scan, const fs::path& file) 
   if (!(g.temperature >= 0.0 && g.temperature <= 1e4)) t.fail("temperature_k", "expected kelvin in [0, 1e4]");
   g.frequency_ghz = t.number("frequency_ghz", 0.0);
   if (!(g.frequency_ghz >= 0.0 && g.frequency_ghz <= 1e4)) t.fail("frequency_ghz", "expected GHz in (0, 1e4]");
-  const std::vector<double> horizon = t.numbers_or_number("horizon_deg").value_or(std::vector<double>{0.0});
+  const std::vector<double> horizon = t.numbers("horizon_deg", {0.0});
   if (horizon.empty() || horizon.size() > 36000)
-    t.fail("horizon_deg", "expected one elevation, or 1 to 36000 at equally spaced azimuths from north");
+    t.fail("horizon_deg", "expected an array of 1 to 36000 elevations at equally spaced azimuths from north");
   g.model.horizon.clear();
   for (double h : horizon) {
     if (!(h > -90.0 && h < 90.0)) t.fail("horizon_deg", "expected elevations within (-90, 90) deg, got " + Table::format(h));

@@ -654,3 +654,36 @@ def test_sources_match_toast_sim_catalog(tmp_path):
     with pytest.raises(RuntimeError, match="has no shared 'no_times', which sources need"):
         pisco.toast.PixelConvolve(sky=pisco.Sky(128, units="K"), det_data="x", sources=[source], times="no_times",
                                   backend="cpu").apply(data)
+
+
+def test_the_ground_through_boresight_azel_is_the_horizon_frame():
+    """The ground in TOAST (docs/ground.md): PixelConvolve over a ground map (pisco.ground_sky: the horizon
+    frame, longitude -azimuth) with boresight="boresight_azel", against the engine at
+    pisco.horizon_pointing of the observation's own azimuth and elevation, for detectors at the
+    boresight with a 1 deg beam and a uniform far-sidelobe ring at 40 deg (a response that does not
+    depend on the boresight's turn): the same TOD, so TOAST's Az/El quaternions' frame is the ground
+    map's. The scan at 50 deg elevation sees the ground through the ring only, and its azimuth
+    sweep carries the ring across a horizon that rises to 12 deg in the east."""
+    fp = focalplane(n_pix=1)
+    data = ground_data(fp, seconds=300.0)
+    ob = data.obs[0]
+    dets = list(ob.local_detectors)
+    ground = pisco.ground_sky(64, 300.0, horizon=np.radians([2.0, 12.0, 4.0, 1.0]), width=np.radians(2.0), units="K")
+    beam = pisco.Beamsor.gaussian(FWHM, rho_max=np.radians(60.0), sidelobes=np.radians(8.0),
+                                  far_sidelobe=(-40.0, np.radians(40.0), np.radians(6.0)))
+    pisco.toast.PixelConvolve(sky=ground, beam=beam, boresight="boresight_azel", det_data="ground", backend="cpu",
+                              zero=True).apply(data)
+    az = np.asarray(ob.shared["azimuth"].data, dtype=np.float64)
+    el = np.asarray(ob.shared["elevation"].data, dtype=np.float64)
+    theta, phi, psi = pisco.horizon_pointing(az, el)
+    table = pisco.focal_plane_from_toast(ob.telescope.focalplane, beam=0)
+    with pisco.Engine(ground, beam, table, backend="cpu") as engine:
+        for d in dets:
+            offset = np.asarray(table[table.names.index(d)].offset)
+            assert np.allclose(np.abs(offset), [0, 0, 0, 1], atol=1e-12)  # at the boresight
+            direct = engine.convolve(d, theta, phi, psi)
+            ours = np.asarray(ob.detdata["ground"][d])
+            scale = np.abs(direct).max()
+            assert scale > 1e-3 and np.ptp(direct) > 1e-3 * scale  # the ring sees the ground, more in the east
+            assert np.abs(ours - direct).max() <= 1e-9 * scale, d
+    print(f"ground through boresight_azel: {ours.min():.4g} to {ours.max():.4g} K, as at horizon_pointing")
