@@ -829,6 +829,34 @@ TEST_F(Cli, BeamDriftExampleAsTheReadmeSays) {
   EXPECT_GT(drift, 1e-2);
 }
 
+// assets/examples/ground_pickup.toml, whole (docs/ground.md): the ground's pickup and what it leaves in
+// the maps, as README.md quotes them (to 1%), and the files of the ground's own maps and spectra.
+TEST_F(Cli, GroundExampleAsTheReadmeSays) {
+  const fs::path cfg = fs::path(PISCO_TEST_ASSETS_DIR) / "examples" / "ground_pickup.toml";
+  const Result r = run("run " + cfg.string() + " -o " + (dir_ / "out").string() + " --no-plots --backend simd");
+  std::cout << r.output;
+  if (r.status != 0 && r.output.find("simd") != std::string::npos && r.output.find("not available") != std::string::npos)
+    GTEST_SKIP() << "no simd backend here";
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "ground_maps.fits"));
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "ground_spectra.txt"));
+  const std::string row = readme_row("ground_pickup.toml");
+  const auto figure = [](const std::string& text, const std::string& key) {
+    const std::size_t at = text.find(key);
+    return at == std::string::npos ? std::nan("") : std::stod(text.substr(at + key.size()));
+  };
+  for (const auto& [printed, quoted] : std::vector<std::pair<std::string, std::string>>{
+           {"picked up through the beams: mean ", "picked up: mean "},
+           {"scan-synchronous rms ", "scan-synchronous rms "},
+           {"rms I about it ", "rms I about their mean "},
+           {"rms P ", "rms P "}}) {
+    const double got = figure(r.output, printed), said = figure(row, quoted);
+    ASSERT_TRUE(std::isfinite(got)) << printed << "\n" << r.output;
+    ASSERT_TRUE(std::isfinite(said)) << quoted << "\n" << row;
+    EXPECT_NEAR(got, said, 0.01 * said) << printed << ": README.md quotes " << said;
+  }
+}
+
 // assets/examples/hwp_satellite.toml, whole: the README's figures, and its leakage figure as README.md
 // and docs/validation.md (H4) quote it, to two digits.
 TEST_F(Cli, HwpSatelliteExampleAsTheReadmeSays) {

@@ -219,14 +219,17 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     cl.step([&] { ground_sky.emplace(make_ground_sky(c.ground, sky, c.source)); });
     cl.step([&] {
       try {
-        ground_engine.emplace(make_engine(*ground_sky, beams, fp, c, cl));
+        SimulationConfig ground_config = c;  // [ground] backend, with [engine]'s other settings
+        ground_config.engine.options.backend = c.ground.backend;
+        ground_engine.emplace(make_engine(*ground_sky, beams, fp, ground_config, cl));
       } catch (const Error& e) {
         throw Error(c.source.string() + ": [ground]: " + e.what(), e.kind());
       }
     });
     const auto [lo, hi] = std::minmax_element(ground_sky->I().begin(), ground_sky->I().end());
-    say("ground: NSIDE %d in the horizon frame, %s, from %.6g to %.6g %s\n", ground_sky->nside(),
-        c.ground.file.empty() ? "the model" : c.ground.file.string().c_str(), *lo, *hi, sky.units().c_str());
+    say("ground: NSIDE %d in the horizon frame, %s, from %.6g to %.6g %s; backend %s\n", ground_sky->nside(),
+        c.ground.file.empty() ? "the model" : c.ground.file.string().c_str(), *lo, *hi, sky.units().c_str(),
+        ground_engine->backend_name().c_str());
   }
   say("backend: %s (%s)%s\n", engine.backend_name().c_str(), engine.device_name().c_str(),
       cl.parallel() ? (", rank 0 of " + std::to_string(cl.size()) + " (" + std::to_string(cl.node_size()) +
