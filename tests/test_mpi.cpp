@@ -243,6 +243,47 @@ TEST_F(Mpi, RanksGiveTheTodAndMapsOfOneProcessWithAHalfWavePlate) {
   expect_same(one, read_output(out), 2);
 }
 
+// [ground] (docs/ground.md) under 2 ranks: each rank's jobs add the ground engine's TOD at their own
+// spans' horizon pointing, the ground's maps and the account's figures are summed over the ranks.
+TEST_F(Mpi, TheGroundUnderRanksIsOneProcesss) {
+  std::string text = config("[ground]\ntemperature_k = 270\nfrequency_ghz = 90\nhorizon_deg = [2, 9, 4]\n"
+                            "horizon_width_deg = 2\nnside = 32\n");
+  const std::string scan = text.substr(text.find("[scan]"), text.find("[engine]") - text.find("[scan]"));
+  text.replace(text.find(scan), scan.size(),
+               "[scan]\ntype = \"ces\"\nelevation_deg = 40\naz_throw_deg = 120\nsample_rate_hz = 2\n"
+               "duration_hours = 0.5\nnside = 16\n");
+  const std::string large = "rho_max_deg = 8.0\n[focal_plane]";
+  text.replace(text.find(large), large.size(),
+               "rho_max_deg = 60.0\nsidelobe_split_deg = 16\nfar_sidelobe_db = -40\nfar_sidelobe_deg = 50\n"
+               "far_sidelobe_width_deg = 6\nfar_sidelobe_angle_deg = 180\n[focal_plane]");
+  text.replace(text.find("backend = \"cpu\""), 15, "backend = \"cpu\"\nnormalization = \"integral\"");
+  const fs::path cfg = write("sim.toml", text);
+  const Result plain = pisco(0, "run " + cfg.string() + " -o " + (dir_ / "plain").string());
+  ASSERT_EQ(plain.status, 0) << plain.output;
+  const Output one = read_output(dir_ / "plain");
+  const fs::path out = dir_ / "ranks2";
+  const Result r = pisco(2, "run " + cfg.string() + " -o " + out.string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  expect_same(one, read_output(out), 2);
+  const auto line = [](const std::string& output) {
+    const std::size_t at = output.find("ground: picked up");
+    return at == std::string::npos ? std::string() : output.substr(at, output.find('\n', at) - at);
+  };
+  EXPECT_FALSE(line(plain.output).empty()) << plain.output;
+  EXPECT_EQ(line(plain.output), line(r.output));
+  const pisco::Sky a = pisco::Sky::read_fits(dir_ / "plain" / "ground_maps.fits", pisco::UnseenPolicy::flag);
+  const pisco::Sky b = pisco::Sky::read_fits(out / "ground_maps.fits", pisco::UnseenPolicy::flag);
+  double worst = 0, scale = 0;
+  for (std::size_t p = 0; p < a.npix(); ++p) {
+    ASSERT_EQ(a.I()[p] == pisco::unseen, b.I()[p] == pisco::unseen) << "pixel " << p;
+    if (a.I()[p] == pisco::unseen) continue;
+    scale = std::max(scale, std::abs(a.I()[p]));
+    worst = std::max(worst, std::abs(a.I()[p] - b.I()[p]));
+  }
+  EXPECT_GT(scale, 0.0);
+  EXPECT_LE(worst, 1e-15 * scale);
+}
+
 TEST_F(Mpi, RanksReadPerDetectorPointingFilesAsOneProcess) {
   // Per-detector pointing (detectors outermost in the jobs): the pointing of a first run's TOD file,
   // which is a pointing file, read back by the same detectors without offsets.
