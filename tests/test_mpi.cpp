@@ -137,7 +137,9 @@ Output read_output(const fs::path& dir) {
   return o;
 }
 
-void expect_same(const Output& one, const Output& many, int ranks) {
+// The TOD bit for bit; the maps to `map_tolerance` of their largest value (the ranks' normal equations
+// are summed in another order).
+void expect_same(const Output& one, const Output& many, int ranks, double map_tolerance = 1e-15) {
   ASSERT_EQ(one.detectors.size(), many.detectors.size());
   for (std::size_t d = 0; d < one.detectors.size(); ++d) {
     EXPECT_EQ(one.detectors[d].name, many.detectors[d].name);
@@ -168,7 +170,7 @@ void expect_same(const Output& one, const Output& many, int ranks) {
   EXPECT_GT(solved, 100u);
   std::cout << ranks << " ranks: largest map difference " << worst << " = " << worst / scale
             << " of the largest value\n";
-  EXPECT_LE(worst, 1e-15 * scale) << ranks << " ranks";
+  EXPECT_LE(worst, map_tolerance * scale) << ranks << " ranks";
 }
 
 TEST_F(Mpi, RanksGiveTheTodAndMapsOfOneProcess) {
@@ -264,7 +266,8 @@ TEST_F(Mpi, TheGroundUnderRanksIsOneProcesss) {
   const fs::path out = dir_ / "ranks2";
   const Result r = pisco(2, "run " + cfg.string() + " -o " + out.string());
   ASSERT_EQ(r.status, 0) << r.output;
-  expect_same(one, read_output(out), 2);
+  // The ground's pickup is a large offset (its mean), whose sums in another order round differently.
+  expect_same(one, read_output(out), 2, 1e-12);
   const auto line = [](const std::string& output) {
     const std::size_t at = output.find("ground: picked up");
     return at == std::string::npos ? std::string() : output.substr(at, output.find('\n', at) - at);
@@ -281,7 +284,7 @@ TEST_F(Mpi, TheGroundUnderRanksIsOneProcesss) {
     worst = std::max(worst, std::abs(a.I()[p] - b.I()[p]));
   }
   EXPECT_GT(scale, 0.0);
-  EXPECT_LE(worst, 1e-15 * scale);
+  EXPECT_LE(worst, 1e-12 * scale);
 }
 
 TEST_F(Mpi, RanksReadPerDetectorPointingFilesAsOneProcess) {
