@@ -143,10 +143,8 @@ struct GroundConfig {
   double temperature = 300.0;     // K (Rayleigh-Jeans)
   double frequency_ghz = 0.0;     // for skies in K_CMB or uK_CMB
   int nside = 128;
-  // The ground engine's backend: the float64 reference by default, since what far sidelobes pick up is
-  // 1e-6 to 1e-9 of the ground's brightness, below the float32 backends' resolution of the sky (about
-  // 1e-7 of its largest values; docs/ground.md, "Precision").
-  std::string backend = "cpu";
+  // The ground engine's backend; empty: the run's own ([engine] backend).
+  std::string backend;
 };
 
 struct SimulationConfig {

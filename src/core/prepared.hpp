@@ -94,7 +94,7 @@ std::vector<double> reference_pixels(int nside, std::size_t first, const std::ar
 // float32 backends (docs/vulkan.md, "Precision").
 std::vector<float> float32_weights(const PreparedDetector& detector);
 // The monopole the float32 backends take out of the sky (docs/vulkan.md, "Precision"): the mean I0 of
-// I when it matters for float32, that is when |I0| > 0.1 x the RMS of I - I0; 0 otherwise. They add
+// I when it dominates the map, that is when |I0| > 10 x the RMS of I - I0; 0 otherwise. They add
 // I0 sum_k w_I(k) back in float64.
 double float32_monopole(const SkyView& sky);
 PreparedDetector prepare_detector(const Detector& detector, const Beamsor& beam, double pixel_area,

@@ -220,7 +220,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     cl.step([&] {
       try {
         SimulationConfig ground_config = c;  // [ground] backend, with [engine]'s other settings
-        ground_config.engine.options.backend = c.ground.backend;
+        if (!c.ground.backend.empty()) ground_config.engine.options.backend = c.ground.backend;
         ground_engine.emplace(make_engine(*ground_sky, beams, fp, ground_config, cl));
       } catch (const Error& e) {
         throw Error(c.source.string() + ": [ground]: " + e.what(), e.kind());
