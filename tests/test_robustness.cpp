@@ -230,6 +230,7 @@ std::vector<Key> keys() {
       {"plate", "[beams.turning]", "beams", K::strings,
        {"[\"main\"]", "[\"main\", \"nope\"]", "[\"main\", \"turning\"]", "[\"main\", \"\"]"}},
       {"plate", "[beams.turning]", "period_deg", K::number, {"0", "-180", "721", "1e300"}},
+      {"plate", "[beams.turning]", "normalize_by", K::string, {"\"nowhere\"", "\"turning\""}},
       {"sequence", "[beams.drift]", "beams", K::strings,
        {"[\"main\"]", "[\"main\", \"nope\"]", "[\"main\", \"drift\"]", "[\"main\", \"\"]"}},
       {"far_sidelobe", beam, "far_sidelobe_db", K::number, {"1", "-201", "1e300"}},

@@ -347,6 +347,16 @@ TEST_F(SimulationTest, BeamsThatTurnWithThePlateAreInterpolated) {
   EXPECT_LE(worst, 1e-12 * rms);
   EXPECT_GT(apart, 1e-3 * rms);
 
+  // normalize_by: the plate beams over one beam's Omega~ (the beam without the plate, keeping the plate's
+  // losses) instead of their mean: the same TOD times mean / Omega~(oval).
+  pisco::Simulation::from_file(config("normalized", plate + "normalize_by = \"oval\"\n", hwp)).run();
+  const std::vector<double> tn = pisco::read_tod_signal(dir_ / "normalized" / "tod.h5", "t");
+  ASSERT_EQ(tn.size(), t.size());
+  double off = 0;
+  for (std::size_t i = 0; i < t.size(); ++i) off = std::max(off, std::abs(tn[i] - t[i] * mean / omega_o));
+  EXPECT_LE(off, 1e-12 * rms);
+  EXPECT_GT(std::abs(mean / omega_o - 1), 1e-3);  // the two normalizations differ
+
   const auto refused = [&](const std::string& name, const std::string& plate_table, const std::string& hwp_table) {
     try {
       (void)pisco::read_simulation_file(config(name, plate_table, hwp_table));
@@ -367,6 +377,12 @@ TEST_F(SimulationTest, BeamsThatTurnWithThePlateAreInterpolated) {
   EXPECT_NE(refused("nested",
                     "[beams.turning]\ntype = \"plate\"\nbeams = [\"round\", \"turning\"]\n", hwp)
                 .find("beam 1 is \"turning\", itself a beam that turns with the plate"),
+            std::string::npos);
+  EXPECT_NE(refused("norm", plate + "normalize_by = \"nowhere\"\n", hwp)
+                .find("[beams.turning] normalize_by: \"nowhere\" is not a [beams] table of a fixed beam"),
+            std::string::npos);
+  EXPECT_NE(refused("norm_self", plate + "normalize_by = \"turning\"\n", hwp)
+                .find("[beams.turning] normalize_by: \"turning\" is not a [beams] table of a fixed beam"),
             std::string::npos);
 }
 

@@ -57,6 +57,9 @@ struct BeamConfig {
   std::vector<double> node_times;
   std::vector<std::string> nodes;
   double plate_period = 3.14159265358979323846;  // radians
+  // plate: the [beams] table whose Omega~ normalizes the plate beams (PlateBeams::omega: the beam without
+  // the plate, which keeps the plate's losses); empty: their mean Omega~.
+  std::string plate_normalize_by;
   bool combines_beams() const { return kind == BeamKind::sequence || kind == BeamKind::plate; }
   // grasp and blm: the beam turns with each detector (its co-polar axis along the detector's zeta)
   bool turns_with_detector() const { return kind == BeamKind::grasp || kind == BeamKind::blm; }

@@ -108,6 +108,11 @@ BeamConfig read_beam(Table t, const std::string& name) {
       t.fail("beams", "a beam that turns with the plate needs two or more beams (names of [beams] tables, at plate "
                       "angles k period / N)");
     b.plate_period = t.number_in("period_deg", 180.0, 1e-6, 720.0, "a period in (0, 720] deg (180 for a half-wave plate)") * deg;
+    if (t.has("normalize_by")) {
+      b.plate_normalize_by = t.string("normalize_by").value_or("");
+      if (b.plate_normalize_by.empty())
+        t.fail("normalize_by", "expected the name of a [beams] table (the beam without the plate), or no key");
+    }
     t.finish();
     return b;
   }
@@ -258,6 +263,13 @@ void check_combined_beams(const SimulationConfig& c, const toml::table& beams, c
         t.fail("beams", "beam " + std::to_string(k) + " is \"" + b.nodes[k] + "\", itself a " +
                             (it->kind == BeamKind::sequence ? "beam that changes with time" : "beam that turns with the plate") +
                             "; name fixed beams");
+    }
+    if (b.kind == BeamKind::plate && !b.plate_normalize_by.empty()) {
+      const auto it = std::find_if(c.beams.begin(), c.beams.end(),
+                                   [&](const BeamConfig& x) { return x.name == b.plate_normalize_by; });
+      if (it == c.beams.end() || it->combines_beams())
+        t.fail("normalize_by", "\"" + b.plate_normalize_by + "\" is not a [beams] table of a fixed beam (the beam "
+                               "without the plate, whose Omega~ keeps the plate's losses)");
     }
     if (b.kind == BeamKind::plate) {
       if (!c.hwp.enabled)

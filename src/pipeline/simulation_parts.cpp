@@ -200,6 +200,12 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
         throw pisco::Error(c.source.string() + ": detector '" + d.name + "' has the beam " + b.name +
                            ", which turns with the plate, but its half-wave plate is off (hwp = false)");
       d.plate_beams = pisco::PlateBeams{made_nodes, b.plate_period, d.hwp->gamma};
+      if (!b.plate_normalize_by.empty()) {  // the beam without the plate: its Omega~ keeps the plate's losses
+        const auto j = std::size_t(std::find_if(c.beams.begin(), c.beams.end(), [&](const BeamConfig& x) {
+                                     return x.name == b.plate_normalize_by;
+                                   }) - c.beams.begin());
+        d.plate_beams->omega = out.beams[beam_for(j, c.detectors[i].zeta, &c.detectors[i])].omega_tilde();
+      }
       d.hwp.reset();
     }
   }
