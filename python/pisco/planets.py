@@ -37,7 +37,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ._pisco import SourceTrack
+from ._pisco import SourceTrack, rayleigh_jeans_in
 
 try:
     import astropy.units as _u
@@ -68,17 +68,14 @@ BODIES = {
 _OBLIQUITY = math.radians(23.4392911)
 _NGP_RA, _NGP_DEC, _NCP_L = math.radians(192.85948), math.radians(27.12825), math.radians(122.93192)
 _L2_DISTANCE_KM = 1.5e6
-_T_CMB = 2.72548  # K (Fixsen 2009)
-_H_OVER_K = 6.62607015e-34 / 1.380649e-23  # s K
 
 
 def rayleigh_jeans_to_cmb(frequency: float) -> float:
     """The factor that turns a Rayleigh-Jeans temperature into a CMB thermodynamic one at `frequency`
-    (GHz): (e^x - 1)^2 / (x^2 e^x), x = h nu / k T_CMB."""
+    (GHz): (e^x - 1)^2 / (x^2 e^x), x = h nu / k T_CMB (pisco.rayleigh_jeans_in's)."""
     if not (frequency > 0 and math.isfinite(frequency)):
         raise ValueError(f"frequency must be a positive number of GHz, got {frequency!r}")
-    x = _H_OVER_K * frequency * 1e9 / _T_CMB
-    return math.expm1(x) ** 2 / (x * x * math.exp(x))
+    return rayleigh_jeans_in("K_CMB", 1.0, frequency)
 
 
 def _rotation_z(a: float) -> np.ndarray:
@@ -259,8 +256,9 @@ def planet_track(
     else:
         a, b = BODIES[key]
         omega = math.pi * a * b / np.asarray(distance) ** 2
-        scale = (rayleigh_jeans_to_cmb(frequency) if units.endswith("CMB") else 1.0) * (1e6 if units[0] == "u" else 1.0)
-        intensity = brightness_temperature * scale * omega
+        if units.endswith("CMB"):
+            rayleigh_jeans_to_cmb(frequency)  # a ValueError naming the frequency
+        intensity = rayleigh_jeans_in(units, brightness_temperature, frequency or 0.0) * omega
     return SourceTrack(
         name if name is not None else key,
         (when.unix if unix_times else t).tolist(),

@@ -1,5 +1,6 @@
 // Focal plane tables (docs/config.md, "[focal_plane]"): CSV, TOML ([[detectors]], [[pairs]]) and
 // TOAST's HDF5 tables, each detector's beam named by a [beams] table.
+#include "io/csv_text.hpp"
 #include "io/focal_plane_file.hpp"
 
 #include <algorithm>
@@ -202,24 +203,11 @@ std::vector<Detector> read_focal_plane_file(const fs::path& file, const std::vec
   if (!in) throw pisco::Error(file.string() + ": cannot open the focal plane file");
   std::string line;
   std::vector<std::string> header;
-  auto split = [](const std::string& s) {
-    std::vector<std::string> f;
-    std::stringstream ss(s);
-    std::string x;
-    while (std::getline(ss, x, ',')) {
-      const auto b = x.find_first_not_of(" \t\r"), e = x.find_last_not_of(" \t\r");
-      f.push_back(b == std::string::npos ? "" : x.substr(b, e - b + 1));
-    }
-    return f;
-  };
-  int lineno = 0;
+  std::size_t lineno = 0;
   std::map<std::string, int> line_of;  // each detector's line
   while (std::getline(in, line)) {
-    ++lineno;
-    // Spreadsheets save CSV with a UTF-8 byte-order mark first.
-    if (lineno == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);
-    if (line.find_first_not_of(" \t\r") == std::string::npos || line[line.find_first_not_of(" \t")] == '#') continue;
-    const auto f = split(line);
+    if (!csv_content_line(line, ++lineno)) continue;
+    const auto f = csv_fields(line);
     const std::string where = file.string() + ":" + std::to_string(lineno) + ": ";
     if (header.empty()) {
       header = f;
@@ -243,14 +231,8 @@ std::vector<Detector> read_focal_plane_file(const fs::path& file, const std::vec
     DetectorHwp plate;  // the row's plate keys (hwp, hwp_gamma_deg)
     for (std::size_t i = 0; i < f.size(); ++i) {
       auto num = [&](const std::string& s) {
-        try {
-          std::size_t used = 0;
-          const double v = std::stod(s, &used);
-          if (used != s.size() || !std::isfinite(v)) throw std::invalid_argument(s);
-          return v;
-        } catch (const std::exception&) {
-          throw pisco::Error(where + "column '" + header[i] + "': expected a number, got '" + s + "'");
-        }
+        if (const std::optional<double> v = csv_number(s)) return *v;
+        throw pisco::Error(where + "column '" + header[i] + "': expected a number, got '" + s + "'");
       };
       if (header[i] == "name") d.name = f[i];
       else if (header[i] == "zeta_deg") d.zeta = num(f[i]) * deg;

@@ -5,10 +5,11 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <sstream>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "io/csv_text.hpp"
 #include "io/input_file.hpp"
 #include "pisco/error.hpp"
 #include "pisco/output_file.hpp"
@@ -19,18 +20,6 @@ namespace pisco {
 namespace {
 
 constexpr std::array<const char*, 7> columns = {"time_s", "theta_deg", "phi_deg", "I", "Q", "U", "V"};
-
-std::vector<std::string> split_fields(const std::string& line) {
-  std::vector<std::string> out;
-  std::stringstream ss(line);
-  std::string x;
-  while (std::getline(ss, x, ',')) {
-    const auto b = x.find_first_not_of(" \t\r"), e = x.find_last_not_of(" \t\r");
-    out.push_back(b == std::string::npos ? "" : x.substr(b, e - b + 1));
-  }
-  if (!line.empty() && line.back() == ',') out.emplace_back();
-  return out;
-}
 
 }  // namespace
 
@@ -46,12 +35,10 @@ SourceTrack SourceTrack::read_csv(const std::filesystem::path& file, std::string
   std::string line;
   std::size_t lineno = 0;
   while (std::getline(in, line)) {
-    ++lineno;
-    if (lineno == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // a spreadsheet's byte-order mark
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
+    if (!detail::csv_content_line(line, ++lineno)) continue;
     const std::string where = file.string() + ":" + std::to_string(lineno) + ": ";
-    const std::vector<std::string> f = split_fields(line);
+    std::vector<std::string> f = detail::csv_fields(line);
+    if (!line.empty() && line.back() == ',') f.emplace_back();  // a trailing comma: one more (empty) field
     if (order.empty()) {
       std::vector<std::string> seen;
       for (const std::string& h : f) {
@@ -71,16 +58,9 @@ SourceTrack SourceTrack::read_csv(const std::filesystem::path& file, std::string
     if (f.size() != order.size())
       throw Error(where + "expected " + std::to_string(order.size()) + " fields, got " + std::to_string(f.size()));
     for (std::size_t i = 0; i < f.size(); ++i) {
-      double v = 0.0;
-      try {
-        std::size_t used = 0;
-        v = std::stod(f[i], &used);
-        if (used != f[i].size()) throw std::invalid_argument(f[i]);
-      } catch (const std::exception&) {
-        v = std::nan("");
-      }
-      if (!std::isfinite(v))
-        throw Error(where + "column '" + columns[order[i]] + "': expected a finite number, got '" + f[i] + "'");
+      const std::optional<double> number = detail::csv_number(f[i]);
+      if (!number) throw Error(where + "column '" + columns[order[i]] + "': expected a finite number, got '" + f[i] + "'");
+      const double v = *number;
       if (columns[order[i]] == std::string("theta_deg") && !(v >= 0.0 && v <= 180.0))
         throw Error(where + "column 'theta_deg': " + f[i] + " is outside [0, 180] (the colatitude)");
       if (order[i] == 0 && !t.time.empty() && !(v > t.time.back()))

@@ -154,10 +154,14 @@ std::optional<pisco::DeconvolvedMaps> deconvolve(const SimulationConfig& c, cons
 
 // [ground]: the pickup over every process's samples (SimulationResult's ground_ fields).
 void ground_summary(const std::vector<detail::JobStream::GroundStats>& stats, RunContext& cl, SimulationResult& r) {
+  // Every detector's count, sum and sum of squares summed over the processes in one call.
+  std::vector<double> sums;
+  for (const auto& g : stats) sums.insert(sums.end(), {double(g.n), g.sum, g.sum2});
+  cl.sum_in_place(sums);
   double sum = 0.0, n = 0.0, variance = 0.0, detectors = 0.0, peak = 0.0;
-  for (const auto& g : stats) {
-    const double dn = cl.sum_of(double(g.n));
-    const double ds = cl.sum_of(g.sum), ds2 = cl.sum_of(g.sum2);
+  for (std::size_t k = 0; k < stats.size(); ++k) {
+    const auto& g = stats[k];
+    const double dn = sums[3 * k], ds = sums[3 * k + 1], ds2 = sums[3 * k + 2];
     const double hi = cl.max(g.max), lo = -cl.max(-g.min);
     if (dn == 0) continue;
     sum += ds;

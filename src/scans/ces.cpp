@@ -72,9 +72,7 @@ double CesScan::local_sidereal_time(std::size_t i) const {
 
 void CesScan::generate(std::size_t first, std::size_t count, Pointing& out) const {
   check();
-  out.theta.clear();
-  out.phi.clear();
-  out.psi.clear();
+  out.clear();
   out.reserve(count);
   const double sl = std::sin(latitude), cl = std::cos(latitude);
   const double se = std::sin(elevation), ce = std::cos(elevation);
@@ -105,9 +103,7 @@ double CesScan::boresight_angle(std::size_t i) const {
 
 void CesScan::generate_horizon(std::size_t first, std::size_t count, Pointing& out) const {
   check();
-  out.theta.clear();
-  out.phi.clear();
-  out.psi.clear();
+  out.clear();
   out.reserve(count);
   // At the boresight theta^ points down (away from the zenith, the pole): theta' up is psi = pi.
   for (std::size_t i = first; i < first + count; ++i)
