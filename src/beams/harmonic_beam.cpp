@@ -239,6 +239,91 @@ void HarmonicBeam::check() const {
                       "positive, got " + std::to_string(t[0].real()));
 }
 
+namespace {
+using namespace detail;
+
+// One alm table of the file: its rows and its header's MAX-LPOL and MAX-MPOL (-1 where absent).
+struct AlmTable {
+  int hdu;
+  std::vector<double> index, re, im;
+  long long lmax_key = -1, mmax_key = -1;
+};
+
+// l and m of a healpy INDEX - 1, that is l^2 + l + m.
+std::pair<long long, long long> alm_lm(long long i) {
+  auto l = static_cast<long long>(std::sqrt(static_cast<double>(i)));
+  while (l * l > i) --l;
+  while ((l + 1) * (l + 1) <= i) ++l;
+  return {l, i - l * l - l};
+}
+
+// The alm table of HDU h (the file positioned there); `expected` says what the file should be.
+AlmTable read_alm_table(FitsFile& f, const std::filesystem::path& file, int h, const std::string& expected) {
+  const std::string where = "HDU " + std::to_string(h) + ": ";
+  require_complete_hdu(f);
+  const TableSize size = table_size(f);
+  int col_index = 0, col_re = 0, col_im = 0;
+  for (int c = 1; c <= size.columns; ++c) {
+    const std::string n = trim_upper(column_name(f, c, std::string()));
+    if (n == "INDEX") col_index = c;
+    if (n == "REAL") col_re = c;
+    if (n == "IMAG") col_im = c;
+  }
+  if (!col_index || !col_re || !col_im) fail(file, where + "has no INDEX, REAL and IMAG columns; " + expected);
+  AlmTable p;
+  p.hdu = h;
+  const auto n = static_cast<std::size_t>(size.rows);
+  p.index.resize(n);
+  p.re.resize(n);
+  p.im.resize(n);
+  const auto repeat = [&](int col, const char* label) {
+    const ColumnType t = column_type(f, col, label);
+    if (t.repeat != 1) fail(file, where + "column " + label + " holds " + std::to_string(t.repeat) + " values a row; expected 1");
+    if (!is_fixed_numeric(t.type)) fail(file, where + "column " + label + " is not numeric");
+    return t.repeat;
+  };
+  read_column(f, col_index, repeat(col_index, "INDEX"), p.index, "INDEX");
+  read_column(f, col_re, repeat(col_re, "REAL"), p.re, "REAL");
+  read_column(f, col_im, repeat(col_im, "IMAG"), p.im, "IMAG");
+  long value = 0;
+  int s2 = 0;
+  if (fits_read_key(f.get(), TLONG, "MAX-LPOL", &value, nullptr, &s2) == 0) p.lmax_key = value;
+  s2 = 0;
+  if (fits_read_key(f.get(), TLONG, "MAX-MPOL", &value, nullptr, &s2) == 0) p.mmax_key = value;
+  fits_clear_errmsg();
+  return p;
+}
+
+// A table's header keys and rows checked, and the beam's lmax and mmax raised to them: the header's
+// MAX-LPOL and MAX-MPOL where given, else the largest l and m present.
+void check_alm_table(const AlmTable& p, const std::filesystem::path& file, HarmonicBeam& beam) {
+  const std::string where = "HDU " + std::to_string(p.hdu) + ": ";
+  if (p.lmax_key >= 0 && p.mmax_key > p.lmax_key)
+    fail(file, where + "MAX-MPOL = " + std::to_string(p.mmax_key) + " is above MAX-LPOL = " + std::to_string(p.lmax_key) +
+                   "; expected mmax <= lmax");
+  if (p.lmax_key > 100000) fail(file, where + "MAX-LPOL = " + std::to_string(p.lmax_key) + " is above 100000");
+  beam.lmax = std::max<long long>(beam.lmax, p.lmax_key);
+  beam.mmax = std::max<long long>(beam.mmax, p.mmax_key);
+  for (std::size_t r = 0; r < p.index.size(); ++r) {
+    const double x = p.index[r];
+    if (!(x >= 1 && x <= 1e10 && x == std::floor(x)))
+      fail(file, where + "row " + std::to_string(r + 1) + ": INDEX " + std::to_string(x) + " is not l^2 + l + m + 1 of any l, m >= 0");
+    const auto i = static_cast<long long>(x) - 1;
+    const auto [l, m] = alm_lm(i);
+    if (m < 0) fail(file, where + "row " + std::to_string(r + 1) + ": INDEX " + std::to_string(i + 1) + " is l = " + std::to_string(l) + ", m = " + std::to_string(m) + "; expected m >= 0");
+    if (p.lmax_key >= 0 && l > p.lmax_key)
+      fail(file, where + "row " + std::to_string(r + 1) + ": l = " + std::to_string(l) + " is above MAX-LPOL = " + std::to_string(p.lmax_key));
+    if (p.mmax_key >= 0 && m > p.mmax_key)
+      fail(file, where + "row " + std::to_string(r + 1) + ": m = " + std::to_string(m) + " is above MAX-MPOL = " + std::to_string(p.mmax_key));
+    if (p.lmax_key < 0) beam.lmax = std::max<long long>(beam.lmax, l);
+    if (p.mmax_key < 0) beam.mmax = std::max<long long>(beam.mmax, m);
+    if (!std::isfinite(p.re[r]) || !std::isfinite(p.im[r]))
+      fail(file, where + "row " + std::to_string(r + 1) + " (l = " + std::to_string(l) + ", m = " + std::to_string(m) + ") is not finite");
+  }
+}
+
+}  // namespace
+
 HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
   using namespace detail;
   const std::string expected = "expected a healpy alm FITS file (healpy.write_alm: tables of INDEX, REAL, IMAG)";
@@ -246,84 +331,19 @@ HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
   int hdus = 0, status = 0;
   fits_get_num_hdus(f.get(), &hdus, &status);
   detail::check(status, file, "counting its HDUs");
-  struct Part {
-    int hdu;
-    std::vector<double> index, re, im;
-    long long lmax_key = -1, mmax_key = -1;
-  };
-  std::vector<Part> parts;
+  std::vector<AlmTable> parts;
   for (int h = 2; h <= hdus; ++h) {
     int type = 0;
     fits_movabs_hdu(f.get(), h, &type, &status);
     detail::check(status, file, "moving to HDU " + std::to_string(h));
     if (type != BINARY_TBL && type != ASCII_TBL) continue;
-    const std::string where = "HDU " + std::to_string(h) + ": ";
-    require_complete_hdu(f);
-    const TableSize size = table_size(f);
-    int col_index = 0, col_re = 0, col_im = 0;
-    for (int c = 1; c <= size.columns; ++c) {
-      const std::string n = trim_upper(column_name(f, c, std::string()));
-      if (n == "INDEX") col_index = c;
-      if (n == "REAL") col_re = c;
-      if (n == "IMAG") col_im = c;
-    }
-    if (!col_index || !col_re || !col_im) fail(file, where + "has no INDEX, REAL and IMAG columns; " + expected);
-    Part p;
-    p.hdu = h;
-    const auto n = static_cast<std::size_t>(size.rows);
-    p.index.resize(n);
-    p.re.resize(n);
-    p.im.resize(n);
-    const auto repeat = [&](int col, const char* label) {
-      const ColumnType t = column_type(f, col, label);
-      if (t.repeat != 1) fail(file, where + "column " + label + " holds " + std::to_string(t.repeat) + " values a row; expected 1");
-      if (!is_fixed_numeric(t.type)) fail(file, where + "column " + label + " is not numeric");
-      return t.repeat;
-    };
-    read_column(f, col_index, repeat(col_index, "INDEX"), p.index, "INDEX");
-    read_column(f, col_re, repeat(col_re, "REAL"), p.re, "REAL");
-    read_column(f, col_im, repeat(col_im, "IMAG"), p.im, "IMAG");
-    long value = 0;
-    int s2 = 0;
-    if (fits_read_key(f.get(), TLONG, "MAX-LPOL", &value, nullptr, &s2) == 0) p.lmax_key = value;
-    s2 = 0;
-    if (fits_read_key(f.get(), TLONG, "MAX-MPOL", &value, nullptr, &s2) == 0) p.mmax_key = value;
-    fits_clear_errmsg();
-    parts.push_back(std::move(p));
+    parts.push_back(read_alm_table(f, file, h, expected));
   }
   if (parts.size() != 1 && parts.size() != 3)
     fail(file, "has " + std::to_string(parts.size()) + " alm tables; expected 1 (T) or 3 (T, E, B), as healpy.write_alm writes them");
   HarmonicBeam beam;
   beam.source = file.string();
-  // lmax and mmax: the header's MAX-LPOL and MAX-MPOL where given, else the largest l and m present.
-  for (const Part& p : parts) {
-    const std::string where = "HDU " + std::to_string(p.hdu) + ": ";
-    if (p.lmax_key >= 0 && p.mmax_key > p.lmax_key)
-      fail(file, where + "MAX-MPOL = " + std::to_string(p.mmax_key) + " is above MAX-LPOL = " + std::to_string(p.lmax_key) +
-                     "; expected mmax <= lmax");
-    if (p.lmax_key > 100000) fail(file, where + "MAX-LPOL = " + std::to_string(p.lmax_key) + " is above 100000");
-    beam.lmax = std::max<long long>(beam.lmax, p.lmax_key);
-    beam.mmax = std::max<long long>(beam.mmax, p.mmax_key);
-    for (std::size_t r = 0; r < p.index.size(); ++r) {
-      const double x = p.index[r];
-      if (!(x >= 1 && x <= 1e10 && x == std::floor(x)))
-        fail(file, where + "row " + std::to_string(r + 1) + ": INDEX " + std::to_string(x) + " is not l^2 + l + m + 1 of any l, m >= 0");
-      const auto i = static_cast<long long>(x) - 1;
-      auto l = static_cast<long long>(std::sqrt(static_cast<double>(i)));
-      while (l * l > i) --l;
-      while ((l + 1) * (l + 1) <= i) ++l;
-      const long long m = i - l * l - l;
-      if (m < 0) fail(file, where + "row " + std::to_string(r + 1) + ": INDEX " + std::to_string(i + 1) + " is l = " + std::to_string(l) + ", m = " + std::to_string(m) + "; expected m >= 0");
-      if (p.lmax_key >= 0 && l > p.lmax_key)
-        fail(file, where + "row " + std::to_string(r + 1) + ": l = " + std::to_string(l) + " is above MAX-LPOL = " + std::to_string(p.lmax_key));
-      if (p.mmax_key >= 0 && m > p.mmax_key)
-        fail(file, where + "row " + std::to_string(r + 1) + ": m = " + std::to_string(m) + " is above MAX-MPOL = " + std::to_string(p.mmax_key));
-      if (p.lmax_key < 0) beam.lmax = std::max<long long>(beam.lmax, l);
-      if (p.mmax_key < 0) beam.mmax = std::max<long long>(beam.mmax, m);
-      if (!std::isfinite(p.re[r]) || !std::isfinite(p.im[r]))
-        fail(file, where + "row " + std::to_string(r + 1) + " (l = " + std::to_string(l) + ", m = " + std::to_string(m) + ") is not finite");
-    }
-  }
+  for (const AlmTable& p : parts) check_alm_table(p, file, beam);
   if (beam.lmax < 0) fail(file, "its alm tables are empty");
   if (beam.mmax > beam.lmax)
     fail(file, "mmax = " + std::to_string(beam.mmax) + " is above lmax = " + std::to_string(beam.lmax));
@@ -333,7 +353,7 @@ HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
   // a small file must not declare gigabytes, nor hours of synthesis (O(lmax mmax) a radius).
   const std::size_t n = size(beam.lmax, beam.mmax);
   std::size_t rows = 0;
-  for (const Part& p : parts) rows = std::max(rows, p.index.size());
+  for (const AlmTable& p : parts) rows = std::max(rows, p.index.size());
   if (static_cast<double>(n) > 4.0 * static_cast<double>(rows) + 1e6)
     fail(file, "lmax = " + std::to_string(beam.lmax) + ", mmax = " + std::to_string(beam.mmax) + " (" +
                    (parts[0].lmax_key >= 0 ? "MAX-LPOL and MAX-MPOL" : "the largest l and m of its rows") + ") make " +
@@ -350,13 +370,9 @@ HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
                      " coefficients (lmax " + std::to_string(beam.lmax) + ", mmax " + std::to_string(beam.mmax) +
                      ") could not be allocated");
     }
-    const Part& p = parts[c];
+    const AlmTable& p = parts[c];
     for (std::size_t r = 0; r < p.index.size(); ++r) {
-      const auto i = static_cast<long long>(p.index[r]) - 1;
-      auto l = static_cast<long long>(std::sqrt(static_cast<double>(i)));
-      while (l * l > i) --l;
-      while ((l + 1) * (l + 1) <= i) ++l;
-      const long long m = i - l * l - l;
+      const auto [l, m] = alm_lm(static_cast<long long>(p.index[r]) - 1);
       (*out[c])[index(beam.lmax, static_cast<int>(l), static_cast<int>(m))] = cd(p.re[r], m == 0 ? 0.0 : p.im[r]);
     }
   }

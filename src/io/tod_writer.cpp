@@ -150,11 +150,11 @@ TodWriter::TodWriter(const fs::path& file, const FocalPlane& focal_plane, std::s
   create(focal_plane, samples_per_detector, precision, with_pointing, attributes, with_flags, with_weights, false);
 }
 
-void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_detector, TodPrecision precision,
-                       bool with_pointing, const std::map<std::string, std::string>& attributes, bool with_flags,
-                       bool with_weights, bool shared) {
-  const fs::path& file = file_;
-  Session session;
+namespace {
+
+// A TOD file's name and detectors, checked before anything is made: a file in a directory that
+// exists, and detector names that can name HDF5 groups, each once.
+void check_target(const fs::path& file, const FocalPlane& focal_plane) {
   const std::string where = file.string();
   if (file.empty() || !file.has_filename()) throw Error(where + ": not a file name (expected a TOD file path)");
   std::error_code ec;
@@ -171,6 +171,95 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
     if (!seen.insert(d.name).second)
       throw Error(where + ": detector name " + in_quotes(d.name) + " appears twice (expected unique names)");
   }
+}
+
+// The dataspace of a detector's dataset, (samples) or (samples, width), and its creation list,
+// chunked along samples.
+struct Layout {
+  Handle space, list;
+};
+Layout layout(std::size_t samples, hsize_t width, const std::string& where, const std::string& what) {
+  const hsize_t dims[2] = {static_cast<hsize_t>(samples), width};
+  const int rank = width ? 2 : 1;
+  Layout l{checked(H5Screate_simple(rank, dims, nullptr), H5Sclose, where, "cannot create the " + what + " dataspace"),
+           checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list")};
+  if (samples > 0) {
+    const hsize_t chunk[2] = {std::min<hsize_t>(dims[0], kChunkSamples), width};
+    check(H5Pset_chunk(l.list.get(), rank, chunk), where, "cannot set the dataset chunk size");
+  }
+  return l;
+}
+
+// The datasets' layouts: the signal (and the angles), the quaternions (samples, 4), the weights
+// (samples, 3) and the flags.
+struct Layouts {
+  hid_t signal_type;
+  Layout signal, quat, weights, flags;
+};
+Layouts layouts(std::size_t samples, TodPrecision precision, bool shared, const std::string& where) {
+  Layouts l{precision == TodPrecision::float32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE, layout(samples, 0, where, "TOD"),
+            layout(samples, 4, where, "quaternion"), layout(samples, 3, where, "weights"), layout(samples, 0, where, "TOD")};
+  // Samples never written read back as NaN (commit() refuses such a file anyway); flags as unflagged (0).
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  check(H5Pset_fill_value(l.signal.list.get(), H5T_NATIVE_DOUBLE, &nan), where, "cannot set the dataset fill value");
+  // A shared file: all storage allocated now, so that the processes that open it write into it
+  // independently (with parallel HDF5, allocation is collective), and nothing filled (each process
+  // writes its own samples; filling would write the whole file once more).
+  if (shared)
+    for (const Layout* x : {&l.signal, &l.quat, &l.flags, &l.weights}) {
+      check(H5Pset_alloc_time(x->list.get(), H5D_ALLOC_TIME_EARLY), where, "cannot set the allocation time");
+      check(H5Pset_fill_time(x->list.get(), H5D_FILL_TIME_NEVER), where, "cannot set the fill time");
+    }
+  return l;
+}
+
+// One of a detector's datasets, with a string attribute when `attribute` is given.
+void create_dataset(hid_t group, const std::string& detector, const char* name, hid_t type, const Layout& l, hid_t dapl,
+                    const std::string& where, const char* attribute = nullptr, const char* value = nullptr) {
+  const std::string path = in_quotes("/" + detector + "/" + name);
+  Handle ds = checked(H5Dcreate2(group, name, type, l.space.get(), H5P_DEFAULT, l.list.get(), dapl), H5Dclose, where,
+                      "cannot create dataset " + path);
+  if (attribute) write_string_attribute(ds.get(), attribute, value, where);
+  if (!ds.close()) fail(where, "cannot close dataset " + path);
+}
+
+// A detector's group: its attributes and datasets.
+void create_group(hid_t file, hid_t dapl, const Detector& d, const Layouts& l, bool with_pointing, bool with_flags,
+                  bool with_weights, const std::string& where) {
+  const std::string group_path = in_quotes("/" + d.name);
+  Handle group = checked(H5Gcreate2(file, d.name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose, where,
+                         "cannot create group " + group_path);
+  write_scalar_attribute(group.get(), "zeta", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.zeta, where, d.name);
+  write_scalar_attribute(group.get(), "epsilon", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.epsilon, where, d.name);
+  write_scalar_attribute(group.get(), "gain", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.gain, where, d.name);
+  const std::uint64_t beam = d.beam;
+  write_scalar_attribute(group.get(), "beam", H5T_STD_U64LE, H5T_NATIVE_UINT64, &beam, where, d.name);
+  create_dataset(group.get(), d.name, "signal", l.signal_type, l.signal, dapl, where);
+  if (with_pointing) {
+    for (const char* name : tod::pointing_names)
+      create_dataset(group.get(), d.name, name, H5T_IEEE_F64LE, l.signal, dapl, where);
+    create_dataset(group.get(), d.name, tod::quat_name, H5T_IEEE_F64LE, l.quat, dapl, where, "layout",
+                   "the detector's antenna basis as a rotation, x, y, z, w (scalar last): q z^ q* is the "
+                   "line of sight, q x^ q* the axis zeta is measured from");
+  }
+  if (with_flags)
+    create_dataset(group.get(), d.name, tod::flags_name, H5T_STD_U8LE, l.flags, dapl, where, "meaning", tod::flags_meaning);
+  if (with_weights)
+    create_dataset(group.get(), d.name, tod::weights_name, H5T_IEEE_F64LE, l.weights, dapl, where, "meaning",
+                   tod::weights_meaning);
+  if (!group.close()) fail(where, "cannot close group " + group_path);
+}
+
+}  // namespace
+
+void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_detector, TodPrecision precision,
+                       bool with_pointing, const std::map<std::string, std::string>& attributes, bool with_flags,
+                       bool with_weights, bool shared) {
+  const fs::path& file = file_;
+  Session session;
+  const std::string where = file.string();
+  check_target(file, focal_plane);
+  std::error_code ec;
 
   impl_ = std::make_unique<Impl>();
   Impl& s = *impl_;
@@ -208,99 +297,9 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
   }
   write_string_attribute(s.file.get(), "pisco_format", tod::format, where);
 
-  const hsize_t dims[1] = {static_cast<hsize_t>(samples_per_detector)};
-  Handle space = checked(H5Screate_simple(1, dims, nullptr), H5Sclose, where, "cannot create the TOD dataspace");
-  Handle dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
-  if (samples_per_detector > 0) {
-    const hsize_t chunk[1] = {std::min<hsize_t>(dims[0], kChunkSamples)};
-    check(H5Pset_chunk(dcpl.get(), 1, chunk), where, "cannot set the dataset chunk size");
-  }
-  // Samples never written read back as NaN (commit() refuses such a file anyway).
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  check(H5Pset_fill_value(dcpl.get(), H5T_NATIVE_DOUBLE, &nan), where, "cannot set the dataset fill value");
-  const hid_t signal_type = precision == TodPrecision::float32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
-  // The detector quaternions: (samples, 4), chunked along samples.
-  const hsize_t quat_dims[2] = {static_cast<hsize_t>(samples_per_detector), 4};
-  Handle quat_space = checked(H5Screate_simple(2, quat_dims, nullptr), H5Sclose, where,
-                              "cannot create the quaternion dataspace");
-  Handle quat_dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
-  if (samples_per_detector > 0) {
-    const hsize_t chunk[2] = {std::min<hsize_t>(quat_dims[0], kChunkSamples), 4};
-    check(H5Pset_chunk(quat_dcpl.get(), 2, chunk), where, "cannot set the dataset chunk size");
-  }
-  // The weights: (samples, 3), chunked along samples.
-  const hsize_t weights_dims[2] = {static_cast<hsize_t>(samples_per_detector), 3};
-  Handle weights_space = checked(H5Screate_simple(2, weights_dims, nullptr), H5Sclose, where,
-                                 "cannot create the weights dataspace");
-  Handle weights_dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
-  if (samples_per_detector > 0) {
-    const hsize_t chunk[2] = {std::min<hsize_t>(weights_dims[0], kChunkSamples), 3};
-    check(H5Pset_chunk(weights_dcpl.get(), 2, chunk), where, "cannot set the dataset chunk size");
-  }
-
-  // Flags: unflagged (0) wherever nothing was written.
-  Handle flags_dcpl = checked(H5Pcreate(H5P_DATASET_CREATE), H5Pclose, where, "cannot create a dataset creation list");
-  if (samples_per_detector > 0) {
-    const hsize_t chunk[1] = {std::min<hsize_t>(dims[0], kChunkSamples)};
-    check(H5Pset_chunk(flags_dcpl.get(), 1, chunk), where, "cannot set the dataset chunk size");
-  }
-  // A shared file: all storage allocated now, so that the processes that open it write into it
-  // independently (with parallel HDF5, allocation is collective), and nothing filled (each process
-  // writes its own samples; filling would write the whole file once more).
-  if (shared)
-    for (const Handle* list : {&dcpl, &quat_dcpl, &flags_dcpl, &weights_dcpl}) {
-      check(H5Pset_alloc_time(list->get(), H5D_ALLOC_TIME_EARLY), where, "cannot set the allocation time");
-      check(H5Pset_fill_time(list->get(), H5D_FILL_TIME_NEVER), where, "cannot set the fill time");
-    }
-  for (const Detector& d : focal_plane.detectors()) {
-    const std::string group_path = in_quotes("/" + d.name);
-    Handle group = checked(H5Gcreate2(s.file.get(), d.name.c_str(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
-                           H5Gclose, where, "cannot create group " + group_path);
-    write_scalar_attribute(group.get(), "zeta", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.zeta, where, d.name);
-    write_scalar_attribute(group.get(), "epsilon", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.epsilon, where, d.name);
-    write_scalar_attribute(group.get(), "gain", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &d.gain, where, d.name);
-    const std::uint64_t beam = d.beam;
-    write_scalar_attribute(group.get(), "beam", H5T_STD_U64LE, H5T_NATIVE_UINT64, &beam, where, d.name);
-    Handle signal = checked(H5Dcreate2(group.get(), "signal", signal_type, space.get(), H5P_DEFAULT, dcpl.get(),
-                                       s.dapl.get()),
-                            H5Dclose, where, "cannot create dataset " + in_quotes("/" + d.name + "/signal"));
-    if (!signal.close()) fail(where, "cannot close dataset " + in_quotes("/" + d.name + "/signal"));
-    if (with_pointing) {
-      for (const char* name : tod::pointing_names) {
-        const std::string path = in_quotes("/" + d.name + "/" + name);
-        Handle ds = checked(H5Dcreate2(group.get(), name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, dcpl.get(),
-                                       s.dapl.get()),
-                            H5Dclose, where, "cannot create dataset " + path);
-        if (!ds.close()) fail(where, "cannot close dataset " + path);
-      }
-      const std::string path = in_quotes("/" + d.name + "/" + tod::quat_name);
-      Handle ds = checked(H5Dcreate2(group.get(), tod::quat_name, H5T_IEEE_F64LE, quat_space.get(), H5P_DEFAULT,
-                                     quat_dcpl.get(), s.dapl.get()),
-                          H5Dclose, where, "cannot create dataset " + path);
-      write_string_attribute(ds.get(), "layout",
-                             "the detector's antenna basis as a rotation, x, y, z, w (scalar last): q z^ q* is the "
-                             "line of sight, q x^ q* the axis zeta is measured from",
-                             where);
-      if (!ds.close()) fail(where, "cannot close dataset " + path);
-    }
-    if (with_flags) {
-      const std::string path = in_quotes("/" + d.name + "/" + tod::flags_name);
-      Handle ds = checked(H5Dcreate2(group.get(), tod::flags_name, H5T_STD_U8LE, space.get(), H5P_DEFAULT,
-                                     flags_dcpl.get(), s.dapl.get()),
-                          H5Dclose, where, "cannot create dataset " + path);
-      write_string_attribute(ds.get(), "meaning", tod::flags_meaning, where);
-      if (!ds.close()) fail(where, "cannot close dataset " + path);
-    }
-    if (with_weights) {
-      const std::string path = in_quotes("/" + d.name + "/" + tod::weights_name);
-      Handle ds = checked(H5Dcreate2(group.get(), tod::weights_name, H5T_IEEE_F64LE, weights_space.get(), H5P_DEFAULT,
-                                     weights_dcpl.get(), s.dapl.get()),
-                          H5Dclose, where, "cannot create dataset " + path);
-      write_string_attribute(ds.get(), "meaning", tod::weights_meaning, where);
-      if (!ds.close()) fail(where, "cannot close dataset " + path);
-    }
-    if (!group.close()) fail(where, "cannot close group " + group_path);
-  }
+  const Layouts l = layouts(samples_per_detector, precision, shared, where);
+  for (const Detector& d : focal_plane.detectors())
+    create_group(s.file.get(), s.dapl.get(), d, l, with_pointing, with_flags, with_weights, where);
 }
 
 void TodWriter::create_shared(const fs::path& file, const FocalPlane& focal_plane, std::size_t samples_per_detector,

@@ -80,36 +80,39 @@ void DeconvolvingMapmaker::add(const SurveyChunk& chunk, std::span<const double>
   any_ = true;
 }
 
-DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
-                                            const std::function<void(const DeconvolutionProgress&)>& progress) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const int nside = engine_.nside();
-  if (!any_ && !options_.reduce)
-    throw Error("deconvolution: no TOD was added; call add() for every chunk of the survey before solve()");
-  Sky b(nside), x(nside), r(nside), p(nside), q(nside), z(nside), diagonal(nside);
-  // The engine's adjoint maps, summed over the processes when there are several.
-  std::vector<double> buffer;
-  const auto take = [&](Sky& out) {
+namespace {
+
+// The engine's adjoint maps into `out`, summed over the processes by `reduce` when it is given.
+class Taker {
+ public:
+  Taker(Engine& engine, const std::function<void(std::span<double>)>& reduce) : engine_(engine), reduce_(reduce) {}
+  void operator()(Sky& out) {
     engine_.take_adjoint(maps_of(out));
-    if (!options_.reduce) return;
+    if (!reduce_) return;
     const std::size_t n = out.npix();
-    buffer.resize(4 * n);
-    for (int k = 0; k < 4; ++k) std::copy_n(out.stokes(StokesIndex(k)).begin(), n, buffer.begin() + std::ptrdiff_t(k * n));
-    options_.reduce(buffer);
-    for (int k = 0; k < 4; ++k) std::copy_n(buffer.begin() + std::ptrdiff_t(k * n), n, out.stokes(StokesIndex(k)).begin());
-  };
-  take(b);
-  // The Jacobi preconditioner: the diagonal of A^T A (Engine::adjoint_diagonal), one more pass; and,
-  // in the same pass, the polarization angles the scan gives each region of the sky (the detectors'
-  // (I, Q, U) weights binned at the coverage NSIDE, as the binned map-maker bins them).
-  const int coverage_nside = options_.coverage_nside > 0 ? std::min(options_.coverage_nside, nside)
-                                                         : std::max(1, nside / 4);
-  BinnedMapmaker coverage(coverage_nside, options_.rcond_min);
+    buffer_.resize(4 * n);
+    for (int k = 0; k < 4; ++k) std::copy_n(out.stokes(StokesIndex(k)).begin(), n, buffer_.begin() + std::ptrdiff_t(k * n));
+    reduce_(buffer_);
+    for (int k = 0; k < 4; ++k) std::copy_n(buffer_.begin() + std::ptrdiff_t(k * n), n, out.stokes(StokesIndex(k)).begin());
+  }
+
+ private:
+  Engine& engine_;
+  const std::function<void(std::span<double>)>& reduce_;
+  std::vector<double> buffer_;
+};
+
+// The Jacobi preconditioner: the diagonal of A^T A (Engine::adjoint_diagonal), one more pass; and,
+// in the same pass, the polarization angles the scan gives each region of the sky (the detectors'
+// (I, Q, U) weights binned at the coverage NSIDE, as the binned map-maker bins them).
+BinnedMaps diagonal_and_angles(Engine& engine, const DeconvolvingMapmaker::Survey& survey, const DeconvolutionOptions& options,
+                               int coverage_nside, Taker& take, Sky& diagonal) {
+  BinnedMapmaker coverage(coverage_nside, options.rcond_min);
   {
-    const FocalPlane& fp = engine_.focal_plane();
+    const FocalPlane& fp = engine.focal_plane();
     std::vector<double> zeros;
     survey([&](const SurveyChunk& c) {
-      diagonal_chunk(engine_, c);
+      diagonal_chunk(engine, c);
       zeros.assign(c.size(), 0.0);
       const Detector& d = fp.detectors().at(c.detector);
       if (c.quaternions) coverage.add_from_boresight(d, c.quats, zeros, c.hwp_angle);
@@ -117,13 +120,13 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
     });
   }
   take(diagonal);
-  if (options_.reduce) {  // the coverage of every process's chunks
+  if (options.reduce) {  // the coverage of every process's chunks
     const auto ata = coverage.normal_matrices();
     std::vector<double> sum(ata.begin(), ata.end());
     sum.resize(ata.size() + coverage.hits().size());
     std::copy(coverage.hits().begin(), coverage.hits().end(), sum.begin() + std::ptrdiff_t(ata.size()));
-    options_.reduce(sum);
-    BinnedMapmaker all(coverage_nside, options_.rcond_min);
+    options.reduce(sum);
+    BinnedMapmaker all(coverage_nside, options.rcond_min);
     std::vector<std::uint32_t> hits(coverage.hits().size());
     for (std::size_t i = 0; i < hits.size(); ++i)
       hits[i] = static_cast<std::uint32_t>(std::min(sum[ata.size() + i], 4e9));
@@ -131,38 +134,60 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
                              std::vector<double>(coverage.normal_vectors().size(), 0.0), hits);
     coverage = std::move(all);
   }
-  const BinnedMaps angles = coverage.solve();
+  return coverage.solve();
+}
 
-  DeconvolvedMaps out;
-  out.nside = nside;
-  const std::size_t npix = x.npix();
-  // What is solved: solve[k][i], Stokes parameter k of pixel i. A pixel no sample's disc reaches has a
-  // zero diagonal and stays zero, as conjugate gradients from zero leave it.
-  // - A Stokes parameter the beams do not respond to (a diagonal below 1e-12 of I's: the V of a beam
-  //   whose circular response is rounding, not zero) is left out everywhere: dividing by its diagonal
-  //   would multiply rounding by 1e16.
-  // - Q and U (and V) are left out everywhere when the scan's angles constrain them in no coverage
-  //   pixel (a 3x3 matrix with reciprocal condition number below rcond_min everywhere, as the binned
-  //   map-maker cuts: one angle): the solver would fill them with amplified noise. Where only some
-  //   pixels' angles fail (the edges of a scan) they are solved, for the data's sake, and marked
-  //   unseen in the maps.
+// What is solved and what the maps show.
+struct Solved {
+  std::array<bool, 4> solve{};      // Stokes parameter k solved at all
+  std::vector<std::uint8_t> polarized;  // pixel i's Q and U (and V) shown
+  std::vector<bool> seen;           // pixel i shown
+  double floor[4] = {0, 0, 0, 0};   // the preconditioner's least divisor, per Stokes parameter
+};
+
+// 0.1 of the median of the positive values of d (0 when none is).
+double tenth_of_median(std::span<const double> d) {
+  std::vector<double> values;
+  for (double v : d)
+    if (v > 0.0) values.push_back(v);
+  if (values.empty()) return 0.0;
+  std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
+  return 0.1 * values[values.size() / 2];
+}
+
+// What is solved: solve[k][i], Stokes parameter k of pixel i. A pixel no sample's disc reaches has a
+// zero diagonal and stays zero, as conjugate gradients from zero leave it.
+// - A Stokes parameter the beams do not respond to (a diagonal below 1e-12 of I's: the V of a beam
+//   whose circular response is rounding, not zero) is left out everywhere: dividing by its diagonal
+//   would multiply rounding by 1e16.
+// - Q and U (and V) are left out everywhere when the scan's angles constrain them in no coverage
+//   pixel (a 3x3 matrix with reciprocal condition number below rcond_min everywhere, as the binned
+//   map-maker cuts: one angle): the solver would fill them with amplified noise. Where only some
+//   pixels' angles fail (the edges of a scan) they are solved, for the data's sake, and marked
+//   unseen in the maps.
+// What was left out is told in out.left_out.
+Solved what_to_solve(const Sky& diagonal, const BinnedMaps& angles, const DeconvolutionOptions& options, int nside,
+                     int coverage_nside, DeconvolvedMaps& out) {
+  const std::size_t npix = diagonal.npix();
+  Solved v;
   std::array<double, 4> mean{};
   for (int k = 0; k < 4; ++k) {
     double sum = 0;
     std::size_t n = 0;
-    for (double v : diagonal.stokes(StokesIndex(k)))
-      if (v > 0.0) sum += v, ++n;
+    for (double d : diagonal.stokes(StokesIndex(k)))
+      if (d > 0.0) sum += d, ++n;
     mean[std::size_t(k)] = n ? sum / double(n) : 0.0;
   }
   std::array<bool, 4> responds{};
   for (int k = 0; k < 4; ++k) responds[std::size_t(k)] = k == 0 ? mean[0] > 0.0 : mean[std::size_t(k)] > 1e-12 * mean[0];
   const bool any_polarization = responds[1] || responds[2] || responds[3];
-  std::vector<std::uint8_t> polarized(npix, 0);
+  std::vector<std::uint8_t>& polarized = v.polarized;
+  polarized.assign(npix, 0);
   {
     T_Healpix_Base<int> sky_base(nside, RING, SET_NSIDE), coverage_base(coverage_nside, RING, SET_NSIDE);
     for (std::size_t i = 0; i < npix; ++i) {
       const int c = coverage_base.ang2pix(sky_base.pix2ang(int(i)));
-      polarized[i] = angles.rcond[std::size_t(c)] >= options_.rcond_min;
+      polarized[i] = angles.rcond[std::size_t(c)] >= options.rcond_min;
     }
   }
   std::size_t reached = 0, polarization_poor = 0;
@@ -173,7 +198,7 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
       else ++polarization_poor;
     }
   out.polarization_unconstrained = any_polarization && reached > 0 && out.polarization_pixels == 0;
-  std::array<bool, 4> solve{};
+  std::array<bool, 4>& solve = v.solve;
   for (int k = 0; k < 4; ++k) solve[std::size_t(k)] = responds[std::size_t(k)] && (k == 0 || !out.polarization_unconstrained);
   const char* names[4] = {"I", "Q", "U", "V"};
   for (int k = 1; k < 4; ++k)
@@ -184,20 +209,21 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
   if (out.polarization_unconstrained)
     out.left_out.push_back("Q and U everywhere: the scan's polarization angles constrain them in none of the " +
                            std::to_string(reached) + " pixels the beams reach (reciprocal condition number below " +
-                           detail::number_text(options_.rcond_min) + " at NSIDE " + std::to_string(coverage_nside) +
+                           detail::number_text(options.rcond_min) + " at NSIDE " + std::to_string(coverage_nside) +
                            "); they are unseen in the maps");
   else if (any_polarization && polarization_poor > 0)
     out.left_out.push_back("Q and U from the maps in " + std::to_string(polarization_poor) + " of the " +
                            std::to_string(reached) +
                            " pixels the beams reach, where the scan's polarization angles do not constrain them "
-                           "(reciprocal condition number below " + detail::number_text(options_.rcond_min) +
+                           "(reciprocal condition number below " + detail::number_text(options.rcond_min) +
                            " at NSIDE " + std::to_string(coverage_nside) + "): solved, and unseen in the maps");
   // Pixels that only the far tails of the beams reach have a tiny diagonal: the preconditioner's
   // divisor is floored at 1e-3 of the mean non-zero diagonal of its Stokes parameter (else it would
   // multiply their residual by up to 1e27), and the maps mark them unseen (the data hardly constrain
   // them).
-  std::vector<bool> seen(npix, false);
-  double floor[4] = {0, 0, 0, 0};
+  std::vector<bool>& seen = v.seen;
+  seen.assign(npix, false);
+  double* floor = v.floor;
   for (int k = 0; k < 4; ++k) floor[k] = 1e-3 * mean[std::size_t(k)];
   {
     const auto di = diagonal.I();
@@ -206,14 +232,6 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
   // The edges of the coverage, where the beams reach pixels from one side only: the solution there is
   // an extrapolation of the interior, and its errors grow several times. The maps mark unseen the
   // pixels whose I diagonal is below a tenth of its median, and Q, U and V where Q's is.
-  const auto tenth_of_median = [&](std::span<const double> d) {
-    std::vector<double> values;
-    for (double v : d)
-      if (v > 0.0) values.push_back(v);
-    if (values.empty()) return 0.0;
-    std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
-    return 0.1 * values[values.size() / 2];
-  };
   {
     const auto di = diagonal.I();
     const double least = tenth_of_median(di);
@@ -236,6 +254,54 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
                              " more pixels at the edge of the coverage, whose Q diagonal is below a tenth of the "
                              "median: solved, and unseen in the maps");
   }
+  return v;
+}
+
+// The solution smoothed by a Gaussian of options.target_fwhm, with the maps' unseen pixels.
+void smoothed_maps(const Sky& x, const Solved& v, const DeconvolutionOptions& options, int nside, DeconvolvedMaps& out) {
+  const std::vector<bool>& seen = v.seen;
+  const std::vector<std::uint8_t>& polarized = v.polarized;
+  const int lmax = 3 * nside - 1;
+  detail::SkyAlm a = detail::sky_alm(x, lmax, 3);
+  const std::vector<double> wt = gaussian_beam_window(options.target_fwhm, lmax, false);
+  const std::vector<double> wp = gaussian_beam_window(options.target_fwhm, lmax, true);
+  for (int m = 0; m <= lmax; ++m)
+    for (int l = m; l <= lmax; ++l) {
+      a.t(l, m) *= wt[std::size_t(l)];
+      a.e(l, m) *= wp[std::size_t(l)];
+      a.b(l, m) *= wp[std::size_t(l)];
+    }
+  a.has_v = false;
+  const Sky s = detail::sky_from_alm(a, nside, x.units());
+  out.smoothed_I.assign(s.I().begin(), s.I().end());
+  out.smoothed_Q.assign(s.Q().begin(), s.Q().end());
+  out.smoothed_U.assign(s.U().begin(), s.U().end());
+  for (std::size_t i = 0; i < seen.size(); ++i)
+    if (!seen[i]) out.smoothed_I[i] = out.smoothed_Q[i] = out.smoothed_U[i] = unseen;
+    else if (!polarized[i]) out.smoothed_Q[i] = out.smoothed_U[i] = unseen;
+}
+
+}  // namespace
+
+DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
+                                            const std::function<void(const DeconvolutionProgress&)>& progress) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const int nside = engine_.nside();
+  if (!any_ && !options_.reduce)
+    throw Error("deconvolution: no TOD was added; call add() for every chunk of the survey before solve()");
+  Sky b(nside), x(nside), r(nside), p(nside), q(nside), z(nside), diagonal(nside);
+  // The engine's adjoint maps, summed over the processes when there are several.
+  Taker take(engine_, options_.reduce);
+  take(b);
+  const int coverage_nside = options_.coverage_nside > 0 ? std::min(options_.coverage_nside, nside)
+                                                         : std::max(1, nside / 4);
+  const BinnedMaps angles = diagonal_and_angles(engine_, survey, options_, coverage_nside, take, diagonal);
+
+  DeconvolvedMaps out;
+  out.nside = nside;
+  const Solved v = what_to_solve(diagonal, angles, options_, nside, coverage_nside, out);
+  const std::array<bool, 4>& solve = v.solve;
+  const double* floor = v.floor;
   // The right-hand side of the parameters solved; the rest is zero and stays so.
   const auto project = [&](Sky& m) {
     for (int k = 0; k < 4; ++k)
@@ -309,33 +375,14 @@ DeconvolvedMaps DeconvolvingMapmaker::solve(const Survey& survey,
   } else {
     out.converged = true;  // A^T d = 0: the solution is zero
   }
-  if (options_.target_fwhm > 0.0) {
-    const int lmax = 3 * nside - 1;
-    detail::SkyAlm a = detail::sky_alm(x, lmax, 3);
-    const std::vector<double> wt = gaussian_beam_window(options_.target_fwhm, lmax, false);
-    const std::vector<double> wp = gaussian_beam_window(options_.target_fwhm, lmax, true);
-    for (int m = 0; m <= lmax; ++m)
-      for (int l = m; l <= lmax; ++l) {
-        a.t(l, m) *= wt[std::size_t(l)];
-        a.e(l, m) *= wp[std::size_t(l)];
-        a.b(l, m) *= wp[std::size_t(l)];
-      }
-    a.has_v = false;
-    const Sky s = detail::sky_from_alm(a, nside, x.units());
-    out.smoothed_I.assign(s.I().begin(), s.I().end());
-    out.smoothed_Q.assign(s.Q().begin(), s.Q().end());
-    out.smoothed_U.assign(s.U().begin(), s.U().end());
-    for (std::size_t i = 0; i < seen.size(); ++i)
-      if (!seen[i]) out.smoothed_I[i] = out.smoothed_Q[i] = out.smoothed_U[i] = unseen;
-      else if (!polarized[i]) out.smoothed_Q[i] = out.smoothed_U[i] = unseen;
-  }
+  if (options_.target_fwhm > 0.0) smoothed_maps(x, v, options_, nside, out);
   out.I.assign(x.I().begin(), x.I().end());
   out.Q.assign(x.Q().begin(), x.Q().end());
   out.U.assign(x.U().begin(), x.U().end());
   out.V.assign(x.V().begin(), x.V().end());
-  for (std::size_t i = 0; i < seen.size(); ++i)
-    if (!seen[i]) out.I[i] = out.Q[i] = out.U[i] = out.V[i] = unseen;
-    else if (!polarized[i]) out.Q[i] = out.U[i] = out.V[i] = unseen;
+  for (std::size_t i = 0; i < v.seen.size(); ++i)
+    if (!v.seen[i]) out.I[i] = out.Q[i] = out.U[i] = out.V[i] = unseen;
+    else if (!v.polarized[i]) out.Q[i] = out.U[i] = out.V[i] = unseen;
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   out.seconds_per_iteration = out.iterations ? out.seconds / out.iterations : 0.0;
   any_ = false;

@@ -153,7 +153,9 @@ std::optional<pisco::DeconvolvedMaps> deconvolve(const SimulationConfig& c, cons
 }
 
 // [ground]: the pickup over every process's samples (SimulationResult's ground_ fields).
-void ground_summary(const std::vector<detail::JobStream::GroundStats>& stats, RunContext& cl, SimulationResult& r) {
+// Told in the sky's units.
+void ground_summary(const std::vector<detail::JobStream::GroundStats>& stats, RunContext& cl, SimulationResult& r,
+                    const std::string& units, const std::function<void(const std::string&)>& say_line) {
   // Every detector's count, sum and sum of squares summed over the processes in one call.
   std::vector<double> sums;
   for (const auto& g : stats) sums.insert(sums.end(), {double(g.n), g.sum, g.sum2});
@@ -174,6 +176,71 @@ void ground_summary(const std::vector<detail::JobStream::GroundStats>& stats, Ru
   r.ground_mean = n > 0 ? sum / n : 0.0;
   r.ground_rms = detectors > 0 ? std::sqrt(variance / detectors) : 0.0;
   r.ground_peak_to_peak = peak;
+  say_line(detail::printf_text(
+      "ground: picked up through the beams: mean %.6g %s, scan-synchronous rms %.6g, largest peak to peak %.6g\n",
+      r.ground_mean, units.c_str(), r.ground_rms, r.ground_peak_to_peak));
+}
+
+// [ground]: a second engine over the ground map in the horizon frame, with the run's beams, on
+// [ground]'s backend (the run's own by default) with [engine]'s other settings.
+void make_ground_engine(const SimulationConfig& c, const Sky& sky, const std::vector<Beamsor>& beams, const FocalPlane& fp,
+                        RunContext& cl, const std::function<void(const std::string&)>& say_line,
+                        std::optional<Engine>& ground_engine) {
+  auto say = [&](const char* fmt, auto... args) { say_line(detail::printf_text(fmt, args...)); };
+  std::optional<Sky> ground_sky;
+  cl.step([&] { ground_sky.emplace(make_ground_sky(c.ground, sky, c.source)); });
+  cl.step([&] {
+    try {
+      SimulationConfig ground_config = c;  // [ground] backend, with [engine]'s other settings
+      if (!c.ground.backend.empty()) ground_config.engine.options.backend = c.ground.backend;
+      ground_engine.emplace(make_engine(*ground_sky, beams, fp, ground_config, cl));
+    } catch (const Error& e) {
+      throw Error(c.source.string() + ": [ground]: " + e.what(), e.kind());
+    }
+  });
+  const auto [lo, hi] = std::minmax_element(ground_sky->I().begin(), ground_sky->I().end());
+  say("ground: NSIDE %d in the horizon frame, %s, from %.6g to %.6g %s; backend %s\n", ground_sky->nside(),
+      c.ground.file.empty() ? "the model" : c.ground.file.string().c_str(), *lo, *hi, sky.units().c_str(),
+      ground_engine->backend_name().c_str());
+}
+
+// The leader's maps and spectra (binned, or deconvolved with binned ones beside), and the ground's
+// maps when it was binned; returns why nothing was solved, empty when something was.
+std::string write_maps(const SimulationConfig& c, const Sky& sky, int maps_nside,
+                       const std::optional<pisco::DeconvolvedMaps>& deconvolved, pisco::BinnedMapmaker& mapper,
+                       pisco::BinnedMapmaker* ground_mapper, bool flagging, RunObserver& obs, SimulationResult& result) {
+  const auto log = [&](const std::string& line) { obs.log(line); };
+  const MapOutputs out = deconvolved ? write_deconvolved_maps(c, sky, maps_nside, *deconvolved, mapper, log)
+                                     : write_binned_maps(c, sky, maps_nside, mapper, flagging, log);
+  result.written.insert(result.written.end(), out.written.begin(), out.written.end());
+  if (ground_mapper && out.nothing_solved.empty())
+    for (const auto& f : write_ground_maps(c, sky, maps_nside, *ground_mapper, log)) result.written.push_back(f);
+  result.solved_pixels = out.solved;
+  return out.nothing_solved;
+}
+
+// A run that would write nothing is refused before it starts (spectra and plots come from the maps).
+void refuse_a_run_that_writes_nothing(const SimulationConfig& c) {
+  if (!c.output.tod && !c.output.maps)
+    throw Error((c.source.empty() ? std::string("simulation") : c.source.string()) +
+                ": [output] tod = false and maps = false: the run would write nothing; set tod or maps to true");
+}
+
+// The engine's backend and the sky's UNSEEN pixels, told; returns whether samples are flagged: with
+// [sky] unseen = "flag", samples whose disc holds an UNSEEN pixel are flagged in the TOD file and left
+// out of the maps.
+bool describe_engine(const SimulationConfig& c, const Engine& engine, RunContext& cl,
+                     const std::function<void(const std::string&)>& say_line) {
+  auto say = [&](const char* fmt, auto... args) { say_line(detail::printf_text(fmt, args...)); };
+  say("backend: %s (%s)%s\n", engine.backend_name().c_str(), engine.device_name().c_str(),
+      cl.parallel() ? (", rank 0 of " + std::to_string(cl.size()) + " (" + std::to_string(cl.node_size()) +
+                       " on its node)").c_str()
+                    : "");
+  const bool flagging = c.sky.unseen == pisco::UnseenPolicy::flag && engine.unseen_pixels() > 0;
+  if (engine.unseen_pixels() > 0)
+    say("sky: %zu UNSEEN pixels taken as 0%s\n", engine.unseen_pixels(),
+        flagging ? "; samples whose disc holds one are flagged and left out of the maps" : " ([sky] unseen = \"zero\")");
+  return flagging;
 }
 
 }  // namespace
@@ -198,10 +265,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   const fs::path data_dir = options_.data_dir.empty() ? default_data_dir() : options_.data_dir;
   SimulationResult result;
 
-  // A run that would write nothing is refused before it starts (spectra and plots come from the maps).
-  if (!c.output.tod && !c.output.maps)
-    throw Error((c.source.empty() ? std::string("simulation") : c.source.string()) +
-                ": [output] tod = false and maps = false: the run would write nothing; set tod or maps to true");
+  refuse_a_run_that_writes_nothing(c);
   std::optional<OutputLock> lock;
   lock_output_dir(c, options_, cl, obs, lock);
   std::optional<Sky> sky_holder;
@@ -218,33 +282,8 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   Engine& engine = *engine_holder;
   // [ground]: a second engine over the ground map in the horizon frame, with the same beams.
   std::optional<Engine> ground_engine;
-  if (c.ground.enabled) {
-    std::optional<Sky> ground_sky;
-    cl.step([&] { ground_sky.emplace(make_ground_sky(c.ground, sky, c.source)); });
-    cl.step([&] {
-      try {
-        SimulationConfig ground_config = c;  // [ground] backend, with [engine]'s other settings
-        if (!c.ground.backend.empty()) ground_config.engine.options.backend = c.ground.backend;
-        ground_engine.emplace(make_engine(*ground_sky, beams, fp, ground_config, cl));
-      } catch (const Error& e) {
-        throw Error(c.source.string() + ": [ground]: " + e.what(), e.kind());
-      }
-    });
-    const auto [lo, hi] = std::minmax_element(ground_sky->I().begin(), ground_sky->I().end());
-    say("ground: NSIDE %d in the horizon frame, %s, from %.6g to %.6g %s; backend %s\n", ground_sky->nside(),
-        c.ground.file.empty() ? "the model" : c.ground.file.string().c_str(), *lo, *hi, sky.units().c_str(),
-        ground_engine->backend_name().c_str());
-  }
-  say("backend: %s (%s)%s\n", engine.backend_name().c_str(), engine.device_name().c_str(),
-      cl.parallel() ? (", rank 0 of " + std::to_string(cl.size()) + " (" + std::to_string(cl.node_size()) +
-                       " on its node)").c_str()
-                    : "");
-  // [sky] unseen = "flag": samples whose disc holds an UNSEEN pixel are flagged in the TOD file and
-  // left out of the maps.
-  const bool flagging = c.sky.unseen == pisco::UnseenPolicy::flag && engine.unseen_pixels() > 0;
-  if (engine.unseen_pixels() > 0)
-    say("sky: %zu UNSEEN pixels taken as 0%s\n", engine.unseen_pixels(),
-        flagging ? "; samples whose disc holds one are flagged and left out of the maps" : " ([sky] unseen = \"zero\")");
+  if (c.ground.enabled) make_ground_engine(c, sky, beams, fp, cl, say_line, ground_engine);
+  const bool flagging = describe_engine(c, engine, cl, say_line);
   std::optional<ScanSource> scan;
   cl.step([&] { scan.emplace(c, fp); });
   const bool per_detector_file = scan->per_detector();
@@ -264,17 +303,13 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   make_mapmakers(c, sky, engine, deconvolving, maps_nside, host_threads, cl, mapper, deconvolver);
   // [ground]: its TOD alone binned as the maps are, to show what it leaves in them.
   std::optional<pisco::BinnedMapmaker> ground_mapper;
-  if (ground_engine && mapper) {
-    ground_mapper.emplace(maps_nside, c.output.rcond_min);
-    ground_mapper->set_threads(host_threads);
-  }
+  if (ground_engine && mapper) ground_mapper.emplace(maps_nside, c.output.rcond_min).set_threads(host_threads);
   const fs::path tod_path = c.output.dir / "tod.h5";
   std::optional<pisco::TodWriter> tod_file;
   if (c.output.tod) tod_file = open_tod_file(c, tod_path, sky, made, engine, fp, samples_per_detector, flagging, cl);
 
   const std::size_t chunk = std::min(c.engine.chunk_samples, std::max<std::size_t>(samples_per_detector, 1));
-  const std::size_t ndet = fp.size();
-  const JobPlan plan = plan_jobs(ndet, samples_per_detector, chunk, per_detector_file, cl, [&](std::size_t d) {
+  const JobPlan plan = plan_jobs(fp.size(), samples_per_detector, chunk, per_detector_file, cl, [&](std::size_t d) {
     return disc_pixels(beams[fp[d].beam], sky.nside(), engine.sidelobe_nside());
   });
   std::uint64_t my_samples = 0;
@@ -289,11 +324,8 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
                      flagging, chunk, host_threads, obs, ground_engine ? &*ground_engine : nullptr);
     stream.run(plan, cl);
     flagged = stream.flagged();
-    if (ground_engine) ground_summary(stream.ground_stats(), cl, result);
+    if (ground_engine) ground_summary(stream.ground_stats(), cl, result, sky.units(), say_line);
   }
-  if (ground_engine)
-    say("ground: picked up through the beams: mean %.6g %s, scan-synchronous rms %.6g, largest peak to peak %.6g\n",
-        result.ground_mean, sky.units().c_str(), result.ground_rms, result.ground_peak_to_peak);
   obs.end_convolution();
   const double my_conv = std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
   const double conv = cl.max(my_conv);  // the slowest rank's
@@ -306,10 +338,9 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     cl.step([&] { tod_file->commit(); });
     written.push_back(tod_path);
   }
-  flagged = cl.sum(flagged);
-  std::uint64_t reduced_bytes = 0;
-  if (mapper) cl.step([&] { reduced_bytes = cl.sum(cl.reduce(*mapper)); });
-  if (ground_mapper) cl.step([&] { reduced_bytes += cl.sum(cl.reduce(*ground_mapper)); });
+  result.flagged = flagged = cl.sum(flagged);
+  if (mapper) cl.step([&] { result.reduced_bytes = cl.sum(cl.reduce(*mapper)); });
+  if (ground_mapper) cl.step([&] { result.reduced_bytes += cl.sum(cl.reduce(*ground_mapper)); });
   if (flagging)
     say("flags: %llu of %llu samples flagged (their disc holds an UNSEEN pixel)%s\n",
         static_cast<unsigned long long>(flagged), static_cast<unsigned long long>(total),
@@ -324,17 +355,11 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   // no pixel has no maps to speak of: no spectra (and pisco-vk makes no plots and exits with status 4).
   std::string nothing_solved;
   cl.step([&] {
-    if (!cl.leader() || !mapper) return;
-    const auto log = [&](const std::string& line) { obs.log(line); };
-    const MapOutputs out = deconvolved ? write_deconvolved_maps(c, sky, maps_nside, *deconvolved, *mapper, log)
-                                       : write_binned_maps(c, sky, maps_nside, *mapper, flagging, log);
-    written.insert(written.end(), out.written.begin(), out.written.end());
-    if (ground_mapper && out.nothing_solved.empty())
-      for (const auto& f : write_ground_maps(c, sky, maps_nside, *ground_mapper, log)) written.push_back(f);
-    result.solved_pixels = out.solved;
-    nothing_solved = out.nothing_solved;
+    if (cl.leader() && mapper)
+      nothing_solved = write_maps(c, sky, maps_nside, deconvolved, *mapper, ground_mapper ? &*ground_mapper : nullptr,
+                                  flagging, obs, result);
   });
-  nothing_solved = cl.broadcast(nothing_solved);
+  result.nothing_solved = cl.broadcast(nothing_solved);
 
   result.samples = total;
   result.detectors = fp.size();
@@ -343,10 +368,7 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   result.convolution_seconds = conv;
   result.backend = engine.backend_name();
   result.device = engine.device_name();
-  result.flagged = flagged;
-  result.reduced_bytes = reduced_bytes;
   if (tod_file) result.tod_file = tod_path;
-  result.nothing_solved = nothing_solved;
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return result;
 }

@@ -268,39 +268,27 @@ HWY_INLINE void lookup_pairs(DD dd, const double* table, hn::Vec<hn::RebindToSig
 }
 #endif
 
-// One sample. Radial: weights from a radial profile (else a 2D grid); Columns: weight columns stored
-// (2: w_U = w_V = 0); Plate: effective weights w M(theta); Exact: the float64 sums (monopole,
-// per-sample normalization), whose float64 beam coordinates the float32 evaluation then uses too,
-// as the GPU kernels do (docs/vulkan.md, "Precision").
-// flatten: the formulas, the lambdas and Highway's operations inlined into one loop (left to its
-// heuristics, GCC calls pixel_geometry<F> out of line and passes its vectors through memory).
-template <bool Radial, int Columns, bool Plate, bool Exact>
-HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
-  const DF df;
-  const std::size_t N = hn::Lanes(df);
-  const detail::SampleFrame<double>& fd = *in.frame;
-  const SampleFrame<F> f = broadcast(fd);
-  Vec4<F> mcols[4];  // Plate: the columns of M(theta) in float32, and its column 0 in float64
-  double col0[4] = {1.0, 0.0, 0.0, 0.0};
-  if constexpr (Plate) {
-    plate_columns(in.plate, mcols);
-    for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
-  }
-  const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
-                                 F(det.grid_inv_step), Radial ? 1 : 3};
-  const VF zero = hn::Zero(df);
-
-  F sum(zero), carry(zero);
-  double monopole = 0.0, norm = 0.0;
-
-  // The float64 sums of pixels [p, p + count), count <= N, and their float64 beam coordinates
-  // rounded to float32 into xs, ys: the reference's arithmetic (interpolate_radial,
-  // interpolate_weights with T = double, the weights from its own tables), in vectors of N / 2
-  // doubles; the branches of the interpolation become masks. Sums are kept per lane.
+// The float64 sums of pixels [p, p + count), count <= N, and their float64 beam coordinates
+// rounded to float32 into xs, ys: the reference's arithmetic (interpolate_radial,
+// interpolate_weights with T = double, the weights from its own tables), in vectors of N / 2
+// doubles; the branches of the interpolation become masks. Sums are kept per lane.
+// Radial and Plate as Sample's; `monopole` and `norm` receive the sums (at finish(), where they are
+// kept in vectors).
+template <bool Radial, bool Plate>
+struct ExactSums {
 #if HWY_TARGET == HWY_SCALAR
-  const detail::ArrayGrid<double> weights{det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
-  const detail::ArrayGrid<double> norm_weights{det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
-  auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) {
+  ExactSums(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, const double (&col0)[4],
+            double& monopole, double& norm)
+      : sky(sky), in(in), fd(*in.frame), col0(col0), monopole(monopole), norm(norm),
+        weights{det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d},
+        norm_weights{det.norm_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d} {}
+  const KernelSky& sky;
+  const SampleInput& in;
+  const detail::SampleFrame<double>& fd;
+  const double (&col0)[4];
+  double &monopole, &norm;
+  const detail::ArrayGrid<double> weights, norm_weights;
+  void operator()(std::size_t p, std::size_t count, float* xs, float* ys) {
     for (std::size_t l = 0; l < count; ++l) {
       const detail::Vec3<double> kd{sky.vx[p + l], sky.vy[p + l], sky.vz[p + l]};
       const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
@@ -314,23 +302,38 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
         norm += (Radial ? detail::interpolate_radial(norm_weights, x * x + y * y)
                         : detail::interpolate_weights(norm_weights, x, y)).x;
     }
-  };
-  auto finish_exact = [&] {};
+  }
+  void finish() {}
 #else
-  const hn::Half<DF> dh;
-  const hn::Rebind<double, hn::Half<DF>> dd;
-  const hn::RebindToSigned<decltype(dd)> dl;
-  using VD = hn::Vec<decltype(dd)>;
-  const std::size_t H = hn::Lanes(dd);
-  const VD th_x = hn::Set(dd, fd.theta_p.x), th_y = hn::Set(dd, fd.theta_p.y), th_z = hn::Set(dd, fd.theta_p.z);
-  const VD ph_x = hn::Set(dd, fd.phi_p.x), ph_y = hn::Set(dd, fd.phi_p.y), ph_z = hn::Set(dd, fd.phi_p.z);
-  const VD zero_d = hn::Zero(dd), one_d = hn::Set(dd, 1.0), last_d = hn::Set(dd, double(det.grid_n - 1));
-  const VD max_node_d = hn::Set(dd, double(det.grid_n - 2)), n_d = hn::Set(dd, double(det.grid_n));
-  const VD inv_d = hn::Set(dd, det.grid_inv_step_d), a_d = hn::Set(dd, det.grid_a_d);
-  VD mono_acc = zero_d, norm_acc = zero_d;
-  VD mcol[4];
-  for (int a = 0; a < 4; ++a) mcol[a] = hn::Set(dd, col0[a]);
-  auto exact = [&](std::size_t p, std::size_t count, float* xs, float* ys) HWY_ATTR {
+  using DH = hn::Half<DF>;
+  using DD = hn::Rebind<double, DH>;
+  using DL = hn::RebindToSigned<DD>;
+  using VD = hn::Vec<DD>;
+  ExactSums(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, const double (&col0)[4],
+            double& monopole, double& norm)
+      : sky(sky), det(det), in(in), monopole(monopole), norm(norm), H(hn::Lanes(dd)) {
+    const detail::SampleFrame<double>& fd = *in.frame;
+    th_x = hn::Set(dd, fd.theta_p.x), th_y = hn::Set(dd, fd.theta_p.y), th_z = hn::Set(dd, fd.theta_p.z);
+    ph_x = hn::Set(dd, fd.phi_p.x), ph_y = hn::Set(dd, fd.phi_p.y), ph_z = hn::Set(dd, fd.phi_p.z);
+    zero_d = hn::Zero(dd), one_d = hn::Set(dd, 1.0), last_d = hn::Set(dd, double(det.grid_n - 1));
+    max_node_d = hn::Set(dd, double(det.grid_n - 2)), n_d = hn::Set(dd, double(det.grid_n));
+    inv_d = hn::Set(dd, det.grid_inv_step_d), a_d = hn::Set(dd, det.grid_a_d);
+    mono_acc = zero_d, norm_acc = zero_d;
+    for (int a = 0; a < 4; ++a) mcol[a] = hn::Set(dd, col0[a]);
+  }
+  const KernelSky& sky;
+  const KernelDetector& det;
+  const SampleInput& in;
+  double &monopole, &norm;
+  const DF df;
+  const DH dh;
+  const DD dd;
+  const DL dl;
+  const std::size_t H;
+  VD th_x, th_y, th_z, ph_x, ph_y, ph_z, zero_d, one_d, last_d, max_node_d, n_d, inv_d, a_d;
+  VD mono_acc, norm_acc, mcol[4];
+
+  void operator()(std::size_t p, std::size_t count, float* xs, float* ys) {
     hn::Vec<hn::Half<DF>> xf[2], yf[2];
     for (std::size_t h = 0; h < 2; ++h) {
       const std::size_t first = p + h * H;
@@ -410,15 +413,44 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
     }
     hn::StoreU(hn::Combine(df, xf[1], xf[0]), df, xs);
     hn::StoreU(hn::Combine(df, yf[1], yf[0]), df, ys);
-  };
-  auto finish_exact = [&]() HWY_ATTR {
+  }
+  void finish() {
     HWY_ALIGN double lanes[max_lanes];
     hn::Store(mono_acc, dd, lanes);
     for (std::size_t l = 0; l < H; ++l) monopole += lanes[l];
     hn::Store(norm_acc, dd, lanes);
     for (std::size_t l = 0; l < H; ++l) norm += lanes[l];
-  };
+  }
 #endif
+};
+
+// One sample. Radial: weights from a radial profile (else a 2D grid); Columns: weight columns stored
+// (2: w_U = w_V = 0); Plate: effective weights w M(theta); Exact: the float64 sums (monopole,
+// per-sample normalization), whose float64 beam coordinates the float32 evaluation then uses too,
+// as the GPU kernels do (docs/vulkan.md, "Precision").
+// flatten: the formulas, the lambdas and Highway's operations inlined into one loop (left to its
+// heuristics, GCC calls pixel_geometry<F> out of line and passes its vectors through memory).
+template <bool Radial, int Columns, bool Plate, bool Exact>
+HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+  const DF df;
+  const std::size_t N = hn::Lanes(df);
+  const detail::SampleFrame<double>& fd = *in.frame;
+  const SampleFrame<F> f = broadcast(fd);
+  Vec4<F> mcols[4];  // Plate: the columns of M(theta) in float32, and its column 0 in float64
+  double col0[4] = {1.0, 0.0, 0.0, 0.0};
+  if constexpr (Plate) {
+    plate_columns(in.plate, mcols);
+    for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
+  }
+  const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
+                                 F(det.grid_inv_step), Radial ? 1 : 3};
+  const VF zero = hn::Zero(df);
+
+  F sum(zero), carry(zero);
+  double monopole = 0.0, norm = 0.0;
+
+  // The float64 sums (ExactSums) and the pixels' beam coordinates they round to float32.
+  ExactSums<Radial, Plate> exact(sky, det, in, col0, monopole, norm);
 
   // One vector of pixels: s[0..6] hold kx, ky, kz, I - I0, Q, U, V, and s[7], s[8] the float64 beam
   // coordinates rounded to float32 (Exact); lanes outside `live` add nothing.
@@ -491,7 +523,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   }
   if (fill > 0) evaluate(stage, hn::FirstN(df, fill));
 
-  if constexpr (Exact) finish_exact();
+  if constexpr (Exact) exact.finish();
   HWY_ALIGN float totals[max_lanes];
   hn::Store(hn::Sub(sum.v, carry.v), df, totals);
   double total = 0.0;
@@ -532,33 +564,27 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
     SampleColumns<false>(sky, det, in, out);
 }
 
-// The adjoint of one sample: the forward's float32 geometry and weights, stokes_adjoint, and d times
-// each pixel's weights added to it in float64. In two passes over a chunk of the disc's pixels at a
-// time: first the pixels are evaluated a whole vector at a time as the forward evaluates them, their
-// float32 weights stored by column; then each range adds d times its stretch of those weights to its
-// pixels, float64 vector by vector. A pixel's float32 weights do not depend on the lane that computes
-// them, so the maps are the same bits however the ranges are cut.
-template <bool Radial, int Columns, bool Plate, bool Normal>
-HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
+// The adjoint weights of a vector of pixels (unit vectors k); the fourth is zero where iq (two
+// columns, no plate). With S (the normal pass), the forward's response of the lanes in `live` joins
+// sum and carry (Kahan-compensated float32 lanes, as Sample sums them), from the sky's I - I0, Q, U (and
+// V where a weight multiplies it).
+template <bool Radial, int Columns, bool Plate>
+struct AdjointWeights {
+  static constexpr bool iq = Columns == 2 && !Plate;
+  static constexpr int stokes_in = (Columns == 4 || Plate) ? 4 : 3;
+  AdjointWeights(const KernelDetector& det, const ScatterInput& in)
+      : f(broadcast(*in.frame)),
+        grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a), F(det.grid_inv_step),
+             Radial ? 1 : 3} {
+    if constexpr (Plate) plate_columns(in.plate, mcols);
+  }
   const DF df;
-  const SampleFrame<F> f = broadcast(*in.frame);
+  const SampleFrame<F> f;
   Vec4<F> mcols[4];
-  if constexpr (Plate) plate_columns(in.plate, mcols);
-  const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
-                                 F(det.grid_inv_step), Radial ? 1 : 3};
-  double d = in.value;
-  // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
-  constexpr bool iq = Columns == 2 && !Plate;
-  constexpr int outputs = iq ? 3 : 4;
-  // The normal pass (ScatterInput::normal): d is the forward's sum of the same pixels, summed here
-  // as Sample sums it (Kahan-compensated float32 lanes), from the sky's I - I0, Q, U (and V where a
-  // weight multiplies it).
-  constexpr bool normal = Normal;  // a template parameter: the adjoint's own code has none of it
-  constexpr int stokes_in = (Columns == 4 || Plate) ? 4 : 3;
-  F sum(hn::Zero(df)), carry(hn::Zero(df));
-  // The adjoint weights of a vector of pixels (unit vectors k); the fourth is zero where iq. With S
-  // (the normal pass), the forward's response of the lanes in `live` joins the sum.
-  auto weights = [&](const VF& kx, const VF& ky, const VF& kz, const VF* S = nullptr, MF live = MF()) {
+  const RecordGrid<Columns> grid;
+  F sum{hn::Zero(DF())}, carry{hn::Zero(DF())};
+
+  Vec4<F> operator()(const VF& kx, const VF& ky, const VF& kz, const VF* S = nullptr, MF live = MF()) {
     const PixelGeometry<F> g = pixel_geometry(f, Vec3<F>{F(kx), F(ky), F(kz)});
     Vec4<F> w = Radial ? interpolate_radial(grid, g.r2) : interpolate_weights(grid, g.x, g.y);
     if constexpr (Plate) w = effective_weights(w, mcols[0], mcols[1], mcols[2], mcols[3]);
@@ -574,8 +600,67 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     } else {
       return stokes_adjoint(w, g.cos2chi, g.sin2chi);
     }
-  };
+  }
+};
+
 #if HWY_TARGET != HWY_SCALAR
+// A stretch of a range of a disc (Scatter): its place in the maps, whether its weights lie in the
+// buffer of staged vectors (else of whole ones), its position there, and its pixels.
+struct Stretch {
+  std::uint32_t entry, at, count, staged;
+};
+
+// Pass 2 for one stretch: d times its weights (Mul, squared for the diagonal) added to its pixels,
+// a float64 vector at a time (Mul, then Add: the same bits on every instruction set, with or
+// without fused multiply-adds). A pixel's float32 weights do not depend on the lane that computes
+// them, and each pixel of a disc is added once, so the order of the stretches changes no bit. The
+// last vector's lanes past the stretch add zero to the pixels after it when those are the caller's
+// own (below in.limit); otherwise it goes through a scratch copy of them.
+// `from` is its buffer, by column; dv holds d.
+template <class VD>
+HWY_INLINE void AddStretch(const ScatterInput& in, const Stretch& s, float* const* from, int outputs, VD dv) {
+  const hn::Half<DF> dh;
+  const hn::Rebind<double, hn::Half<DF>> dd;
+  const std::size_t H = hn::Lanes(dd);
+  auto product = [&](const float* at) {
+    auto v = hn::Mul(dv, hn::PromoteTo(dd, hn::LoadU(dh, at)));
+    return in.squares ? hn::Mul(v, v) : v;
+  };
+  std::size_t j = 0;
+  for (; j + H <= s.count; j += H)
+    for (int c = 0; c < outputs; ++c) {
+      double* map = in.maps[c] + s.entry + j;
+      hn::StoreU(hn::Add(hn::LoadU(dd, map), product(from[c] + s.at + j)), dd, map);
+    }
+  if (j == s.count) return;
+  const std::size_t rest = s.count - j;
+  const auto live = hn::FirstN(dd, rest);
+  if (s.entry + j + H <= in.limit) {
+    for (int c = 0; c < outputs; ++c) {
+      double* map = in.maps[c] + s.entry + j;
+      hn::StoreU(hn::Add(hn::LoadU(dd, map), hn::IfThenElseZero(live, product(from[c] + s.at + j))), dd, map);
+    }
+    return;
+  }
+  for (int c = 0; c < outputs; ++c) {
+    double* map = in.maps[c] + s.entry + j;
+    HWY_ALIGN double scratch[max_lanes] = {};
+    for (std::size_t l = 0; l < H; ++l) scratch[l] = l < rest ? map[l] : 0.0;
+    hn::Store(hn::Add(hn::Load(dd, scratch), hn::IfThenElseZero(live, product(from[c] + s.at + j))), dd, scratch);
+    for (std::size_t l = 0; l < rest; ++l) map[l] = scratch[l];
+  }
+}
+#endif
+
+#if HWY_TARGET != HWY_SCALAR
+// Scatter's passes on vectors (below).
+template <bool Normal, class W>
+HWY_INLINE void ScatterVectors(const KernelSky& sky, const ScatterInput& in, W& weights) {
+  const DF df;
+  double d = in.value;
+  // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
+  constexpr int outputs = W::iq ? 3 : 4;
+  constexpr bool normal = Normal;  // a template parameter: the adjoint's own code has none of it
   const std::size_t N = hn::Lanes(df);
   const hn::Half<DF> dh;
   const hn::Rebind<double, hn::Half<DF>> dd;
@@ -590,9 +675,6 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
   // is full, pass 2 adds d times each stretch's weights to its pixels.
   // The normal pass keeps the whole disc's weights (in.scratch: normal_scratch_floats), since d is
   // known only once every pixel is evaluated.
-  struct Stretch {
-    std::uint32_t entry, at, count, staged;
-  };
   std::size_t chunk = 2 * max_lanes;
   HWY_ALIGN float whole[4][2 * max_lanes + max_lanes];
   HWY_ALIGN float staged[4][2 * max_lanes + max_lanes];
@@ -615,42 +697,6 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     std::fill_n(staged_at[c] + chunk, max_lanes, 0.0f);
   }
   std::size_t whole_fill = 0, staged_fill = 0, count = 0, fill = 0;  // fill: the staging vector's lanes
-  // Pass 2 for one stretch: d times its weights (Mul, squared for the diagonal) added to its pixels,
-  // a float64 vector at a time (Mul, then Add: the same bits on every instruction set, with or
-  // without fused multiply-adds). A pixel's float32 weights do not depend on the lane that computes
-  // them, and each pixel of a disc is added once, so the order of the stretches changes no bit. The
-  // last vector's lanes past the stretch add zero to the pixels after it when those are the caller's
-  // own (below in.limit); otherwise it goes through a scratch copy of them.
-  auto product = [&](const float* from) {
-    auto v = hn::Mul(dv, hn::PromoteTo(dd, hn::LoadU(dh, from)));
-    return in.squares ? hn::Mul(v, v) : v;
-  };
-  auto add = [&](const Stretch& s) {
-    float* const* from = s.staged ? staged_at : whole_at;
-    std::size_t j = 0;
-    for (; j + H <= s.count; j += H)
-      for (int c = 0; c < outputs; ++c) {
-        double* map = in.maps[c] + s.entry + j;
-        hn::StoreU(hn::Add(hn::LoadU(dd, map), product(from[c] + s.at + j)), dd, map);
-      }
-    if (j == s.count) return;
-    const std::size_t rest = s.count - j;
-    const auto live = hn::FirstN(dd, rest);
-    if (s.entry + j + H <= in.limit) {
-      for (int c = 0; c < outputs; ++c) {
-        double* map = in.maps[c] + s.entry + j;
-        hn::StoreU(hn::Add(hn::LoadU(dd, map), hn::IfThenElseZero(live, product(from[c] + s.at + j))), dd, map);
-      }
-      return;
-    }
-    for (int c = 0; c < outputs; ++c) {
-      double* map = in.maps[c] + s.entry + j;
-      HWY_ALIGN double scratch[max_lanes];
-      for (std::size_t l = 0; l < H; ++l) scratch[l] = l < rest ? map[l] : 0.0;
-      hn::Store(hn::Add(hn::Load(dd, scratch), hn::IfThenElseZero(live, product(from[c] + s.at + j))), dd, scratch);
-      for (std::size_t l = 0; l < rest; ++l) map[l] = scratch[l];
-    }
-  };
   // The weights of one vector of pixels (q: kx, ky, kz, then the normal pass's I - I0, Q, U, V)
   // stored at `to` (by column).
   const MF all = hn::FirstN(df, N);
@@ -660,7 +706,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     for (int c = 0; c < outputs; ++c) hn::Store(columns[c], df, to[c] + at);
   };
   const float* const unit[7] = {sky.kx, sky.ky, sky.kz, sky.i, sky.q, sky.u, sky.v};
-  constexpr int quantities = normal ? 3 + stokes_in : 3;
+  constexpr int quantities = normal ? 3 + W::stokes_in : 3;
   VF stage[7], q[7];
   for (int c = 0; c < 7; ++c) stage[c] = q[c] = hn::Zero(df);
   // Pass 2 for every stretch so far; the staging vector's lanes so far (fill) evaluated first. The
@@ -674,13 +720,13 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     }
     if constexpr (normal) {
       HWY_ALIGN float totals[max_lanes];
-      hn::Store(hn::Sub(sum.v, carry.v), df, totals);
+      hn::Store(hn::Sub(weights.sum.v, weights.carry.v), df, totals);
       double total = 0.0;
       for (std::size_t l = 0; l < N; ++l) total += double(totals[l]);
       d = total + sky.monopole * 0.0;  // the forward's d without the float64 path (no monopole term)
       dv = hn::Set(dd, d);
     }
-    for (std::size_t s = 0; s < count; ++s) add(stretches[s]);
+    for (std::size_t s = 0; s < count; ++s) AddStretch(in, stretches[s], stretches[s].staged ? staged_at : whole_at, outputs, dv);
     whole_fill = staged_fill = count = 0;
   };
   for (std::size_t r = 0; r < in.range_count; ++r) {
@@ -717,7 +763,16 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
     }
   }
   flush();
+}
 #else
+// Scatter a pixel at a time.
+template <bool Normal, class W>
+HWY_INLINE void ScatterScalar(const KernelSky& sky, const ScatterInput& in, W& weights) {
+  const DF df;
+  double d = in.value;
+  // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
+  constexpr int outputs = W::iq ? 3 : 4;
+  constexpr bool normal = Normal;  // a template parameter: the adjoint's own code has none of it
   HWY_ALIGN float out[4][max_lanes];
   if constexpr (normal) {  // d first: the forward's sum of the disc, a pixel at a time
     const MF one = hn::FirstN(df, 1);
@@ -728,7 +783,7 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
         weights(hn::LoadU(df, sky.kx + p), hn::LoadU(df, sky.ky + p), hn::LoadU(df, sky.kz + p), S, one);
       }
     HWY_ALIGN float totals[max_lanes];
-    hn::Store(hn::Sub(sum.v, carry.v), df, totals);
+    hn::Store(hn::Sub(weights.sum.v, weights.carry.v), df, totals);
     d = double(totals[0]) + sky.monopole * 0.0;
   }
   for (std::size_t r = 0; r < in.range_count; ++r) {
@@ -745,6 +800,25 @@ HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector
       }
     }
   }
+}
+#endif
+
+// The adjoint of one sample: the forward's float32 geometry and weights, stokes_adjoint, and d times
+// each pixel's weights added to it in float64. In two passes over a chunk of the disc's pixels at a
+// time: first the pixels are evaluated a whole vector at a time as the forward evaluates them, their
+// float32 weights stored by column; then each range adds d times its stretch of those weights to its
+// pixels, float64 vector by vector. A pixel's float32 weights do not depend on the lane that computes
+// them, so the maps are the same bits however the ranges are cut.
+// The normal pass (ScatterInput::normal): d is the forward's sum of the same pixels, summed here as
+// Sample sums it (Kahan-compensated float32 lanes), from the sky's I - I0, Q, U (and V where a weight
+// multiplies it).
+template <bool Radial, int Columns, bool Plate, bool Normal>
+HWY_NOINLINE HWY_FLATTEN void Scatter(const KernelSky& sky, const KernelDetector& det, const ScatterInput& in) {
+  AdjointWeights<Radial, Columns, Plate> weights(det, in);
+#if HWY_TARGET != HWY_SCALAR
+  ScatterVectors<Normal>(sky, in, weights);
+#else
+  ScatterScalar<Normal>(sky, in, weights);
 #endif
 }
 
