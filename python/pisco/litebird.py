@@ -197,6 +197,165 @@ def _plate_mueller(obs, i, hwp):
     raise ValueError(f"detector {name}: the HWP ({plate}) is not ideal, but the detector has no mueller_hwp")
 
 
+def _observations_and_pointings(observations, pointings, lbs):
+    """The observations as a list, and the pointings given for each (None: the observation's own)."""
+    obs_list = [observations] if isinstance(observations, lbs.Observation) else list(observations)
+    if pointings is None:
+        return obs_list, [None] * len(obs_list)
+    if isinstance(observations, lbs.Observation):
+        return obs_list, [pointings]
+    if not isinstance(pointings, list) or len(pointings) != len(obs_list):
+        raise ValueError("pointings: give one pointing array per observation, as a list")
+    return obs_list, pointings
+
+
+def _source_list(sources):
+    """The point sources as a list (empty for None), each a pisco.SourceTrack."""
+    sources = list(sources) if sources is not None else []
+    for k, track in enumerate(sources):
+        if not isinstance(track, SourceTrack):
+            raise TypeError(f"sources[{k}]: expected a pisco.SourceTrack, got {type(track).__name__}")
+    return sources
+
+
+class _Convolution:
+    """One call of add_convolved_sky_to_observations: its arguments, and the skies and b_lm beams it has
+    converted, each once for every observation and detector that shares it."""
+
+    def __init__(self, *, sky, beams, hwp, component, pointings_dtype, coordinates, backend, device, beam_rho_max,
+                 hwp_placement, convolution_params, beam_alms_rho_max, beam_alms_grid_step, plate_beams,
+                 plate_beams_period, plate_beams_omega, sources):
+        self.sky, self.beams, self.hwp, self.sources = sky, beams, hwp, sources
+        self.component, self.pointings_dtype, self.coordinates = component, pointings_dtype, coordinates
+        self.backend, self.device, self.hwp_placement = backend, device, hwp_placement
+        self.beam_rho_max, self.convolution_params = beam_rho_max, convolution_params
+        self.beam_alms_rho_max, self.beam_alms_grid_step = beam_alms_rho_max, beam_alms_grid_step
+        self.plate_beams, self.plate_beams_period = plate_beams, plate_beams_period
+        self.plate_beams_omega = plate_beams_omega
+        self.converted = {}  # id of the caller's sky -> (pisco.Sky, coordinates)
+        self.made = {}  # (id of the caller's b_lm, zeta) -> (their owner, pisco.Beamsor)
+
+    def convert(self, s):
+        """(pisco.Sky, coordinates) of the caller's sky s, converted the first time it is met."""
+        if id(s) not in self.converted:
+            self.converted[id(s)] = _as_sky(s)
+        return self.converted[id(s)]
+
+    def from_blm(self, alms, name, zeta):
+        """The beamsor of litebird_sim b_lm at zeta, made the first time they are met at that angle."""
+        key = (id(alms), zeta)
+        if key not in self.made:
+            self.made[key] = (alms, _blm_beam(alms, name, zeta, self.beam_alms_rho_max, self.beam_alms_grid_step,
+                                              self.convolution_params))
+        return self.made[key][1]
+
+    def add_to(self, obs, ptg):
+        """Adds the convolved sky (and the sources) to one observation's TOD; ptg: its pointings, or None."""
+        from litebird_sim.coordinates import CoordinateSystem
+
+        times = _unix_or_own_times(obs) if self.sources else None
+        hwp_angle = _hwp_angle(obs, self.hwp, self.pointings_dtype)
+        if hwp_angle is not None and not np.all(np.isfinite(hwp_angle)):
+            raise ValueError("pisco.litebird: the plate's angles (hwp_angle) are not finite")
+        tod = getattr(obs, self.component)
+        n_det = tod.shape[0]
+        skies = _per_detector(self.sky, obs, "Sky")
+        det_beams = _per_detector(self.beams, obs, "Beam") if self.beams is not None else [None] * n_det
+        # One engine per distinct sky, with the detectors that see it.
+        groups = {}
+        for i in range(n_det):
+            groups.setdefault(id(skies[i]), []).append(i)
+        for members in groups.values():
+            pisco_sky, sky_coordinates = self.convert(skies[members[0]])
+            frame = self.coordinates if self.coordinates is not None else sky_coordinates
+            if frame is None:
+                logging.warning("pisco.litebird: the sky's coordinates are unknown: assuming CoordinateSystem.Galactic")
+                frame = CoordinateSystem.Galactic
+            beam_list, fp = self._focal_plane(obs, members, det_beams, hwp_angle, n_det)
+            with Engine(pisco_sky, beam_list, fp, backend=self.backend, device=self.device) as engine:
+                self._convolve(engine, obs, ptg, members, frame, tod, times, hwp_angle)
+
+    def _focal_plane(self, obs, members, det_beams, hwp_angle, n_det):
+        """The engine's beams and focal plane for these detectors of the observation, in their order."""
+        import litebird_sim as lbs
+
+        beam_list, fp = [], FocalPlane()
+
+        def beam_index(b):
+            found = next((k for k, x in enumerate(beam_list) if x is b), None)
+            if found is None:
+                beam_list.append(b)
+                found = len(beam_list) - 1
+            return found
+
+        for i in members:
+            zeta = float(obs.pol_angle_rad[i])
+            turning = _plate_beams_of(self.plate_beams, obs, i)
+            if turning is not None:
+                if hwp_angle is None:
+                    raise ValueError(f"plate_beams: detector {obs.name[i]}'s beams turn with the plate, but the "
+                                     "observation has no plate angles (give hwp, or an observation with a plate)")
+                eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
+                epsilon = (1.0 - eta) / (1.0 + eta)
+                # The plate's angle from the beam frame's x axis, its beams from the detector's axis.
+                turns = PlateBeams([beam_index(b) for b in turning], period=self.plate_beams_period, gamma=zeta,
+                                   omega=self.plate_beams_omega)
+                fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=2.0 / (1.0 + epsilon),
+                       beam=turns.beams[0], plate_beams=turns)
+                continue
+            b = det_beams[i] if det_beams[i] is not None else _default_beam(obs, i, self.beam_rho_max)
+            harmonic = isinstance(b, lbs.SphericalHarmonics)
+            if harmonic:
+                b = self.from_blm(b, obs.name[i], zeta)
+            if not isinstance(b, Beamsor):
+                raise TypeError(f"beams: expected pisco.Beamsor or litebird_sim.SphericalHarmonics for detector "
+                                f"{obs.name[i]}, got {type(b).__name__}")
+            found = beam_index(b)
+            eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
+            epsilon = (1.0 - eta) / (1.0 + eta)
+            gain = 2.0 / (1.0 + epsilon)
+            if harmonic:
+                # litebird_sim's TOD is ducc0's sum over the b_lm, which carry the polarization
+                # efficiency: the engine's is gain / (2 Omega~) times it at epsilon 0.
+                epsilon, gain = 0.0, 2.0 * b.omega_tilde
+            plate = None
+            if hwp_angle is not None:
+                # The plate's angle is measured from the beam frame's x axis (psi), the detector's
+                # polarization axis lies at pol_angle_rad from it: theta = hwp_angle - pol_angle_rad.
+                plate = HalfWavePlate(_plate_mueller(obs, i, self.hwp), placement=self.hwp_placement, gamma=zeta)
+            fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=gain, beam=found, hwp=plate)
+        return beam_list, fp
+
+    def _convolve(self, engine, obs, ptg, members, frame, tod, times, hwp_angle):
+        """Adds each of these detectors' convolved sky (and sources) into its row of the TOD, engine's
+        detector k being members[k]."""
+        from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g
+
+        sources = self.sources
+        buffer = None
+        for k, i in enumerate(members):
+            if ptg is not None:
+                p = np.asarray(ptg[i])
+            elif getattr(obs, "pointing_matrix", None) is not None:
+                p = np.asarray(obs.pointing_matrix[i])
+            else:
+                p, _ = obs.get_pointings(i, pointings_dtype=self.pointings_dtype, compute_hwp_angle=False)
+            if frame == CoordinateSystem.Galactic:
+                p = rotate_coordinates_e2g(p)
+            theta, phi, psi = (np.ascontiguousarray(p[:, c], dtype=np.float64) for c in range(3))
+            row = tod[i]
+            if row.dtype == np.float64 and row.flags.c_contiguous and row.flags.writeable:
+                engine.convolve(k, theta, phi, psi, out=row, accumulate=True, hwp_angle=hwp_angle)
+                if sources:
+                    engine.add_sources(k, times, sources, theta, phi, psi, out=row, hwp_angle=hwp_angle)
+            else:
+                buffer = engine.convolve(k, theta, phi, psi, out=buffer if buffer is not None and
+                                         len(buffer) == len(theta) else None, hwp_angle=hwp_angle)
+                if sources:
+                    engine.add_sources(k, times, sources, theta, phi, psi, out=buffer, hwp_angle=hwp_angle)
+                row += buffer.astype(row.dtype, copy=False)
+
+
 def add_convolved_sky_to_observations(
     observations,
     sky,
@@ -278,126 +437,17 @@ def add_convolved_sky_to_observations(
         when the observation's ``start_time`` is an astropy Time, else on its float clock.
     """
     import litebird_sim as lbs
-    from litebird_sim.coordinates import CoordinateSystem, rotate_coordinates_e2g
 
-    obs_list = [observations] if isinstance(observations, lbs.Observation) else list(observations)
-    if pointings is None:
-        ptg_list = [None] * len(obs_list)
-    elif isinstance(observations, lbs.Observation):
-        ptg_list = [pointings]
-    else:
-        if not isinstance(pointings, list) or len(pointings) != len(obs_list):
-            raise ValueError("pointings: give one pointing array per observation, as a list")
-        ptg_list = pointings
-
-    converted = {}  # id of the caller's sky -> (pisco.Sky, coordinates)
-
-    def convert(s):
-        if id(s) not in converted:
-            converted[id(s)] = _as_sky(s)
-        return converted[id(s)]
-
+    obs_list, ptg_list = _observations_and_pointings(observations, pointings, lbs)
     if hwp_placement not in ("aperture", "detector"):
         raise ValueError(f"hwp_placement: expected 'aperture' or 'detector', got {hwp_placement!r}")
     if beams is None and obs_list and getattr(obs_list[0], "blms", None) is not None:
         beams = obs_list[0].blms  # litebird_sim's own fallback: the b_lm stored in the observation
-    made = {}  # (id of the caller's b_lm, zeta) -> (their owner, pisco.Beamsor)
-
-    def from_blm(alms, name, zeta):
-        key = (id(alms), zeta)
-        if key not in made:
-            made[key] = (alms, _blm_beam(alms, name, zeta, beam_alms_rho_max, beam_alms_grid_step,
-                                         convolution_params))
-        return made[key][1]
-
-    sources = list(sources) if sources is not None else []
-    for k, track in enumerate(sources):
-        if not isinstance(track, SourceTrack):
-            raise TypeError(f"sources[{k}]: expected a pisco.SourceTrack, got {type(track).__name__}")
+    call = _Convolution(
+        sky=sky, beams=beams, hwp=hwp, component=component, pointings_dtype=pointings_dtype,
+        coordinates=coordinates, backend=backend, device=device, beam_rho_max=beam_rho_max,
+        hwp_placement=hwp_placement, convolution_params=convolution_params, beam_alms_rho_max=beam_alms_rho_max,
+        beam_alms_grid_step=beam_alms_grid_step, plate_beams=plate_beams, plate_beams_period=plate_beams_period,
+        plate_beams_omega=plate_beams_omega, sources=_source_list(sources))
     for obs, ptg in zip(obs_list, ptg_list):
-        times = _unix_or_own_times(obs) if sources else None
-        hwp_angle = _hwp_angle(obs, hwp, pointings_dtype)
-        if hwp_angle is not None and not np.all(np.isfinite(hwp_angle)):
-            raise ValueError("pisco.litebird: the plate's angles (hwp_angle) are not finite")
-        tod = getattr(obs, component)
-        n_det = tod.shape[0]
-        skies = _per_detector(sky, obs, "Sky")
-        det_beams = _per_detector(beams, obs, "Beam") if beams is not None else [None] * n_det
-        # One engine per distinct sky, with the detectors that see it.
-        groups = {}
-        for i in range(n_det):
-            groups.setdefault(id(skies[i]), []).append(i)
-        for members in groups.values():
-            pisco_sky, sky_coordinates = convert(skies[members[0]])
-            frame = coordinates if coordinates is not None else sky_coordinates
-            if frame is None:
-                logging.warning("pisco.litebird: the sky's coordinates are unknown: assuming CoordinateSystem.Galactic")
-                frame = CoordinateSystem.Galactic
-            beam_list, fp = [], FocalPlane()
-
-            def beam_index(b):
-                found = next((k for k, x in enumerate(beam_list) if x is b), None)
-                if found is None:
-                    beam_list.append(b)
-                    found = len(beam_list) - 1
-                return found
-
-            for i in members:
-                zeta = float(obs.pol_angle_rad[i])
-                turning = _plate_beams_of(plate_beams, obs, i)
-                if turning is not None:
-                    if hwp_angle is None:
-                        raise ValueError(f"plate_beams: detector {obs.name[i]}'s beams turn with the plate, but the "
-                                         "observation has no plate angles (give hwp, or an observation with a plate)")
-                    eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
-                    epsilon = (1.0 - eta) / (1.0 + eta)
-                    # The plate's angle from the beam frame's x axis, its beams from the detector's axis.
-                    turns = PlateBeams([beam_index(b) for b in turning], period=plate_beams_period, gamma=zeta,
-                                       omega=plate_beams_omega)
-                    fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=2.0 / (1.0 + epsilon),
-                           beam=turns.beams[0], plate_beams=turns)
-                    continue
-                b = det_beams[i] if det_beams[i] is not None else _default_beam(obs, i, beam_rho_max)
-                harmonic = isinstance(b, lbs.SphericalHarmonics)
-                if harmonic:
-                    b = from_blm(b, obs.name[i], zeta)
-                if not isinstance(b, Beamsor):
-                    raise TypeError(f"beams: expected pisco.Beamsor or litebird_sim.SphericalHarmonics for detector "
-                                    f"{obs.name[i]}, got {type(b).__name__}")
-                found = beam_index(b)
-                eta = float(getattr(obs, "pol_efficiency", np.ones(n_det))[i])
-                epsilon = (1.0 - eta) / (1.0 + eta)
-                gain = 2.0 / (1.0 + epsilon)
-                if harmonic:
-                    # litebird_sim's TOD is ducc0's sum over the b_lm, which carry the polarization
-                    # efficiency: the engine's is gain / (2 Omega~) times it at epsilon 0.
-                    epsilon, gain = 0.0, 2.0 * b.omega_tilde
-                plate = None
-                if hwp_angle is not None:
-                    # The plate's angle is measured from the beam frame's x axis (psi), the detector's
-                    # polarization axis lies at pol_angle_rad from it: theta = hwp_angle - pol_angle_rad.
-                    plate = HalfWavePlate(_plate_mueller(obs, i, hwp), placement=hwp_placement, gamma=zeta)
-                fp.add(str(obs.name[i]), zeta=zeta, epsilon=epsilon, gain=gain, beam=found, hwp=plate)
-            with Engine(pisco_sky, beam_list, fp, backend=backend, device=device) as engine:
-                buffer = None
-                for k, i in enumerate(members):
-                    if ptg is not None:
-                        p = np.asarray(ptg[i])
-                    elif getattr(obs, "pointing_matrix", None) is not None:
-                        p = np.asarray(obs.pointing_matrix[i])
-                    else:
-                        p, _ = obs.get_pointings(i, pointings_dtype=pointings_dtype, compute_hwp_angle=False)
-                    if frame == CoordinateSystem.Galactic:
-                        p = rotate_coordinates_e2g(p)
-                    theta, phi, psi = (np.ascontiguousarray(p[:, c], dtype=np.float64) for c in range(3))
-                    row = tod[i]
-                    if row.dtype == np.float64 and row.flags.c_contiguous and row.flags.writeable:
-                        engine.convolve(k, theta, phi, psi, out=row, accumulate=True, hwp_angle=hwp_angle)
-                        if sources:
-                            engine.add_sources(k, times, sources, theta, phi, psi, out=row, hwp_angle=hwp_angle)
-                    else:
-                        buffer = engine.convolve(k, theta, phi, psi, out=buffer if buffer is not None and
-                                                 len(buffer) == len(theta) else None, hwp_angle=hwp_angle)
-                        if sources:
-                            engine.add_sources(k, times, sources, theta, phi, psi, out=buffer, hwp_angle=hwp_angle)
-                        row += buffer.astype(row.dtype, copy=False)
+        call.add_to(obs, ptg)

@@ -695,9 +695,8 @@ class PyMapmaker {
   std::unique_ptr<DeconvolvingMapmaker> maker_;
 };
 
-}  // namespace
-
-void bind_engine(nb::module_& m) {
+// pisco.SourceTrack: a point source's track, fixed or moving.
+void bind_source_track(nb::module_& m) {
   nb::class_<SourceTrack>(m, "SourceTrack",
                           "A point source's track (pisco/sources.hpp, docs/sources.md): its direction and flux at a\n"
                           "sequence of strictly increasing times; between two, the great circle at a constant rate and\n"
@@ -742,7 +741,10 @@ void bind_engine(nb::module_& m) {
       .def("__repr__", [](const SourceTrack& t) {
         return "SourceTrack('" + t.name + "', " + std::to_string(t.time.size()) + " points)";
       });
+}
 
+// pisco.DeconvolvingMapmaker: the beam-deconvolving map-maker over an engine.
+void bind_mapmaker(nb::module_& m) {
   nb::class_<PyMapmaker>(m, "DeconvolvingMapmaker",
                          "The beam-deconvolving map-maker (docs/physics.md, 'Map-making with the beams'):\n"
                          "conjugate gradients on (A^T A + lambda) s = A^T d with each detector's own beam.\n\n"
@@ -769,45 +771,24 @@ void bind_engine(nb::module_& m) {
            "seconds_per_iteration, left_out (what was left out, a line each), polarization_pixels and\n"
            "polarization_unconstrained. A solve that does not converge, or that constrains no pixel's\n"
            "polarization, also issues a RuntimeWarning.");
+}
 
-  nb::class_<PyEngine>(m, "Engine",
-                       "The convolution engine: the sky, beams and focal plane are set up once for a backend,\n"
-                       "then chunks of pointing become TOD.\n\n"
-                       "Engine(sky, beams, focal_plane, backend='auto', device='auto', chunk_samples=0,\n"
-                       "       normalization='integral', threads=0, arithmetic='auto', unseen='error',\n"
-                       "       quadrature='corrected')\n\n"
-                       "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'simd',\n"
-                       "'vulkan', 'cuda' or 'auto' (the best present: pisco.devices()). device (vulkan, cuda): an\n"
-                       "index or part of a name; simd: its instruction set. threads (cpu, simd): 0 for all.\n"
-                       "chunk_samples (vulkan, cuda): 0 fits the device. arithmetic (vulkan): 'auto', 'float64' or\n"
-                       "'float-float', the kernel's float64 work; 'auto' takes float-float on devices without float64.\n"
-                       "A setting other than its default for a named backend without it is a pisco.InputError.\n"
-                       "unseen: the sky's UNSEEN pixels (a masked map): 'error' (the default: pisco.Error naming\n"
-                       "their number and the first), 'zero' (taken as 0), or 'flag' (taken as 0, and\n"
-                       "flag_samples() tells which samples' discs hold one).\n"
-                       "quadrature: 'corrected' (the default: samples near the HEALPix poles are summed on a copy of\n"
-                       "the sky turned by 90 deg, exact for skies band-limited to 2 NSIDE, and the rings where the\n"
-                       "polar caps meet the belt weighted) or 'plain' (the equal-weight pixel sum everywhere).\n"
-                       "Usable as a context manager; close() frees the device's memory.")
-      .def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, long long,
-                    const std::string&, long long, const std::string&, const std::string&, const std::string&>(),
-           "sky"_a, "beams"_a, "focal_plane"_a, "backend"_a = "auto", "device"_a = "auto", "chunk_samples"_a = 0,
-           "normalization"_a = "integral", "threads"_a = 0, "arithmetic"_a = "auto", "unseen"_a = "error",
-           "quadrature"_a = "corrected")
-      .def("convolve", &PyEngine::convolve, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
-           "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
-           "accumulate"_a = false, "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
-           "The TOD of one detector (an index or its name) for a chunk of boresight pointing.\n\n"
-           "Pointing: theta, phi, psi (1-D float64 arrays, radians), or boresight_quats ((n, 4) float64,\n"
-           "x, y, z, w, TOAST's and litebird_sim's layout); the engine applies the detector's offset.\n"
-           "out: a writable 1-D float64 array of n samples, written (or added to, with accumulate=True);\n"
-           "None allocates one. Returns out. Arrays are used in place, never copied: a wrong dtype raises\n"
-           "TypeError, a wrong shape, a strided or read-only array or a non-finite value ValueError.\n"
-           "hwp_angle: the half-wave plate's angle per sample (1-D float64, radians, in the focal-plane\n"
-           "frame: TOAST's hwp_angle), required for a detector with a plate (Detector.hwp) and refused for\n"
-           "one without (pisco.Error). time: each sample's time (1-D float64, seconds), required for a\n"
-           "detector whose beam changes with time (Detector.beam_sequence) and ignored for others. The GIL\n"
-           "is released while the engine runs.")
+// Engine.convolve and Engine.add_sources: a detector's TOD from the sky and from point sources.
+void bind_engine_forward(nb::class_<PyEngine>& cls) {
+  cls.def("convolve", &PyEngine::convolve, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
+          "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(), "out"_a = nb::none(),
+          "accumulate"_a = false, "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
+          "The TOD of one detector (an index or its name) for a chunk of boresight pointing.\n\n"
+          "Pointing: theta, phi, psi (1-D float64 arrays, radians), or boresight_quats ((n, 4) float64,\n"
+          "x, y, z, w, TOAST's and litebird_sim's layout); the engine applies the detector's offset.\n"
+          "out: a writable 1-D float64 array of n samples, written (or added to, with accumulate=True);\n"
+          "None allocates one. Returns out. Arrays are used in place, never copied: a wrong dtype raises\n"
+          "TypeError, a wrong shape, a strided or read-only array or a non-finite value ValueError.\n"
+          "hwp_angle: the half-wave plate's angle per sample (1-D float64, radians, in the focal-plane\n"
+          "frame: TOAST's hwp_angle), required for a detector with a plate (Detector.hwp) and refused for\n"
+          "one without (pisco.Error). time: each sample's time (1-D float64, seconds), required for a\n"
+          "detector whose beam changes with time (Detector.beam_sequence) and ignored for others. The GIL\n"
+          "is released while the engine runs.")
       .def("add_sources", &PyEngine::add_sources, "detector"_a, "time"_a, "sources"_a, "theta"_a = nb::none(),
            "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),
            "out"_a = nb::none(), "hwp_angle"_a = nb::none(),
@@ -817,19 +798,23 @@ void bind_engine(nb::module_& m) {
            "time: each sample's time on the sources' clock (1-D float64). Pointing and hwp_angle as for\n"
            "convolve(). out: a writable 1-D float64 array the sources are added to (a TOD from convolve());\n"
            "None: new zeros. Returns out. Needs normalization='integral'. Computed on the host in float64,\n"
-           "the same whatever the backend.")
-      .def("adjoint",
-           [](PyEngine& e, nb::handle detector, nb::handle tod, nb::handle theta, nb::handle phi, nb::handle psi,
-              nb::handle quats, nb::handle out, nb::handle hwp, nb::handle time) {
-             return e.adjoint(detector, tod, theta, phi, psi, quats, out, hwp, time, PyEngine::Scatter::adjoint);
-           },
-           "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
-           "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
-           "The adjoint of convolve(): A^T tod, the TOD of one detector scattered back onto the sky with the\n"
-           "same weights, offsets, plates and quadrature, so that sum(sky * A^T d) = sum(A sky * d).\n\n"
-           "Pointing, hwp_angle and time as for convolve(); tod: 1-D float64, one value per sample. out: a (4, npix)\n"
-           "float64 array (I, Q, U, V at the engine's NSIDE) the result is added into; None: new zeros.\n"
-           "Returns out. Backends without it raise pisco.UnavailableError (capabilities['adjoint']).")
+           "the same whatever the backend.");
+}
+
+// Engine.adjoint, .adjoint_diagonal and .normal: the TOD scattered back onto the sky, for map-making.
+void bind_engine_adjoint(nb::class_<PyEngine>& cls) {
+  cls.def("adjoint",
+          [](PyEngine& e, nb::handle detector, nb::handle tod, nb::handle theta, nb::handle phi, nb::handle psi,
+             nb::handle quats, nb::handle out, nb::handle hwp, nb::handle time) {
+            return e.adjoint(detector, tod, theta, phi, psi, quats, out, hwp, time, PyEngine::Scatter::adjoint);
+          },
+          "detector"_a, "tod"_a, "theta"_a = nb::none(), "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(),
+          "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
+          "The adjoint of convolve(): A^T tod, the TOD of one detector scattered back onto the sky with the\n"
+          "same weights, offsets, plates and quadrature, so that sum(sky * A^T d) = sum(A sky * d).\n\n"
+          "Pointing, hwp_angle and time as for convolve(); tod: 1-D float64, one value per sample. out: a (4, npix)\n"
+          "float64 array (I, Q, U, V at the engine's NSIDE) the result is added into; None: new zeros.\n"
+          "Returns out. Backends without it raise pisco.UnavailableError (capabilities['adjoint']).")
       .def("adjoint_diagonal",
            [](PyEngine& e, nb::handle detector, nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats,
               nb::handle out, nb::handle hwp, nb::handle time) {
@@ -848,9 +833,13 @@ void bind_engine(nb::module_& m) {
            "boresight_quats"_a = nb::none(), "out"_a = nb::none(), "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
            "A^T A sky for these samples: adjoint(convolve(...)) of the engine's sky (set_sky's), added into\n"
            "out ((4, npix)) or new zeros; one pass over each disc where the backend can (simd), the same\n"
-           "result as the two calls. An iterative map-maker's step.")
-      .def("set_sky", &PyEngine::set_sky, "sky"_a,
-           "Replaces the sky (the same NSIDE), keeping beams, detectors and options.")
+           "result as the two calls. An iterative map-maker's step.");
+}
+
+// The engine's sky, its asynchronous submissions, its figures and its life as a context manager.
+void bind_engine_state(nb::class_<PyEngine>& cls) {
+  cls.def("set_sky", &PyEngine::set_sky, "sky"_a,
+          "Replaces the sky (the same NSIDE), keeping beams, detectors and options.")
       .def("prepare", &PyEngine::prepare,
            "Completes the set-up that runs in the background (the sky's polar copy, started at construction\n"
            "and set_sky), without the GIL; otherwise the first submission near a pole completes it.")
@@ -892,6 +881,41 @@ void bind_engine(nb::module_& m) {
         return "pisco.Engine(backend='" + e.backend_name() + "', device='" + e.device_name() + "', " +
                std::to_string(e.size()) + " detectors)";
       });
+}
+
+}  // namespace
+
+void bind_engine(nb::module_& m) {
+  bind_source_track(m);
+  bind_mapmaker(m);
+  nb::class_<PyEngine> cls(
+      m, "Engine",
+      "The convolution engine: the sky, beams and focal plane are set up once for a backend,\n"
+      "then chunks of pointing become TOD.\n\n"
+      "Engine(sky, beams, focal_plane, backend='auto', device='auto', chunk_samples=0,\n"
+      "       normalization='integral', threads=0, arithmetic='auto', unseen='error',\n"
+      "       quadrature='corrected')\n\n"
+      "beams: one pisco.Beamsor or a sequence (Detector.beam indexes it). backend: 'cpu', 'simd',\n"
+      "'vulkan', 'cuda' or 'auto' (the best present: pisco.devices()). device (vulkan, cuda): an\n"
+      "index or part of a name; simd: its instruction set. threads (cpu, simd): 0 for all.\n"
+      "chunk_samples (vulkan, cuda): 0 fits the device. arithmetic (vulkan): 'auto', 'float64' or\n"
+      "'float-float', the kernel's float64 work; 'auto' takes float-float on devices without float64.\n"
+      "A setting other than its default for a named backend without it is a pisco.InputError.\n"
+      "unseen: the sky's UNSEEN pixels (a masked map): 'error' (the default: pisco.Error naming\n"
+      "their number and the first), 'zero' (taken as 0), or 'flag' (taken as 0, and\n"
+      "flag_samples() tells which samples' discs hold one).\n"
+      "quadrature: 'corrected' (the default: samples near the HEALPix poles are summed on a copy of\n"
+      "the sky turned by 90 deg, exact for skies band-limited to 2 NSIDE, and the rings where the\n"
+      "polar caps meet the belt weighted) or 'plain' (the equal-weight pixel sum everywhere).\n"
+      "Usable as a context manager; close() frees the device's memory.");
+  cls.def(nb::init<const Sky&, nb::handle, const FocalPlane&, const std::string&, const std::string&, long long,
+                   const std::string&, long long, const std::string&, const std::string&, const std::string&>(),
+          "sky"_a, "beams"_a, "focal_plane"_a, "backend"_a = "auto", "device"_a = "auto", "chunk_samples"_a = 0,
+          "normalization"_a = "integral", "threads"_a = 0, "arithmetic"_a = "auto", "unseen"_a = "error",
+          "quadrature"_a = "corrected");
+  bind_engine_forward(cls);
+  bind_engine_adjoint(cls);
+  bind_engine_state(cls);
 }
 
 }  // namespace pisco::python

@@ -360,11 +360,9 @@ void bind_sky(nb::module_& m) {
       });
 }
 
-void bind_beamsor(nb::module_& m) {
-  nb::class_<Beamsor>(m, "Beamsor",
-                      "A beamsor: a field of 4x4 Mueller matrices over the beam's directions, sampled on a grid\n"
-                      "out to rho_max (radians). Built by Beamsor.gaussian, .elliptical_gaussian, .from_field or\n"
-                      ".read_fits.")
+// Beamsor's analytic beams: gaussian, elliptical_gaussian, and from_field's beam of any field.
+void bind_beamsor_analytic(nb::class_<Beamsor>& cls) {
+  cls
       .def_static(
           "gaussian",
           [](double fwhm, double rho_max, double grid_step, double cross_polar, const std::string& pattern,
@@ -405,9 +403,14 @@ void bind_beamsor(nb::module_& m) {
           "radial"_a = false, "sidelobes"_a = nb::none(),
           "Any beam: field(rho, sigma) returns the (unnormalized) 4x4 Mueller matrix at the antenna-basis\n"
           "direction (rho, sigma), sampled every grid_step out to rho_max. radial: the field does not depend\n"
-          "on sigma (stored as a radial profile).")
-      .def_static("read_fits", &Beamsor::read_healpix_fits, "path"_a, "rho_max"_a, "grid_step"_a = 0.0,
-                  "Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...); grid_step 0 = 1.25 pixels.")
+          "on sigma (stored as a radial profile).");
+}
+
+// Beamsor's beams read or made from other codes' descriptions: a HEALPix beamsor file, a GRASP far
+// field, a harmonic b_lm.
+void bind_beamsor_files(nb::class_<Beamsor>& cls) {
+  cls.def_static("read_fits", &Beamsor::read_healpix_fits, "path"_a, "rho_max"_a, "grid_step"_a = 0.0,
+                 "Reads one of the paper's HEALPix beamsor files (columns B_TT, B_QT, ...); grid_step 0 = 1.25 pixels.")
       .def_static(
           "from_grasp",
           [](const std::filesystem::path& path, double rho_max, double grid_step, std::optional<int> set, double angle,
@@ -483,9 +486,13 @@ void bind_beamsor(nb::module_& m) {
           "A harmonic beam b_lm, the beam axis at the north pole: a healpy alm FITS file (healpy.write_alm;\n"
           "T or T, E, B) or an array of shape (n,), (1, n) or (3, n) in healpy's layout (lmax and mmax as given,\n"
           "else mmax = lmax). In ducc0's totalconvolve convention (TOAST's and litebird_sim's), synthesized\n"
-          "exactly at every node; grid_step 0 = 0.75 / l_eff. angle: the beam frame's x axis from theta'.")
-      .def("write_fits", &Beamsor::write_healpix_fits, "path"_a, "nside"_a,
-           "Writes this beamsor as a HEALPix beamsor file at `nside`.")
+          "exactly at every node; grid_step 0 = 0.75 / l_eff. angle: the beam frame's x axis from theta'.");
+}
+
+// What a Beamsor holds (its disc, grid, split and Mueller elements), and write_fits.
+void bind_beamsor_contents(nb::class_<Beamsor>& cls) {
+  cls.def("write_fits", &Beamsor::write_healpix_fits, "path"_a, "nside"_a,
+          "Writes this beamsor as a HEALPix beamsor file at `nside`.")
       .def_prop_ro("rho_max", &Beamsor::rho_max, "The disc's radius (a split beam's: its main part's).")
       .def_prop_ro(
           "sidelobes", [](const Beamsor& b) -> std::optional<Beamsor> {
@@ -513,6 +520,16 @@ void bind_beamsor(nb::module_& m) {
       .def("at", [](const Beamsor& b, double x, double y) { return mueller_array(b.at(x, y)); }, "x"_a, "y"_a,
            "The interpolated Mueller matrix at orthographic (x, y) = sin(rho) (cos sigma, sin sigma).")
       .def("__repr__", [](const Beamsor& b) { return "pisco.Beamsor('" + b.description() + "')"; });
+}
+
+void bind_beamsor(nb::module_& m) {
+  nb::class_<Beamsor> cls(m, "Beamsor",
+                          "A beamsor: a field of 4x4 Mueller matrices over the beam's directions, sampled on a grid\n"
+                          "out to rho_max (radians). Built by Beamsor.gaussian, .elliptical_gaussian, .from_field or\n"
+                          ".read_fits.");
+  bind_beamsor_analytic(cls);
+  bind_beamsor_files(cls);
+  bind_beamsor_contents(cls);
 }
 
 void bind_hwp(nb::module_& m) {
@@ -636,7 +653,8 @@ nb::list sequence_list(const std::vector<BeamNode>& nodes) {
   return out;
 }
 
-void bind_focal_plane(nb::module_& m) {
+// pisco.PlateBeams: a beam that turns with a half-wave plate.
+void bind_plate_beams(nb::module_& m) {
   nb::class_<PlateBeams>(m, "PlateBeams",
                          "A beam that turns with a half-wave plate (docs/changing.md): the optics and the plate\n"
                          "simulated together at N plate angles.\n\n"
@@ -677,7 +695,10 @@ void bind_focal_plane(nb::module_& m) {
         return "pisco.PlateBeams(" + std::to_string(p.beams.size()) + " beams, period=" + format_double(p.period) +
                ", gamma=" + format_double(p.gamma) + ")";
       });
+}
 
+// pisco.Detector: one detector's fields, its offset, plate and changing beams.
+void bind_detector(nb::module_& m) {
   nb::class_<Detector>(m, "Detector",
                        "A detector: name, polarization angle zeta (radians, from theta' towards phi'), cross-polar\n"
                        "leakage epsilon (efficiency 1 - epsilon), gain, the index of its beam, its offset from the\n"
@@ -746,11 +767,11 @@ void bind_focal_plane(nb::module_& m) {
                                         : ", beam_sequence=[" + std::to_string(d.beam_sequence.size()) + " nodes]") +
                ")";
       });
+}
 
-  nb::class_<FocalPlane>(m, "FocalPlane",
-                         "The detectors of an engine, in order. FocalPlane() is empty; add() and add_pair() fill\n"
-                         "it; FocalPlane.from_columns and FocalPlane.from_toast build one from tables.")
-      .def(nb::init<>())
+// FocalPlane.add and .add_pair: a detector, or a PSB pair, appended.
+void bind_focal_plane_adders(nb::class_<FocalPlane>& cls) {
+  cls
       .def(
           "add",
           [](FocalPlane& fp, nb::handle detector_or_name, double zeta, double epsilon, double gain, long long beam,
@@ -804,8 +825,12 @@ void bind_focal_plane(nb::module_& m) {
           "name"_a, "zeta"_a = 0.0, "beam_a"_a = 0, "beam_b"_a = 0, "epsilon"_a = 0.0, "gain_a"_a = 1.0,
           "gain_b"_a = 1.0, "hwp"_a = nb::none(),
           "Adds a PSB pair: name+'a' at zeta and name+'b' at zeta - 90 deg; returns the first's index.\n"
-          "hwp: a pisco.HalfWavePlate in front of both, its gamma a's (b's is gamma - 90 deg).")
-      .def("__len__", &FocalPlane::size)
+          "hwp: a pisco.HalfWavePlate in front of both, its gamma a's (b's is gamma - 90 deg).");
+}
+
+// A FocalPlane's detectors, by index or name, and FocalPlane.read_toast.
+void bind_focal_plane_contents(nb::class_<FocalPlane>& cls) {
+  cls.def("__len__", &FocalPlane::size)
       .def("__getitem__",
            [](const FocalPlane& fp, nb::handle key) -> Detector {
              if (nb::isinstance<nb::str>(key)) {
@@ -854,6 +879,17 @@ void bind_focal_plane(nb::module_& m) {
           "column (without one, the detector's polarization angle in the focal plane: its offset's gamma\n"
           "plus zeta, as pisco-vk run does).")
       .def("__repr__", [](const FocalPlane& fp) { return "pisco.FocalPlane(" + std::to_string(fp.size()) + " detectors)"; });
+}
+
+void bind_focal_plane(nb::module_& m) {
+  bind_plate_beams(m);
+  bind_detector(m);
+  nb::class_<FocalPlane> cls(m, "FocalPlane",
+                             "The detectors of an engine, in order. FocalPlane() is empty; add() and add_pair() fill\n"
+                             "it; FocalPlane.from_columns and FocalPlane.from_toast build one from tables.");
+  cls.def(nb::init<>());
+  bind_focal_plane_adders(cls);
+  bind_focal_plane_contents(cls);
 
   m.def(
       "read_toast_focal_plane",

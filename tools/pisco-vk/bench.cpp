@@ -34,11 +34,8 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-}  // namespace
-
-int run_bench(const BenchOptions& options) {
-  const std::vector<double>& radii = options.rho_max_deg;
-  // The one-name settings of the command line, on the backend they apply to (an error for one without them).
+// The one-name settings of the command line, on the backend they apply to (an error for one without them).
+pisco::EngineOptions bench_engine_options(const BenchOptions& options) {
   pisco::EngineOptions engine_options{.backend = options.backend};
   const auto route = [](const char* flag, auto set) {
     try {
@@ -51,137 +48,191 @@ int run_bench(const BenchOptions& options) {
   route("--threads", [&] { engine_options.set_threads(options.threads); });
   const pisco::Arithmetic arithmetic = pisco::arithmetic_from(options.arithmetic);
   route("--arithmetic", [&] { engine_options.set_arithmetic(arithmetic); });
+  return engine_options;
+}
 
-  const int nside = 128;
+// The benchmark's sky: I the monopole (uK) plus 100 uK of white noise, Q and U 5 uK of it.
+pisco::Sky bench_sky(int nside, double monopole_uk) {
   pisco::Sky sky(nside, "uK_CMB");
   std::mt19937_64 rng(1);
   std::normal_distribution<double> g(0, 1);
   for (std::size_t i = 0; i < sky.npix(); ++i) {
-    sky.I()[i] = options.monopole_uk + 100 * g(rng);
+    sky.I()[i] = monopole_uk + 100 * g(rng);
     sky.Q()[i] = 5 * g(rng);
     sky.U()[i] = 5 * g(rng);
   }
-  const pisco::Pointing scan = pisco::pixel_centre_scan(nside, {0.0, 45 * deg, 90 * deg});
-  pisco::FocalPlane fp;
-  fp.add_pair("psb", 0.0, 0, 0);
-  std::vector<double> hwp_angle;
-  if (options.hwp != "none") {
-    pisco::Mueller m = pisco::ideal_hwp_mueller();
-    if (options.hwp == "generic") {
-      // Every entry perturbed, the plate a little lossy (M00 < 1) so that it stays passive
-      // (docs/physics.md, "Physical bounds on Mueller matrices").
-      const double leak[4][4] = {{-0.02, 0.012, -0.008, 0.005},
-                                 {0.021, -0.03, 0.017, -0.011},
-                                 {-0.015, 0.009, 0.025, 0.04},
-                                 {0.007, -0.02, 0.033, 0.02}};
-      for (int i = 0; i < 4; ++i)
-        for (int j = 0; j < 4; ++j) m[i][j] += leak[i][j];
-    }
-    std::vector<pisco::Detector> dets = fp.detectors();
-    for (auto& d : dets)
-      d.hwp = pisco::HalfWavePlate{m, options.hwp_placement == "detector" ? pisco::HwpPlacement::detector
-                                                                          : pisco::HwpPlacement::aperture,
-                                   d.zeta};
-    fp = pisco::FocalPlane(dets);
-    pisco::HwpAngleStream stream;
-    stream.frequency_hz = 2.0;
-    stream.sample_rate = 200.0;
-    stream.generate(0, scan.size(), hwp_angle);
-  }
-  const std::size_t samples = scan.size() * fp.size();
-  const double beam_step = std::sqrt(4 * std::numbers::pi / (12.0 * 512 * 512));  // beam NSIDE 512
+  return sky;
+}
 
+// --hwp: the plate (ideal, or generic) before each detector of `fp`, and its angle at each of the scan's
+// samples, turning at 2 Hz.
+void add_bench_plate(const BenchOptions& options, std::size_t scan_samples, pisco::FocalPlane& fp,
+                     std::vector<double>& hwp_angle) {
+  pisco::Mueller m = pisco::ideal_hwp_mueller();
+  if (options.hwp == "generic") {
+    // Every entry perturbed, the plate a little lossy (M00 < 1) so that it stays passive
+    // (docs/physics.md, "Physical bounds on Mueller matrices").
+    const double leak[4][4] = {{-0.02, 0.012, -0.008, 0.005},
+                               {0.021, -0.03, 0.017, -0.011},
+                               {-0.015, 0.009, 0.025, 0.04},
+                               {0.007, -0.02, 0.033, 0.02}};
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) m[i][j] += leak[i][j];
+  }
+  std::vector<pisco::Detector> dets = fp.detectors();
+  for (auto& d : dets)
+    d.hwp = pisco::HalfWavePlate{m, options.hwp_placement == "detector" ? pisco::HwpPlacement::detector
+                                                                        : pisco::HwpPlacement::aperture,
+                                 d.zeta};
+  fp = pisco::FocalPlane(dets);
+  pisco::HwpAngleStream stream;
+  stream.frequency_hz = 2.0;
+  stream.sample_rate = 200.0;
+  stream.generate(0, scan_samples, hwp_angle);
+}
+
+// The workload each disc radius is timed on.
+struct BenchWorkload {
+  int nside;
+  const pisco::Sky& sky;
+  const pisco::Pointing& scan;
+  const pisco::FocalPlane& fp;
+  const std::vector<double>& hwp_angle;
+  std::size_t samples;  // pointings x detectors
+  double beam_step;     // radians
+};
+
+// The workload's description and the table's header.
+void print_bench_header(const BenchOptions& options, const BenchWorkload& w) {
   const std::string monopole =
       options.monopole_uk != 0.0 ? ", monopole " + std::to_string(options.monopole_uk) + " uK" : std::string();
   std::printf("Table 1 workload: NSIDE %d sky, %zu samples (%zu pointings x %zu detectors), "
               "%s, beam grid step %.2f arcmin%s%s\n",
-              nside, samples, scan.size(), fp.size(),
+              w.nside, w.samples, w.scan.size(), w.fp.size(),
               options.beam == "elliptical" ? "elliptical beam 1.52 x 1.46 deg FWHM (2D grid)" : "FWHM 1.5 deg",
-              beam_step / deg * 60,
+              w.beam_step / deg * 60,
               options.hwp == "none" ? "" : (", " + options.hwp + " half-wave plate at the " + options.hwp_placement).c_str(),
               monopole.c_str());
   std::printf("%8s %9s %10s %10s %12s %12s %10s\n", "rho_max", "pixels", "setup_s", "conv_s",
               "evals/s", "paper_ms", "speedup");
-  for (double rho : radii) {
+}
+
+// The best time of each path over --repeat runs, seconds.
+struct BenchTimes {
+  double conv, forward, adjoint, take, normal, iteration, host;
+};
+
+// The best of `repeat` runs of each path, the two alternating. conv: the convolution alone (Table
+// 1's figure): every detector submitted, then one wait. With --adjoint the forward path also loads
+// the sky (Engine::set_sky: the backend's sky and the polar copy's transform, completed by
+// Engine::prepare), as the adjoint path includes take_adjoint (the polar copy's transpose): a
+// map-maker's iteration runs both.
+BenchTimes time_bench_paths(pisco::Engine& engine, const BenchWorkload& w, const BenchOptions& options) {
+  const pisco::FocalPlane& fp = w.fp;
+  const pisco::Pointing& scan = w.scan;
+  std::vector<double> tod(scan.size());
+  std::vector<std::vector<double>> tods(fp.size(), std::vector<double>(scan.size()));
+  const double inf = std::numeric_limits<double>::infinity();
+  double conv = inf, forward = inf, adjoint = inf, take = inf, normal = inf, iteration = inf, host = inf;
+  for (unsigned rep = 0; rep < options.repeat; ++rep) {
     const auto t0 = std::chrono::steady_clock::now();
-    pisco::BeamOptions o;
-    o.rho_max = rho * deg;
-    o.grid_step = beam_step;
-    std::vector<pisco::Beamsor> beams{options.beam == "elliptical"
-                                          ? pisco::Beamsor::elliptical_gaussian(1.52 * deg, 1.46 * deg, 10 * deg, o)
-                                          : pisco::Beamsor::gaussian(1.5 * deg, o)};
-    pisco::Engine engine(sky, beams, fp, engine_options);
-    engine.prepare();  // the polar copy, which would otherwise be made by the first convolution
-    const double setup = seconds_since(t0);
-    std::vector<double> tod(scan.size());
-    std::vector<std::vector<double>> tods(fp.size(), std::vector<double>(scan.size()));
-    // The best of `repeat` runs of each path, the two alternating. conv: the convolution alone (Table
-    // 1's figure): every detector submitted, then one wait. With --adjoint the forward path also loads
-    // the sky (Engine::set_sky: the backend's sky and the polar copy's transform, completed by
-    // Engine::prepare), as the adjoint path includes take_adjoint (the polar copy's transpose): a
-    // map-maker's iteration runs both.
-    const double inf = std::numeric_limits<double>::infinity();
-    double conv = inf, forward = inf, adjoint = inf, take = inf, normal = inf, iteration = inf, host = inf;
-    for (unsigned rep = 0; rep < options.repeat; ++rep) {
-      const auto t0 = std::chrono::steady_clock::now();
-      if (options.adjoint) {
-        engine.set_sky(sky);
-        engine.prepare();
-      }
-      const double host0 = engine.host_seconds();
-      const auto t1 = std::chrono::steady_clock::now();
-      for (std::size_t d = 0; d < fp.size(); ++d) engine.submit(d, scan, tods[d], false, hwp_angle);
-      engine.wait();
-      conv = std::min(conv, seconds_since(t1));
-      host = std::min(host, engine.host_seconds() - host0);
-      const double f = seconds_since(t0);
-      forward = std::min(forward, f);
-      if (!options.adjoint) continue;
-      pisco::Sky back(nside);
-      double a = 0.0;
-      for (std::size_t d = 0; d < fp.size(); ++d) {
-        engine.convolve(d, scan, tod, false, hwp_angle);  // each detector's own TOD, outside the timing
-        const auto t3 = std::chrono::steady_clock::now();
-        engine.adjoint(d, scan, tod, hwp_angle);
-        a += seconds_since(t3);
-      }
-      const auto t4 = std::chrono::steady_clock::now();
-      engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
-      const double t = seconds_since(t4);
-      if (a + t < adjoint) {
-        adjoint = a + t;
-        take = t;
-      }
-      iteration = std::min(iteration, f + a + t);
-      // The same iteration through Engine::normal (one pass where the backend evaluates each disc once).
-      const auto t5 = std::chrono::steady_clock::now();
-      engine.set_sky(sky);
-      for (std::size_t d = 0; d < fp.size(); ++d) engine.normal(d, scan, hwp_angle);
-      engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
-      normal = std::min(normal, seconds_since(t5));
+    if (options.adjoint) {
+      engine.set_sky(w.sky);
+      engine.prepare();
     }
-    const double evals = engine.mean_disc_pixels() * double(samples);
-    const auto it = paper.find(rho);
-    if (it != paper.end())
-      std::printf("%8.1f %9.1f %10.3f %10.3f %12.3e %12.1f %10.3f\n", rho, engine.mean_disc_pixels(), setup,
-                  conv, evals / conv, it->second.second, it->second.second / 1e3 / (setup + conv));
-    else
-      std::printf("%8.1f %9.1f %10.3f %10.3f %12.3e %12s %10s\n", rho, engine.mean_disc_pixels(), setup, conv,
-                  evals / conv, "-", "-");
-    if (options.repeat > 1) std::printf("         best of %u runs of each path\n", options.repeat);
-    std::printf("         set-up %.3f s (the engine and the polar copy), apart from conv; the engine's own host work in "
-                "conv: %.1f ns/sample (%.3f s)\n",
-                setup, host / double(samples) * 1e9, host);
-    if (options.adjoint)
-      std::printf("         adjoint: %.3f s (take_adjoint %.3f s), %.3e evals/s; forward path with set_sky: %.3f s; "
-                  "adjoint / forward: %.2f\n",
-                  adjoint, take, evals / adjoint, forward, adjoint / forward);
-    if (options.adjoint)
-      std::printf("         map-maker iteration (set_sky, then A^T A s): normal pass %.3f s; forward path, then "
-                  "adjoint: %.3f s; normal / two passes: %.2f\n",
-                  normal, iteration, normal / iteration);
-    std::printf("         device: %s\n", engine.device_name().c_str());
+    const double host0 = engine.host_seconds();
+    const auto t1 = std::chrono::steady_clock::now();
+    for (std::size_t d = 0; d < fp.size(); ++d) engine.submit(d, scan, tods[d], false, w.hwp_angle);
+    engine.wait();
+    conv = std::min(conv, seconds_since(t1));
+    host = std::min(host, engine.host_seconds() - host0);
+    const double f = seconds_since(t0);
+    forward = std::min(forward, f);
+    if (!options.adjoint) continue;
+    pisco::Sky back(w.nside);
+    double a = 0.0;
+    for (std::size_t d = 0; d < fp.size(); ++d) {
+      engine.convolve(d, scan, tod, false, w.hwp_angle);  // each detector's own TOD, outside the timing
+      const auto t3 = std::chrono::steady_clock::now();
+      engine.adjoint(d, scan, tod, w.hwp_angle);
+      a += seconds_since(t3);
+    }
+    const auto t4 = std::chrono::steady_clock::now();
+    engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+    const double t = seconds_since(t4);
+    if (a + t < adjoint) {
+      adjoint = a + t;
+      take = t;
+    }
+    iteration = std::min(iteration, f + a + t);
+    // The same iteration through Engine::normal (one pass where the backend evaluates each disc once).
+    const auto t5 = std::chrono::steady_clock::now();
+    engine.set_sky(w.sky);
+    for (std::size_t d = 0; d < fp.size(); ++d) engine.normal(d, scan, w.hwp_angle);
+    engine.take_adjoint({back.I(), back.Q(), back.U(), back.V()});
+    normal = std::min(normal, seconds_since(t5));
   }
+  return {conv, forward, adjoint, take, normal, iteration, host};
+}
+
+// A disc radius's row of the table (beside the paper's time where it has one), and its notes.
+void print_bench_row(double rho, const pisco::Engine& engine, double setup, const BenchTimes& t, std::size_t samples,
+                     const BenchOptions& options) {
+  const double evals = engine.mean_disc_pixels() * double(samples);
+  const auto it = paper.find(rho);
+  if (it != paper.end())
+    std::printf("%8.1f %9.1f %10.3f %10.3f %12.3e %12.1f %10.3f\n", rho, engine.mean_disc_pixels(), setup,
+                t.conv, evals / t.conv, it->second.second, it->second.second / 1e3 / (setup + t.conv));
+  else
+    std::printf("%8.1f %9.1f %10.3f %10.3f %12.3e %12s %10s\n", rho, engine.mean_disc_pixels(), setup, t.conv,
+                evals / t.conv, "-", "-");
+  if (options.repeat > 1) std::printf("         best of %u runs of each path\n", options.repeat);
+  std::printf("         set-up %.3f s (the engine and the polar copy), apart from conv; the engine's own host work in "
+              "conv: %.1f ns/sample (%.3f s)\n",
+              setup, t.host / double(samples) * 1e9, t.host);
+  if (options.adjoint)
+    std::printf("         adjoint: %.3f s (take_adjoint %.3f s), %.3e evals/s; forward path with set_sky: %.3f s; "
+                "adjoint / forward: %.2f\n",
+                t.adjoint, t.take, evals / t.adjoint, t.forward, t.adjoint / t.forward);
+  if (options.adjoint)
+    std::printf("         map-maker iteration (set_sky, then A^T A s): normal pass %.3f s; forward path, then "
+                "adjoint: %.3f s; normal / two passes: %.2f\n",
+                t.normal, t.iteration, t.normal / t.iteration);
+  std::printf("         device: %s\n", engine.device_name().c_str());
+}
+
+// One disc radius: the beam and the engine set up (timed apart), the paths timed, the row printed.
+void bench_radius(double rho, const BenchWorkload& w, const pisco::EngineOptions& engine_options,
+                  const BenchOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  pisco::BeamOptions o;
+  o.rho_max = rho * deg;
+  o.grid_step = w.beam_step;
+  std::vector<pisco::Beamsor> beams{options.beam == "elliptical"
+                                        ? pisco::Beamsor::elliptical_gaussian(1.52 * deg, 1.46 * deg, 10 * deg, o)
+                                        : pisco::Beamsor::gaussian(1.5 * deg, o)};
+  pisco::Engine engine(w.sky, beams, w.fp, engine_options);
+  engine.prepare();  // the polar copy, which would otherwise be made by the first convolution
+  const double setup = seconds_since(t0);
+  const BenchTimes t = time_bench_paths(engine, w, options);
+  print_bench_row(rho, engine, setup, t, w.samples, options);
+}
+
+}  // namespace
+
+int run_bench(const BenchOptions& options) {
+  const pisco::EngineOptions engine_options = bench_engine_options(options);
+  const int nside = 128;
+  const pisco::Sky sky = bench_sky(nside, options.monopole_uk);
+  const pisco::Pointing scan = pisco::pixel_centre_scan(nside, {0.0, 45 * deg, 90 * deg});
+  pisco::FocalPlane fp;
+  fp.add_pair("psb", 0.0, 0, 0);
+  std::vector<double> hwp_angle;
+  if (options.hwp != "none") add_bench_plate(options, scan.size(), fp, hwp_angle);
+  const double beam_step = std::sqrt(4 * std::numbers::pi / (12.0 * 512 * 512));  // beam NSIDE 512
+  const BenchWorkload w{nside, sky, scan, fp, hwp_angle, scan.size() * fp.size(), beam_step};
+  print_bench_header(options, w);
+  for (double rho : options.rho_max_deg) bench_radius(rho, w, engine_options, options);
   return 0;
 }
 

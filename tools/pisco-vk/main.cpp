@@ -116,40 +116,30 @@ std::string printable(const char* text) {
   return out;
 }
 
-}  // namespace
-
-static int main_body(int argc, char** argv) {
-  // The stop signals (SIGINT, SIGTERM, SIGHUP, ...): stop at once, no temporary file left, status
-  // 128 + signal (signals.hpp).
-  pisco_cli::handle_stop_signals();
-  // HDF5's exit-time clean-up is not needed (every file is closed or abandoned by then), and after a
-  // full disk HDF5 1.10's can crash or loop on its own state (docs/formats.md, "Errors and partial
-  // files"): the program ends without it. Before any other HDF5 call.
-  H5dont_atexit();
-  // The processes of the run: MPI's ranks in the MPI build (docs/scaling.md), else this one.
-  pisco_cli::Cluster cluster(argc, argv);
-  CLI::App app{"PISCO-VK: pixel-space convolution of polarized skies with beamsors, for CMB simulations.",
-               "pisco-vk"};
-  app.set_version_flag("--version", std::string("pisco-vk ") + pisco::version);
-  app.require_subcommand(1);
-
-  auto* run = app.add_subcommand("run", "Run a simulation: sky -> TOD -> maps -> spectra (-> plots).");
+// The `run` subcommand's arguments.
+struct RunArgs {
   std::string config_path, output_dir, backend, device;
   bool quiet = false, no_plots = false;
-  run->add_option("config", config_path,
+};
+
+// `pisco-vk run`'s options, read into r; returns the subcommand.
+CLI::App* add_run_command(CLI::App& app, RunArgs& r) {
+  auto* run = app.add_subcommand("run", "Run a simulation: sky -> TOD -> maps -> spectra (-> plots).");
+  run->add_option("config", r.config_path,
                   "Simulation file (TOML). Without one, the bundled quick-start assets/examples/quickstart.toml.");
-  run->add_option("-o,--output", output_dir, "Output directory (overrides [output] dir).");
-  run->add_option("-b,--backend", backend, "Backend: auto, cpu, simd, vulkan, cuda (overrides [engine] backend).");
-  run->add_option("-d,--device", device, "Device of the vulkan or cuda backend: auto, an index or part of its name; "
-                                         "simd: an instruction set, e.g. AVX2 "
-                                         "(overrides [engine] device; `pisco-vk devices` lists them).");
-  run->add_flag("-q,--quiet", quiet, "Print nothing but errors.");
-  run->add_flag("--no-plots", no_plots, "Do not run the plotting tool.");
+  run->add_option("-o,--output", r.output_dir, "Output directory (overrides [output] dir).");
+  run->add_option("-b,--backend", r.backend, "Backend: auto, cpu, simd, vulkan, cuda (overrides [engine] backend).");
+  run->add_option("-d,--device", r.device, "Device of the vulkan or cuda backend: auto, an index or part of its name; "
+                                           "simd: an instruction set, e.g. AVX2 "
+                                           "(overrides [engine] device; `pisco-vk devices` lists them).");
+  run->add_flag("-q,--quiet", r.quiet, "Print nothing but errors.");
+  run->add_flag("--no-plots", r.no_plots, "Do not run the plotting tool.");
+  return run;
+}
 
-  app.add_subcommand("devices", "List the backends compiled in, the devices found, and why a backend is missing.");
-
+// `pisco-vk bench`'s options, read into bench_options.
+void add_bench_command(CLI::App& app, pisco_cli::BenchOptions& bench_options) {
   auto* bench = app.add_subcommand("bench", "Benchmark the paper's Table 1 workload (docs/validation.md, case G).");
-  pisco_cli::BenchOptions bench_options;
   bench->add_option("--rho-max", bench_options.rho_max_deg, "Disc radii in degrees (default: 5 10).");
   bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, simd, vulkan, cuda (default: auto).");
   bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend, or the simd backend's instruction set (default: auto).");
@@ -178,9 +168,11 @@ static int main_body(int argc, char** argv) {
                     "Time the forward path (and the adjoint) this many times, alternately, and report the best "
                     "of each (default: 1).")
       ->check(CLI::Range(1u, 1000u));
+}
 
+// `pisco-vk validate`'s options, read into vo.
+void add_validate_command(CLI::App& app, ValidateOptions& vo) {
   auto* val = app.add_subcommand("validate", "Run the paper's validation cases (docs/validation.md, cases C, D, E, F) and the deconvolving map-maker's (M), and print a pass/fail table.");
-  ValidateOptions vo;
   val->add_flag("--full", vo.full, "Paper scale (C at three beam resolutions, D and E with an NSIDE 512 sky, F a week of 36 pairs at NSIDE 128); hours on a CPU.");
   val->add_option("-b,--backend", vo.backend, "Backend the cases run through (default: cpu, the reference).");
   val->add_option("--case", vo.cases, "Only these cases (C, D, E, F, M; repeatable).");
@@ -192,6 +184,57 @@ static int main_body(int argc, char** argv) {
   val->add_option("--m-iterations", vo.survey.deconvolve_iterations, "M: conjugate-gradient iterations instead of the case's.")->check(CLI::Range(1, 100000));
   val->add_option("--m-regularization", vo.survey.deconvolve_regularization, "M: the regularization instead of the case's.")->check(CLI::Range(0.0, 1.0));
   val->add_option("--spectra-python", vo.spectra_python, "F: the Python of the NaMaster environment (tools/spectra_env.py; default build/spectra-venv).");
+}
+
+// `pisco-vk run`: the simulation file (or the quick-start), the command line's overrides on it, the run.
+int run_command(const CLI::App& run, const RunArgs& r, pisco_cli::Cluster& cluster) {
+  const fs::path data = data_dir();
+  const fs::path config_file =
+      r.config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(r.config_path);
+  if (run.count("--output") > 0 && r.output_dir.empty())
+    throw pisco::Error("-o/--output: expected a directory name, got an empty string");
+  pisco::SimulationConfig config;
+  cluster.step([&] { config = pisco::read_simulation_file(config_file); });
+  if (!r.output_dir.empty()) config.output.dir = r.output_dir;
+  if (!r.backend.empty()) config.engine.set_backend(r.backend, config.source);
+  if (!r.device.empty()) {
+    try {
+      config.engine.options.set_device(r.device);
+    } catch (const pisco::Error& e) {
+      throw pisco::Error(std::string("-d/--device: ") + e.what());
+    }
+  }
+  pisco_cli::RunOptions options;
+  options.quiet = r.quiet;
+  options.plots = !r.no_plots;
+  options.data_dir = data;
+  return pisco_cli::run_simulation(config, options);
+}
+
+}  // namespace
+
+static int main_body(int argc, char** argv) {
+  // The stop signals (SIGINT, SIGTERM, SIGHUP, ...): stop at once, no temporary file left, status
+  // 128 + signal (signals.hpp).
+  pisco_cli::handle_stop_signals();
+  // HDF5's exit-time clean-up is not needed (every file is closed or abandoned by then), and after a
+  // full disk HDF5 1.10's can crash or loop on its own state (docs/formats.md, "Errors and partial
+  // files"): the program ends without it. Before any other HDF5 call.
+  H5dont_atexit();
+  // The processes of the run: MPI's ranks in the MPI build (docs/scaling.md), else this one.
+  pisco_cli::Cluster cluster(argc, argv);
+  CLI::App app{"PISCO-VK: pixel-space convolution of polarized skies with beamsors, for CMB simulations.",
+               "pisco-vk"};
+  app.set_version_flag("--version", std::string("pisco-vk ") + pisco::version);
+  app.require_subcommand(1);
+
+  RunArgs run_args;
+  const CLI::App* run = add_run_command(app, run_args);
+  app.add_subcommand("devices", "List the backends compiled in, the devices found, and why a backend is missing.");
+  pisco_cli::BenchOptions bench_options;
+  add_bench_command(app, bench_options);
+  ValidateOptions vo;
+  add_validate_command(app, vo);
 
   try {
     app.parse(argc, argv);
@@ -204,26 +247,7 @@ static int main_body(int argc, char** argv) {
     if (app.got_subcommand("bench"))
       return bench_options.stream ? pisco_cli::run_stream_bench(bench_options) : pisco_cli::run_bench(bench_options);
     if (app.got_subcommand("validate")) return validate(vo, data_dir());
-    const fs::path data = data_dir();
-    const fs::path config_file = config_path.empty() ? data / "assets" / "examples" / "quickstart.toml" : fs::path(config_path);
-    if (run->count("--output") > 0 && output_dir.empty())
-      throw pisco::Error("-o/--output: expected a directory name, got an empty string");
-    pisco::SimulationConfig config;
-    cluster.step([&] { config = pisco::read_simulation_file(config_file); });
-    if (!output_dir.empty()) config.output.dir = output_dir;
-    if (!backend.empty()) config.engine.set_backend(backend, config.source);
-    if (!device.empty()) {
-      try {
-        config.engine.options.set_device(device);
-      } catch (const pisco::Error& e) {
-        throw pisco::Error(std::string("-d/--device: ") + e.what());
-      }
-    }
-    pisco_cli::RunOptions options;
-    options.quiet = quiet;
-    options.plots = !no_plots;
-    options.data_dir = data;
-    return pisco_cli::run_simulation(config, options);
+    return run_command(*run, run_args, cluster);
   } catch (const pisco_cli::AgreedError& e) {
     pisco_cli::wait_for_stop();  // an error caused by a stop signal (a write cut off): the signal's status
     // Every rank has it (a single process: always): said once.
