@@ -448,6 +448,9 @@ TEST_F(Cli, ConfigErrors) {
                "-d/--device: the cpu backend has no device setting (it applies to simd, vulkan and cuda)");
   expect_error("bench -b vulkan --threads 2 --rho-max 5",
                "--threads: the vulkan backend has no threads setting (it applies to cpu and simd)");
+  // A value the table of settings does not take: the words of simulation files and Python, behind the flag.
+  expect_error("bench -b vulkan --arithmetic double --rho-max 5",
+               "--arithmetic: expected \"auto\", \"float64\" or \"float-float\", got \"double\"");
 }
 
 // A Gaussian of `fwhm` polarized along x as the frameworks' b_lm, in healpy's alm FITS layout, with

@@ -3,6 +3,8 @@
 // product D(chi) Lambda(chi) B Lambda(-chi) S per pixel; plus determinism, chunking and errors.
 #include <gtest/gtest.h>
 
+#include <functional>
+
 #include <cmath>
 #include <iostream>
 #include <numbers>
@@ -258,6 +260,79 @@ double max_abs_diff(const std::vector<double>& a, const std::vector<double>& b) 
 // Each backend's own options, and the one-name settings of simulation files, the command line and
 // Python: on every backend that has them under "auto", on the named one otherwise, and an error
 // naming the setting's backends where the named backend has no such setting.
+// Every setting by name through the one table (pisco::set_engine_option), as simulation files,
+// pisco-vk and Python set them; each error carries the setting's name as its key, and its message does
+// not repeat it (the caller names it as its own key, keyword or flag).
+TEST(EngineOptions, EverySettingByNameThroughOneTable) {
+  const auto key_of = [](const std::function<void()>& f) {
+    try {
+      f();
+    } catch (const pisco::Error& e) {
+      EXPECT_EQ(e.kind(), pisco::ErrorKind::input);
+      return e.key() + " | " + e.what();
+    }
+    return std::string("no error");
+  };
+  pisco::EngineOptions o;
+  std::vector<std::string> names;
+  for (const pisco::EngineSetting& s : pisco::engine_settings()) names.push_back(s.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"backend", "device", "threads", "chunk_samples", "arithmetic",
+                                              "normalization", "unseen", "quadrature"}));
+  pisco::set_engine_option(o, "backend", std::string("auto"));
+  pisco::set_engine_option(o, "device", std::string("1"));
+  pisco::set_engine_option(o, "threads", 3LL);
+  pisco::set_engine_option(o, "chunk_samples", 4096LL);
+  pisco::set_engine_option(o, "arithmetic", std::string("float-float"));
+  pisco::set_engine_option(o, "normalization", std::string("per_sample"));
+  pisco::set_engine_option(o, "unseen", std::string("flag"));
+  pisco::set_engine_option(o, "quadrature", std::string("plain"));
+  EXPECT_EQ(o.backend, "auto");
+  EXPECT_EQ(o.vulkan.device, "1");
+  EXPECT_EQ(o.cuda.device, "1");
+  EXPECT_EQ(o.simd.instruction_set, "1");
+  EXPECT_EQ(o.cpu.threads, 3u);
+  EXPECT_EQ(o.simd.threads, 3u);
+  EXPECT_EQ(o.vulkan.chunk_samples, 4096u);
+  EXPECT_EQ(o.cuda.chunk_samples, 4096u);
+  EXPECT_EQ(o.vulkan.arithmetic, pisco::Arithmetic::float_float);
+  EXPECT_EQ(o.normalization, pisco::Normalization::per_sample);
+  EXPECT_EQ(o.unseen, pisco::UnseenPolicy::flag);
+  EXPECT_EQ(o.quadrature, pisco::Quadrature::plain);
+  // Every value's name and back.
+  for (auto v : {pisco::Normalization::integral, pisco::Normalization::per_sample})
+    EXPECT_EQ(pisco::normalization_from(pisco::normalization_name(v)), v);
+  for (auto v : {pisco::Quadrature::corrected, pisco::Quadrature::plain})
+    EXPECT_EQ(pisco::quadrature_from(pisco::quadrature_name(v)), v);
+  for (auto v : {pisco::UnseenPolicy::error, pisco::UnseenPolicy::zero, pisco::UnseenPolicy::flag})
+    EXPECT_EQ(pisco::unseen_policy_from(pisco::unseen_policy_name(v)), v);
+
+  EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "normalisation", std::string("integral")); }),
+            "normalisation | not a setting of the engine (expected one of backend, device, threads, chunk_samples, "
+            "arithmetic, normalization, unseen, quadrature)");
+  EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "threads", std::string("4")); }), "threads | expected a number, got \"4\"");
+  EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "chunk_samples", -1LL); }),
+            "chunk_samples | expected a number of zero or more, got -1");
+  EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "quadrature", 1LL); }),
+            "quadrature | expected \"corrected\" or \"plain\", got the number 1");
+  EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "unseen", std::string("mask")); }),
+            "unseen | expected \"error\", \"zero\" or \"flag\", got \"mask\"");
+  EXPECT_EQ(key_of([&] {
+              pisco::set_engine_option(o, "threads", static_cast<long long>(pisco::Engine::max_threads()) + 1);
+            }).substr(0, 40),
+            "threads | expected 0 (all hardware threa");
+  pisco::EngineOptions cpu;
+  pisco::set_engine_option(cpu, "backend", std::string("cpu"));
+  EXPECT_EQ(key_of([&] { pisco::set_engine_option(cpu, "arithmetic", std::string("float64")); }),
+            "arithmetic | the cpu backend has no arithmetic setting (it applies to vulkan)");
+  // The error named as a caller names it.
+  try {
+    pisco::set_engine_option(cpu, "device", std::string("0"));
+    ADD_FAILURE() << "no error";
+  } catch (const pisco::Error& e) {
+    EXPECT_EQ(e.named("[engine] "), "[engine] device: the cpu backend has no device setting (it applies to simd, vulkan and cuda)");
+  }
+}
+
 TEST(EngineOptions, OneNameSettingsGoToTheBackendsThatHaveThem) {
   pisco::EngineOptions all{.backend = "auto"};
   all.set_device("1");

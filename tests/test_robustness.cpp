@@ -640,6 +640,15 @@ TEST_F(Robustness, MessagesNameWhatIsWrong) {
        "[engine] arithmetic: the cpu backend has no arithmetic setting (it applies to vulkan)"},
       {with_table(c, "[engine]", "backend = \"vulkan\"\nthreads = 2\n"),
        "[engine] threads: the vulkan backend has no threads setting (it applies to cpu and simd)"},
+      // Values the table of settings does not take (pisco::set_engine_option): the same words as Python's
+      // and the command line's, behind the file's own prefix.
+      {with_key(c, "[engine]", "normalization", "\"per-sample\""),
+       "[engine] normalization: expected \"integral\" or \"per_sample\", got \"per-sample\""},
+      {with_key(c, "[engine]", "quadrature", "\"exact\""), "[engine] quadrature: expected \"corrected\" or \"plain\", got \"exact\""},
+      {with_table(c, "[engine]", "backend = \"vulkan\"\narithmetic = \"double\"\n"),
+       "[engine] arithmetic: expected \"auto\", \"float64\" or \"float-float\", got \"double\""},
+      {with_key(c, "[engine]", "threads", "-2"), "[engine] threads: expected a number of zero or more, got -2"},
+      {with_key(c, "[engine]", "threads", "\"four\""), "[engine] threads: expected an integer"},
   };
   for (const auto& [text, needle] : cases) expect_clean_error(needle, text, needle);
 

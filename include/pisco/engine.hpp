@@ -7,6 +7,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "pisco/beamsor.hpp"
@@ -37,9 +38,17 @@ enum class Quadrature {
 enum class Arithmetic { automatic, float64, float_float };
 
 // "auto", "float64" or "float-float" (the names of simulation files, the command line and Python);
-// throws pisco::Error (ErrorKind::input) naming them for any other.
+// throws pisco::Error (ErrorKind::input, key "arithmetic") naming them for any other.
 Arithmetic arithmetic_from(const std::string& name);
 std::string arithmetic_name(Arithmetic a);
+// The other settings' names, as arithmetic_from and arithmetic_name: "integral", "per_sample";
+// "corrected", "plain"; "error", "zero", "flag" (keys "normalization", "quadrature", "unseen").
+Normalization normalization_from(const std::string& name);
+std::string normalization_name(Normalization n);
+Quadrature quadrature_from(const std::string& name);
+std::string quadrature_name(Quadrature q);
+UnseenPolicy unseen_policy_from(const std::string& name);
+std::string unseen_policy_name(UnseenPolicy u);
 
 // Each backend's own settings (EngineOptions). threads: worker threads, 0 = all hardware threads,
 // at most Engine::max_threads(). device: a device index, or part of its name; "auto" prefers a
@@ -96,6 +105,26 @@ struct EngineOptions {
   unsigned* threads_of(const std::string& name);
   std::string* device_of(const std::string& name);
 };
+
+// The engine's settings by name (docs/library.md, "Engine options"): the one table that simulation
+// files' [engine] tables, pisco-vk's options and Python's Engine keywords set them through.
+struct EngineSetting {
+  const char* name;      // "backend", "device", "threads", "chunk_samples", "arithmetic", "normalization",
+                         // "unseen", "quadrature"
+  const char* takes;     // what it takes, in words
+  const char* backends;  // the backends it applies to
+  bool number;           // a number (threads, chunk_samples), else text
+};
+std::span<const EngineSetting> engine_settings();
+
+// A setting's value: text, or a number for threads and chunk_samples.
+using EngineValue = std::variant<std::string, long long>;
+
+// Sets the setting `name` of `options` (backend first: the others go to the backends they apply to,
+// as EngineOptions::set_device and its siblings route them). Throws pisco::Error (ErrorKind::input)
+// with key() the setting's name for a name not in engine_settings(), a value of the wrong type or not
+// among those it takes, or a value other than the default for a named backend without the setting.
+void set_engine_option(EngineOptions& options, const std::string& name, const EngineValue& value);
 
 // What a backend can do, so that a caller (a framework, the simulation pipeline) decides by
 // capability rather than by the backend's name.

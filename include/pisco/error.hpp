@@ -5,6 +5,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace pisco {
 
@@ -21,14 +22,25 @@ enum class ErrorKind {
 // "input", "unavailable", "device", "io" or "internal".
 const char* error_kind_name(ErrorKind kind) noexcept;
 
+// key(): the setting, keyword or field the error concerns, where the code that found it knows it and
+// its message does not name it; the caller that knows where it came from (a simulation file's table,
+// a Python keyword, a command-line flag) names it with its own prefix (Error::named) instead of
+// checking the value again. Empty where the message says it all.
 class Error : public std::runtime_error {
  public:
-  explicit Error(const std::string& what, ErrorKind kind = ErrorKind::input) : std::runtime_error(what), kind_(kind) {}
+  explicit Error(const std::string& what, ErrorKind kind = ErrorKind::input, std::string key = {})
+      : std::runtime_error(what), kind_(kind), key_(std::move(key)) {}
   explicit Error(const char* what, ErrorKind kind = ErrorKind::input) : std::runtime_error(what), kind_(kind) {}
   ErrorKind kind() const noexcept { return kind_; }
+  const std::string& key() const noexcept { return key_; }
+  // The message with the key named as `prefix` + key + ": " (the message alone when there is no key).
+  std::string named(const std::string& prefix = {}) const {
+    return key_.empty() ? std::string(what()) : prefix + key_ + ": " + what();
+  }
 
  private:
   ErrorKind kind_;
+  std::string key_;
 };
 
 }  // namespace pisco

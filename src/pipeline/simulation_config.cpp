@@ -447,42 +447,31 @@ ScanConfig read_scan(Table t) {
 // The TOD is streamed in chunks of at most this many samples (two buffers of 128 MiB at float64).
 constexpr std::int64_t max_chunk_samples = std::int64_t(1) << 24;
 
-// Routes the [engine] settings a file gave (EngineConfig::device, arithmetic, threads) to the backend
-// that options.backend names, one name each for whichever backend runs (EngineOptions::set_device and
-// the others); `fail(key, error)` reports, and must throw for, a setting that backend does not have.
-void route_settings(EngineConfig& e, const std::function<void(const char* key, const pisco::Error& error)>& fail) {
-  const auto route = [&](const char* key, auto set) {
-    try {
-      set();
-    } catch (const pisco::Error& err) {
-      fail(key, err);
-    }
-  };
-  if (e.device) route("device", [&] { e.options.set_device(*e.device); });
-  if (e.arithmetic) route("arithmetic", [&] { e.options.set_arithmetic(*e.arithmetic); });
-  if (e.threads) route("threads", [&] { e.options.set_threads(*e.threads); });
+// Routes the [engine] settings a file gave (EngineConfig::backend_settings) to the backend that
+// options.backend names (pisco::set_engine_option); its error for a setting that backend does not
+// have carries the setting's key.
+void route_settings(EngineConfig& e) {
+  for (const auto& [key, value] : e.backend_settings) pisco::set_engine_option(e.options, key, value);
 }
 
 EngineConfig read_engine(Table t) {
   EngineConfig e;
-  e.options.backend = t.string("backend", "auto");
-  if (t.has("device")) e.device = t.string("device", "auto");
-  if (t.has("arithmetic"))
-    e.arithmetic = pisco::arithmetic_from(t.choice("arithmetic", "auto", {"auto", "float64", "float-float"}));
-  e.options.normalization = t.choice("normalization", "integral", {"integral", "per_sample"}) == "integral"
-                                ? pisco::Normalization::integral
-                                : pisco::Normalization::per_sample;
-  e.options.quadrature = t.choice("quadrature", "corrected", {"corrected", "plain"}) == "corrected"
-                             ? pisco::Quadrature::corrected
-                             : pisco::Quadrature::plain;
-  const unsigned max_threads = pisco::Engine::max_threads();
-  if (t.has("threads"))
-    e.threads = static_cast<unsigned>(t.integer_in(
-        "threads", 0, 0, max_threads,
-        "0 (all hardware threads) or a number of threads up to " + std::to_string(max_threads) +
-            " (64 per hardware thread of this machine)"));
+  // Each setting as pisco::set_engine_option takes it; its errors name their key.
+  const auto set = [&](const char* key, const pisco::EngineValue& value) {
+    try {
+      pisco::set_engine_option(e.options, key, value);
+    } catch (const pisco::Error& err) {
+      t.fail(err.key().empty() ? key : err.key(), err.what());
+    }
+  };
+  set("backend", t.string("backend", "auto"));
+  if (t.has("device")) e.backend_settings.emplace_back("device", t.string("device", "auto"));
+  if (t.has("arithmetic")) e.backend_settings.emplace_back("arithmetic", t.string("arithmetic", "auto"));
+  if (t.has("threads")) e.backend_settings.emplace_back("threads", t.integer("threads", 0));
+  for (const char* key : {"normalization", "quadrature"})
+    if (t.has(key)) set(key, t.string(key, ""));
   // A setting the named backend does not have is an error naming its key.
-  route_settings(e, [&](const char* key, const pisco::Error& err) { t.fail(key, err.what()); });
+  for (const auto& [key, value] : e.backend_settings) set(key.c_str(), value);
   const auto chunk = t.integer_in("chunk_samples", 1 << 16, 1, max_chunk_samples,
                                   "a number of samples from 1 to " + std::to_string(max_chunk_samples));
   e.chunk_samples = static_cast<std::size_t>(chunk);
@@ -498,14 +487,14 @@ void EngineConfig::set_backend(const std::string& name, const std::filesystem::p
   routed.options.normalization = options.normalization;
   routed.options.quadrature = options.quadrature;
   routed.options.unseen = options.unseen;
-  routed.device = device;
-  routed.arithmetic = arithmetic;
-  routed.threads = threads;
-  route_settings(routed, [&](const char* key, const pisco::Error& err) {
-    throw pisco::Error((source.empty() ? std::string("simulation") : source.string()) + ": [engine] " + key + ": " +
-                           err.what() + "; the backend was named after the file (" + name + ")",
+  routed.backend_settings = backend_settings;
+  try {
+    route_settings(routed);
+  } catch (const pisco::Error& err) {
+    throw pisco::Error((source.empty() ? std::string("simulation") : source.string()) + ": " + err.named("[engine] ") +
+                           "; the backend was named after the file (" + name + ")",
                        err.kind());
-  });
+  }
   options = std::move(routed.options);
 }
 

@@ -40,31 +40,6 @@ using namespace nb::literals;
 namespace pisco::python {
 namespace {
 
-Normalization normalization_from(const std::string& name) {
-  if (name == "integral") return Normalization::integral;
-  if (name == "per_sample") return Normalization::per_sample;
-  throw nb::value_error(("normalization: expected 'integral' or 'per_sample', got '" + name + "'").c_str());
-}
-
-}  // namespace
-
-// The `unseen` arguments (Engine, Sky.read_fits): what is done with a masked sky's UNSEEN pixels.
-UnseenPolicy unseen_policy_from(const std::string& name) {
-  if (name == "error") return UnseenPolicy::error;
-  if (name == "zero") return UnseenPolicy::zero;
-  if (name == "flag") return UnseenPolicy::flag;
-  throw nb::value_error(("unseen: expected 'error', 'zero' or 'flag', got '" + name + "'").c_str());
-}
-
-// The `quadrature` argument (Engine): the sum over pixels, corrected or plain.
-Quadrature quadrature_from(const std::string& name) {
-  if (name == "corrected") return Quadrature::corrected;
-  if (name == "plain") return Quadrature::plain;
-  throw nb::value_error(("quadrature: expected 'corrected' or 'plain', got '" + name + "'").c_str());
-}
-
-namespace {
-
 // The pointing of one call, checked and viewed (no copy): angles or boresight quaternions.
 struct PointingArgs {
   std::optional<ConstVector> theta, phi, psi;
@@ -185,24 +160,17 @@ class PyEngine {
         beam_list.push_back(nb::cast<Beamsor>(b));
       }
     }
+    // Each keyword through the library's table of settings (pisco::set_engine_option), whose errors
+    // carry the setting's name: the keyword's.
     EngineOptions options;
-    options.backend = backend;
-    // Each keyword on the backends it applies to (EngineOptions::set_device and the others).
-    const auto route = [](const char* keyword, auto set) {
-      try {
-        set();
-      } catch (const Error& e) {
-        throw Error(std::string(keyword) + ": " + e.what(), e.kind());
-      }
-    };
-    const Arithmetic kernel_arithmetic = arithmetic_from(arithmetic);
-    route("device", [&] { options.set_device(device); });
-    route("chunk_samples", [&] { options.set_chunk_samples(unsigned_arg<std::size_t>(chunk_samples, "chunk_samples")); });
-    route("threads", [&] { options.set_threads(unsigned_arg<unsigned>(threads, "threads")); });
-    route("arithmetic", [&] { options.set_arithmetic(kernel_arithmetic); });
-    options.normalization = normalization_from(normalization);
-    options.unseen = unseen_policy_from(unseen);
-    options.quadrature = quadrature_from(quadrature);
+    set_engine_option(options, "backend", backend);
+    set_engine_option(options, "arithmetic", arithmetic);
+    set_engine_option(options, "device", device);
+    set_engine_option(options, "chunk_samples", static_cast<long long>(unsigned_arg<std::size_t>(chunk_samples, "chunk_samples")));
+    set_engine_option(options, "threads", static_cast<long long>(unsigned_arg<unsigned>(threads, "threads")));
+    set_engine_option(options, "normalization", normalization);
+    set_engine_option(options, "unseen", unseen);
+    set_engine_option(options, "quadrature", quadrature);
     for (const auto& d : focal_plane.detectors()) names_.push_back(d.name);
     bool out_of_memory = false;
     {

@@ -32,7 +32,6 @@ using namespace nb::literals;
 namespace pisco::python {
 void bind_engine(nb::module_& m);
 void bind_simulation(nb::module_& m);  // simulation.cpp
-UnseenPolicy unseen_policy_from(const std::string& name);  // engine.cpp
 
 namespace {
 
@@ -425,7 +424,7 @@ void bind_beamsor_files(nb::class_<Beamsor>& cls) {
               throw pisco::Error("set = " + std::to_string(k) + ", but " + path.string() + " holds " +
                                  std::to_string(all.size()) + " beam(s)");
             nb::gil_scoped_release release;
-            return Beamsor::from_grasp(all[static_cast<std::size_t>(k - 1)], {rho_max, grid_step, angle, split});
+            return Beamsor::from_grasp(all[static_cast<std::size_t>(k - 1)], {rho_max, grid_step, angle, split, {}});
           },
           "path"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "set"_a = nb::none(), "angle"_a = 0.0,
           "sidelobes"_a = nb::none(),
@@ -479,7 +478,7 @@ void bind_beamsor_files(nb::class_<Beamsor>& cls) {
               }
             }
             nb::gil_scoped_release release;
-            return Beamsor::from_harmonic(beam, {rho_max, grid_step, angle, split});
+            return Beamsor::from_harmonic(beam, {rho_max, grid_step, angle, split, {}});
           },
           "blm"_a, "rho_max"_a = 5 * deg, "grid_step"_a = 0.0, "angle"_a = 0.0, "lmax"_a = nb::none(), "mmax"_a = nb::none(),
           "sidelobes"_a = nb::none(),
@@ -996,7 +995,7 @@ void bind_errors(nb::module_& m) {
     const char* doc;
   };
   const Kind kinds[] = {
-      {ErrorKind::input, "InputError", "A bad argument, file content or configuration."},
+      {ErrorKind::input, "InputError", "A bad argument, file content or configuration (also a ValueError)."},
       {ErrorKind::unavailable, "UnavailableError", "A backend, device, driver or library absent from this machine."},
       {ErrorKind::device, "DeviceError", "A device that failed while working: out of memory, lost, or a driver error."},
       {ErrorKind::io, "FileError", "A file that could not be opened, read, written or renamed."},
@@ -1004,7 +1003,11 @@ void bind_errors(nb::module_& m) {
   };
   nb::setattr(nb::borrow(base), "kind", nb::none());
   for (const Kind& k : kinds) {
-    PyObject* type = PyErr_NewExceptionWithDoc((std::string("pisco._pisco.") + k.name).c_str(), k.doc, base, nullptr);
+    // InputError is also a ValueError: a bad argument is one, whichever check found it.
+    PyObject* bases = k.kind == ErrorKind::input ? PyTuple_Pack(2, base, PyExc_ValueError) : nullptr;
+    PyObject* type = PyErr_NewExceptionWithDoc((std::string("pisco._pisco.") + k.name).c_str(), k.doc,
+                                               bases ? bases : base, nullptr);
+    Py_XDECREF(bases);
     if (!type) throw nb::python_error();
     nb::setattr(nb::borrow(type), "kind", nb::str(error_kind_name(k.kind)));
     m.attr(k.name) = nb::borrow(type);
@@ -1014,7 +1017,9 @@ void bind_errors(nb::module_& m) {
     try {
       std::rethrow_exception(p);
     } catch (const pisco::Error& e) {
-      PyErr_SetString(error_types[static_cast<int>(e.kind())], e.what());
+      // An error that carries its key (a setting, keyword or field) is named by it: the keywords of
+      // the bindings are the library's own names.
+      PyErr_SetString(error_types[static_cast<int>(e.kind())], e.named().c_str());
     }
   });
 }

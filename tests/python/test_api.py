@@ -533,6 +533,26 @@ def test_vulkan_backend_agrees_with_the_reference():
         pisco.Engine(sky, beam, fp, backend="vulkan", arithmetic="float128")
 
 
+def test_engine_settings_have_the_words_of_simulation_files():
+    """Engine's keywords go through the library's one table of settings (pisco::set_engine_option): its
+    errors are pisco.InputError, also a ValueError, named by the keyword, in the words a simulation file's
+    [engine] table and pisco-vk give for the same mistake."""
+    sky = pisco.Sky(8)
+    beam = pisco.Beamsor.gaussian(np.radians(8.0), np.radians(20.0))
+    fp = pisco.FocalPlane()
+    fp.add("d")
+    assert issubclass(pisco.InputError, ValueError) and issubclass(pisco.InputError, pisco.Error)
+    for kwargs, message in [
+        (dict(normalization="per-sample"), 'normalization: expected "integral" or "per_sample", got "per-sample"'),
+        (dict(quadrature="exact"), 'quadrature: expected "corrected" or "plain", got "exact"'),
+        (dict(unseen="mask"), 'unseen: expected "error", "zero" or "flag", got "mask"'),
+        (dict(backend="cpu", arithmetic="float64"), "arithmetic: the cpu backend has no arithmetic setting"),
+    ]:
+        with pytest.raises(pisco.InputError) as raised:
+            pisco.Engine(sky, beam, fp, backend=kwargs.pop("backend", "cpu"), **kwargs)
+        assert str(raised.value).startswith(message), (kwargs, str(raised.value))
+
+
 def vulkan_auto_device():
     """(index, part of the name) of the device the vulkan backend's "auto" takes, from pisco.devices()."""
     info = next(b for b in pisco.devices() if b.name == "vulkan")
@@ -651,7 +671,7 @@ def test_masked_sky_policies():
     with pytest.raises(pisco.Error, match="the Stokes I map has 6 UNSEEN pixels"):
         pisco.Engine(masked, beam, fp, backend="cpu", unseen="error")
     for bad in ("mask", "", "ERROR"):
-        with pytest.raises(ValueError, match=f"unseen: expected 'error', 'zero' or 'flag', got '{bad}'"):
+        with pytest.raises(ValueError, match=f'unseen: expected "error", "zero" or "flag", got "{bad}"'):
             pisco.Engine(masked, beam, fp, backend="cpu", unseen=bad)
     # zero: exactly the convolution of the sky with those pixels set to 0 (in every map).
     zeroed = pisco.Sky.from_maps(np.array([masked.I, masked.Q, masked.U]), units="uK_CMB")
@@ -728,7 +748,7 @@ def test_read_fits_unseen_policies(tmp_out):
     assert zero.I[5000] == masked.I[5000]
     kept = pisco.Sky.read_fits(str(path), unseen="flag")
     assert np.array_equal(kept.unseen_pixels(), sorted(MASK_I + MASK_Q)) and kept.I[7000] == pisco.unseen
-    with pytest.raises(ValueError, match="unseen: expected 'error', 'zero' or 'flag', got 'skip'"):
+    with pytest.raises(ValueError, match='unseen: expected "error", "zero" or "flag", got "skip"'):
         pisco.Sky.read_fits(path, unseen="skip")
 
 

@@ -34,20 +34,24 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// The one-name settings of the command line, on the backend they apply to (an error for one without them).
+// The one-name settings of the command line, on the backend they apply to (an error for one without
+// them), through the library's table of settings; an error names the flag.
 pisco::EngineOptions bench_engine_options(const BenchOptions& options) {
-  pisco::EngineOptions engine_options{.backend = options.backend};
-  const auto route = [](const char* flag, auto set) {
+  pisco::EngineOptions engine_options;
+  const std::pair<const char*, pisco::EngineValue> given[] = {
+      {"backend", options.backend},
+      {"device", options.device},
+      {"threads", static_cast<long long>(options.threads)},
+      {"arithmetic", options.arithmetic}};
+  for (const auto& [name, value] : given) {
     try {
-      set();
+      pisco::set_engine_option(engine_options, name, value);
     } catch (const pisco::Error& e) {
-      throw pisco::Error(std::string(flag) + ": " + e.what());
+      const std::string key = e.key().empty() ? name : e.key();
+      throw pisco::Error((key == "device" ? "-d/--device" : key == "backend" ? "-b/--backend" : "--" + key) + ": " +
+                         e.what());
     }
-  };
-  route("-d/--device", [&] { engine_options.set_device(options.device); });
-  route("--threads", [&] { engine_options.set_threads(options.threads); });
-  const pisco::Arithmetic arithmetic = pisco::arithmetic_from(options.arithmetic);
-  route("--arithmetic", [&] { engine_options.set_arithmetic(arithmetic); });
+  }
   return engine_options;
 }
 

@@ -144,9 +144,10 @@ void add_bench_command(CLI::App& app, pisco_cli::BenchOptions& bench_options) {
   bench->add_option("-b,--backend", bench_options.backend, "Backend: auto, cpu, simd, vulkan, cuda (default: auto).");
   bench->add_option("-d,--device", bench_options.device, "Device of the vulkan or cuda backend, or the simd backend's instruction set (default: auto).");
   bench->add_option("--threads", bench_options.threads, "cpu and simd backend threads (default: all).");
+  // Its values are checked by the library's table of settings (pisco::set_engine_option), as a
+  // simulation file's and Python's are.
   bench->add_option("--arithmetic", bench_options.arithmetic,
-                    "Vulkan kernel's float64 work: auto, float64, float-float (default: auto).")
-      ->check(CLI::IsMember({"auto", "float64", "float-float"}));
+                    "Vulkan kernel's float64 work: auto, float64, float-float (default: auto).");
   bench->add_option("--hwp", bench_options.hwp,
                     "A half-wave plate before both detectors, turning at 2 Hz: none, ideal, generic (default: none).")
       ->check(CLI::IsMember({"none", "ideal", "generic"}));
@@ -199,7 +200,7 @@ int run_command(const CLI::App& run, const RunArgs& r, pisco_cli::Cluster& clust
   if (!r.backend.empty()) config.engine.set_backend(r.backend, config.source);
   if (!r.device.empty()) {
     try {
-      config.engine.options.set_device(r.device);
+      pisco::set_engine_option(config.engine.options, "device", r.device);
     } catch (const pisco::Error& e) {
       throw pisco::Error(std::string("-d/--device: ") + e.what());
     }
