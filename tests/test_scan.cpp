@@ -15,6 +15,7 @@
 #include "pisco/error.hpp"
 #include "pisco/scan.hpp"
 #include "pisco/units.hpp"
+#include "scans/scan_kind.hpp"
 
 namespace {
 
@@ -187,3 +188,70 @@ TEST(Scan, BadInputsNameTheArgument) {
 }
 
 }  // namespace
+
+// Every kind of [scan] is registered once (scans/scan_kinds.cpp) under its ScanKind and name, and its
+// generator gives the pointing of any range of samples as the scan's own functions give it.
+TEST(ScanKinds, EveryKindIsRegisteredOnceAndGivesAnyRange) {
+  using namespace pisco::detail;
+  std::set<std::string> names;
+  for (const ScanKindEntry* k : scan_kinds()) {
+    EXPECT_TRUE(names.insert(k->name).second) << k->name;
+    EXPECT_EQ(&scan_kind(k->kind), k);
+    EXPECT_EQ(scan_kind_named(k->name), k);
+    EXPECT_STREQ(pisco::scan_kind_name(k->kind), k->name);
+  }
+  EXPECT_EQ(names, (std::set<std::string>{"pixel_centres", "random_offsets", "raster", "ces", "satellite", "file"}));
+  EXPECT_EQ(scan_kind_named("spiral"), nullptr);
+
+  pisco::ScanConfig c;
+  c.kind = pisco::ScanKind::ces;
+  c.ces.samples = 5000;
+  c.ces.az_throw = 20 * pisco::deg;
+  c.ces.boresight_angles = {0.0, 0.5};
+  c.ces.boresight_period = 60.0;
+  pisco::ScanConfig sat;
+  sat.kind = pisco::ScanKind::satellite;
+  sat.satellite.samples = 5000;
+  pisco::ScanConfig pix;
+  pix.kind = pisco::ScanKind::random_offsets;
+  pix.nside = 8;
+  pix.psi = {0.0, 1.0};
+  for (const pisco::ScanConfig* s : {&c, &sat, &pix}) {
+    SCOPED_TRACE(pisco::scan_kind_name(s->kind));
+    const auto g = scan_kind(s->kind).make(*s);
+    EXPECT_EQ(g->samples(), s == &pix ? 2 * 768u : 5000u);
+    EXPECT_EQ(g->quaternions(), s == &sat);
+    EXPECT_EQ(scan_kind(s->kind).sample_rate(*s), s == &c ? c.ces.sample_rate : s == &sat ? sat.satellite.sample_rate : 0.0);
+    pisco::Pointing all, part, direct;
+    std::vector<pisco::Quat> qall, qpart, qdirect;
+    g->generate(0, g->samples(), all, qall);
+    const std::size_t first = g->samples() / 4, count = g->samples() / 3;
+    g->generate(first, count, part, qpart);
+    if (s == &c) c.ces.generate(first, count, direct);
+    if (s == &sat) sat.satellite.generate(first, count, qdirect);
+    if (s == &pix) {
+      const pisco::Pointing p = pisco::random_offset_scan(8, pix.psi, pix.f, pix.seed, pix.symmetric);
+      const pisco::PointingView v = p.view().subspan(first, count);
+      direct.theta.assign(v.theta.begin(), v.theta.end());
+      direct.phi.assign(v.phi.begin(), v.phi.end());
+      direct.psi.assign(v.psi.begin(), v.psi.end());
+    }
+    ASSERT_EQ(g->quaternions() ? qpart.size() : part.size(), count);
+    for (std::size_t i = 0; i < count; ++i) {
+      if (g->quaternions()) {
+        for (const pisco::Quat& q : {qall[first + i], qdirect[i]}) {
+          EXPECT_EQ(qpart[i].x, q.x);
+          EXPECT_EQ(qpart[i].y, q.y);
+          EXPECT_EQ(qpart[i].z, q.z);
+          EXPECT_EQ(qpart[i].w, q.w);
+        }
+      } else {
+        EXPECT_EQ(part.theta[i], all.theta[first + i]);
+        EXPECT_EQ(part.psi[i], all.psi[first + i]);
+        EXPECT_EQ(part.theta[i], direct.theta[i]);
+        EXPECT_EQ(part.phi[i], direct.phi[i]);
+        EXPECT_EQ(part.psi[i], direct.psi[i]);
+      }
+    }
+  }
+}

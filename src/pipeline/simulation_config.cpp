@@ -13,6 +13,7 @@
 
 #include "io/focal_plane_file.hpp"
 #include "io/toml_table.hpp"
+#include "scans/scan_kind.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/spectra.hpp"
 #include "pisco/time_ranges.hpp"
@@ -34,14 +35,8 @@ const char* beam_kind_name(BeamKind kind) noexcept {
 }
 
 const char* scan_kind_name(ScanKind kind) noexcept {
-  switch (kind) {
-    case ScanKind::pixel_centres: return "pixel_centres";
-    case ScanKind::random_offsets: return "random_offsets";
-    case ScanKind::raster: return "raster";
-    case ScanKind::ces: return "ces";
-    case ScanKind::satellite: return "satellite";
-    case ScanKind::file: return "file";
-  }
+  for (const detail::ScanKindEntry* k : detail::scan_kinds())
+    if (k->kind == kind) return k->name;
   return "?";
 }
 
@@ -309,137 +304,14 @@ void check_combined_beams(const SimulationConfig& c, const toml::table& beams, c
   }
 }
 
-// "YYYY-MM-DDTHH:MM:SSZ" (UTC) to seconds since 1970-01-01.
-double parse_utc(Table& t, const std::string& key, const std::string& text) {
-  int y, mo, d, h, mi;
-  double sec;
-  char z = 0;
-  // Field widths keep every integer within int; the seconds must be a number in [0, 61).
-  if (std::sscanf(text.c_str(), "%4d-%2d-%2dT%2d:%2d:%lf%c", &y, &mo, &d, &h, &mi, &sec, &z) != 7 || z != 'Z' || mo < 1 ||
-      mo > 12 || d < 1 || d > 31 || h < 0 || h > 23 || mi < 0 || mi > 59 || !(sec >= 0 && sec < 61))
-    t.fail(key, "expected a UTC time like \"2019-06-01T00:00:00Z\", got \"" + text + "\"");
-  // Days from civil (proleptic Gregorian), Howard Hinnant's algorithm.
-  y -= mo <= 2;
-  const int era = (y >= 0 ? y : y - 399) / 400;
-  const unsigned yoe = static_cast<unsigned>(y - era * 400);
-  const unsigned doy = (153 * (mo + (mo > 2 ? -3 : 9)) + 2) / 5 + d - 1;
-  const unsigned doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-  const long days = era * 146097L + static_cast<long>(doe) - 719468L;
-  return days * 86400.0 + h * 3600.0 + mi * 60.0 + sec;
-}
-
-// [scan] type = "satellite": a spinning, precessing spacecraft (pisco::SatelliteScan; every key is
-// checked here so that its error names it).
-// The samples of a scan of duration_hours at `sample_rate` (Hz): at least one, at most 1e15.
-std::size_t scan_samples(Table& t, double sample_rate) {
-  const double hours = t.positive("duration_hours", 1.0);
-  const double samples = std::round(hours * 3600 * sample_rate);
-  if (!(samples >= 1)) t.fail("duration_hours", "shorter than one sample at sample_rate_hz");
-  if (samples > 1e15) t.fail("duration_hours", "more than 1e15 samples at sample_rate_hz");
-  return static_cast<std::size_t>(samples);
-}
-
-void read_satellite(Table& t, ScanConfig& s) {
-  pisco::SatelliteScan& c = s.satellite;
-  auto angle = [&](const std::string& key, double fallback, bool open_interval) {
-    const double v = t.number(key, fallback);
-    if (!std::isfinite(v) || v < 0 || v > 180 || (open_interval && (v == 0 || v == 180)))
-      t.fail(key, std::string("expected an angle within ") + (open_interval ? "(0, 180)" : "[0, 180]") + " deg, got " +
-                      std::to_string(v));
-    return v * deg;
-  };
-  auto finite = [&](const std::string& key, double fallback) {
-    const double v = t.number(key, fallback);
-    if (!std::isfinite(v)) t.fail(key, "expected a finite number");
-    return v;
-  };
-  c.spin_sun_angle = angle("spin_sun_angle_deg", 45.0, false);
-  c.spin_boresight_angle = angle("spin_boresight_angle_deg", 50.0, true);
-  c.precession_period = t.positive("precession_period_min", 192.348, 60);
-  c.spin_period = t.positive("spin_period_min", 20.0, 60);
-  c.sample_rate = t.positive("sample_rate_hz", 19.0);
-  c.start_time = finite("start_time_s", 0.0);
-  c.precession_phase = finite("precession_phase_deg", 0.0) * deg;
-  c.spin_phase = finite("spin_phase_deg", 0.0) * deg;
-  const std::string frame = t.choice("frame", "ecliptic", {"ecliptic", "equatorial", "galactic"});
-  c.frame = frame == "ecliptic"     ? pisco::SatelliteScan::Frame::ecliptic
-            : frame == "equatorial" ? pisco::SatelliteScan::Frame::equatorial
-                                    : pisco::SatelliteScan::Frame::galactic;
-  c.samples = scan_samples(t, c.sample_rate);
-  s.nside = t.nside("nside", 64);  // the maps' default NSIDE
-  // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
-  if (const auto p = c.time_problem()) {
-    if (p->field == "start_time") t.fail("start_time_s", p->what);
-    if (p->field == "spin_period") t.fail("spin_period_min", p->what);
-    if (p->field == "precession_period") t.fail("precession_period_min", p->what);
-  }
-  try {
-    c.check();
-  } catch (const pisco::Error& e) {
-    t.fail_table(e.what());
-  }
-}
-
+// [scan]: its type, then that kind's keys (scans/scan_kind.hpp: one reader a kind).
 ScanConfig read_scan(Table t) {
   ScanConfig s;
-  const std::string type =
-      t.choice("type", "pixel_centres", {"pixel_centres", "random_offsets", "raster", "ces", "satellite", "file"});
-  s.kind = type == "pixel_centres"    ? ScanKind::pixel_centres
-           : type == "random_offsets" ? ScanKind::random_offsets
-           : type == "raster"         ? ScanKind::raster
-           : type == "ces"            ? ScanKind::ces
-           : type == "satellite"      ? ScanKind::satellite
-                                      : ScanKind::file;
-  if (s.kind != ScanKind::ces && s.kind != ScanKind::satellite && s.kind != ScanKind::file)
-    for (double p : t.numbers("psi_deg", {0.0, 45.0, 90.0})) s.psi.push_back(p * deg);
-  if (s.kind == ScanKind::ces) {
-    pisco::CesScan& c = s.ces;
-    c.latitude = t.number_in("latitude_deg", -22.96, -90, 90, "a latitude in [-90, 90] deg") * deg;
-    c.longitude = t.number("longitude_deg", -67.79) * deg;
-    const double elevation = t.number("elevation_deg", 45.0);
-    if (!(elevation > 0 && elevation < 90)) t.fail("elevation_deg", "expected an elevation within (0, 90) deg, got " + Table::format(elevation));
-    c.elevation = elevation * deg;
-    c.az_centre = t.number("az_centre_deg", 180.0) * deg;
-    c.az_throw = t.number_in("az_throw_deg", 720.0, 0, 1e9, "a non-negative azimuth throw") * deg;
-    c.az_speed = t.positive("az_speed_deg_s", 1.0) * deg;
-    c.sample_rate = t.positive("sample_rate_hz", 20.0);
-    c.start_unix = parse_utc(t, "start", t.string("start", "2019-06-01T00:00:00Z"));
-    c.samples = scan_samples(t, c.sample_rate);
-    c.boresight_angles.clear();
-    for (double b : t.numbers("boresight_deg", {0.0})) c.boresight_angles.push_back(b * deg);
-    c.boresight_period = t.positive("boresight_period_hours", 24.0, 3600);
-    s.nside = t.nside("nside", 128);  // the maps' default NSIDE
-    // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
-    if (const auto p = c.time_problem()) {
-      if (p->field == "start_unix") t.fail("start", p->what);
-      if (p->field == "az_speed") t.fail("az_speed_deg_s", p->what);
-      if (p->field == "boresight_period") t.fail("boresight_period_hours", p->what);
-    }
-    try {
-      c.check();
-    } catch (const pisco::Error& e) {
-      t.fail_table(e.what());
-    }
-  } else if (s.kind == ScanKind::satellite) {
-    read_satellite(t, s);
-  } else if (s.kind == ScanKind::file) {
-    s.file = t.input_file("file");
-    if (s.file.empty()) t.fail("file", "a scan of type \"file\" needs file = \"pointing.h5\"");
-  } else {
-    s.nside = t.nside("nside", 64);
-  }
-  if (s.kind == ScanKind::random_offsets) {
-    s.f = t.number_in("f", 0.1, 0, 1, "a fraction of the pixel size in [0, 1]");
-    s.symmetric = t.boolean("symmetric", false);
-    s.seed = static_cast<std::uint64_t>(t.integer_in("seed", 1, 0, INT64_MAX, "a non-negative integer"));
-  }
-  if (s.kind == ScanKind::raster) {
-    s.theta = t.number_in("theta_deg", 45.0, 0, 180, "a colatitude in [0, 180] deg") * deg;
-    s.phi = t.number("phi_deg", 0.0) * deg;
-    const double radius = t.positive("radius_deg", 5.0);
-    if (radius >= 180) t.fail("radius_deg", "expected a radius below 180 deg, got " + Table::format(radius));
-    s.radius = radius * deg;
-  }
+  std::vector<std::string> names;
+  for (const detail::ScanKindEntry* k : detail::scan_kinds()) names.emplace_back(k->name);
+  const detail::ScanKindEntry& kind = *detail::scan_kind_named(t.choice("type", "pixel_centres", names));
+  s.kind = kind.kind;
+  kind.read(t, s);
   t.finish();
   return s;
 }
@@ -546,9 +418,7 @@ MapmakerConfig read_mapmaker(Table t) {
 
 // [hwp] (docs/config.md): the plate model and its angle stream.
 // The samples' rate of a scan that has one (ces, satellite: sample i at time i / rate); 0 for the others.
-double scan_sample_rate(const ScanConfig& scan) {
-  return scan.kind == ScanKind::ces ? scan.ces.sample_rate : scan.kind == ScanKind::satellite ? scan.satellite.sample_rate : 0.0;
-}
+double scan_sample_rate(const ScanConfig& scan) { return detail::scan_kind(scan.kind).sample_rate(scan); }
 
 HwpConfig read_hwp(Table t, const ScanConfig& scan) {
   HwpConfig h;
@@ -802,9 +672,7 @@ SimulationConfig read_simulation_file(const fs::path& file) {
   check_combined_beams(c, *beams, file);
   if (const toml::table* ground = t.table("ground")) c.ground = read_ground(Table(*ground, "ground", file), c.scan, file);
   if (const toml::array* sources = t.array_of_tables("sources")) {
-    const std::size_t samples = c.scan.kind == ScanKind::ces         ? c.scan.ces.samples
-                                : c.scan.kind == ScanKind::satellite ? c.scan.satellite.samples
-                                                                     : 0;
+    const std::size_t samples = detail::scan_kind(c.scan.kind).samples(c.scan);
     c.sources = read_sources(*sources, file, c.sample_rate, samples);
     if (c.engine.options.normalization != pisco::Normalization::integral)
       t.fail("sources", "point sources need [engine] normalization = \"integral\"");

@@ -22,6 +22,7 @@
 #include <vector>
 #include <unistd.h>
 
+#include "scans/scan_kind.hpp"
 #include "core/detector_pointing.hpp"
 #include "core/thread_pool.hpp"
 #include "io/input_file.hpp"
@@ -59,65 +60,47 @@ struct BoresightChunk {
 // scanning, a year of satellite scanning or a season's pointing file is never held in memory whole).
 class Boresight {
  public:
-  Boresight(const ScanConfig& s, const HwpConfig& hwp) : scan_(s), hwp_(hwp) {
-    if (s.kind == ScanKind::pixel_centres) all_ = pisco::pixel_centre_scan(s.nside, s.psi);
-    else if (s.kind == ScanKind::random_offsets) all_ = pisco::random_offset_scan(s.nside, s.psi, s.f, s.seed, s.symmetric);
-    else if (s.kind == ScanKind::raster) all_ = pisco::raster_scan(s.theta, s.phi, s.radius, s.nside, s.psi);
-    else if (s.kind == ScanKind::file) file_.emplace(s.file);
-    if (hwp_.angles_from_file && !(file_ && file_->has_hwp_angle()))
+  Boresight(const ScanConfig& s, const HwpConfig& hwp) : scan_(pisco::detail::scan_kind(s.kind).make(s)), hwp_(hwp) {
+    if (hwp_.angles_from_file && !(scan_->file() && scan_->file()->has_hwp_angle()))
       throw pisco::Error(s.file.string() + ": [hwp] gives no rotation or steps, and the pointing file has no "
                                            "'hwp_angle' dataset (expected one of them)");
   }
-  bool quaternions() const { return scan_.kind == ScanKind::satellite || file_.has_value(); }
-  std::size_t size() const {
-    if (scan_.kind == ScanKind::ces) return scan_.ces.samples;
-    if (scan_.kind == ScanKind::satellite) return scan_.satellite.samples;
-    if (file_) return file_->size();
-    return all_.size();
-  }
-  // With `pool`, the generated scans (constant-elevation and satellite, whose samples do not depend on
-  // each other) in blocks of samples on its threads: the same values.
+  bool quaternions() const { return scan_->quaternions(); }
+  std::size_t size() const { return scan_->samples(); }
+  // With `pool`, the scans whose samples do not depend on each other (ScanGenerator::by_blocks) in
+  // blocks of samples on its threads: the same values.
   void fill(std::size_t first, std::size_t count, BoresightChunk& out, pisco::detail::ThreadPool* pool = nullptr) const {
     out.first = first;
     out.quaternions = quaternions();
     constexpr std::size_t block = 4096;
-    const bool spread = pool && pool->size() > 1 && count > block;
-    if (scan_.kind == ScanKind::ces && spread) {
-      for (auto* v : {&out.angles.theta, &out.angles.phi, &out.angles.psi}) v->resize(count);
+    if (pool && pool->size() > 1 && count > block && scan_->by_blocks()) {
+      if (out.quaternions) out.quats.resize(count);
+      else
+        for (auto* v : {&out.angles.theta, &out.angles.phi, &out.angles.psi}) v->resize(count);
       pool->parallel_for(count, block, [&](std::size_t begin, std::size_t end) {
-        pisco::Pointing part;
-        scan_.ces.generate(first + begin, end - begin, part);
-        std::copy(part.theta.begin(), part.theta.end(), out.angles.theta.begin() + std::ptrdiff_t(begin));
-        std::copy(part.phi.begin(), part.phi.end(), out.angles.phi.begin() + std::ptrdiff_t(begin));
-        std::copy(part.psi.begin(), part.psi.end(), out.angles.psi.begin() + std::ptrdiff_t(begin));
+        pisco::Pointing angles;
+        std::vector<pisco::Quat> quats;
+        scan_->generate(first + begin, end - begin, angles, quats);
+        if (out.quaternions) {
+          std::copy(quats.begin(), quats.end(), out.quats.begin() + std::ptrdiff_t(begin));
+          return;
+        }
+        std::copy(angles.theta.begin(), angles.theta.end(), out.angles.theta.begin() + std::ptrdiff_t(begin));
+        std::copy(angles.phi.begin(), angles.phi.end(), out.angles.phi.begin() + std::ptrdiff_t(begin));
+        std::copy(angles.psi.begin(), angles.psi.end(), out.angles.psi.begin() + std::ptrdiff_t(begin));
       });
-    } else if (scan_.kind == ScanKind::satellite && spread) {
-      out.quats.resize(count);
-      pool->parallel_for(count, block, [&](std::size_t begin, std::size_t end) {
-        std::vector<pisco::Quat> part;
-        scan_.satellite.generate(first + begin, end - begin, part);
-        std::copy(part.begin(), part.end(), out.quats.begin() + std::ptrdiff_t(begin));
-      });
-    } else if (scan_.kind == ScanKind::ces) scan_.ces.generate(first, count, out.angles);
-    else if (scan_.kind == ScanKind::satellite) scan_.satellite.generate(first, count, out.quats);
-    else if (file_) file_->read(first, count, out.quats);
-    else {
-      const pisco::PointingView v = all_.view().subspan(first, count);
-      out.angles.theta.assign(v.theta.begin(), v.theta.end());
-      out.angles.phi.assign(v.phi.begin(), v.phi.end());
-      out.angles.psi.assign(v.psi.begin(), v.psi.end());
+    } else {
+      scan_->generate(first, count, out.angles, out.quats);
     }
     out.angle_quats_made = false;
     out.hwp.clear();
-    if (hwp_.angles_from_file) file_->read_hwp_angle(first, count, out.hwp);
+    if (hwp_.angles_from_file) scan_->file()->read_hwp_angle(first, count, out.hwp);
     else if (hwp_.enabled) hwp_.stream.generate(first, count, out.hwp);
   }
 
  private:
-  ScanConfig scan_;
+  std::unique_ptr<const pisco::detail::ScanGenerator> scan_;
   HwpConfig hwp_;
-  pisco::Pointing all_;
-  std::optional<pisco::BoresightFile> file_;
 };
 
 
