@@ -11,6 +11,7 @@
 #include <fstream>
 #include <iterator>
 #include <numbers>
+#include <set>
 #include <span>
 #include <string>
 #include <sys/wait.h>
@@ -20,6 +21,7 @@
 #include "pisco/pisco.hpp"
 #include "pisco/simulation.hpp"
 #include "support.hpp"
+#include "beams/beam_kind.hpp"
 
 #include <healpix_base.h>
 #include <iomanip>
@@ -712,3 +714,38 @@ TEST_F(SimulationTest, FocalPlaneFiles) {
 }
 
 }  // namespace
+
+// Every kind of [beams.NAME] table is registered once (beams/beam_kinds.cpp) under its BeamKind and
+// name, with what it is (made of other tables, turning with the detector), and makes what the
+// library's own builders make.
+TEST(BeamKinds, EveryKindIsRegisteredOnceAndMakesItsBeam) {
+  using namespace pisco::detail;
+  std::set<std::string> names;
+  for (const BeamKindEntry* k : beam_kinds()) {
+    EXPECT_TRUE(names.insert(k->name).second) << k->name;
+    EXPECT_EQ(&beam_kind(k->kind), k);
+    EXPECT_EQ(beam_kind_named(k->name), k);
+    EXPECT_STREQ(pisco::beam_kind_name(k->kind), k->name);
+    EXPECT_EQ(k->combines_beams, k->make == nullptr) << k->name;
+    pisco::BeamConfig b;
+    b.kind = k->kind;
+    EXPECT_EQ(b.combines_beams(), k->kind == pisco::BeamKind::sequence || k->kind == pisco::BeamKind::plate);
+    EXPECT_EQ(b.turns_with_detector(), k->kind == pisco::BeamKind::grasp || k->kind == pisco::BeamKind::blm);
+  }
+  EXPECT_EQ(names, (std::set<std::string>{"gaussian", "elliptical", "file", "grasp", "blm", "sequence", "plate"}));
+  EXPECT_EQ(beam_kind_named("airy"), nullptr);
+  pisco::BeamConfig e;
+  e.kind = pisco::BeamKind::elliptical;
+  e.fwhm_x = 1.0 * pisco::deg;
+  e.fwhm_y = 1.5 * pisco::deg;
+  e.angle = 0.3;
+  e.options.rho_max = 4 * pisco::deg;
+  e.options.cross_polar = 0.01;
+  const pisco::Beamsor made = beam_kind(e.kind).make(e, {});
+  const pisco::Beamsor direct = pisco::Beamsor::elliptical_gaussian(e.fwhm_x, e.fwhm_y, e.angle, e.options);
+  EXPECT_EQ(made.omega_tilde(), direct.omega_tilde());
+  for (const double x : {-0.01, 0.0, 0.004})
+    for (const double y : {-0.005, 0.0, 0.012})
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) EXPECT_EQ(made.at(x, y)[i][j], direct.at(x, y)[i][j]);
+}

@@ -60,9 +60,10 @@ struct BeamConfig {
   // plate: the [beams] table whose Omega~ normalizes the plate beams (PlateBeams::omega: the beam without
   // the plate, which keeps the plate's losses); empty: their mean Omega~.
   std::string plate_normalize_by;
-  bool combines_beams() const { return kind == BeamKind::sequence || kind == BeamKind::plate; }
+  // sequence and plate: made of other tables' beams
+  bool combines_beams() const;
   // grasp and blm: the beam turns with each detector (its co-polar axis along the detector's zeta)
-  bool turns_with_detector() const { return kind == BeamKind::grasp || kind == BeamKind::blm; }
+  bool turns_with_detector() const;
 };
 
 // [scan] type.

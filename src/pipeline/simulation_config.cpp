@@ -13,6 +13,7 @@
 
 #include "io/focal_plane_file.hpp"
 #include "io/toml_table.hpp"
+#include "beams/beam_kind.hpp"
 #include "scans/scan_kind.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/spectra.hpp"
@@ -22,17 +23,13 @@
 namespace pisco {
 
 const char* beam_kind_name(BeamKind kind) noexcept {
-  switch (kind) {
-    case BeamKind::gaussian: return "gaussian";
-    case BeamKind::elliptical: return "elliptical";
-    case BeamKind::file: return "file";
-    case BeamKind::grasp: return "grasp";
-    case BeamKind::blm: return "blm";
-    case BeamKind::sequence: return "sequence";
-    case BeamKind::plate: return "plate";
-  }
+  for (const detail::BeamKindEntry* k : detail::beam_kinds())
+    if (k->kind == kind) return k->name;
   return "?";
 }
+
+bool BeamConfig::combines_beams() const { return detail::beam_kind(kind).combines_beams; }
+bool BeamConfig::turns_with_detector() const { return detail::beam_kind(kind).turns_with_detector; }
 
 const char* scan_kind_name(ScanKind kind) noexcept {
   for (const detail::ScanKindEntry* k : detail::scan_kinds())
@@ -44,7 +41,6 @@ namespace {
 
 using namespace detail;
 using pisco::deg;
-constexpr double arcmin = deg / 60;
 
 SkyConfig read_sky(Table t) {
   SkyConfig s;
@@ -83,184 +79,15 @@ SkyConfig read_sky(Table t) {
   return s;
 }
 
-// type = "plate": a beam that turns with the half-wave plate (docs/changing.md): other beams at plate
-// angles; their names are checked once every table is read (check_combined_beams).
-void read_plate_beam(Table& t, BeamConfig& b) {
-  b.nodes = t.strings("beams", {});
-  if (b.nodes.size() < 2)
-    t.fail("beams", "a beam that turns with the plate needs two or more beams (names of [beams] tables, at plate "
-                    "angles k period / N)");
-  b.plate_period = t.number_in("period_deg", 180.0, 1e-6, 720.0, "a period in (0, 720] deg (180 for a half-wave plate)") * deg;
-  if (t.has("normalize_by")) {
-    b.plate_normalize_by = t.string("normalize_by").value_or("");
-    if (b.plate_normalize_by.empty())
-      t.fail("normalize_by", "expected the name of a [beams] table (the beam without the plate), or no key");
-  }
-}
-
-// type = "sequence": a beam that changes with time (docs/beams.md): other beams at times; their names
-// are checked once every table is read (check_sequences).
-void read_sequence_beam(Table& t, BeamConfig& b) {
-  b.node_times = t.numbers("times_s", {});
-  b.nodes = t.strings("beams", {});
-  if (b.nodes.size() < 2) t.fail("beams", "a beam that changes with time needs two or more beams (names of [beams] tables)");
-  if (b.node_times.size() != b.nodes.size())
-    t.fail("times_s", "expected one time (seconds from the run's first sample) for each of the " +
-                          std::to_string(b.nodes.size()) + " beams, got " + std::to_string(b.node_times.size()));
-  for (std::size_t k = 0; k < b.node_times.size(); ++k) {
-    if (!std::isfinite(b.node_times[k])) t.fail("times_s", "time " + std::to_string(k) + " is not finite");
-    if (k > 0 && !(b.node_times[k] > b.node_times[k - 1]))
-      t.fail("times_s", "time " + std::to_string(k) + " (" + Table::format(b.node_times[k]) + " s) is not after time " +
-                            std::to_string(k - 1) + " (" + Table::format(b.node_times[k - 1]) +
-                            " s); expected strictly ascending times");
-  }
-}
-
-// The beam's disc and grid step.
-void read_beam_grid(Table& t, BeamConfig& b) {
-  b.options.rho_max = t.positive("rho_max_deg", 5.0) * deg;
-  if (b.options.rho_max >= std::numbers::pi / 2) t.fail("rho_max_deg", "expected less than 90 deg");
-  b.options.grid_step = t.number("grid_step_arcmin", 0.0) * arcmin;
-  if (b.options.grid_step < 0) t.fail("grid_step_arcmin", "expected a positive step (or 0 for the default)");
-  // A grid has at least five nodes across the disc: a coarser one does not sample the beam.
-  if (b.options.grid_step > b.options.rho_max / 2)
-    t.fail("grid_step_arcmin", "a step of " + Table::format(b.options.grid_step / arcmin) +
-                                   " arcmin is coarser than half of rho_max_deg = " +
-                                   Table::format(b.options.rho_max / deg) +
-                                   ": the grid would not sample the beam (0 for the default step)");
-}
-
-// A Gaussian's width: its half-maximum radius within rho_max, and a grid of at most
-// Beamsor::max_grid_nodes nodes a side at the step it implies (by default 1/16 of the smallest FWHM on a
-// 2D grid, 1/20 for a round beam's radial profile; 1/20 here, the finer of the two).
-double read_width(Table& t, const BeamConfig& b, const std::string& key) {
-  const double fwhm = t.positive(key, 1.5) * deg;
-  if (fwhm / 2 >= b.options.rho_max)
-    t.fail(key, "a FWHM of " + Table::format(fwhm / deg) + " deg is wider than the beam grid: its half-maximum "
-                "radius must fit within rho_max_deg = " + Table::format(b.options.rho_max / deg));
-  // At least two nodes within the FWHM: a coarser grid makes the beam another beam (TOD off by factors).
-  if (b.options.grid_step > fwhm / 2)
-    t.fail("grid_step_arcmin", "a step of " + Table::format(b.options.grid_step / arcmin) +
-                                   " arcmin is coarser than half of " + key + " = " + Table::format(fwhm / deg) +
-                                   " deg: the grid would not resolve the beam (0 for the default step, FWHM / 16)");
-  const double step = b.options.grid_step > 0 ? b.options.grid_step : fwhm / 20;
-  if (std::ceil(2 * std::sin(b.options.rho_max) / step) + 1 > pisco::Beamsor::max_grid_nodes)
-    t.fail(b.options.grid_step > 0 ? "grid_step_arcmin" : key,
-           "a grid step of " + Table::format(step / arcmin) + " arcmin needs more than " +
-               std::to_string(pisco::Beamsor::max_grid_nodes) + " nodes a side within rho_max_deg = " +
-               Table::format(b.options.rho_max / deg) + " (set a larger grid_step_arcmin)");
-  return fwhm;
-}
-
-// The beam itself: a Gaussian's widths, or a file's name and what to read from it.
-void read_beam_source(Table& t, BeamConfig& b) {
-  if (b.kind == BeamKind::gaussian) {
-    b.fwhm = read_width(t, b, "fwhm_deg");
-  } else if (b.kind == BeamKind::elliptical) {
-    b.fwhm_x = read_width(t, b, "fwhm_x_deg");
-    b.fwhm_y = read_width(t, b, "fwhm_y_deg");
-    b.angle = t.number("angle_deg", 0.0) * deg;
-  } else {
-    b.file = t.input_file("file");
-    if (b.file.empty())
-      t.fail("file", b.kind == BeamKind::grasp ? "a beam of type \"grasp\" needs file = \"beam.grd\" (or a .cut file)"
-                     : b.kind == BeamKind::blm ? "a beam of type \"blm\" needs file = \"beam_alm.fits\" (healpy.write_alm)"
-                                       : "a beam of type \"file\" needs file = \"beamsor.fits\"");
-    if (b.kind == BeamKind::blm) b.temperature_only = t.boolean("temperature_only", false);
-    if (b.kind == BeamKind::grasp) {
-      const double set = t.number("set", 0.0);
-      if (!(set >= 0 && set <= 1e6 && set == std::floor(set)))
-        t.fail("set", "expected the number of one of the file's beams (1, 2, ...)");
-      b.set = static_cast<int>(set);
-    }
-  }
-}
-
-// Sidelobes (docs/beams.md, "Sidelobes"): a main part within sidelobe_split_deg on the sky's pixels, the
-// rest on a band-limited coarser sky.
-void read_sidelobe_split(Table& t, BeamConfig& b) {
-  if (!(t.has("sidelobe_split_deg") || t.has("sidelobe_taper_deg") || t.has("sidelobe_nside"))) return;
-  if (b.kind == BeamKind::file)
-    t.fail(t.has("sidelobe_split_deg") ? "sidelobe_split_deg" : t.has("sidelobe_taper_deg") ? "sidelobe_taper_deg" : "sidelobe_nside",
-           "a HEALPix beamsor file (type \"file\") cannot be split; give the beam as grasp, blm, gaussian or elliptical");
-  if (!t.has("sidelobe_split_deg"))
-    t.fail(t.has("sidelobe_taper_deg") ? "sidelobe_taper_deg" : "sidelobe_nside",
-           "only with sidelobe_split_deg, the radius of the beam's main part");
-  b.options.split.rho_main = t.positive("sidelobe_split_deg", 1.0) * deg;
-  if (!(b.options.split.rho_main < b.options.rho_max))
-    t.fail("sidelobe_split_deg", "expected less than rho_max_deg = " + Table::format(b.options.rho_max / deg) +
-                                     ": the main part lies within the beam's disc");
-  b.options.split.taper = t.number("sidelobe_taper_deg", 0.0) * deg;
-  if (!(b.options.split.taper >= 0 && b.options.split.taper <= b.options.split.rho_main))
-    t.fail("sidelobe_taper_deg", "expected a width in [0, sidelobe_split_deg] (0: a quarter of it)");
-  const double nside = t.number("sidelobe_nside", 0.0);
-  const int n = nside >= 0 && nside <= 8192 ? static_cast<int>(nside) : -1;  // converted only within range
-  if (!(n >= 0 && nside == n && (n & (n - 1)) == 0))
-    t.fail("sidelobe_nside", "expected a power of two up to 8192 (or 0: chosen from the sidelobes' band limit)");
-  b.options.split.nside = n;
-}
-
-// A far sidelobe ring (docs/beams.md, "Far sidelobes"): its keys only with far_sidelobe_db.
-void read_far_sidelobe(Table& t, BeamConfig& b) {
-  if (!t.has("far_sidelobe_db")) {
-    for (const char* key : {"far_sidelobe_deg", "far_sidelobe_width_deg", "far_sidelobe_angle_deg", "far_sidelobe_asymmetry"})
-      if (t.has(key)) t.fail(key, "a far sidelobe needs far_sidelobe_db");
-    return;
-  }
-  const double db = t.number("far_sidelobe_db", 0.0);
-  if (!(db <= 0.0 && db >= -200.0)) t.fail("far_sidelobe_db", "expected a level in [-200, 0] dB of the main beam's peak");
-  pisco::FarSidelobe& far = b.options.far_sidelobe;
-  far.level = std::pow(10.0, db / 10.0);
-  far.radius = t.number("far_sidelobe_deg", 0.0) * deg;
-  if (!(far.radius > 0.0 && far.radius <= b.options.rho_max))
-    t.fail("far_sidelobe_deg", "expected the ring's radius in (0, rho_max_deg = " + Table::format(b.options.rho_max / deg) + "]");
-  far.width = t.number("far_sidelobe_width_deg", 0.0) * deg;
-  if (!(far.width > 0.0 && far.width <= 180.0 * deg))
-    t.fail("far_sidelobe_width_deg", "expected a positive width (deg, at most 180)");
-  far.angle = t.number("far_sidelobe_angle_deg", 0.0) * deg;
-  far.asymmetry = t.number("far_sidelobe_asymmetry", 0.0);
-  if (!(far.asymmetry >= 0.0 && far.asymmetry <= 1.0))
-    t.fail("far_sidelobe_asymmetry", "expected a number in [0, 1] (0: a uniform ring, 1: a single lobe)");
-}
-
-// An analytic beam's polarization: its cross-polar part, far sidelobe and Mueller matrix.
-void read_analytic_beam(Table& t, BeamConfig& b) {
-  b.options.cross_polar = t.number("cross_polar", 0.0);
-  b.options.cross_polar_pattern =
-      t.choice("cross_polar_pattern", "uniform", {"uniform", "quadrupole"}) == "uniform"
-          ? pisco::CrossPolarPattern::uniform
-          : pisco::CrossPolarPattern::quadrupole;
-  read_far_sidelobe(t, b);
-  const std::vector<double> m = t.numbers("mueller", {});
-  if (!m.empty()) {
-    if (m.size() != 16) t.fail("mueller", "expected 16 numbers (a 4x4 Mueller matrix, row by row)");
-    if (!(m[0] > 0)) t.fail("mueller", "the first element (T to T) must be positive: the beam's total response");
-    for (int i = 0; i < 16; ++i) b.options.mueller[i / 4][i % 4] = m[i];
-  }
-}
-
+// [beams.NAME]: its type, then that kind's keys (beams/beam_kind.hpp: one reader a kind).
 BeamConfig read_beam(Table t, const std::string& name) {
   BeamConfig b;
   b.name = name;
-  const std::string type =
-      t.choice("type", "gaussian", {"gaussian", "elliptical", "file", "grasp", "blm", "sequence", "plate"});
-  b.kind = type == "gaussian"     ? BeamKind::gaussian
-           : type == "elliptical" ? BeamKind::elliptical
-           : type == "file"       ? BeamKind::file
-           : type == "grasp"      ? BeamKind::grasp
-           : type == "blm"        ? BeamKind::blm
-           : type == "sequence"   ? BeamKind::sequence
-                                  : BeamKind::plate;
-  if (b.kind == BeamKind::plate) {
-    read_plate_beam(t, b);
-  } else if (b.kind == BeamKind::sequence) {
-    read_sequence_beam(t, b);
-  } else {
-    read_beam_grid(t, b);
-    read_beam_source(t, b);
-    read_sidelobe_split(t, b);
-    if (b.kind == BeamKind::gaussian || b.kind == BeamKind::elliptical) read_analytic_beam(t, b);
-  }
+  std::vector<std::string> names;
+  for (const detail::BeamKindEntry* k : detail::beam_kinds()) names.emplace_back(k->name);
+  const detail::BeamKindEntry& kind = *detail::beam_kind_named(t.choice("type", "gaussian", names));
+  b.kind = kind.kind;
+  kind.read(t, b);
   t.finish();
   return b;
 }

@@ -1,5 +1,6 @@
 // The parts pisco::Simulation chains (pisco/simulation.hpp), public so that a program can chain them
 // otherwise: the sky, the beams and the engine of a simulation file, and the maps and spectra written.
+#include "beams/beam_kind.hpp"
 #include "pisco/simulation.hpp"
 
 #include <algorithm>
@@ -109,22 +110,11 @@ Sky make_sky(const SkyConfig& s, const fs::path& data_dir) {
 Beamsor make_beam(const BeamConfig& b, const fs::path& config, double angle,
                   const std::function<void(const std::string&)>& progress) {
   try {
-    if (b.kind == BeamKind::gaussian) return pisco::Beamsor::gaussian(b.fwhm, b.options);
-    if (b.kind == BeamKind::elliptical) return pisco::Beamsor::elliptical_gaussian(b.fwhm_x, b.fwhm_y, b.angle, b.options);
     pisco::FileBeamOptions fo{b.options.rho_max, b.options.grid_step, angle, b.options.split, {}};
     if (progress) fo.progress = [&](const std::string& line) { progress("beam " + b.name + ": " + line + "\n"); };
-    if (b.kind == BeamKind::blm) return pisco::Beamsor::from_harmonic(pisco::HarmonicBeam::read_fits(b.file), fo);
-    if (b.kind == BeamKind::grasp) {
-      const auto all = pisco::GraspBeam::read(b.file);
-      if (b.set == 0 && all.size() > 1)
-        throw pisco::Error(b.file.string() + " holds " + std::to_string(all.size()) +
-                           " beams (field sets or frequencies): choose one with set = 1.." + std::to_string(all.size()));
-      if (b.set > static_cast<int>(all.size()))
-        throw pisco::Error("set = " + std::to_string(b.set) + ", but " + b.file.string() + " holds " +
-                           std::to_string(all.size()) + " beam" + (all.size() > 1 ? "s" : ""));
-      return pisco::Beamsor::from_grasp(all[static_cast<std::size_t>(std::max(b.set, 1) - 1)], fo);
-    }
-    return pisco::Beamsor::read_healpix_fits(b.file, b.options.rho_max, b.options.grid_step);
+    const detail::BeamKindEntry& kind = detail::beam_kind(b.kind);
+    if (!kind.make) throw pisco::Error("a beam made of other tables' beams has no beamsor of its own", pisco::ErrorKind::internal);
+    return kind.make(b, fo);
   } catch (const pisco::Error& e) {
     throw pisco::Error(config.string() + ": [beams." + b.name + "] " + e.what());
   }

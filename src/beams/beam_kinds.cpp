@@ -1,0 +1,36 @@
+// The registry of beam kinds (beam_kind.hpp; docs/library.md, "How to add a beam format"): a new kind
+// is a file in kinds/ and one line here.
+#include <string>
+
+#include "beams/beam_kind.hpp"
+
+namespace pisco::detail {
+namespace {
+
+const BeamKindEntry* const kinds[] = {
+    &gaussian_beam_kind,
+    &elliptical_beam_kind,
+    &beamsor_file_beam_kind,
+    &grasp_beam_kind,
+    &blm_beam_kind,
+    &sequence_beam_kind,
+    &plate_beam_kind,
+};
+
+}  // namespace
+
+std::span<const BeamKindEntry* const> beam_kinds() { return kinds; }
+
+const BeamKindEntry& beam_kind(BeamKind kind) {
+  for (const BeamKindEntry* k : kinds)
+    if (k->kind == kind) return *k;
+  throw Error("beam kind " + std::to_string(static_cast<int>(kind)) + " is not registered", ErrorKind::internal);
+}
+
+const BeamKindEntry* beam_kind_named(const std::string& name) {
+  for (const BeamKindEntry* k : kinds)
+    if (name == k->name) return k;
+  return nullptr;
+}
+
+}  // namespace pisco::detail
