@@ -394,8 +394,8 @@ TEST(Checks, FocalPlaneValidation) {
   pisco::Detector off = good;
   off.offset = {0.0, 0.0, 0.0, 2.0};
   std::string e = engine_error({off});
-  EXPECT_TRUE(contains(e, "detector 'a': the offset quaternion (0, 0, 0, 2) has norm 2; a rotation is a unit "
-                          "quaternion (x, y, z, w), to within 1e-06"))
+  EXPECT_TRUE(contains(e, "detector 'a': the offset quaternion (0, 0, 0, 2) has norm 2 (expected a unit "
+                          "quaternion x, y, z, w, to within 1e-06)"))
       << e;
   off.offset = {0.0, 0.0, 0.0, 1.0 + 1e-9};  // rounding: accepted
   EXPECT_EQ(engine_error({off}), "no error");

@@ -413,10 +413,10 @@ TEST_F(ToastFocalPlane, BadQuaternionsNameTheRowDetectorAndColumn) {
     for (double& v : q[3]) v *= 1.001;
   });
   expect_error([&] { pisco::read_toast_focal_plane(scaled); },
-               "corrupt.h5: dataset '/focalplane' row 3 (detector 'D1B-150'), column 'quat': norm 1.00");
+               "corrupt.h5: dataset '/focalplane' row 3 (detector 'D1B-150'), column 'quat' has norm 1.00");
   const fs::path nan = corrupt_quat([](auto& q) { q[5][2] = std::nan(""); });
   expect_error([&] { pisco::read_toast_focal_plane(nan); },
-               "row 5 (detector 'D2B-150'), column 'quat': a non-finite component");
+               "row 5 (detector 'D2B-150'), column 'quat' has a non-finite component");
   // Within 1e-6 of unit: accepted.
   const fs::path close = corrupt_quat([](auto& q) {
     for (double& v : q[3]) v *= 1 + 4e-7;

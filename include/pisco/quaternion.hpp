@@ -8,6 +8,7 @@
 #pragma once
 
 #include <array>
+#include <string>
 
 namespace pisco {
 
@@ -26,6 +27,11 @@ double norm(const Quat& q) noexcept;
 // The same without overflow or underflow on the way (components of 1e200 have a norm of about 2e200,
 // not inf): for the checks that report a quaternion's norm.
 double checked_norm(const Quat& q) noexcept;
+// Why q is not a rotation, the one check of every reader of quaternions (pointing, pointing files,
+// focal planes, Python): "has a non-finite component (expected a unit quaternion x, y, z, w)" or "has
+// norm N (expected a unit quaternion x, y, z, w, to within 1e-06)"; empty when its norm is 1 to
+// within unit_quat_tolerance. The caller names the quaternion before it.
+std::string rotation_problem(const Quat& q);
 // q rotated onto the unit sphere; throws pisco::Error for a zero or non-finite quaternion.
 Quat normalized(const Quat& q);
 // The rotation by `angle` (radians) about the unit vector `axis`.

@@ -51,11 +51,9 @@ void check_focal_plane(const FocalPlane& focal_plane, std::size_t beams) {
       throw Error(who + ": epsilon = " + number_text(d.epsilon) + " (cross-polar leakage) is outside [0, 1]");
     if (!std::isfinite(d.zeta)) throw Error(who + ": zeta = " + number_text(d.zeta) + " is not finite");
     const Quat& o = d.offset;
-    const double n = norm(o);
-    if (!(std::abs(n - 1.0) <= unit_quat_tolerance))
+    if (const std::string problem = rotation_problem(o); !problem.empty())
       throw Error(who + ": the offset quaternion (" + number_text(o.x, 12) + ", " + number_text(o.y, 12) + ", " +
-                  number_text(o.z, 12) + ", " + number_text(o.w, 12) + ") has norm " + number_text(n, 12) +
-                  "; a rotation is a unit quaternion (x, y, z, w), to within " + number_text(unit_quat_tolerance));
+                  number_text(o.z, 12) + ", " + number_text(o.w, 12) + ") " + problem);
     if (d.beam >= beams)
       throw Error(who + ": beam index " + std::to_string(d.beam) + " but only " + std::to_string(beams) +
                   " beamsors were given");

@@ -110,13 +110,8 @@ void check_pointing(const PointingView& p, const char* origin) {
 
 void check_pointing(const QuatPointingView& p, const char* origin) {
   for (std::size_t i = 0; i < p.size(); ++i) {
-    const Quat& q = p.quats[i];
-    const double n = norm(q);
-    if (std::abs(n - 1.0) <= 1e-6) continue;  // the common case, at the cost of the plain norm
-    if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z) || !std::isfinite(q.w))
-      throw Error(std::string(origin) + ": quaternion of sample " + std::to_string(i) + " has a non-finite component");
-    throw Error(std::string(origin) + ": quaternion of sample " + std::to_string(i) + " has norm " +
-                detail::number_text(checked_norm(q)) + "; expected a unit quaternion (x, y, z, w), to within 1e-6");
+    if (const std::string problem = rotation_problem(p.quats[i]); !problem.empty())
+      throw Error(std::string(origin) + ": quaternion of sample " + std::to_string(i) + " " + problem);
   }
 }
 

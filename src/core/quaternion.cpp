@@ -1,5 +1,7 @@
 #include "pisco/quaternion.hpp"
 
+#include "core/text.hpp"
+
 #include <cmath>
 #include <numbers>
 
@@ -19,6 +21,17 @@ double norm(const Quat& q) noexcept { return std::sqrt(q.x * q.x + q.y * q.y + q
 
 double checked_norm(const Quat& q) noexcept {
   return std::hypot(std::hypot(q.x, q.y), std::hypot(q.z, q.w));
+}
+
+std::string rotation_problem(const Quat& q) {
+  if (std::abs(norm(q) - 1.0) <= unit_quat_tolerance) return {};  // the common case, at the cost of the plain norm
+  if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z) || !std::isfinite(q.w))
+    return "has a non-finite component (expected a unit quaternion x, y, z, w)";
+  // Finite components as large as 1e200 have a norm of that size, not an infinite one.
+  const double n = checked_norm(q);
+  if (std::abs(n - 1.0) <= unit_quat_tolerance) return {};
+  return "has norm " + detail::number_text(n, 17) + " (expected a unit quaternion x, y, z, w, to within " +
+         detail::number_text(unit_quat_tolerance) + ")";
 }
 
 Quat normalized(const Quat& q) {

@@ -381,12 +381,8 @@ ToastFocalPlane read_table(const fs::path& file, std::size_t beam) {
       throw Error(where + ": dataset '/focalplane' rows " + std::to_string(it->second) + " and " + std::to_string(i) +
                   ", column 'name': both are detector '" + names[i] + "' (expected unique names)");
     const Quat& q = quats[i];
-    const double norm_q = norm(q);
-    if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z) || !std::isfinite(q.w))
-      throw Error(row_text(i) + ", column 'quat': a non-finite component (expected a unit quaternion x, y, z, w)");
-    if (std::abs(norm_q - 1.0) > 1e-6)
-      throw Error(row_text(i) + ", column 'quat': norm " + format_double(norm_q) +
-                  " (expected a unit quaternion x, y, z, w, to within 1e-6)");
+    if (const std::string problem = rotation_problem(q); !problem.empty())
+      throw Error(row_text(i) + ", column 'quat' " + problem);
     Detector d;
     d.name = names[i];
     d.epsilon = epsilon[i];

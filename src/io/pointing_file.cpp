@@ -100,13 +100,8 @@ void BoresightFile::read(std::size_t first, std::size_t count, std::vector<Quat>
   check(H5Dread(ds, H5T_NATIVE_DOUBLE, memory.get(), space.get(), H5P_DEFAULT, out.data()), where,
         "cannot read samples " + std::to_string(first) + " to " + std::to_string(first + count - 1) + " of '/boresight'");
   for (std::size_t i = 0; i < count; ++i) {
-    const Quat& q = out[i];
-    if (std::abs(norm(q) - 1.0) <= 1e-6) continue;
-    if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z) || !std::isfinite(q.w))
-      throw Error(where + ": '/boresight' sample " + std::to_string(first + i) + " has a non-finite component");
-    // Finite components as large as 1e200 have a norm of that size, not an infinite one.
-    throw Error(where + ": '/boresight' sample " + std::to_string(first + i) + " has norm " +
-                format_double(checked_norm(q)) + " (expected a unit quaternion x, y, z, w, to within 1e-6)");
+    if (const std::string problem = rotation_problem(out[i]); !problem.empty())
+      throw Error(where + ": '/boresight' sample " + std::to_string(first + i) + " " + problem);
   }
 }
 

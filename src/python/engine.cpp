@@ -129,19 +129,10 @@ std::string check_values(const PointingArgs& p) {
     return {};
   }
   const double* q = p.quats->data();
-  const std::size_t bad = first_non_finite(q, 4 * p.size);
-  if (bad < 4 * p.size)
-    return "boresight_quats[" + std::to_string(bad / 4) + "] has a non-finite component (" +
-           format_double(q[bad]) + ")";
-  for (std::size_t i = 0; i < p.size; ++i) {
-    const double plain = std::sqrt(q[4 * i] * q[4 * i] + q[4 * i + 1] * q[4 * i + 1] + q[4 * i + 2] * q[4 * i + 2] +
-                                   q[4 * i + 3] * q[4 * i + 3]);
-    if (std::abs(plain - 1.0) <= unit_quat_tolerance) continue;
-    const double n = checked_norm({q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]});  // 1e200s: not inf
-    if (!(std::abs(n - 1.0) <= unit_quat_tolerance))
-      return "boresight_quats[" + std::to_string(i) + "] has norm " + format_double(n) +
-             "; rotations must be unit quaternions (to " + short_text(unit_quat_tolerance) + ")";
-  }
+  for (std::size_t i = 0; i < p.size; ++i)
+    if (const std::string problem = rotation_problem({q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]});
+        !problem.empty())
+      return "boresight_quats[" + std::to_string(i) + "] " + problem;
   return {};
 }
 

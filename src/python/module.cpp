@@ -51,15 +51,10 @@ Quat quat_from(nb::handle obj, const char* name) {
   std::vector<double> v;
   if (!nb::try_cast(obj, v) || v.size() != 4)
     throw nb::value_error((std::string(name) + ": expected four numbers (x, y, z, w), got " + describe(obj)).c_str());
-  for (double c : v)
-    if (!std::isfinite(c)) throw nb::value_error((std::string(name) + ": the quaternion is not finite").c_str());
   const Quat q{v[0], v[1], v[2], v[3]};
-  const double n = checked_norm(q);
-  if (!(std::abs(n - 1.0) <= unit_quat_tolerance))
+  if (const std::string problem = rotation_problem(q); !problem.empty())
     throw nb::value_error((std::string(name) + ": the quaternion (" + format_double(q.x) + ", " + format_double(q.y) +
-                           ", " + format_double(q.z) + ", " + format_double(q.w) + ") has norm " + format_double(n) +
-                           "; a rotation is a unit quaternion (x, y, z, w), to within " +
-                           short_text(unit_quat_tolerance))
+                           ", " + format_double(q.z) + ", " + format_double(q.w) + ") " + problem)
                               .c_str());
   return normalized(q);
 }
