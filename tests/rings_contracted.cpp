@@ -1,4 +1,4 @@
-// shaders/rings.glsl as C++ (tests/glsl_to_cpp.cmake) in a translation unit compiled with contraction
+// src/kernel/rings.glsl as C++ (tests/glsl_to_cpp.cmake) in a translation unit compiled with contraction
 // into fused multiply-adds (-ffp-contract=fast -mfma, tests/CMakeLists.txt): what a shader compiler
 // may do to every operation that `precise` (mul_rn) does not protect. test_kernel_host.cpp holds these
 // to the reference's ring arithmetic bit for bit. Internal linkage throughout, so that no inline

@@ -8,7 +8,7 @@
 #include <numbers>
 #include <random>
 
-#include "core/contribution.hpp"
+#include "kernel/contribution.hpp"
 #include "pisco/pisco.hpp"
 #include "pisco/scan.hpp"
 

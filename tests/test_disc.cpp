@@ -10,7 +10,7 @@
 #include <pointing.h>
 #include <rangeset.h>
 
-#include "core/disc.hpp"
+#include "kernel/disc.hpp"
 #include "core/prepared.hpp"
 #include "pisco/units.hpp"
 

@@ -1,4 +1,4 @@
-// The kernels' float64 sine, cosine and arctangent (shaders/fp64.glsl, compiled here as C++) against
+// The kernels' float64 sine, cosine and arctangent (src/kernel/fp64.glsl, compiled here as C++) against
 // the C library, over the arguments the kernels give them: within 2 ulp, most exactly equal.
 #include <gtest/gtest.h>
 
@@ -7,7 +7,7 @@
 #include <random>
 
 using std::floor;
-#include "fp64_host.hpp"  // shaders/fp64.glsl
+#include "fp64_host.hpp"  // src/kernel/fp64.glsl
 
 namespace {
 

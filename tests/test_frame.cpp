@@ -1,5 +1,5 @@
-// The vulkan kernel's per-sample frame (shaders/frame.glsl, compiled here as C++ from the shader
-// source itself, with the shaders' own sine, cosine and arctangent) against src/core/frame.hpp, the
+// The vulkan kernel's per-sample frame (src/kernel/frame.glsl, compiled here as C++ from the shader
+// source itself, with the shaders' own sine, cosine and arctangent) against src/kernel/frame.hpp, the
 // same text with the C library's, which the float64 reference and the CUDA kernel run: boresight
 // angles on and off the boresight, and boresight quaternions composed with offsets. Where no sine,
 // cosine or arctangent enters (a quaternion's basis), the two builds give the same bits.
@@ -9,7 +9,7 @@
 #include <numbers>
 #include <random>
 
-#include "core/frame.hpp"
+#include "kernel/frame.hpp"
 #include "pisco/quaternion.hpp"
 
 // The few GLSL vector types frame.glsl uses.
@@ -26,7 +26,7 @@ struct dvec4 {
   dvec4() = default;
   dvec4(double a, double b, double c, double d) : x(a), y(b), z(c), w(d) {}
 };
-#include "frame_host.hpp"  // shaders/frame.glsl (with fp64.glsl)
+#include "frame_host.hpp"  // src/kernel/frame.glsl (with fp64.glsl)
 }  // namespace glsl
 
 namespace {

@@ -1,5 +1,5 @@
 // A1-A2 (docs/validation.md, "A"): the trigonometry-free antenna coordinates and polarization angle of
-// core/contribution.hpp against the paper's Appendix A (spherical trigonometry).
+// kernel/contribution.hpp against the paper's Appendix A (spherical trigonometry).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -7,8 +7,8 @@
 #include <numbers>
 #include <random>
 
-#include "core/contribution.hpp"
-#include "core/grid_curvature.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/grid_curvature.hpp"
 #include "pisco/units.hpp"
 
 namespace {
@@ -126,7 +126,7 @@ TEST(Geometry, IdealDetectorResponse) {
 }
 
 TEST(Geometry, GridInterpolationIsExactForQuadraticFields) {
-  // The grid's interpolation (bilinear less the edges' curvature terms, src/core/grid_curvature.hpp):
+  // The grid's interpolation (bilinear less the edges' curvature terms, src/kernel/grid_curvature.hpp):
   // a field f = a + b x + c y + d x y is reproduced exactly inside every cell, and one with x^2 and y^2
   // terms too inside every cell whose edges' second differences are all interior.
   const int n = 7;

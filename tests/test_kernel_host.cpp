@@ -1,4 +1,4 @@
-// The vulkan kernel's own source (shaders/kernel.glsl with contribution.glsl, disc.glsl, frame.glsl,
+// The vulkan kernel's own source (src/kernel/kernel.glsl with contribution.glsl, disc.glsl, frame.glsl,
 // ff.glsl and fp64.glsl, turned into C++ by tests/glsl_to_cpp.cmake), compiled on glm's GLSL types and
 // run sample by sample on the very tables the device gets (src/vulkan/tables.hpp), against the float64
 // reference and HEALPix's query_disc. Built twice: PISCO_FF=0 runs the float64 kernel, PISCO_FF=1 the
@@ -68,7 +68,7 @@ inline bool RADIAL = false, FLOAT64 = false, PLATE = false;
 inline int PARTS = 1, COLUMNS = 4;
 inline uint SKY_FIRST = 0;
 
-#include "kernel_host.hpp"  // shaders/kernel.glsl and its includes
+#include "kernel_host.hpp"  // src/kernel/kernel.glsl and its includes
 }  // namespace glsl
 
 #if PISCO_TEST_CONTRACTED
@@ -397,7 +397,7 @@ TEST(KernelArithmetic, ChosenByTheDeviceOrAskedFor) {
     EXPECT_EQ(arithmetic_from(pisco::arithmetic_name(a)), a);
 }
 
-// One text for the maths (shaders/pixel.glsl, shaders/rings.glsl): every shared function, run through
+// One text for the maths (src/kernel/pixel.glsl, src/kernel/rings.glsl): every shared function, run through
 // the GLSL-as-C++ build (glm's types, as the shaders see it) and through the C++ template build the
 // reference, the simd backend and the CUDA kernels use (float here, as on the devices), on random
 // inputs: the same bits.
@@ -418,7 +418,7 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
     return v / std::sqrt(glm::dot(v, v));
   };
   // A beam grid of n x n nodes with 4 weights each and its 2 n^2 records of edge curvatures
-  // (src/core/grid_curvature.hpp; random here like the nodes), as the shaders' texels (COLUMNS 4 and 2)
+  // (src/kernel/grid_curvature.hpp; random here like the nodes), as the shaders' texels (COLUMNS 4 and 2)
   // and as the reference's array.
   const int n = 9;
   std::vector<float> nodes(4 * 3 * n * n + 4);

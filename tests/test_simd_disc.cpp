@@ -1,5 +1,5 @@
 // The simd backend's disc walk (src/simd/simd_kernel.cpp, DiscRanges) against the reference's
-// for_each_disc_range (core/disc.hpp, itself held to HEALPix query_disc by test_disc): the same
+// for_each_disc_range (kernel/disc.hpp, itself held to HEALPix query_disc by test_disc): the same
 // ranges, in the same order, on every instruction set this machine runs, for random discs, discs
 // centred on pixel centres with the radii of docs/validation.md's Table 1 workload, discs through the
 // poles and across phi = 0; and with every ring sent through the scalar fallback.
@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/disc.hpp"
+#include "kernel/disc.hpp"
 #include "pisco/error.hpp"
 #include "pisco/units.hpp"
 #include "simd/simd_kernel.hpp"

@@ -7,7 +7,7 @@
 #include <numbers>
 #include <sstream>
 
-#include "core/grid_curvature.hpp"
+#include "kernel/grid_curvature.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"
 #include "pisco/spectra.hpp"
@@ -489,7 +489,7 @@ Mueller Beamsor::at(double x, double y) const {
   for (int e = 0; e < 16; ++e) {
     const auto& g = elements_[e];
     if (g.empty()) continue;
-    // Bilinear less the curvature terms, as every backend interpolates (core/grid_curvature.hpp).
+    // Bilinear less the curvature terms, as every backend interpolates (kernel/grid_curvature.hpp).
     m[e / 4][e % 4] = detail::interpolate_grid(g.data(), n_, 1, i, j, fu, fv, 0);
   }
   return m;

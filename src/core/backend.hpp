@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "core/frame.hpp"
+#include "kernel/frame.hpp"
 #include "core/polar_copy.hpp"
 #include "core/prepared.hpp"
 #include "pisco/engine.hpp"

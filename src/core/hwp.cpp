@@ -4,7 +4,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "core/plate.hpp"
+#include "kernel/plate.hpp"
 #include "pisco/error.hpp"
 #include "pisco/time_ranges.hpp"
 

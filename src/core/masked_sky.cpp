@@ -5,8 +5,8 @@
 #include <thread>
 #include <utility>
 
-#include "core/disc.hpp"
-#include "core/frame.hpp"
+#include "kernel/disc.hpp"
+#include "kernel/frame.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
 

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "core/detector_pointing.hpp"
-#include "core/frame.hpp"
+#include "kernel/frame.hpp"
 #include "core/text.hpp"
 #include "core/thread_pool.hpp"
 #include "pisco/error.hpp"

@@ -17,8 +17,8 @@
 #include <vector>
 
 #include "core/backend.hpp"
-#include "core/cap_boundary.hpp"
-#include "core/frame.hpp"
+#include "kernel/cap_boundary.hpp"
+#include "kernel/frame.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/quaternion.hpp"
 #include "pisco/sky.hpp"

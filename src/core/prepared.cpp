@@ -10,7 +10,7 @@
 #include <healpix_base.h>
 #include <vec3.h>
 
-#include "core/grid_curvature.hpp"
+#include "kernel/grid_curvature.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"
 
@@ -119,7 +119,7 @@ std::vector<double> reference_pixels(const SkyView& sky, unsigned threads) {
 namespace {
 
 // A detector's weights w(col) = sum_r row[r] B_r,col(node) over the beam's rows r, with the grid's
-// edge records appended (src/core/grid_curvature.hpp); per-sample normalization's (Omega_pix B_TT /
+// edge records appended (src/kernel/grid_curvature.hpp); per-sample normalization's (Omega_pix B_TT /
 // Omega~, 0, 0, 0) likewise. `d` is the detector as check_focal_plane() has accepted it.
 PreparedDetector prepare(const Detector& d, const Beamsor& beam, double pixel_area, Normalization normalization,
                          const double (&row)[4]) {

@@ -13,8 +13,8 @@
 #include <span>
 #include <vector>
 
-#include "core/disc.hpp"
-#include "core/frame.hpp"
+#include "kernel/disc.hpp"
+#include "kernel/frame.hpp"
 #include "pisco/beamsor.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/focal_plane.hpp"

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "core/frame.hpp"
+#include "kernel/frame.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {

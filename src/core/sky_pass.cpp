@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/frame.hpp"
+#include "kernel/frame.hpp"
 
 namespace pisco::detail {
 

@@ -6,8 +6,8 @@
 #include <numbers>
 #include <string>
 
-#include "core/contribution.hpp"
-#include "core/plate.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/plate.hpp"
 #include "core/text.hpp"
 #include "pisco/error.hpp"
 

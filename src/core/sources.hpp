@@ -1,5 +1,5 @@
 // Point sources evaluated per sample (pisco/sources.hpp; docs/sources.md): the host's float64
-// arithmetic of the reference backend (shaders/pixel.glsl through core/contribution.hpp) at the source's
+// arithmetic of the reference backend (src/kernel/pixel.glsl through kernel/contribution.hpp) at the source's
 // direction instead of a pixel centre, so that a source at a pixel's centre with flux F reads exactly
 // as that pixel at F / Omega_pix does in a plain pixel sum.
 #pragma once

@@ -1,5 +1,5 @@
 // The float64 reference backend: one sample per task, the disc walked ring by ring, every pixel
-// through the per-pixel arithmetic of shaders/pixel.glsl (core/contribution.hpp). Straightforward by
+// through the per-pixel arithmetic of src/kernel/pixel.glsl (kernel/contribution.hpp). Straightforward by
 // design: it is the ground truth of every test.
 #include <algorithm>
 #include <atomic>
@@ -9,12 +9,12 @@
 #include <utility>
 
 #include "core/backend.hpp"
-#include "core/contribution.hpp"
-#include "core/disc.hpp"
-#include "core/frame.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/disc.hpp"
+#include "kernel/frame.hpp"
 #include "core/ring_slices.hpp"
 #include "core/thread_pool.hpp"
-#include "core/plate.hpp"
+#include "kernel/plate.hpp"
 
 namespace pisco::detail {
 namespace {
@@ -59,7 +59,7 @@ inline __attribute__((always_inline)) double sample(const PreparedSky& sky, cons
   return sum;
 }
 
-// M(theta) = R(-theta) M0 R(theta), row-major (core/plate.hpp).
+// M(theta) = R(-theta) M0 R(theta), row-major (kernel/plate.hpp).
 inline void plate_matrix(const PreparedDetector& det, double theta, double* m) {
   plate_at(&det.plate_mueller[0][0], std::cos(2 * theta), std::sin(2 * theta), m);
 }

@@ -14,7 +14,7 @@ namespace pisco::detail::cuda {
 
 
 // One record per pixel, I - monopole in float32.
-// The sky's pixels with monopole x boundary.at(p) taken out of I (core/cap_boundary.hpp).
+// The sky's pixels with monopole x boundary.at(p) taken out of I (kernel/cap_boundary.hpp).
 std::vector<PixelRecord> pixel_records(const SkyView& sky, double monopole, const CapBoundary& boundary = {});
 // The same for pixels [first, first + count) of maps of count values each (a band, core/polar_copy.hpp).
 std::vector<PixelRecord> pixel_records(int nside, std::size_t first, const std::array<std::span<const double>, 4>& maps,

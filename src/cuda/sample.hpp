@@ -17,19 +17,19 @@
 // weights: the same arithmetic as the reference. On that path the float32 evaluation also takes its
 // beam coordinates (x, y) from the float64 ones, which cuts its error about five-fold for free (the
 // rounding of the float32 pixel vectors is the largest float32 error, amplified by the beam's slope);
-// otherwise the whole evaluation is the arithmetic of shaders/pixel.glsl in float (core/contribution.hpp).
+// otherwise the whole evaluation is the arithmetic of src/kernel/pixel.glsl in float (kernel/contribution.hpp).
 #pragma once
 
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 
-#include "core/cap_boundary.hpp"
-#include "core/contribution.hpp"
-#include "core/disc.hpp"
-#include "core/frame.hpp"
-#include "core/plate.hpp"
-#include "core/hd.hpp"
+#include "kernel/cap_boundary.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/disc.hpp"
+#include "kernel/frame.hpp"
+#include "kernel/plate.hpp"
+#include "kernel/hd.hpp"
 
 namespace pisco::detail::cuda {
 
@@ -115,7 +115,7 @@ PISCO_HD std::uint32_t batch_pixel(const std::uint32_t* first, const std::uint32
   return first[r] + (j - offset[r]);
 }
 
-// Pixel p's float32 geometry g and weights w, w M(theta) behind an aperture plate (core/plate.hpp).
+// Pixel p's float32 geometry g and weights w, w M(theta) behind an aperture plate (kernel/plate.hpp).
 // With Exact, the beam coordinates come from the float64 pixel vectors, which float32 pixel vectors
 // would carry only to ~1e-7 (the largest float32 error otherwise, on steep beams); they are returned
 // in x, y for the float64 sums.
@@ -331,7 +331,7 @@ PISCO_HD void stage_cap(std::uint32_t* begin, std::uint32_t* end, int& pending, 
   });
 }
 
-// The sample from the reduced sums, as every backend (shaders/pixel.glsl): float32 sum plus I0 sum w_I,
+// The sample from the reduced sums, as every backend (src/kernel/pixel.glsl): float32 sum plus I0 sum w_I,
 // over the normalization when per-sample.
 PISCO_HD double finish_sample(float sum, double monopole_weight, double norm, double monopole, bool per_sample) {
   return pisco::detail::finish_sample(double(sum), monopole, monopole_weight, norm, per_sample);

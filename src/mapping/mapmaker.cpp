@@ -11,7 +11,7 @@
 #include <pointing.h>
 #include <vec3.h>
 
-#include "core/frame.hpp"
+#include "kernel/frame.hpp"
 #include "core/thread_pool.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"

@@ -8,7 +8,7 @@
 #include <healpix_base.h>
 #include <pointing.h>
 
-#include "core/disc.hpp"
+#include "kernel/disc.hpp"
 #include "pisco/error.hpp"
 #include "pisco/healpix_map.hpp"
 

@@ -1,7 +1,7 @@
 // The simd backend (docs/simd.md): the GPU kernels' float32 contract on the CPU's vector units.
 // This file is the driver: it packs the sky and the weights into the kernel's layout once, and per
-// sample computes the antenna frame in float64 with the reference's own code (core/frame.hpp) and the
-// disc's ranges (simd::disc_ranges: the reference's, core/disc.hpp), then hands them to the kernel
+// sample computes the antenna frame in float64 with the reference's own code (kernel/frame.hpp) and the
+// disc's ranges (simd::disc_ranges: the reference's, kernel/disc.hpp), then hands them to the kernel
 // (simd_kernel.cpp, compiled per instruction set by Highway). Samples are spread over a thread pool
 // as in the float64 reference.
 #include <algorithm>
@@ -17,9 +17,9 @@
 
 #include "core/poles.hpp"
 #include "core/backend.hpp"
-#include "core/disc.hpp"
-#include "core/frame.hpp"
-#include "core/plate.hpp"
+#include "kernel/disc.hpp"
+#include "kernel/frame.hpp"
+#include "kernel/plate.hpp"
 #include "core/ring_slices.hpp"  // ring_of
 #include "core/thread_pool.hpp"
 #include "simd/simd_kernel.hpp"
@@ -60,7 +60,7 @@ std::vector<T> node_records(const std::vector<T>& table, std::initializer_list<s
 
 // A 2D grid's float32 records (simd_kernel.cpp, RecordGrid): for each node k = j n + i, its record
 // (w(k), w(k + 1)), then (ex(k), ex(k + n)) and (ey(k), ey(k + 1)) of the cell it is the lower corner
-// of, from the table's nodes and edge terms (src/core/grid_curvature.hpp: ex(i, j) at n^2 + i n + j,
+// of, from the table's nodes and edge terms (src/kernel/grid_curvature.hpp: ex(i, j) at n^2 + i n + j,
 // ey at 2 n^2 + k); a pair's member beyond the grid is 0 (no cell reads it).
 std::vector<float> grid_records(const std::vector<float>& table, std::initializer_list<std::size_t> cols, int n) {
   const std::size_t nn = std::size_t(n) * std::size_t(n), m = cols.size();

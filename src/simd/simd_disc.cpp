@@ -20,7 +20,7 @@
 namespace pisco::detail::simd {
 namespace {
 // Writes non-empty ranges through a pointer. Defined outside the targets' namespaces, with no target
-// attribute, as core/disc.hpp's emitters that call it: GCC inlines a function only into one whose
+// attribute, as kernel/disc.hpp's emitters that call it: GCC inlines a function only into one whose
 // instruction set includes its own, so a lambda of the walk (AVX-512, say) would be called out of
 // line, vectors saved around each call.
 struct RangeWriter {
@@ -41,7 +41,7 @@ namespace pisco::detail::simd {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-// The disc's pixel ranges, exactly for_each_disc_range's (core/disc.hpp), with the arctangent of
+// The disc's pixel ranges, exactly for_each_disc_range's (kernel/disc.hpp), with the arctangent of
 // each ring's half-width taken a vector of rings at a time. The reference computes
 // floor(arg(phi0 -+ dphi)) with dphi = atan2(sqrt(ysq), x), the C library's arctangent, some 30 ns a
 // ring: a third of this backend's time at rho_max = 5 deg. Here x and ysq are the reference's

@@ -3,7 +3,7 @@
 // target's HWY_NAMESPACE) and HWY_DYNAMIC_DISPATCH picks the best the processor supports at run time:
 // AVX-512 (Highway's AVX3), AVX2, SSE4 or the portable EMU128 on x86-64; NEON on Arm.
 //
-// The per-pixel formulas are core/contribution-inl.hpp, included into each target's namespace with
+// The per-pixel formulas are kernel/contribution-inl.hpp, included into each target's namespace with
 // T = F, a float32 vector with +, -, *, /: the reference's own arithmetic, lane by lane. Only what
 // cannot be written as a formula of T is vector code here: loads, the beam weights' record lookups,
 // the interpolation's index arithmetic and masks, and the compensated sum.
@@ -70,9 +70,9 @@ HWY_INLINE I operator*(const I& a, int b) { return {hn::Mul(a.v, hn::Set(DI(), b
 HWY_INLINE F sqrt(const F& a) { return F(hn::Sqrt(a.v)); }
 HWY_INLINE F max(const F& a, float b) { return F(hn::Max(a.v, hn::Set(DF(), b))); }
 
-// The formulas of shaders/pixel.glsl, in this target's namespace (Vec3, SampleFrame, pixel_geometry,
+// The formulas of src/kernel/pixel.glsl, in this target's namespace (Vec3, SampleFrame, pixel_geometry,
 // interpolate_weights, stokes_response, effective_weights, kahan_add, ...).
-#include "core/contribution-inl.hpp"
+#include "kernel/contribution-inl.hpp"
 
 template <>
 struct Lanes<F> {
@@ -373,7 +373,7 @@ struct ExactSums {
         c3 = hn::Mul(fu, fv);
         rec = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(j, n_d), i), hn::Set(dd, 2.0)));
         above = hn::Add(rec, hn::Set(dl, 2 * det.grid_n));
-        // Records n^2 + i n + j (ex) and 2 n^2 + j n + i (ey), core/grid_curvature.hpp.
+        // Records n^2 + i n + j (ex) and 2 n^2 + j n + i (ey), kernel/grid_curvature.hpp.
         const std::int64_t nodes = std::int64_t(det.grid_n) * det.grid_n;
         edge_x = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(i, n_d), j), hn::Set(dd, 2.0)));
         edge_x = hn::Add(edge_x, hn::Set(dl, 2 * nodes));

@@ -2,10 +2,10 @@
 // (simd_kernel.cpp) and chosen at run time: plain C++ types only, so that the backend's driver
 // (simd_backend.cpp) needs no Highway header.
 //
-// The driver computes each sample's antenna frame with the reference's own code (core/frame.hpp) and
-// its disc's ranges with disc_ranges (the reference's, core/disc.hpp, in vectors); the kernel
+// The driver computes each sample's antenna frame with the reference's own code (kernel/frame.hpp) and
+// its disc's ranges with disc_ranges (the reference's, kernel/disc.hpp, in vectors); the kernel
 // evaluates the disc's pixels, range by range, a vector of float32 lanes at a time, with the
-// formulas of core/contribution-inl.hpp.
+// formulas of kernel/contribution-inl.hpp.
 #pragma once
 
 #include <cstddef>
@@ -13,9 +13,9 @@
 #include <string>
 #include <vector>
 
-#include "core/cap_boundary.hpp"
-#include "core/contribution.hpp"
-#include "core/disc.hpp"
+#include "kernel/cap_boundary.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/disc.hpp"
 
 namespace pisco::detail::simd {
 
@@ -38,7 +38,7 @@ struct KernelSky {
   const double* vy;
   const double* vz;
   double monopole;        // I0
-  // The rings where the polar caps meet the belt and their weight (core/cap_boundary.hpp): the monopole's
+  // The rings where the polar caps meet the belt and their weight (kernel/cap_boundary.hpp): the monopole's
   // weight sum counts their pixels with it.
   detail::CapBoundary boundary;
 };

@@ -1,5 +1,5 @@
 // The compute pipelines of one embedded SPIR-V kernel: its descriptor set layout (its bindings,
-// storage and uniform texel buffers, shaders/interface.h), push constants, a pool of descriptor sets, and one pipeline per
+// storage and uniform texel buffers, src/kernel/interface.h), push constants, a pool of descriptor sets, and one pipeline per
 // set of specialization-constant values, created when first used.
 #pragma once
 

@@ -4,7 +4,7 @@
 #include <cstring>
 #include <numbers>
 
-#include "core/disc.hpp"
+#include "kernel/disc.hpp"
 #include "core/poles.hpp"
 #include "pisco/quaternion.hpp"
 
@@ -115,7 +115,7 @@ Grids pack_grids(const EngineInputs& in, const KernelMode& mode) {
     // the pair is one texel (2 columns) or two neighbouring ones (4 columns).
     g.offset.push_back(std::uint32_t(w32.size() / 4));
     const bool plate = d.plate == PreparedDetector::Plate::aperture;
-    // A plate detector's float64 nodes are 3 texels each (shaders/contribution.glsl), from a texel
+    // A plate detector's float64 nodes are 3 texels each (src/kernel/contribution.glsl), from a texel
     // index divisible by 3.
     if (plate && mode.float64)
       while ((w64.size() / 2) % 3 != 0) w64.insert(w64.end(), {0.0, 0.0});
@@ -184,7 +184,7 @@ void pack_pointing(const PointingInput& pointing, bool ff, double* p) {
   constexpr double twopi = 2 * std::numbers::pi;
   const std::size_t n = pointing.size();
   if (ff) {
-    // The float-float kernel takes every sample as a boresight quaternion (shaders/frame.glsl).
+    // The float-float kernel takes every sample as a boresight quaternion (src/kernel/frame.glsl).
     for (std::size_t i = 0; i < n; ++i) {
       const Quat q = pointing.quaternions ? pointing.quats.quats[i]
                                           : quat_from_pointing(pointing.angles.theta[i], pointing.angles.phi[i],

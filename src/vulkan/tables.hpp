@@ -1,4 +1,4 @@
-// What the vulkan kernel reads (shaders/interface.h), built on the host: the sky and ring tables, the
+// What the vulkan kernel reads (src/kernel/interface.h), built on the host: the sky and ring tables, the
 // beam grids, the push constants and the pointing of a dispatch, for the float64 kernel or the
 // float-float one (docs/vulkan.md, "Devices without float64"). Plain C++ with no Vulkan call, so that
 // the kernel's host tests (tests/test_kernel_host.cpp) run the shader source on the very tables the
@@ -12,14 +12,14 @@
 #include <string>
 #include <vector>
 
-#include "core/cap_boundary.hpp"
+#include "kernel/cap_boundary.hpp"
 #include "core/backend.hpp"
 #include "core/prepared.hpp"
 #include "interface.h"
 
 namespace pisco::detail::vk {
 
-// A float64 number as the float-float kernel takes it (shaders/ff.glsl): the pair (hi, lo) of float32
+// A float64 number as the float-float kernel takes it (src/kernel/ff.glsl): the pair (hi, lo) of float32
 // with hi + lo = x to about 48 bits, in the 8 bytes the float64 kernel reads as one double.
 double ff_bits(double x);
 double from_ff_bits(double bits);
@@ -36,7 +36,7 @@ struct KernelMode {
   bool ff = false;        // every float64 number as a float-float pair (the convolve_ff kernel)
   double monopole = 0.0;  // I0, taken out of the float32 sky (docs/vulkan.md, "Precision")
   bool per_sample = false;
-  CapBoundary boundary;   // the rings where the caps meet the belt (core/cap_boundary.hpp)
+  CapBoundary boundary;   // the rings where the caps meet the belt (kernel/cap_boundary.hpp)
   // The kernel needs the float64 pixel vectors (sky_lo): on the float64 path, and always in float-float.
   bool vectors64() const { return float64 || ff; }
 };

@@ -14,7 +14,7 @@ find_program(PISCO_GLSLANG glslangValidator REQUIRED)
 
 # Shaders -> SPIR-V as C arrays (glslangValidator --vn), with depfiles so that an edited include
 # rebuilds the kernels that use it.
-set(pisco_shader_dir ${PROJECT_SOURCE_DIR}/shaders)
+set(pisco_shader_dir ${PROJECT_SOURCE_DIR}/src/kernel)
 set(pisco_spv_dir ${CMAKE_CURRENT_BINARY_DIR}/spv)
 file(MAKE_DIRECTORY ${pisco_spv_dir})
 set(pisco_spv_headers)
@@ -35,7 +35,7 @@ foreach(variant convolve convolve_ff adjoint adjoint_ff)
             --vn pisco_spv_${variant} --depfile ${out}.d -o ${out} ${pisco_shader_dir}/${source}.comp
     DEPENDS ${pisco_shader_dir}/${source}.comp
     DEPFILE ${out}.d
-    COMMENT "SPIR-V: shaders/${source}.comp (${variant})"
+    COMMENT "SPIR-V: src/kernel/${source}.comp (${variant})"
     VERBATIM)
   list(APPEND pisco_spv_headers ${out})
 endforeach()
@@ -55,7 +55,7 @@ target_sources(pisco PRIVATE
   $<TARGET_OBJECTS:pisco_volk>)
 add_dependencies(pisco pisco_shaders)
 target_include_directories(pisco PRIVATE ${PISCO_VOLK_INCLUDE_DIR} ${Vulkan_INCLUDE_DIRS} ${pisco_spv_dir}
-                                         ${PROJECT_SOURCE_DIR}/shaders)
+                                         ${PROJECT_SOURCE_DIR}/src/kernel)
 target_compile_definitions(pisco PRIVATE PISCO_HAVE_VULKAN VK_NO_PROTOTYPES)
 target_link_libraries(pisco PRIVATE ${CMAKE_DL_LIBS})
 set(PISCO_HAVE_VULKAN ON)

@@ -82,7 +82,7 @@ class VulkanBackend final : public Backend {
   void setup(const vk::DeviceInfo& info, const SkyView& sky, const EngineOptions& options);
   void release() noexcept;
   // A device-local uniform texel buffer holding `bytes` of `data`, viewed as R32G32B32A32_UINT texels
-  // (shaders/interface.h): every table the kernel reads.
+  // (src/kernel/interface.h): every table the kernel reads.
   Buffer upload(const void* data, std::size_t bytes, const char* what);
   // The same for a table of `count` records of `record_bytes`, packed straight into a bounded staging
   // buffer piece by piece: fill(first, n, dst) writes records [first, first + n) to dst. No host copy
@@ -361,7 +361,7 @@ vk::PushConstants VulkanBackend::push_constants(std::size_t detector, bool quate
   return vk::push_constants(*in_, grids_, mode_, detector, quaternions);
 }
 
-// Fills the slot's pointing (4 doubles a sample, shaders/interface.h) and queues its kernel.
+// Fills the slot's pointing (4 doubles a sample, src/kernel/interface.h) and queues its kernel.
 void VulkanBackend::dispatch(Slot& slot, vk::ComputePipeline& pipeline, VkDescriptorSet set,
                              const vk::ComputePipeline::Specialization& spec, const vk::PushConstants& push_in,
                              const PointingInput& pointing) {
@@ -464,7 +464,7 @@ void VulkanBackend::upload_sky(int nside, const std::array<std::span<const doubl
 }
 
 // The band packed as the sky is (upload_sky), uploaded beside it, and a descriptor set a slot that binds it
-// in the sky's place; the kernel reads it from pixel SKY_FIRST (shaders/kernel.glsl).
+// in the sky's place; the kernel reads it from pixel SKY_FIRST (src/kernel/kernel.glsl).
 void VulkanBackend::set_polar_sky(const SkyBand& band) {
   if (polar_sky_.handle() != VK_NULL_HANDLE) throw Error("vulkan: the polar copy is given once per sky");
   upload_sky(band.nside, {band.maps[0], band.maps[1], band.maps[2], band.maps[3]}, band.first, polar_sky_,

@@ -1,6 +1,6 @@
 // The antenna basis of one sample from its pointing, in either input form (docs/physics.md,
 // "Pointing as a rotation"), for the float64 reference, the host-side expansion and the CUDA kernel.
-// The per-sample maths is shaders/frame.glsl's, included here as C++ (with the C library's sine,
+// The per-sample maths is src/kernel/frame.glsl's, included here as C++ (with the C library's sine,
 // cosine and arctangent), the one text the shaders run too; tests/test_frame.cpp holds the shader build
 // to it.
 //
@@ -14,9 +14,9 @@
 
 #include <cmath>
 
-#include "core/contribution.hpp"
-#include "core/disc.hpp"
-#include "core/hd.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/disc.hpp"
+#include "kernel/hd.hpp"
 
 namespace pisco::detail {
 
@@ -27,7 +27,7 @@ struct Q4 {
 // atan2(y, x) for y >= 0 (frame.glsl's PISCO_ATAN2_NONNEG_Y): fabs takes -0.0 to the angle of +0.0.
 PISCO_HD double atan2_nonneg_y(double y, double x) { return atan2(fabs(y), x); }
 
-// shaders/frame.glsl's float64 part: pisco_quat_mul, pisco_rotation, pisco_in_basis,
+// src/kernel/frame.glsl's float64 part: pisco_quat_mul, pisco_rotation, pisco_in_basis,
 // pisco_direction_angles, pisco_sample_frame.
 #pragma push_macro("PISCO_FN")
 #pragma push_macro("PISCO_OUT")
@@ -46,7 +46,7 @@ PISCO_HD double atan2_nonneg_y(double y, double x) { return atan2(fabs(y), x); }
 #define PISCO_SIN sin
 #define PISCO_ATAN2_NONNEG_Y atan2_nonneg_y
 #define PISCO_TWO_PI 6.283185307179586476925286766559
-#include "../../shaders/frame.glsl"
+#include "kernel/frame.glsl"
 #undef PISCO_TEMPLATE_TEXT
 #undef PISCO_D3
 #undef PISCO_D4

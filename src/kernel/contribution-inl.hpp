@@ -1,4 +1,4 @@
-// The C++ side of the per-pixel arithmetic, shaders/pixel.glsl (one text for every backend; the
+// The C++ side of the per-pixel arithmetic, src/kernel/pixel.glsl (one text for every backend; the
 // documentation is there and in contribution.hpp), without an include guard and without a namespace:
 // contribution.hpp includes it into pisco::detail for the float64 reference and the CUDA kernels, and
 // the simd backend (src/simd/simd_kernel.cpp) includes it again into each of its Highway target
@@ -55,7 +55,7 @@ struct Lanes {
   using Mask = bool;
 };
 
-// The interpolation's hooks for scalars (shaders/pixel.glsl): the node below u, and the weights where
+// The interpolation's hooks for scalars (src/kernel/pixel.glsl): the node below u, and the weights where
 // inside. int(u) only where inside: a conversion of a NaN or of a number out of int's range is
 // undefined in C++.
 template <class T>
@@ -103,7 +103,7 @@ PISCO_HD void weight_pair(const ArrayGrid<T>& g, int k, Vec4<T>& w, Vec4<T>& nex
   node_pair(g.weights + 4 * k, w, next);
 }
 
-// The edges' curvature terms of cell (i, j), k = j n + i, after the nodes (src/core/grid_curvature.hpp).
+// The edges' curvature terms of cell (i, j), k = j n + i, after the nodes (src/kernel/grid_curvature.hpp).
 template <class T>
 PISCO_HD void edge_x_pair(const ArrayGrid<T>& g, int /*k*/, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
   weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
@@ -113,7 +113,7 @@ PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& e
   weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
 }
 
-// pixel.glsl as C++ templates of T (and of the grid type G). The macros that shaders/common.glsl
+// pixel.glsl as C++ templates of T (and of the grid type G). The macros that src/kernel/common.glsl
 // also defines (for the GLSL-as-C++ host tests) are saved and restored around it.
 #pragma push_macro("PISCO_FN")
 #pragma push_macro("PISCO_OUT")
@@ -142,7 +142,7 @@ PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& e
 #define PISCO_VEC3(a, b, c) \
   Vec3<T> { a, b, c }
 using uint = unsigned int;
-#include "../../shaders/pixel.glsl"
+#include "kernel/pixel.glsl"
 #undef PISCO_TEMPLATE_TEXT
 #undef PISCO_TEMPLATE
 #undef PISCO_TEMPLATE_GRID

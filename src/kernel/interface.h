@@ -1,5 +1,5 @@
 // The interface between the host and the kernels, included by both the C++ code (src/vulkan/) and
-// the GLSL (shaders/*.comp), so that bindings, workgroup size and push constants cannot drift apart.
+// the GLSL (src/kernel/*.comp), so that bindings, workgroup size and push constants cannot drift apart.
 #ifndef PISCO_SHADER_INTERFACE_H
 #define PISCO_SHADER_INTERFACE_H
 

@@ -1,4 +1,4 @@
-// Disc selection from the ring table (docs/physics.md, "Disc selection"). In float64: src/core/disc.hpp's
+// Disc selection from the ring table (docs/physics.md, "Disc selection"). In float64: src/kernel/disc.hpp's
 // walk, with the ring arithmetic of rings.glsl, the reference's own text (every product that feeds an
 // addition rounded by itself, mul_rn). Without float64 (PISCO_FF): each ring's range estimated in float32 and its ends settled
 // by testing the pixels there in float-float (k . p' >= cos rho_max), which selects the same pixels

@@ -1,6 +1,6 @@
 // One sample's antenna basis in float64, from boresight angles or a boresight quaternion, with the
 // detector's offset applied (docs/physics.md, "Pointing as a rotation"), written once in the common
-// subset of GLSL and C++: the shaders include it, and src/core/frame.hpp includes its float64 part as
+// subset of GLSL and C++: the shaders include it, and src/kernel/frame.hpp includes its float64 part as
 // C++ (PISCO_TEMPLATE_TEXT, with the C library's sine, cosine and arctangent) for the float64
 // reference, the simd backend's frames and the CUDA kernels; tests/test_frame.cpp runs the shader
 // build (its own sine, cosine and arctangent, fp64.glsl) against it. Without float64 (PISCO_FF), the

@@ -12,7 +12,7 @@ namespace pisco::detail {
 // A float64 product rounded by itself, never fused with the addition or subtraction it feeds: nvcc
 // fuses a * b + c into one fused multiply-add in device code by default (--fmad=true), where the host
 // compiles expressions as written (-ffp-contract=off, CMakeLists.txt). The disc's ring bounds
-// (core/disc.hpp) must be the same values on the host and on the device.
+// (kernel/disc.hpp) must be the same values on the host and on the device.
 PISCO_HD double mul_rn(double a, double b) {
 #if defined(__CUDA_ARCH__)
   return __dmul_rn(a, b);

@@ -1,16 +1,16 @@
 // Disc selection from a ring table (docs/physics.md, "Disc selection"): the RING pixels whose centres lie within rho of a
 // pointing, the same set as HEALPix C++ query_disc(..., inclusive = false), produced as one or two
 // contiguous index ranges per ring crossing the disc. Written once for the reference and the CUDA
-// kernels; shaders/disc.glsl walks the disc the same way, and the ring arithmetic itself is one text
-// for both, shaders/rings.glsl. Double precision throughout: the result must be exact. Every product
-// that feeds an addition is mul_rn (core/hd.hpp), rounded by itself on the device as on the host.
+// kernels; src/kernel/disc.glsl walks the disc the same way, and the ring arithmetic itself is one text
+// for both, src/kernel/rings.glsl. Double precision throughout: the result must be exact. Every product
+// that feeds an addition is mul_rn (kernel/hd.hpp), rounded by itself on the device as on the host.
 #pragma once
 
 #include <cmath>
 #include <cstdint>
 #include <vector>
 
-#include "core/hd.hpp"
+#include "kernel/hd.hpp"
 
 namespace pisco::detail {
 
@@ -43,8 +43,8 @@ PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
   return mul_rn(double(r * r), fact2) - 1.0;
 }
 
-// The float64 ring arithmetic shared with the shaders (shaders/rings.glsl): ring_above, ring_edge_x,
-// ring_edge_ysq, ring_bound; mul_rn is core/hd.hpp's.
+// The float64 ring arithmetic shared with the shaders (src/kernel/rings.glsl): ring_above, ring_edge_x,
+// ring_edge_ysq, ring_bound; mul_rn is kernel/hd.hpp's.
 constexpr double PISCO_PI = 3.141592653589793238462643383279502884;
 #pragma push_macro("PISCO_FN")
 #undef PISCO_FN
@@ -52,7 +52,7 @@ constexpr double PISCO_PI = 3.141592653589793238462643383279502884;
 #define PISCO_FN PISCO_HD
 #define PISCO_RING_INT std::int64_t
 using uint = unsigned int;
-#include "../../shaders/rings.glsl"
+#include "kernel/rings.glsl"
 #undef PISCO_RING_INT
 #undef PISCO_TEMPLATE_TEXT
 #pragma pop_macro("PISCO_FN")

@@ -1,12 +1,12 @@
 // The rings where HEALPix's polar caps meet its equatorial belt and their quadrature weight
 // (docs/physics.md, "The quadrature"; core/poles.hpp), in one struct for the host and the CUDA kernel;
-// the ring test is shaders/pixel.glsl's on_cap_boundary, which the shaders run too.
+// the ring test is src/kernel/pixel.glsl's on_cap_boundary, which the shaders run too.
 #pragma once
 
 #include <cstdint>
 
-#include "core/contribution.hpp"
-#include "core/hd.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/hd.hpp"
 
 namespace pisco::detail {
 

@@ -1,5 +1,5 @@
 // The float64 ring arithmetic of the disc selection (docs/physics.md, "Disc selection"), written once
-// in the common subset of GLSL and C++: the shaders include it from disc.glsl, src/core/disc.hpp
+// in the common subset of GLSL and C++: the shaders include it from disc.glsl, src/kernel/disc.hpp
 // includes it as C++ for the reference, the simd disc walk and the CUDA kernels, and
 // tests/test_kernel_host.cpp runs both builds on every ring of many NSIDE and requires the same bits.
 // The disc must be HEALPix query_disc's pixel set exactly, so every product that feeds an addition

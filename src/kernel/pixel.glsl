@@ -3,22 +3,22 @@
 // - the shaders include it as GLSL (float32: REAL is float, V3 vec3, V4 vec4);
 // - tests/glsl_to_cpp.cmake turns it, with the rest of the kernel, into C++ on glm's types for the
 //   host tests (tests/test_kernel_host.cpp);
-// - src/core/contribution-inl.hpp includes it as C++ templates (PISCO_TEMPLATE_TEXT): REAL is the
+// - src/kernel/contribution-inl.hpp includes it as C++ templates (PISCO_TEMPLATE_TEXT): REAL is the
 //   template parameter T, double for the float64 reference, float for the CUDA kernels, a vector of
 //   float32 lanes for the simd backend (src/simd/simd_kernel.cpp), which includes it once per
 //   instruction set.
 // tests/test_kernel_host.cpp runs every function here through the GLSL-as-C++ build and the C++
 // template build on random inputs and requires the same bits.
 //
-// The derivation of pixel_geometry is in src/core/contribution.hpp. Rules of the common subset
-// (shaders/common.glsl): vectors built by constructor (PISCO_VEC3, PISCO_VEC4), no swizzle assigned,
+// The derivation of pixel_geometry is in src/kernel/contribution.hpp. Rules of the common subset
+// (src/kernel/common.glsl): vectors built by constructor (PISCO_VEC3, PISCO_VEC4), no swizzle assigned,
 // float32 constants written with `f` and exactly representable (so that T = double sees the same
 // value), no `lf` literal here (the C++ build includes this file as it is). Each backend supplies, for
 // its beam-weight layout:
 //   weight_pair(grid, node, w, next): the 4 weights of `node` and of `node + 1`;
 //   edge_x_pair(grid, k, i, j, ex0, ex1), edge_y_pair(grid, k, ey0, ey1): the curvature terms of the
 //   lower and upper edges and of the left and right edges of cell (i, j), k = j n + i
-//   (src/core/grid_curvature.hpp);
+//   (src/kernel/grid_curvature.hpp);
 //   node_index(u, inside, top): int(u) clamped to [0, top] (u >= 0 where `inside`);
 //   select_weights(inside, w): w where `inside`, zero elsewhere.
 #if defined(PISCO_TEMPLATE_TEXT) || !defined(PISCO_PIXEL_GLSL)
@@ -63,7 +63,7 @@ PISCO_FN void weight_pair(Grid g, int k, PISCO_OUT(vec4) w, PISCO_OUT(vec4) next
   }
 }
 
-// The edges' curvature terms, stored after the nodes in the nodes' layout (src/core/grid_curvature.hpp):
+// The edges' curvature terms, stored after the nodes in the nodes' layout (src/kernel/grid_curvature.hpp):
 // ex of cell (i, j)'s lower and upper edges at n^2 + i n + j, ey of its left and right edges at
 // 2 n^2 + k.
 PISCO_FN void edge_x_pair(Grid g, int k, int i, int j, PISCO_OUT(vec4) ex0, PISCO_OUT(vec4) ex1) {
@@ -96,7 +96,7 @@ struct PixelGeometry {
   PISCO_REAL cos2chi, sin2chi;
 };
 
-// Everything from d = k - p', small across the disc (src/core/contribution.hpp says why).
+// Everything from d = k - p', small across the disc (src/kernel/contribution.hpp says why).
 PISCO_TEMPLATE
 PISCO_FN PISCO_GEOMETRY pixel_geometry(PISCO_IN(PISCO_FRAME) f, PISCO_IN(PISCO_V3) k) {
   PISCO_GEOMETRY g;
@@ -119,7 +119,7 @@ PISCO_FN PISCO_GEOMETRY pixel_geometry(PISCO_IN(PISCO_FRAME) f, PISCO_IN(PISCO_V
 }
 
 // Interpolation of the 4 weights on the n x n grid at x_i = -a + i * step (x fastest): bilinear less
-// the curvature terms of the cell's edges (src/core/grid_curvature.hpp), which leave an error of
+// the curvature terms of the cell's edges (src/kernel/grid_curvature.hpp), which leave an error of
 // order step^3 instead of step^2 (docs/physics.md, "Interpolation on the grid"); zero outside the grid.
 PISCO_TEMPLATE_GRID
 PISCO_FN PISCO_V4 interpolate_weights(PISCO_IN(PISCO_GRID) g, PISCO_REAL x, PISCO_REAL y) {
@@ -132,7 +132,7 @@ PISCO_FN PISCO_V4 interpolate_weights(PISCO_IN(PISCO_GRID) g, PISCO_REAL x, PISC
   const PISCO_REAL fu = u - PISCO_REAL(i);
   const PISCO_REAL fv = v - PISCO_REAL(j);
   const PISCO_INDEX k00 = j * g.n + i;
-  // Then the curvature terms of the cell's edges (src/core/grid_curvature.hpp): ex of its lower and upper
+  // Then the curvature terms of the cell's edges (src/kernel/grid_curvature.hpp): ex of its lower and upper
   // edges, ey of its left and right ones. Each pair is used as soon as it is read.
   const PISCO_REAL gu = 1.0f - fu;
   const PISCO_REAL gv = 1.0f - fv;

@@ -1,5 +1,5 @@
 // The per-pixel contribution of the measurement equation (docs/physics.md, "Antenna basis, co-polarization and chi" and "The measurement equation"), written once for the float64
-// reference, the CUDA kernels, the simd backend and the shaders: the formulas are in shaders/pixel.glsl,
+// reference, the CUDA kernels, the simd backend and the shaders: the formulas are in src/kernel/pixel.glsl,
 // in the common subset of GLSL and C++, which contribution-inl.hpp makes C++ templates of the number
 // type; this header includes that into pisco::detail and the simd backend includes it again into each
 // of its instruction sets' namespaces (docs/simd.md).
@@ -22,10 +22,10 @@
 
 #include <cmath>
 
-#include "core/hd.hpp"
+#include "kernel/hd.hpp"
 
 namespace pisco::detail {
 
-#include "core/contribution-inl.hpp"
+#include "kernel/contribution-inl.hpp"
 
 }  // namespace pisco::detail

@@ -253,7 +253,7 @@ PISCO_FN void convolve_sample(uint sid, int part, PISCO_OUT(Sums) acc, PISCO_OUT
     smp.m0 = dvec4(r0.x, c * r1.x - s * r2.x, s * r1.x + c * r2.x, r3.x);
   }
   smp.f.e_c = pc.cos_zeta * smp.f.theta_p + pc.sin_zeta * smp.f.phi_p;
-  // The disc: for_each_disc_range of src/core/disc.hpp, with the polar caps as whole rings.
+  // The disc: for_each_disc_range of src/kernel/disc.hpp, with the polar caps as whole rings.
   const double z0 = pisco_cos(theta);
   const double xa = 1.0lf / sqrt((1.0lf - z0) * (1.0lf + z0));
   int first_ring, last_ring, irmin, irmax;

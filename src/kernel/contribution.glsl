@@ -1,5 +1,5 @@
 // The per-pixel contribution of the measurement equation in float32 is pixel.glsl, the one text every
-// backend runs (see the derivation in src/core/contribution.hpp and docs/physics.md). Here: the float64
+// backend runs (see the derivation in src/kernel/contribution.hpp and docs/physics.md). Here: the float64
 // tables of the monopole path, read in float64 or, on devices without it, in float-float (PISCO_FF).
 // Written in the common subset of GLSL and C++ (common.glsl): tests/test_kernel_host.cpp runs this
 // file as C++ against the reference, and the backend parity tests hold the kernel to it. Reads the
@@ -16,7 +16,7 @@
 // The float64 interpolation at (x, y): its nodes (absolute node indices) and coefficients, linear in
 // r = sqrt(x^2 + y^2) for a radial profile (2 nodes), on the grid otherwise bilinear (4 nodes) less
 // the curvature terms of the cell's edges (4 records after the grid's nodes,
-// src/core/grid_curvature.hpp), as pixel.glsl's interpolate_weights; no node outside the grid or
+// src/kernel/grid_curvature.hpp), as pixel.glsl's interpolate_weights; no node outside the grid or
 // beyond the profile. One stencil for every float64 table a node has.
 struct Stencil64 {
   uint k[8];

@@ -12,7 +12,7 @@
 // Layout: the n x n nodes (x fastest) of `width` numbers each are followed by n^2 records ex, in the
 // transposed order (record n^2 + i n + j is ex(i, j)), then n^2 records ey in the nodes' order
 // (record 2 n^2 + j n + i is ey(i, j)). A backend reads (ex(i, j), ex(i, j + 1)) and (ey(i, j),
-// ey(i + 1, j)) as it reads a node and its neighbour along x (shaders/pixel.glsl, interpolate_weights).
+// ey(i + 1, j)) as it reads a node and its neighbour along x (src/kernel/pixel.glsl, interpolate_weights).
 #pragma once
 
 #include <cstddef>

@@ -1,13 +1,13 @@
 // A half-wave plate's Mueller matrix at an angle (docs/physics.md, "Half-wave plates"), written once
 // for the library (pisco::rotated_mueller), the float64 reference and the CUDA kernel;
-// shaders/kernel.glsl's plate_matrix computes the same product in float32 (and its column 0 in float64)
+// src/kernel/kernel.glsl's plate_matrix computes the same product in float32 (and its column 0 in float64)
 // from the plate's rows.
 #pragma once
 
 #include <cmath>
 
-#include "core/contribution.hpp"
-#include "core/hd.hpp"
+#include "kernel/contribution.hpp"
+#include "kernel/hd.hpp"
 
 namespace pisco::detail {
 
@@ -30,7 +30,7 @@ PISCO_HD void plate_at(const double* m0, double c, double s, double* out) {
   }
 }
 
-// effective_weights (v = w M, a pixel's weights behind the plate, from M by columns) is in shaders/pixel.glsl,
+// effective_weights (v = w M, a pixel's weights behind the plate, from M by columns) is in src/kernel/pixel.glsl,
 // with the other per-pixel formulas; these are a row-major M's columns as it takes them.
 PISCO_HD void plate_columns(const double* m, Vec4<double> (&columns)[4]) {
   for (int c = 0; c < 4; ++c) columns[c] = {m[c], m[4 + c], m[8 + c], m[12 + c]};

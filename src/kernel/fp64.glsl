@@ -1,6 +1,6 @@
 // float64 sine, cosine and arctangent for the kernels: GLSL has no double-precision transcendental
 // functions. The disc selection (disc.glsl) must reproduce the reference's double arithmetic
-// (src/core/disc.hpp) to the last bits, so these follow fdlibm's algorithms and coefficients:
+// (src/kernel/disc.hpp) to the last bits, so these follow fdlibm's algorithms and coefficients:
 // Cody-Waite reduction by pi/2 (valid for |x| < 2^19) and minimax polynomials on [-pi/4, pi/4];
 // atan by argument reduction to |x| < 7/16 with the tabulated atan(0.5), atan(1), atan(1.5).
 // Within 1 ulp of the C library (tests/test_fp64.cpp runs this same file as C++).
