@@ -571,6 +571,8 @@ void ConvolveSample(const KernelSky& sky, const KernelDetector& det, const Sampl
 template <bool Radial, int Columns, bool Plate>
 struct AdjointWeights {
   static constexpr bool iq = Columns == 2 && !Plate;
+  // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
+  static constexpr int outputs = iq ? 3 : 4;
   static constexpr int stokes_in = (Columns == 4 || Plate) ? 4 : 3;
   AdjointWeights(const KernelDetector& det, const ScatterInput& in)
       : f(broadcast(*in.frame)),
@@ -658,8 +660,7 @@ template <bool Normal, class W>
 HWY_INLINE void ScatterVectors(const KernelSky& sky, const ScatterInput& in, W& weights) {
   const DF df;
   double d = in.value;
-  // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
-  constexpr int outputs = W::iq ? 3 : 4;
+  constexpr int outputs = W::outputs;
   constexpr bool normal = Normal;  // a template parameter: the adjoint's own code has none of it
   const std::size_t N = hn::Lanes(df);
   const hn::Half<DF> dh;
@@ -770,8 +771,7 @@ template <bool Normal, class W>
 HWY_INLINE void ScatterScalar(const KernelSky& sky, const ScatterInput& in, W& weights) {
   const DF df;
   double d = in.value;
-  // Without U, V weights (two columns, no plate) the V column gets nothing: three maps are written.
-  constexpr int outputs = W::iq ? 3 : 4;
+  constexpr int outputs = W::outputs;
   constexpr bool normal = Normal;  // a template parameter: the adjoint's own code has none of it
   HWY_ALIGN float out[4][max_lanes];
   if constexpr (normal) {  // d first: the forward's sum of the disc, a pixel at a time
