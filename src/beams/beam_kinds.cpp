@@ -3,6 +3,7 @@
 #include <string>
 
 #include "beams/beam_kind.hpp"
+#include "core/registry.hpp"
 
 namespace pisco::detail {
 namespace {
@@ -22,15 +23,10 @@ const BeamKindEntry* const kinds[] = {
 std::span<const BeamKindEntry* const> beam_kinds() { return kinds; }
 
 const BeamKindEntry& beam_kind(BeamKind kind) {
-  for (const BeamKindEntry* k : kinds)
-    if (k->kind == kind) return *k;
+  if (const BeamKindEntry* k = registered_kind(beam_kinds(), kind)) return *k;
   throw Error("beam kind " + std::to_string(static_cast<int>(kind)) + " is not registered", ErrorKind::internal);
 }
 
-const BeamKindEntry* beam_kind_named(const std::string& name) {
-  for (const BeamKindEntry* k : kinds)
-    if (name == k->name) return k;
-  return nullptr;
-}
+const BeamKindEntry* beam_kind_named(const std::string& name) { return registered_name(beam_kinds(), name); }
 
 }  // namespace pisco::detail

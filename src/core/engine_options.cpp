@@ -3,6 +3,7 @@
 #include <span>
 #include <string>
 #include <variant>
+#include <vector>
 
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
@@ -119,56 +120,72 @@ std::string* EngineOptions::device_of(const std::string& name) {
   return nullptr;
 }
 
-}  // namespace pisco
-
-namespace pisco {
 namespace {
 
-constexpr EngineSetting settings[] = {
-    {"backend", "\"cpu\", \"simd\", \"vulkan\", \"cuda\" or \"auto\" (the fastest present)", "all", false},
-    {"device", "\"auto\", a device's index or part of its name; for simd, an instruction set", "simd, vulkan and cuda",
-     false},
-    {"threads", "worker threads, 0 for all hardware threads", "cpu and simd", true},
-    {"chunk_samples", "samples per device chunk, 0 to fit the device", "vulkan and cuda", true},
-    {"arithmetic", "\"auto\", \"float64\" or \"float-float\"", "vulkan", false},
-    {"normalization", "\"integral\" or \"per_sample\"", "all", false},
-    {"unseen", "\"error\", \"zero\" or \"flag\"", "all", false},
-    {"quadrature", "\"corrected\" or \"plain\"", "all", false},
+// Each setting once: its name, the backends it applies to, whether it takes a number, what it takes
+// (for the enums, their names' own list), and how it is set. engine_settings() is this table.
+struct Setting {
+  const char* name;
+  const char* backends;
+  bool number;
+  std::string takes;
+  void (*set)(EngineOptions& o, const std::string& text, long long number);
 };
+
+const std::vector<Setting>& setting_table() {
+  static const std::vector<Setting> table{
+      {"backend", "all", false, "\"cpu\", \"simd\", \"vulkan\", \"cuda\" or \"auto\" (the fastest present)",
+       [](EngineOptions& o, const std::string& t, long long) { o.backend = t; }},
+      {"device", "simd, vulkan and cuda", false, "\"auto\", a device's index or part of its name; for simd, an instruction set",
+       [](EngineOptions& o, const std::string& t, long long) { o.set_device(t); }},
+      {"threads", "cpu and simd", true, "worker threads, 0 for all hardware threads",
+       [](EngineOptions& o, const std::string&, long long n) { o.set_threads(static_cast<unsigned>(n)); }},
+      {"chunk_samples", "vulkan and cuda", true, "samples per device chunk, 0 to fit the device",
+       [](EngineOptions& o, const std::string&, long long n) { o.set_chunk_samples(static_cast<std::size_t>(n)); }},
+      {"arithmetic", "vulkan", false, listed(arithmetics),
+       [](EngineOptions& o, const std::string& t, long long) { o.set_arithmetic(arithmetic_from(t)); }},
+      {"normalization", "all", false, listed(normalizations),
+       [](EngineOptions& o, const std::string& t, long long) { o.normalization = normalization_from(t); }},
+      {"unseen", "all", false, listed(unseen_policies),
+       [](EngineOptions& o, const std::string& t, long long) { o.unseen = unseen_policy_from(t); }},
+      {"quadrature", "all", false, listed(quadratures),
+       [](EngineOptions& o, const std::string& t, long long) { o.quadrature = quadrature_from(t); }},
+  };
+  return table;
+}
 
 }  // namespace
 
-std::span<const EngineSetting> engine_settings() { return settings; }
+std::span<const EngineSetting> engine_settings() {
+  static const std::vector<EngineSetting> view = [] {
+    std::vector<EngineSetting> v;
+    for (const Setting& s : setting_table()) v.push_back({s.name, s.takes.c_str(), s.backends, s.number});
+    return v;
+  }();
+  return view;
+}
 
 void set_engine_option(EngineOptions& options, const std::string& name, const EngineValue& value) {
-  const EngineSetting* setting = nullptr;
-  for (const EngineSetting& s : settings)
+  const Setting* setting = nullptr;
+  for (const Setting& s : setting_table())
     if (name == s.name) setting = &s;
   if (!setting) {
     std::string all;
-    for (const EngineSetting& s : settings) all += std::string(all.empty() ? "" : ", ") + s.name;
+    for (const Setting& s : setting_table()) all += std::string(all.empty() ? "" : ", ") + s.name;
     throw Error("not a setting of the engine (expected one of " + all + ")", ErrorKind::input, name);
   }
   const std::string* text = std::get_if<std::string>(&value);
   const long long* number = std::get_if<long long>(&value);
   if (setting->number && !number) throw Error("expected a number, got \"" + *text + "\"", ErrorKind::input, name);
   if (!setting->number && !text)
-    throw Error("expected " + std::string(setting->takes) + ", got the number " + std::to_string(*number),
-                ErrorKind::input, name);
+    throw Error("expected " + setting->takes + ", got the number " + std::to_string(*number), ErrorKind::input, name);
   if (number && *number < 0)
     throw Error("expected a number of zero or more, got " + std::to_string(*number), ErrorKind::input, name);
   if (name == "threads" && *number > static_cast<long long>(Engine::max_threads()))
     throw Error("expected 0 (all hardware threads) or a number of threads up to " + std::to_string(Engine::max_threads()) +
                     " (64 per hardware thread of this machine), got " + std::to_string(*number),
                 ErrorKind::input, name);
-  if (name == "backend") options.backend = *text;
-  else if (name == "device") options.set_device(*text);
-  else if (name == "threads") options.set_threads(static_cast<unsigned>(*number));
-  else if (name == "chunk_samples") options.set_chunk_samples(static_cast<std::size_t>(*number));
-  else if (name == "arithmetic") options.set_arithmetic(arithmetic_from(*text));
-  else if (name == "normalization") options.normalization = normalization_from(*text);
-  else if (name == "unseen") options.unseen = unseen_policy_from(*text);
-  else options.quadrature = quadrature_from(*text);
+  setting->set(options, text ? *text : std::string(), number ? *number : 0);
 }
 
 }  // namespace pisco

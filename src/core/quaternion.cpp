@@ -1,10 +1,9 @@
 #include "pisco/quaternion.hpp"
 
-#include "core/text.hpp"
-
 #include <cmath>
 #include <numbers>
 
+#include "core/text.hpp"
 #include "kernel/frame.hpp"
 #include "pisco/error.hpp"
 

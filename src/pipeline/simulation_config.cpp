@@ -14,6 +14,7 @@
 #include "io/focal_plane_file.hpp"
 #include "io/toml_table.hpp"
 #include "beams/beam_kind.hpp"
+#include "core/registry.hpp"
 #include "scans/scan_kind.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/spectra.hpp"
@@ -23,18 +24,16 @@
 namespace pisco {
 
 const char* beam_kind_name(BeamKind kind) noexcept {
-  for (const detail::BeamKindEntry* k : detail::beam_kinds())
-    if (k->kind == kind) return k->name;
-  return "?";
+  const detail::BeamKindEntry* k = detail::registered_kind(detail::beam_kinds(), kind);
+  return k ? k->name : "?";
 }
 
 bool BeamConfig::combines_beams() const { return detail::beam_kind(kind).combines_beams; }
 bool BeamConfig::turns_with_detector() const { return detail::beam_kind(kind).turns_with_detector; }
 
 const char* scan_kind_name(ScanKind kind) noexcept {
-  for (const detail::ScanKindEntry* k : detail::scan_kinds())
-    if (k->kind == kind) return k->name;
-  return "?";
+  const detail::ScanKindEntry* k = detail::registered_kind(detail::scan_kinds(), kind);
+  return k ? k->name : "?";
 }
 
 namespace {
@@ -83,9 +82,8 @@ SkyConfig read_sky(Table t) {
 BeamConfig read_beam(Table t, const std::string& name) {
   BeamConfig b;
   b.name = name;
-  std::vector<std::string> names;
-  for (const detail::BeamKindEntry* k : detail::beam_kinds()) names.emplace_back(k->name);
-  const detail::BeamKindEntry& kind = *detail::beam_kind_named(t.choice("type", "gaussian", names));
+  const detail::BeamKindEntry& kind =
+      *detail::beam_kind_named(t.choice("type", "gaussian", detail::registered_names(detail::beam_kinds())));
   b.kind = kind.kind;
   kind.read(t, b);
   t.finish();
@@ -134,9 +132,8 @@ void check_combined_beams(const SimulationConfig& c, const toml::table& beams, c
 // [scan]: its type, then that kind's keys (scans/scan_kind.hpp: one reader a kind).
 ScanConfig read_scan(Table t) {
   ScanConfig s;
-  std::vector<std::string> names;
-  for (const detail::ScanKindEntry* k : detail::scan_kinds()) names.emplace_back(k->name);
-  const detail::ScanKindEntry& kind = *detail::scan_kind_named(t.choice("type", "pixel_centres", names));
+  const detail::ScanKindEntry& kind =
+      *detail::scan_kind_named(t.choice("type", "pixel_centres", detail::registered_names(detail::scan_kinds())));
   s.kind = kind.kind;
   kind.read(t, s);
   t.finish();
@@ -170,7 +167,11 @@ EngineConfig read_engine(Table t) {
   for (const char* key : {"normalization", "quadrature"})
     if (t.has(key)) set(key, t.string(key, ""));
   // A setting the named backend does not have is an error naming its key.
-  for (const auto& [key, value] : e.backend_settings) set(key.c_str(), value);
+  try {
+    route_settings(e);
+  } catch (const pisco::Error& err) {
+    t.fail(err.key(), err.what());
+  }
   const auto chunk = t.integer_in("chunk_samples", 1 << 16, 1, max_chunk_samples,
                                   "a number of samples from 1 to " + std::to_string(max_chunk_samples));
   e.chunk_samples = static_cast<std::size_t>(chunk);
@@ -243,9 +244,10 @@ MapmakerConfig read_mapmaker(Table t) {
   return m;
 }
 
-// [hwp] (docs/config.md): the plate model and its angle stream.
 // The samples' rate of a scan that has one (ces, satellite: sample i at time i / rate); 0 for the others.
 double scan_sample_rate(const ScanConfig& scan) { return detail::scan_kind(scan.kind).sample_rate(scan); }
+
+// [hwp] (docs/config.md): the plate model and its angle stream.
 
 HwpConfig read_hwp(Table t, const ScanConfig& scan) {
   HwpConfig h;

@@ -165,19 +165,18 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
     if (made[k].empty()) beam_for(k, 0.0, nullptr, true);  // checked, though no detector uses it
   }
   // Beams that change with time or turn with the plate: each detector's beams, those of the tables
-  // they name.
+  // they name (checked to exist when the file was read, check_combined_beams).
+  const auto table = [&](const std::string& name) {
+    return std::size_t(std::find_if(c.beams.begin(), c.beams.end(), [&](const BeamConfig& x) { return x.name == name; }) -
+                       c.beams.begin());
+  };
   for (std::size_t k = 0; k < c.beams.size(); ++k) {
     const BeamConfig& b = c.beams[k];
     if (!b.combines_beams()) continue;
     for (std::size_t i = 0; i < detectors.size(); ++i) {
       if (c.detectors[i].beam != k) continue;
       std::vector<std::size_t> made_nodes;
-      for (const std::string& name : b.nodes) {
-        const auto j = std::size_t(
-            std::find_if(c.beams.begin(), c.beams.end(), [&](const BeamConfig& x) { return x.name == name; }) -
-            c.beams.begin());
-        made_nodes.push_back(beam_for(j, c.detectors[i].zeta, &c.detectors[i]));
-      }
+      for (const std::string& name : b.nodes) made_nodes.push_back(beam_for(table(name), c.detectors[i].zeta, &c.detectors[i]));
       Detector& d = detectors[i];
       d.beam = made_nodes.front();
       if (b.kind == BeamKind::sequence) {
@@ -191,10 +190,7 @@ SimulationBeams make_beams(const SimulationConfig& c, const std::function<void(c
                            ", which turns with the plate, but its half-wave plate is off (hwp = false)");
       d.plate_beams = pisco::PlateBeams{made_nodes, b.plate_period, d.hwp->gamma};
       if (!b.plate_normalize_by.empty()) {  // the beam without the plate: its Omega~ keeps the plate's losses
-        const auto j = std::size_t(std::find_if(c.beams.begin(), c.beams.end(), [&](const BeamConfig& x) {
-                                     return x.name == b.plate_normalize_by;
-                                   }) - c.beams.begin());
-        d.plate_beams->omega = out.beams[beam_for(j, c.detectors[i].zeta, &c.detectors[i])].omega_tilde();
+        d.plate_beams->omega = out.beams[beam_for(table(b.plate_normalize_by), c.detectors[i].zeta, &c.detectors[i])].omega_tilde();
       }
       d.hwp.reset();
     }

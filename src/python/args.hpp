@@ -26,13 +26,6 @@ T unsigned_arg(long long value, const char* name) {
   return static_cast<T>(value);
 }
 
-// A number as "1e-06" (six significant digits).
-inline std::string short_text(double v) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "%g", v);
-  return buffer;
-}
-
 // A byte count as "2.58e+10 bytes".
 inline std::string bytes_text(double bytes) {
   char buffer[48];

@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "scans/scan_kind.hpp"
+#include "core/registry.hpp"
 
 namespace pisco::detail {
 namespace {
@@ -22,16 +23,11 @@ const ScanKindEntry* const kinds[] = {
 std::span<const ScanKindEntry* const> scan_kinds() { return kinds; }
 
 const ScanKindEntry& scan_kind(ScanKind kind) {
-  for (const ScanKindEntry* k : kinds)
-    if (k->kind == kind) return *k;
+  if (const ScanKindEntry* k = registered_kind(scan_kinds(), kind)) return *k;
   throw Error("scan kind " + std::to_string(static_cast<int>(kind)) + " is not registered", ErrorKind::internal);
 }
 
-const ScanKindEntry* scan_kind_named(const std::string& name) {
-  for (const ScanKindEntry* k : kinds)
-    if (name == k->name) return k;
-  return nullptr;
-}
+const ScanKindEntry* scan_kind_named(const std::string& name) { return registered_name(scan_kinds(), name); }
 
 std::vector<double> read_psi(Table& t) {
   std::vector<double> psi;
