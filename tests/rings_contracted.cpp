@@ -7,9 +7,12 @@
 
 namespace contracted_rings {
 namespace {
+using std::floor;
 using std::sqrt;
 using uint = unsigned int;
 const double PISCO_PI = 3.141592653589793238462643383279502884;
+double pisco_cos(double x) { return std::cos(x); }
+double pisco_atan2_nonneg_y(double y, double x) { return std::atan2(y, x); }
 #include "rings_host.hpp"
 }  // namespace
 

@@ -93,7 +93,7 @@ struct HostDevice {
   std::vector<pc::PixelRecord> pixels;
   std::vector<double> vectors;
   std::vector<std::vector<float>> weights;
-  std::vector<std::vector<double>> exact;
+  std::vector<std::vector<double>> weights64;
   std::vector<std::vector<double>> plates;
   pc::KernelSky sky{};
   std::vector<pc::KernelDetector> detectors;
@@ -109,11 +109,11 @@ struct HostDevice {
     sky = {pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0, boundary};
     for (const auto& d : in.detectors) {
       weights.push_back(pc::float_weights(d));
-      exact.push_back(pc::exact_weights(d));
+      weights64.push_back(pc::float64_weights(d));
       plates.push_back(pc::plate_weights(d));
     }
     for (std::size_t k = 0; k < in.detectors.size(); ++k)
-      detectors.push_back(pc::kernel_detector(in.detectors[k], weights[k].data(), exact[k].data(), plates[k].data()));
+      detectors.push_back(pc::kernel_detector(in.detectors[k], weights[k].data(), weights64[k].data(), plates[k].data()));
   }
 };
 
@@ -358,7 +358,7 @@ struct EmulatedAdjoint {
 // convolve.cu's adjoint for one detector, lanes in order and samples in the order given (reversed
 // with `reverse`): the norm pass (convolve_kernel with Norms) where per-sample, the batch's scale,
 // scatter_kernel's integer sums, and the fold (gpu/fixed_point.hpp).
-template <bool Radial, bool Exact, bool Plate>
+template <bool Radial, bool Float64, bool Plate>
 EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::PreparedDetector& prepared, std::size_t d,
                                 const pisco::Pointing& p, std::vector<double> values, const double* plate_angle,
                                 bool reverse) {
@@ -401,7 +401,7 @@ EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::Prep
     if constexpr (Plate) plate = pc::plate_sample(det, plate_angle[i]);
     pc::walk_disc(sky, det, theta, phi, first, offset, true, [&](int count) {
       for (int l = 0; l < pc::warp_lanes; ++l)
-        pc::scatter_batch<Radial, Exact, Plate, false>(sky, det, f, fd, first, offset, count, l, values[i], &plate,
+        pc::scatter_batch<Radial, Float64, Plate, false>(sky, det, f, fd, first, offset, count, l, values[i], &plate,
                                                        [&](std::size_t c, std::int64_t q) { out.sums[c] += q; });
     });
   }

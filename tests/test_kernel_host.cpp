@@ -11,6 +11,7 @@
 #include <cmath>
 #include <random>
 #include <cstring>
+#include <limits>
 #include <numbers>
 #include <vector>
 
@@ -43,6 +44,8 @@ using uint = glm::uint;
 using std::abs;
 using std::floor;
 using std::sqrt;
+// GLSL's max(double, float): the float converts (the float64 interpolation's max(r2, 0.0f)).
+inline double max(double a, float b) { return glm::max(a, double(b)); }
 
 // The push constants as the kernel reads them: interface.h again, with the kernel's float64 type
 // (float-float: glm::vec2), filled with the bytes the host pushes.
@@ -397,7 +400,7 @@ TEST(KernelArithmetic, ChosenByTheDeviceOrAskedFor) {
     EXPECT_EQ(arithmetic_from(pisco::arithmetic_name(a)), a);
 }
 
-// One text for the maths (src/kernel/pixel.glsl, src/kernel/rings.glsl): every shared function, run through
+// One text for the maths (src/kernel/pixel.glsl, plate.glsl, rings.glsl): every shared function, run through
 // the GLSL-as-C++ build (glm's types, as the shaders see it) and through the C++ template build the
 // reference, the simd backend and the CUDA kernels use (float here, as on the devices), on random
 // inputs: the same bits.
@@ -508,6 +511,37 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
     const d::Vec4<float> vc = d::effective_weights(wc, colc[0], colc[1], colc[2], colc[3]);
     ASSERT_EQ(bits(vg.x), bits(vc.x));
     ASSERT_EQ(bits(vg.w), bits(vc.w));
+    {  // a plate at an angle (plate.glsl): M(theta)'s rows, and the monopole's weight behind it
+#if PISCO_FF
+      using PV = glm::vec4;
+      using PR = float;
+#else
+      using PV = glm::dvec4;
+      using PR = double;
+#endif
+      PV r[4], m[4];
+      d::Vec4<PR> rc[4], mc[4];
+      for (int i = 0; i < 4; ++i) {
+        r[i] = PV(u(rng), u(rng), u(rng), u(rng));
+        rc[i] = {r[i].x, r[i].y, r[i].z, r[i].w};
+      }
+      const PR c = std::cos(PR(2) * PR(th)), s = std::sin(PR(2) * PR(th));
+      glsl::plate_rows(r[0], r[1], r[2], r[3], c, s, m[0], m[1], m[2], m[3]);
+      d::plate_rows(rc[0], rc[1], rc[2], rc[3], c, s, mc[0], mc[1], mc[2], mc[3]);
+      // R(-theta) M0 R(theta) as a plain matrix product, in float64.
+      const double R[4][4] = {{1, 0, 0, 0}, {0, double(c), double(s), 0}, {0, -double(s), double(c), 0}, {0, 0, 0, 1}};
+      for (int i = 0; i < 4; ++i) {
+        const PR got[4] = {mc[i].x, mc[i].y, mc[i].z, mc[i].w};
+        for (int j = 0; j < 4; ++j) {
+          ASSERT_EQ(bits(m[i][j]), bits(got[j])) << "plate_rows, case " << t;
+          double want = 0;
+          for (int k = 0; k < 4; ++k)
+            for (int l = 0; l < 4; ++l) want += R[k][i] * double(r[k][l]) * R[l][j];
+          ASSERT_NEAR(double(got[j]), want, sizeof(PR) == 4 ? 1e-6 : 1e-15) << "plate_rows, case " << t;
+        }
+      }
+      ASSERT_EQ(bits(glsl::plate_monopole_weight(m[1], r[2])), bits(d::plate_monopole_weight(mc[1], rc[2])));
+    }
     float sg = u(rng), cg = 1e-8f * u(rng), sc = sg, cc = cg;
     const float value = 1e-3f * u(rng);
     glsl::kahan_add(sg, cg, value);
@@ -532,6 +566,27 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
         ASSERT_EQ(glsl::on_cap_boundary(p, north, south, count), d::on_cap_boundary(p, north, south, count));
   }
   std::cout << checked << " random cases, every value the same bits in both builds\n";
+}
+
+// The adjoints' fixed point (src/kernel/fixed_point.glsl, the vulkan and CUDA adjoints' text): round(v g)
+// to nearest, ties to even, as llrint in the default rounding mode; g^2 for the diagonal; zero
+// where the weight is zero.
+TEST(SharedMaths, FixedPointRoundsToNearestEven) {
+  namespace d = pisco::detail;
+  for (const auto& [v, want] : {std::pair{2.5, 2LL}, {3.5, 4LL}, {-2.5, -2LL}, {-3.5, -4LL}, {0.49999999999999994, 0LL},
+                                {4503599627370495.5, 4503599627370496LL}, {-1e18, -1000000000000000000LL}})
+    EXPECT_EQ(d::fixed_point(v, 1.0f), want) << v;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int t = 0; t < 100000; ++t) {
+    const double v = std::ldexp(u(rng), 40);
+    const float g = float(u(rng));
+    ASSERT_EQ(d::fixed_point(v, g), std::llrint(v * double(g)));
+    ASSERT_EQ(d::fixed_share(v, g, false), std::llrint(v * double(g)));
+    ASSERT_EQ(d::fixed_share(v, g, true), std::llrint(v * double(g * g)));
+  }
+  EXPECT_EQ(d::fixed_share(std::numeric_limits<double>::infinity(), 0.0f, false), 0);
+  EXPECT_EQ(d::fixed_share(std::numeric_limits<double>::quiet_NaN(), -0.0f, true), 0);
 }
 
 #if !PISCO_FF
@@ -574,6 +629,30 @@ TEST(SharedMaths, RingArithmeticGivesTheSameBitsInEveryBuild) {
     ASSERT_EQ(bits(glsl::ring_edge_x(z, z0, xa, cos_rho)), bits(x));
     ASSERT_EQ(bits(glsl::ring_edge_ysq(z, x)), bits(d::ring_edge_ysq(z, x)));
     ASSERT_EQ(bits(glsl::ring_bound(count, t % 2 == 1, phi)), bits(d::ring_bound(count, t % 2 == 1, phi)));
+    {  // a ring's pixels within dphi of phi, as index bounds and as ranges, in both builds; the ranges
+       // against the pixels taken one by one
+      const double phi0 = std::numbers::pi * (u(rng) + 1), dphi = 0.5 * std::numbers::pi * (u(rng) + 1);
+      const bool shifted = t % 2 == 1;
+      int lo, hi;
+      std::int64_t lo_c, hi_c;
+      glsl::ring_pixel_span(count, shifted, phi0, dphi, lo, hi);
+      d::ring_pixel_span(count, shifted, phi0, dphi, lo_c, hi_c);
+      ASSERT_TRUE(lo == lo_c && hi == hi_c) << "ring_pixel_span, case " << t;
+      const unsigned first = 1000u + unsigned(t);
+      unsigned b[4], l[4];
+      const int n = glsl::ring_pixel_ranges(first, count, lo, hi, b[0], l[0], b[1], l[1]);
+      ASSERT_EQ(d::ring_pixel_ranges(first, count, lo_c, hi_c, b[2], l[2], b[3], l[3]), n) << "case " << t;
+      for (int k = 0; k < 2; ++k) ASSERT_TRUE(b[k] == b[2 + k] && l[k] == l[2 + k]) << "ring_pixel_ranges, case " << t;
+      if (count <= 512) {
+        std::vector<unsigned> want, got;
+        for (int j = lo; j <= hi; ++j) want.push_back(first + unsigned(((j % int(count)) + int(count)) % int(count)));
+        for (int k = 0; k < n; ++k)
+          for (unsigned q = 0; q < l[k]; ++q) got.push_back(b[k] + q);
+        std::sort(want.begin(), want.end());
+        std::sort(got.begin(), got.end());
+        ASSERT_EQ(got, want) << "ring_pixel_ranges, case " << t << ": pixels " << lo << " ... " << hi << " of " << count;
+      }
+    }
 #if PISCO_TEST_CONTRACTED
     if (fused) {
       ASSERT_EQ(bits(contracted_rings::edge_x(z, z0, xa, cos_rho)), bits(x));

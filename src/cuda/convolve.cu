@@ -117,7 +117,7 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
 
 // The adjoint's scatter (sample.hpp, scatter_batch): one warp per sample, its value times each pixel's
 // adjoint weights added to the fixed-point maps with integer atomics.
-template <bool Radial, bool Exact, bool Plate, bool Squares>
+template <bool Radial, bool Float64, bool Plate, bool Squares>
 __global__ void __launch_bounds__(block_threads) scatter_kernel(KernelSky sky, KernelDetector det, AdjointArgs chunk) {
   const int warp = int(threadIdx.x) / warp_lanes;
   const int lane = int(threadIdx.x) % warp_lanes;
@@ -131,36 +131,36 @@ __global__ void __launch_bounds__(block_threads) scatter_kernel(KernelSky sky, K
       sky, det, chunk.pointing, chunk.quaternions, chunk.plate_angle, i, warp, lane,
       [&](const SampleFrame<float>& f, const SampleFrame<double>& fd, const std::uint32_t* first,
           const std::uint32_t* offset, int count, const PlateSample& plate) {
-        scatter_batch<Radial, Exact, Plate, Squares>(
+        scatter_batch<Radial, Float64, Plate, Squares>(
             sky, det, f, fd, first, offset, count, lane, value, &plate,
             [&](std::size_t k, std::int64_t q) { atomicAdd(sums + k, static_cast<unsigned long long>(q)); });
       });
   if (lane == 0) atomicAdd(chunk.pixels, static_cast<unsigned long long>(pixels));
 }
 
-template <bool Radial, bool Exact, bool Plate>
+template <bool Radial, bool Float64, bool Plate>
 void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool squares,
                     cudaStream_t stream) {
   const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
   if (squares)
-    scatter_kernel<Radial, Exact, Plate, true><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+    scatter_kernel<Radial, Float64, Plate, true><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
   else
-    scatter_kernel<Radial, Exact, Plate, false><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+    scatter_kernel<Radial, Float64, Plate, false><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
 }
 
-template <bool Radial, bool Exact>
+template <bool Radial, bool Float64>
 void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool plate, bool squares,
                     cudaStream_t stream) {
   if (plate)
-    launch_scatter<Radial, Exact, true>(sky, det, chunk, squares, stream);
+    launch_scatter<Radial, Float64, true>(sky, det, chunk, squares, stream);
   else
-    launch_scatter<Radial, Exact, false>(sky, det, chunk, squares, stream);
+    launch_scatter<Radial, Float64, false>(sky, det, chunk, squares, stream);
 }
 
 template <bool Radial>
-void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool exact, bool plate,
+void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool float64, bool plate,
                     bool squares, cudaStream_t stream) {
-  if (exact)
+  if (float64)
     launch_scatter<Radial, true>(sky, det, chunk, plate, squares, stream);
   else
     launch_scatter<Radial, false>(sky, det, chunk, plate, squares, stream);
@@ -216,13 +216,13 @@ void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkAr
   PISCO_CUDA_CHECK(cudaGetLastError());
 }
 
-void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool radial, bool exact,
+void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool radial, bool float64,
                     bool plate, bool squares, cudaStream_t stream) {
   if (chunk.count == 0) return;
   if (radial)
-    launch_scatter<true>(sky, det, chunk, exact, plate, squares, stream);
+    launch_scatter<true>(sky, det, chunk, float64, plate, squares, stream);
   else
-    launch_scatter<false>(sky, det, chunk, exact, plate, squares, stream);
+    launch_scatter<false>(sky, det, chunk, float64, plate, squares, stream);
   PISCO_CUDA_CHECK(cudaGetLastError());
 }
 

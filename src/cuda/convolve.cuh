@@ -42,8 +42,8 @@ void launch_convolve(const KernelSky& sky, const KernelDetector& det, const Chun
 // The adjoint's first pass with the per-sample normalization: each sample's norm into chunk.tod.
 void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial, bool plate,
                   cudaStream_t stream);
-// The adjoint's scatter; `exact` as the forward's float64 sums (beam coordinates from float64 vectors).
-void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool radial, bool exact,
+// The adjoint's scatter; `float64` as the forward's float64 sums (beam coordinates from float64 vectors).
+void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool radial, bool float64,
                     bool plate, bool squares, cudaStream_t stream);
 
 }  // namespace pisco::detail::cuda

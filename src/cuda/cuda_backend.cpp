@@ -26,7 +26,7 @@ namespace {
 
 struct DetectorData {
   DeviceArray<float> weights;
-  DeviceArray<double> exact;  // only where float64 sums are needed
+  DeviceArray<double> weights64;  // only on the float64 path
   DeviceArray<double> plate;  // aperture plates with float64 sums: (w_Q, w_U, w_V, 0) per node
   KernelDetector kernel;
 };
@@ -56,21 +56,20 @@ class CudaBackend final : public Backend {
     per_sample_ = in_->normalization == Normalization::per_sample;
     const double monopole = float32_monopole(maps);
     monopole_term_ = monopole != 0.0;
-    const bool exact = monopole_term_ || per_sample_;
 
     // Each host table lives only until its upload.
     const CapBoundary boundary = cap_boundary(maps.nside(), in_->quadrature);
     pixels_ = upload(pixel_records(maps, monopole, boundary));
-    if (exact) vectors_ = upload(pixel_vectors(maps));
+    if (float64()) vectors_ = upload(pixel_vectors(maps));
     rings_ = upload(sky.rings);
     sky_ = {pixels_.data(), vectors_.data(), rings_.data(), sky.nside, monopole, boundary};
 
     for (const PreparedDetector& d : in_->detectors) {
       DetectorData data;
       data.weights = upload(float_weights(d));
-      if (exact) data.exact = upload(exact_weights(d));
-      if (exact && d.plate == PreparedDetector::Plate::aperture) data.plate = upload(plate_weights(d));
-      data.kernel = kernel_detector(d, data.weights.data(), data.exact.data(), data.plate.data());
+      if (float64()) data.weights64 = upload(float64_weights(d));
+      if (float64() && d.plate == PreparedDetector::Plate::aperture) data.plate = upload(plate_weights(d));
+      data.kernel = kernel_detector(d, data.weights.data(), data.weights64.data(), data.plate.data());
       detectors_.push_back(std::move(data));
     }
 
@@ -249,7 +248,7 @@ class CudaBackend final : public Backend {
                                            cudaMemcpyHostToDevice, stream));
           const AdjointArgs args{s.dev_in.data(), chunk.quaternions, s.dev_in.data() + 4 * count, s.dev_values.data(),
                                  sums_.data(), s.dev_pixels.data(), std::uint32_t(count)};
-          launch_scatter(sky_, det.kernel, args, prepared.radial, monopole_term_ || per_sample_, plate, squares, stream);
+          launch_scatter(sky_, det.kernel, args, prepared.radial, float64(), plate, squares, stream);
         }
         PISCO_CUDA_CHECK(cudaMemcpyAsync(s.host_pixels.data(), s.dev_pixels.data(), sizeof(unsigned long long),
                                          cudaMemcpyDeviceToHost, stream));
@@ -302,6 +301,8 @@ class CudaBackend final : public Backend {
   std::shared_ptr<const EngineInputs> in_;
   DeviceContext device_;
   bool per_sample_ = false, monopole_term_ = false;
+  // The float64 path: the monopole's weight or the per-sample normalization summed in float64.
+  bool float64() const { return monopole_term_ || per_sample_; }
   DeviceArray<PixelRecord> pixels_;
   DeviceArray<double> vectors_;
   DeviceArray<RingEntry> rings_;

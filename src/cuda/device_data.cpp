@@ -52,7 +52,7 @@ std::vector<double> pixel_vectors(const SkyView& sky) { return pixel_vectors(sky
 
 std::vector<float> float_weights(const PreparedDetector& det) { return float32_weights(det); }
 
-std::vector<double> exact_weights(const PreparedDetector& det) {
+std::vector<double> float64_weights(const PreparedDetector& det) {
   const std::size_t nodes = det.weights.size() / 4;
   std::vector<double> out(nodes * 4, 0.0);
   for (std::size_t k = 0; k < nodes; ++k) {
@@ -70,16 +70,16 @@ std::vector<double> plate_weights(const PreparedDetector& det) {
   return out;
 }
 
-KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* exact,
+KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* weights64,
                                const double* plate) {
   // The kernel reads each node's weights with 16-byte loads (contribution-inl.hpp, weight_pair).
-  for (const void* table : {static_cast<const void*>(weights), static_cast<const void*>(exact),
+  for (const void* table : {static_cast<const void*>(weights), static_cast<const void*>(weights64),
                             static_cast<const void*>(plate)})
     if (reinterpret_cast<std::uintptr_t>(table) % 16 != 0)
       throw Error("cuda backend: a detector's weight table is not 16-byte aligned");
   KernelDetector k{};
   k.weights = weights;
-  k.exact_weights = exact;
+  k.weights64 = weights64;
   k.plate_weights = plate;
   for (int i = 0; i < 4; ++i)
     for (int j = 0; j < 4; ++j) k.plate_mueller[4 * i + j] = det.plate_mueller[i][j];

@@ -29,13 +29,13 @@ std::vector<float> float_weights(const PreparedDetector& det);
 
 // (w_I, wn, 0, 0) per node in double: the I weight and the per-sample normalization weight (zero
 // unless the inputs were prepared for per-sample normalization).
-std::vector<double> exact_weights(const PreparedDetector& det);
+std::vector<double> float64_weights(const PreparedDetector& det);
 
 // Aperture plates: (w_Q, w_U, w_V, 0) per node in double, for the monopole's float64 sum.
 std::vector<double> plate_weights(const PreparedDetector& det);
 
 // The kernel's view of a detector, given its uploaded weights.
-KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* exact,
+KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* weights64,
                                const double* plate = nullptr);
 
 }  // namespace pisco::detail::cuda

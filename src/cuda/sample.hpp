@@ -54,7 +54,7 @@ struct KernelSky {
 
 struct KernelDetector {
   const float* weights;         // w per node, 4 floats (reference layout, converted)
-  const double* exact_weights;  // (w_I, wn, 0, 0) per node in double; only for the float64 sums
+  const double* weights64;      // (w_I, wn, 0, 0) per node in double; only on the float64 path
   const double* plate_weights;  // aperture plates: (w_Q, w_U, w_V, 0) per node in double, for the float64 sums
   int grid_n;
   float grid_a, grid_inv_step;
@@ -69,15 +69,21 @@ struct KernelDetector {
 // weights, and its column 0 in float64 for the monopole's weight sum_a w_a M_a0.
 struct PlateSample {
   Vec4<float> columns[4];  // M(theta) by columns, the form effective_weights takes
-  double col0[4];
+  Vec4<double> col0;
 };
 
 PISCO_HD PlateSample plate_sample(const KernelDetector& det, double theta) {
-  double m[16];
-  plate_at(det.plate_mueller, cos(2.0 * theta), sin(2.0 * theta), m);
+  const double* m0 = det.plate_mueller;
+  Vec4<double> m[4];
+  plate_rows(Vec4<double>{m0[0], m0[1], m0[2], m0[3]}, Vec4<double>{m0[4], m0[5], m0[6], m0[7]},
+             Vec4<double>{m0[8], m0[9], m0[10], m0[11]}, Vec4<double>{m0[12], m0[13], m0[14], m0[15]},
+             cos(2.0 * theta), sin(2.0 * theta), m[0], m[1], m[2], m[3]);
   PlateSample p;
-  for (int c = 0; c < 4; ++c) p.columns[c] = {float(m[c]), float(m[4 + c]), float(m[8 + c]), float(m[12 + c])};
-  for (int a = 0; a < 4; ++a) p.col0[a] = m[4 * a];
+  p.columns[0] = {float(m[0].x), float(m[1].x), float(m[2].x), float(m[3].x)};
+  p.columns[1] = {float(m[0].y), float(m[1].y), float(m[2].y), float(m[3].y)};
+  p.columns[2] = {float(m[0].z), float(m[1].z), float(m[2].z), float(m[3].z)};
+  p.columns[3] = {float(m[0].w), float(m[1].w), float(m[2].w), float(m[3].w)};
+  p.col0 = {m[0].x, m[1].x, m[2].x, m[3].x};
   return p;
 }
 
@@ -116,20 +122,19 @@ PISCO_HD std::uint32_t batch_pixel(const std::uint32_t* first, const std::uint32
 }
 
 // Pixel p's float32 geometry g and weights w, w M(theta) behind an aperture plate (kernel/plate.hpp).
-// With Exact, the beam coordinates come from the float64 pixel vectors, which float32 pixel vectors
+// On the float64 path (Float64), the beam coordinates come from the float64 pixel vectors, which float32 pixel vectors
 // would carry only to ~1e-7 (the largest float32 error otherwise, on steep beams); they are returned
 // in x, y for the float64 sums.
-template <bool Radial, bool Exact, bool Plate>
+template <bool Radial, bool Float64, bool Plate>
 PISCO_HD Vec4<float> pixel_weights(const KernelSky& sky, const ArrayGrid<float>& grid, const SampleFrame<float>& f,
                                    const SampleFrame<double>& fd, std::uint32_t p, const PixelRecord& px,
                                    const PlateSample* plate, PixelGeometry<float>& g, double& x, double& y) {
   const Vec3<float> k{px.kx, px.ky, px.kz};
   g = pixel_geometry(f, k);
-  if constexpr (Exact) {
+  if constexpr (Float64) {
     const double* kv = sky.vectors + 4 * std::size_t(p);
     const Vec3<double> kd{kv[0], kv[1], kv[2]};
-    x = dot(kd, fd.theta_p);
-    y = dot(kd, fd.phi_p);
+    beam_coordinates(kd, fd.theta_p, fd.phi_p, x, y);
     g.x = float(x);
     g.y = float(y);
   }
@@ -138,16 +143,18 @@ PISCO_HD Vec4<float> pixel_weights(const KernelSky& sky, const ArrayGrid<float>&
   return w;
 }
 
-// The pixels of one batch that fall to `lane`: positions lane, lane + 32, ... of the batch.
+// The pixels of one batch that fall to `lane`: positions lane, lane + 32, ... of the batch. The
+// float64 path (Float64) is taken for the monopole's weight and for the per-sample normalization.
 template <bool Radial, bool Monopole, bool PerSample, bool Plate = false>
 PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
                             const SampleFrame<double>& fd, const std::uint32_t* first,
                             const std::uint32_t* offset, int count, int lane, LaneSums& acc,
                             const PlateSample* plate = nullptr) {
+  constexpr bool Float64 = Monopole || PerSample;
   const std::uint32_t total = offset[count];
   const ArrayGrid<float> grid{det.weights, det.grid_n, det.grid_a, det.grid_inv_step};
-  const ArrayGrid<double> exact{det.exact_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
-  const ArrayGrid<double> plate_exact{det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
+  const ArrayGrid<double> weights64{det.weights64, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
+  const ArrayGrid<double> plate64{det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
   int r = 0;
   for (std::uint32_t j = std::uint32_t(lane); j < total; j += warp_lanes) {
     const std::uint32_t p = batch_pixel(first, offset, j, r);
@@ -155,18 +162,18 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
     const Vec4<float> S{px.i, px.q, px.u, px.v};
     PixelGeometry<float> g;
     double x = 0.0, y = 0.0;
-    const Vec4<float> w = pixel_weights<Radial, Monopole || PerSample, Plate>(sky, grid, f, fd, p, px, plate, g, x, y);
+    const Vec4<float> w = pixel_weights<Radial, Float64, Plate>(sky, grid, f, fd, p, px, plate, g, x, y);
     kahan_add(acc, stokes_response(w, g.cos2chi, g.sin2chi, S));
-    if constexpr (Monopole || PerSample) {
-      const Vec4<double> we = Radial ? interpolate_radial(exact, x * x + y * y) : interpolate_weights(exact, x, y);
+    if constexpr (Float64) {
+      const Vec4<double> we =
+          Radial ? interpolate_radial(weights64, x * x + y * y) : interpolate_weights(weights64, x, y);
       if constexpr (Monopole) {
         const double ring = sky.boundary.at(p);
         if constexpr (Plate) {
           // (w_Q, w_U, w_V, 0)
           const Vec4<double> wp =
-              Radial ? interpolate_radial(plate_exact, x * x + y * y) : interpolate_weights(plate_exact, x, y);
-          acc.monopole += ring * (we.x * plate->col0[0] + wp.x * plate->col0[1] + wp.y * plate->col0[2] +
-                                  wp.z * plate->col0[3]);
+              Radial ? interpolate_radial(plate64, x * x + y * y) : interpolate_weights(plate64, x, y);
+          acc.monopole += ring * plate_monopole_weight(Vec4<double>{we.x, wp.x, wp.y, wp.z}, plate->col0);
         } else {
           acc.monopole += ring * we.x;
         }
@@ -176,22 +183,12 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
   }
 }
 
-// The adjoint's contribution round(v g) as a 64-bit integer (gpu/fixed_point.hpp): v carries the
-// batch's scale. Round to nearest even on the device and on the host alike.
-PISCO_HD std::int64_t fixed_point(double v, float g) {
-#if defined(__CUDA_ARCH__)
-  return __double2ll_rn(v * double(g));
-#else
-  return std::llrint(v * double(g));
-#endif
-}
-
 // The adjoint (docs/cuda.md, "The adjoint"): the pixels of one batch that fall to `lane`, each adding
 // round(v g_c) for its Stokes components c, g = stokes_adjoint(w, chi) (g_c^2 with Squares, the diagonal
-// of A^T A), through add(4 p + c, q): an integer atomic on the device, so that the sums are the same
-// bits whatever the order of the warps. The geometry and weights are the forward's (Exact as the
-// forward's Monopole || PerSample).
-template <bool Radial, bool Exact, bool Plate, bool Squares, class Add>
+// of A^T A; kernel/fixed_point.glsl's fixed_share), through add(4 p + c, q): an integer atomic on the
+// device, so that the sums are the same bits whatever the order of the warps. The geometry and weights
+// are the forward's (Float64 as the forward's).
+template <bool Radial, bool Float64, bool Plate, bool Squares, class Add>
 PISCO_HD void scatter_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
                             const SampleFrame<double>& fd, const std::uint32_t* first, const std::uint32_t* offset,
                             int count, int lane, double value, const PlateSample* plate, Add&& add) {
@@ -202,14 +199,11 @@ PISCO_HD void scatter_batch(const KernelSky& sky, const KernelDetector& det, con
     const std::uint32_t p = batch_pixel(first, offset, j, r);
     PixelGeometry<float> g;
     double x = 0.0, y = 0.0;
-    const Vec4<float> w = pixel_weights<Radial, Exact, Plate>(sky, grid, f, fd, p, sky.pixels[p], plate, g, x, y);
+    const Vec4<float> w = pixel_weights<Radial, Float64, Plate>(sky, grid, f, fd, p, sky.pixels[p], plate, g, x, y);
     const Vec4<float> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
     const float gs[4] = {a.x, a.y, a.z, a.w};
-    for (int c = 0; c < 4; ++c) {
-      const float gc = Squares ? gs[c] * gs[c] : gs[c];
-      if (gc == 0.0f) continue;
-      if (const std::int64_t q = fixed_point(value, gc)) add(4 * std::size_t(p) + std::size_t(c), q);
-    }
+    for (int c = 0; c < 4; ++c)
+      if (const std::int64_t q = fixed_share(value, gs[c], Squares)) add(4 * std::size_t(p) + std::size_t(c), q);
   }
 }
 

@@ -3,8 +3,9 @@
 // contribution.hpp includes it into pisco::detail for the float64 reference and the CUDA kernels, and
 // the simd backend (src/simd/simd_kernel.cpp) includes it again into each of its Highway target
 // namespaces, where T is a vector of float32 lanes. Here: what GLSL has built in and C++ has not
-// (vectors, dot, max, the scalar hooks of the interpolation), the macros that make pixel.glsl's
-// functions templates of the number type T, and the host-only frame builder make_frame.
+// (vectors, dot, max, roundEven, the scalar hooks of the interpolation), the macros that make the
+// functions of pixel.glsl, plate.glsl and fixed_point.glsl templates of the number type T, and the
+// host-only frame builder make_frame.
 
 template <class T>
 struct Vec3 {
@@ -35,6 +36,10 @@ template <class T>
 PISCO_HD Vec4<T> operator-(const Vec4<T>& a, const Vec4<T>& b) {
   return {a.x - b.x, a.y - b.y, a.z - b.z, a.w - b.w};
 }
+
+// GLSL's roundEven for the adjoint's fixed point (fixed_point.glsl): to nearest, ties to even, in the
+// default rounding mode, on the host and on a CUDA device alike.
+PISCO_HD double roundEven(double x) { return ::rint(x); }
 
 // sqrt of the argument's own precision, as GLSL's (and CUDA's device overloads): unqualified, a float
 // would otherwise find the C library's sqrt(double) on the host.
@@ -119,10 +124,12 @@ PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& e
 #pragma push_macro("PISCO_OUT")
 #pragma push_macro("PISCO_INOUT")
 #pragma push_macro("PISCO_PRECISE")
+#pragma push_macro("PISCO_F64")
 #undef PISCO_FN
 #undef PISCO_OUT
 #undef PISCO_INOUT
 #undef PISCO_PRECISE
+#undef PISCO_F64
 #define PISCO_TEMPLATE_TEXT 1
 #define PISCO_FN PISCO_HD
 #define PISCO_OUT(T) T&
@@ -141,8 +148,16 @@ PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& e
 #define PISCO_GEOMETRY PixelGeometry<T>
 #define PISCO_VEC3(a, b, c) \
   Vec3<T> { a, b, c }
+#define PISCO_PLATE_TEMPLATE template <class T>
+#define PISCO_PLATE_REAL T
+#define PISCO_PLATE_V4 Vec4<T>
+#define PISCO_PLATE_VEC4(a, b, c, d) \
+  Vec4<T> { a, b, c, d }
+#define PISCO_F64 double
 using uint = unsigned int;
 #include "kernel/pixel.glsl"
+#include "kernel/plate.glsl"
+#include "kernel/fixed_point.glsl"
 #undef PISCO_TEMPLATE_TEXT
 #undef PISCO_TEMPLATE
 #undef PISCO_TEMPLATE_GRID
@@ -156,6 +171,11 @@ using uint = unsigned int;
 #undef PISCO_FRAME
 #undef PISCO_GEOMETRY
 #undef PISCO_VEC3
+#undef PISCO_PLATE_TEMPLATE
+#undef PISCO_PLATE_REAL
+#undef PISCO_PLATE_V4
+#undef PISCO_PLATE_VEC4
+#pragma pop_macro("PISCO_F64")
 #pragma pop_macro("PISCO_FN")
 #pragma pop_macro("PISCO_OUT")
 #pragma pop_macro("PISCO_INOUT")

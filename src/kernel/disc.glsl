@@ -1,6 +1,6 @@
 // Disc selection from the ring table (docs/physics.md, "Disc selection"). In float64: src/kernel/disc.hpp's
-// walk, with the ring arithmetic of rings.glsl, the reference's own text (every product that feeds an
-// addition rounded by itself, mul_rn). Without float64 (PISCO_FF): each ring's range estimated in float32 and its ends settled
+// walk, its disc's rings, ring crossings and pixel ranges the reference's own text, rings.glsl (every
+// product that feeds an addition rounded by itself, mul_rn). Without float64 (PISCO_FF): each ring's range estimated in float32 and its ends settled
 // by testing the pixels there in float-float (k . p' >= cos rho_max), which selects the same pixels
 // unless one lies within about 1e-14 of the disc's edge. Each ring gives at most two contiguous pixel
 // ranges. Written in the common subset of GLSL and C++ (tests/test_kernel_host.cpp runs it as C++);
@@ -47,17 +47,10 @@ const double PISCO_PI = 3.141592653589793238462643383279502884lf;
 // outside [irmin, irmax] lie whole inside it (the polar caps).
 PISCO_FN void disc_rings(int nside, double theta, double rho_max, PISCO_OUT(int) first, PISCO_OUT(int) last,
                          PISCO_OUT(int) irmin, PISCO_OUT(int) irmax) {
-  const int nrings = 4 * nside - 1;
-  const double rlat1 = theta - rho_max;
-  irmin = ring_above(nside, pisco_cos(rlat1)) + 1;
-  const bool north_cap = rlat1 <= 0.0lf && irmin > 1;  // every ring north of irmin entirely
-  const double rlat2 = theta + rho_max;
-  irmax = ring_above(nside, pisco_cos(rlat2));
-  if (irmax > nrings) irmax = nrings;
-  if (irmin < 1) irmin = 1;
-  const bool south_cap = rlat2 >= PISCO_PI && irmax + 1 < 4 * nside;  // every ring south of irmax
+  bool north_cap, south_cap;  // every ring north of irmin (south of irmax) entirely
+  disc_ring_span(nside, theta, rho_max, irmin, irmax, north_cap, south_cap);
   first = north_cap ? 1 : irmin;
-  last = south_cap ? nrings : irmax;
+  last = south_cap ? 4 * nside - 1 : irmax;
 }
 
 // The pixel ranges of ring `ring` inside the disc of cos_rho around (z0, phi0), xa = 1 / sin(theta0):
@@ -68,23 +61,11 @@ PISCO_FN void ring_ranges(RingEntry ring, double z0, double xa, double phi0, dou
   const double x = ring_edge_x(ring.z, z0, xa, cos_rho);
   const double ysq = ring_edge_ysq(ring.z, x);
   if (ysq <= 0.0lf) return;
-  const double dphi = pisco_atan2_nonneg_y(sqrt(ysq), x);
+  const double dphi = ring_half_width(x, ysq);
   if (!(dphi > 0.0lf)) return;
-  const int nr = int(ring.count);
-  const uint first = ring.first;
-  int ip_lo = int(floor(ring_bound(ring.count, ring.shifted, phi0 - dphi))) + 1;
-  int ip_hi = int(floor(ring_bound(ring.count, ring.shifted, phi0 + dphi)));
-  if (ip_lo > ip_hi) return;
-  if (ip_hi >= nr) {
-    ip_lo -= nr;
-    ip_hi -= nr;
-  }
-  if (ip_lo < 0) {
-    b0 = first; l0 = uint(ip_hi + 1);
-    b1 = first + uint(ip_lo + nr); l1 = uint(-ip_lo);
-  } else {
-    b0 = first + uint(ip_lo); l0 = uint(ip_hi - ip_lo + 1);
-  }
+  int lo, hi;
+  ring_pixel_span(ring.count, ring.shifted, phi0, dphi, lo, hi);
+  ring_pixel_ranges(ring.first, ring.count, lo, hi, b0, l0, b1, l1);
 }
 
 #else  // PISCO_FF

@@ -1,8 +1,8 @@
 // Disc selection from a ring table (docs/physics.md, "Disc selection"): the RING pixels whose centres lie within rho of a
 // pointing, the same set as HEALPix C++ query_disc(..., inclusive = false), produced as one or two
-// contiguous index ranges per ring crossing the disc. Written once for the reference and the CUDA
-// kernels; src/kernel/disc.glsl walks the disc the same way, and the ring arithmetic itself is one text
-// for both, src/kernel/rings.glsl. Double precision throughout: the result must be exact. Every product
+// contiguous index ranges per ring crossing the disc. The reference's, the simd and the CUDA kernels'
+// walk; its arithmetic (the disc's rings, each ring's crossing and pixel ranges) is one text with the
+// shaders' float64 walk (src/kernel/disc.glsl), src/kernel/rings.glsl. Double precision throughout: the result must be exact. Every product
 // that feeds an addition is mul_rn (kernel/hd.hpp), rounded by itself on the device as on the host.
 #pragma once
 
@@ -43,18 +43,25 @@ PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
   return mul_rn(double(r * r), fact2) - 1.0;
 }
 
-// The float64 ring arithmetic shared with the shaders (src/kernel/rings.glsl): ring_above, ring_edge_x,
-// ring_edge_ysq, ring_bound; mul_rn is kernel/hd.hpp's.
+// The float64 ring arithmetic and disc walk shared with the shaders (src/kernel/rings.glsl): ring_above,
+// ring_edge_x, ring_edge_ysq, ring_bound, disc_ring_span, ring_half_width, ring_pixel_span and
+// ring_pixel_ranges; mul_rn is kernel/hd.hpp's, and the trigonometry GLSL lacks the C library's.
 constexpr double PISCO_PI = 3.141592653589793238462643383279502884;
+PISCO_HD double pisco_cos(double x) { return cos(x); }
+PISCO_HD double pisco_atan2_nonneg_y(double y, double x) { return atan2(y, x); }
 #pragma push_macro("PISCO_FN")
+#pragma push_macro("PISCO_OUT")
 #undef PISCO_FN
+#undef PISCO_OUT
 #define PISCO_TEMPLATE_TEXT 1
 #define PISCO_FN PISCO_HD
+#define PISCO_OUT(T) T&
 #define PISCO_RING_INT std::int64_t
 using uint = unsigned int;
 #include "kernel/rings.glsl"
 #undef PISCO_RING_INT
 #undef PISCO_TEMPLATE_TEXT
+#pragma pop_macro("PISCO_OUT")
 #pragma pop_macro("PISCO_FN")
 
 // The table for all 4 nside - 1 rings; entry r - 1 describes ring r.
@@ -69,19 +76,10 @@ struct DiscRings {
 };
 
 PISCO_HD DiscRings disc_rings(std::int64_t nside, double theta0, double rho) {
-  const double pi = 3.141592653589793238462643383279502884;
-  const std::int64_t nrings = 4 * nside - 1;
   DiscRings d;
   d.z0 = cos(theta0);
   d.xa = 1.0 / sqrt((1.0 - d.z0) * (1.0 + d.z0));
-  const double rlat1 = theta0 - rho;
-  d.first = ring_above(nside, cos(rlat1)) + 1;
-  d.north = rlat1 <= 0 && d.first > 1;
-  const double rlat2 = theta0 + rho;
-  d.last = ring_above(nside, cos(rlat2));
-  if (d.last > nrings) d.last = nrings;
-  if (d.first < 1) d.first = 1;
-  d.south = rlat2 >= pi && d.last + 1 < 4 * nside;
+  disc_ring_span(nside, theta0, rho, d.first, d.last, d.north, d.south);
   return d;
 }
 
@@ -93,41 +91,29 @@ PISCO_HD void ring_edge(const RingEntry& r, const DiscRings& d, double cos_rho, 
   ysq = ring_edge_ysq(r.z, x);
 }
 
-// A ring's pixels per radian of longitude, and the offset of its pixel centres in pixels: ring_bound's
-// factors, for the simd disc walk's estimate (src/simd/simd_disc.cpp), which ring_bound settles.
-PISCO_HD double ring_pixels_per_radian(const RingEntry& r) { return double(r.count) * (0.5 / PISCO_PI); }
-PISCO_HD double ring_shift(const RingEntry& r) { return r.shifted ? 0.5 : 0.0; }
-
-// The argument whose floor is a bound of the ring's pixel indices: floor(arg(phi0 - dphi)) + 1 is the
-// first pixel, floor(arg(phi0 + dphi)) the last.
-PISCO_HD double ring_bound_arg(const RingEntry& r, double phi) { return ring_bound(r.count, r.shifted != 0, phi); }
+// ring_bound's factors for a ring of the table (the simd disc walk's estimate, src/simd/simd_disc.cpp).
+PISCO_HD double ring_pixels_per_radian(const RingEntry& r) { return ring_pixels_per_radian(uint(r.count)); }
+PISCO_HD double ring_shift(const RingEntry& r) { return ring_shift(r.shifted != 0); }
 
 // Emits ring r's pixels first ... last, indices taken modulo the ring (one range, or two where they
-// wrap through phi = 0); none when first > last.
+// wrap through phi = 0: ring_pixel_ranges); none when first > last.
 template <class Emit>
 PISCO_HD void emit_ring_pixels(const RingEntry& r, std::int64_t ip_lo, std::int64_t ip_hi, Emit&& emit) {
-  const std::int64_t nr = r.count;
-  if (ip_lo > ip_hi) return;
-  if (ip_hi >= nr) {
-    ip_lo -= nr;
-    ip_hi -= nr;
-  }
-  if (ip_lo < 0) {
-    emit(r.first, std::uint32_t(r.first + ip_hi + 1));
-    emit(std::uint32_t(r.first + ip_lo + nr), r.first + r.count);
-  } else {
-    emit(std::uint32_t(r.first + ip_lo), std::uint32_t(r.first + ip_hi + 1));
-  }
+  uint b0, l0, b1, l1;
+  const int ranges = ring_pixel_ranges(r.first, r.count, ip_lo, ip_hi, b0, l0, b1, l1);
+  if (ranges > 0) emit(std::uint32_t(b0), std::uint32_t(b0 + l0));
+  if (ranges > 1) emit(std::uint32_t(b1), std::uint32_t(b1 + l1));
 }
 
 // Emits the pixels of ring r within dphi = atan2(sqrt(ysq), x) of phi0 (ring_edge's x and ysq > 0),
 // with the C library's arctangent.
 template <class Emit>
 PISCO_HD void emit_ring_crossing(const RingEntry& r, double phi0, double x, double ysq, Emit&& emit) {
-  const double dphi = atan2(sqrt(ysq), x);
+  const double dphi = ring_half_width(x, ysq);
   if (!(dphi > 0)) return;
-  emit_ring_pixels(r, std::int64_t(floor(ring_bound_arg(r, phi0 - dphi))) + 1,
-                   std::int64_t(floor(ring_bound_arg(r, phi0 + dphi))), emit);
+  std::int64_t lo, hi;
+  ring_pixel_span(r.count, r.shifted != 0, phi0, dphi, lo, hi);
+  emit_ring_pixels(r, lo, hi, emit);
 }
 
 // The polar caps of a disc that holds a pole: every ring north of d.first (south of d.last) whole.

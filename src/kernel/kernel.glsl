@@ -17,6 +17,7 @@
 #include "contribution.glsl"
 #include "disc.glsl"
 #include "frame.glsl"
+#include "plate.glsl"
 #if PISCO_ADJOINT
 #include "scatter.glsl"
 #endif
@@ -38,6 +39,7 @@ struct Sample {
 #else
   dvec3 theta_p, phi_p;
   dvec4 m0;
+  Grid64 g64;  // the float64 weights, part 0
 #endif
 #if PISCO_ADJOINT
   PISCO_F64 value;  // the scaled value the sample scatters (scatter.glsl)
@@ -58,17 +60,8 @@ PISCO_FN Grid sample_grid() {
   return g;
 }
 
-// M(theta) = R(-theta) M0 R(theta) in float32 from M0's rows and c = cos 2 theta, s = sin 2 theta;
-// R(theta) has rows (1,0,0,0), (0,c,s,0), (0,-s,c,0), (0,0,0,1).
-PISCO_FN mat4 plate_matrix(vec4 r0, vec4 r1, vec4 r2, vec4 r3, float c, float s) {
-  const mat4 m0 = transpose(mat4(r0, r1, r2, r3));  // m0[j][i] = (M0)_ij
-  mat4 rot = mat4(1.0f);                            // rot[j][i] = R(theta)_ij
-  rot[1][1] = c;
-  rot[2][1] = s;
-  rot[1][2] = -s;
-  rot[2][2] = c;
-  return transpose(rot) * m0 * rot;
-}
+// M(theta) by columns in float32 (w * m = w M, effective_weights) from its rows (plate.glsl's plate_rows).
+PISCO_FN mat4 plate_matrix(vec4 m0, vec4 m1, vec4 m2, vec4 m3) { return transpose(mat4(m0, m1, m2, m3)); }
 
 // Whether pixel p lies on ring NSIDE or 3 NSIDE, where the polar caps meet the belt: the monopole's
 // weight sum counts it with pc.ring_weight (src/core/poles.hpp).
@@ -102,8 +95,7 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
     if (FLOAT64) {
       const vec4 lo = uintBitsToFloat(texelFetch(sky_lo, int(t)));
       const dvec3 k64 = dvec3(k) + dvec3(lo.x, lo.y, lo.z);
-      x64 = dot(k64, smp.theta_p);
-      y64 = dot(k64, smp.phi_p);
+      beam_coordinates(k64, smp.theta_p, smp.phi_p, x64, y64);
       g.x = float(x64);
       g.y = float(y64);
     }
@@ -118,9 +110,9 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
     kahan_add(acc.sum, acc.comp, stokes_response(w, g.cos2chi, g.sin2chi, vec4(a.w, b.x, b.y, b.z)));
     if (FLOAT64) {
 #endif
-      const Stencil64 st = stencil64(smp.g, x64, y64);
       const bool ring = cap_boundary_pixel(p);
 #if PISCO_FF
+      const Stencil64 st = stencil64(smp.g, x64, y64);
       for (int q = 0; q < st.m; ++q) {
         if (PLATE) {
           vec2 wi, wq, wu, wv, wn;
@@ -139,21 +131,18 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
         }
       }
 #else
+      // The float64 weights at the pixel (interpolate.glsl in float64): (w_I, wn), and behind a plate
+      // (w_Q, w_U, w_V), for the monopole's weight sum_a w_a M_a0 (plate.glsl).
+      Grid64 g64 = smp.g64;
+      const dvec4 we = RADIAL ? interpolate_radial(g64, x64 * x64 + y64 * y64) : interpolate_weights(g64, x64, y64);
+      double s0 = we.x;
       if (PLATE) {
-        dvec4 w64 = dvec4(0.0lf);
-        double n64 = 0.0lf;
-        for (int q = 0; q < st.m; ++q) {
-          w64 += st.c[q] * plate_weight64(st.k[q]);
-          n64 += st.c[q] * plate_norm_at(st.k[q]);
-        }
-        acc.s0 += ring ? pc.ring_weight * dot(w64, smp.m0) : dot(w64, smp.m0);
-        acc.n0 += n64;
-      } else {
-        dvec2 w64 = dvec2(0.0lf);
-        for (int q = 0; q < st.m; ++q) w64 += st.c[q] * weight64(st.k[q]);
-        acc.s0 += ring ? pc.ring_weight * w64.x : w64.x;
-        acc.n0 += w64.y;
+        g64.part = 1;
+        const dvec4 wp = RADIAL ? interpolate_radial(g64, x64 * x64 + y64 * y64) : interpolate_weights(g64, x64, y64);
+        s0 = plate_monopole_weight(dvec4(we.x, wp.x, wp.y, wp.z), smp.m0);
       }
+      acc.s0 += ring ? pc.ring_weight * s0 : s0;
+      acc.n0 += we.y;
 #endif
     }
   }
@@ -166,6 +155,13 @@ PISCO_FN void convolve_sample(uint sid, int part, PISCO_OUT(Sums) acc, PISCO_OUT
   count = 0u;
   Sample smp;
   smp.g = sample_grid();
+#if !PISCO_FF
+  smp.g64.offset = smp.g.offset64;
+  smp.g64.n = smp.g.n;
+  smp.g64.a = smp.g.a64;
+  smp.g64.inv_step = smp.g.inv_step64;
+  smp.g64.part = 0;
+#endif
   const int nside = int(pc.nside);
 #if PISCO_ADJOINT
   acc.s0 = PISCO_F64(0.0);
@@ -202,11 +198,12 @@ PISCO_FN void convolve_sample(uint sid, int part, PISCO_OUT(Sums) acc, PISCO_OUT
   if (PLATE) {
     const vec2 c = plate_angle[2u * sid], s = plate_angle[2u * sid + 1u];
     const uint o = pc.plate_offset64;
-    smp.m = plate_matrix(vec4(plate_entry(o, 0, 0).x, plate_entry(o, 0, 1).x, plate_entry(o, 0, 2).x, plate_entry(o, 0, 3).x),
-                         vec4(plate_entry(o, 1, 0).x, plate_entry(o, 1, 1).x, plate_entry(o, 1, 2).x, plate_entry(o, 1, 3).x),
-                         vec4(plate_entry(o, 2, 0).x, plate_entry(o, 2, 1).x, plate_entry(o, 2, 2).x, plate_entry(o, 2, 3).x),
-                         vec4(plate_entry(o, 3, 0).x, plate_entry(o, 3, 1).x, plate_entry(o, 3, 2).x, plate_entry(o, 3, 3).x),
-                         c.x, s.x);
+    // M(theta) in float32 from M0's leading parts; its column 0 in float-float.
+    vec4 r[4], m[4];
+    for (int i = 0; i < 4; ++i)
+      r[i] = vec4(plate_entry(o, i, 0).x, plate_entry(o, i, 1).x, plate_entry(o, i, 2).x, plate_entry(o, i, 3).x);
+    plate_rows(r[0], r[1], r[2], r[3], c.x, s.x, m[0], m[1], m[2], m[3]);
+    smp.m = plate_matrix(m[0], m[1], m[2], m[3]);
     const vec2 m10 = plate_entry(o, 1, 0), m20 = plate_entry(o, 2, 0);
     smp.m0[0] = plate_entry(o, 0, 0);
     smp.m0[1] = ff_sub(ff_mul(c, m10), ff_mul(s, m20));
@@ -241,16 +238,18 @@ PISCO_FN void convolve_sample(uint sid, int part, PISCO_OUT(Sums) acc, PISCO_OUT
   smp.f.theta_p = vec3(smp.theta_p);
   smp.f.phi_p = vec3(smp.phi_p);
   smp.f.p = vec3(p64);
-  // The plate's Mueller matrix at this sample's angle, in float64: M(theta) = R(-theta) M0 R(theta).
+  // The plate's Mueller matrix at this sample's angle, M(theta) = R(-theta) M0 R(theta), in float64
+  // (plate.glsl), and in float32 for the pixels' effective weights.
   smp.m = mat4(1.0f);
   smp.m0 = dvec4(1.0lf, 0.0lf, 0.0lf, 0.0lf);
   if (PLATE) {
     const double th = plate_angle[sid];
     const double c = pisco_cos(2.0lf * th), s = pisco_sin(2.0lf * th);
     const uint o = pc.plate_offset64;
-    const dvec4 r0 = plate_row(o, 0), r1 = plate_row(o, 1), r2 = plate_row(o, 2), r3 = plate_row(o, 3);
-    smp.m = plate_matrix(vec4(r0), vec4(r1), vec4(r2), vec4(r3), float(c), float(s));
-    smp.m0 = dvec4(r0.x, c * r1.x - s * r2.x, s * r1.x + c * r2.x, r3.x);
+    dvec4 m0, m1, m2, m3;
+    plate_rows(plate_row(o, 0), plate_row(o, 1), plate_row(o, 2), plate_row(o, 3), c, s, m0, m1, m2, m3);
+    smp.m = plate_matrix(vec4(m0), vec4(m1), vec4(m2), vec4(m3));
+    smp.m0 = dvec4(m0.x, m1.x, m2.x, m3.x);
   }
   smp.f.e_c = pc.cos_zeta * smp.f.theta_p + pc.sin_zeta * smp.f.phi_p;
   // The disc: for_each_disc_range of src/kernel/disc.hpp, with the polar caps as whole rings.

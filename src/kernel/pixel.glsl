@@ -118,48 +118,7 @@ PISCO_FN PISCO_GEOMETRY pixel_geometry(PISCO_IN(PISCO_FRAME) f, PISCO_IN(PISCO_V
   return g;
 }
 
-// Interpolation of the 4 weights on the n x n grid at x_i = -a + i * step (x fastest): bilinear less
-// the curvature terms of the cell's edges (src/kernel/grid_curvature.hpp), which leave an error of
-// order step^3 instead of step^2 (docs/physics.md, "Interpolation on the grid"); zero outside the grid.
-PISCO_TEMPLATE_GRID
-PISCO_FN PISCO_V4 interpolate_weights(PISCO_IN(PISCO_GRID) g, PISCO_REAL x, PISCO_REAL y) {
-  const PISCO_REAL u = (x + g.a) * g.inv_step;
-  const PISCO_REAL v = (y + g.a) * g.inv_step;
-  const PISCO_REAL last = PISCO_REAL(g.n - 1);
-  const PISCO_MASK inside = u >= 0.0f && v >= 0.0f && u <= last && v <= last;
-  const PISCO_INDEX i = node_index(u, inside, g.n - 2);
-  const PISCO_INDEX j = node_index(v, inside, g.n - 2);
-  const PISCO_REAL fu = u - PISCO_REAL(i);
-  const PISCO_REAL fv = v - PISCO_REAL(j);
-  const PISCO_INDEX k00 = j * g.n + i;
-  // Then the curvature terms of the cell's edges (src/kernel/grid_curvature.hpp): ex of its lower and upper
-  // edges, ey of its left and right ones. Each pair is used as soon as it is read.
-  const PISCO_REAL gu = 1.0f - fu;
-  const PISCO_REAL gv = 1.0f - fv;
-  PISCO_V4 a, b;
-  weight_pair(g, k00, a, b);
-  PISCO_V4 w = (gu * gv) * a + (fu * gv) * b;
-  weight_pair(g, k00 + g.n, a, b);
-  w = w + (gu * fv) * a + (fu * fv) * b;
-  edge_x_pair(g, k00, i, j, a, b);
-  w = w - (fu * gu) * (gv * a + fv * b);
-  edge_y_pair(g, k00, a, b);
-  w = w - (fv * gv) * (gu * a + fu * b);
-  return select_weights(inside, w);
-}
-
-// Linear interpolation in r = sqrt(r2) of a radial profile at r = i * step, exactly invariant under
-// rotations about the beam axis; zero beyond the last node.
-PISCO_TEMPLATE_GRID
-PISCO_FN PISCO_V4 interpolate_radial(PISCO_IN(PISCO_GRID) g, PISCO_REAL r2) {
-  const PISCO_REAL u = sqrt(max(r2, 0.0f)) * g.inv_step;
-  const PISCO_MASK inside = u <= PISCO_REAL(g.n - 1);  // false for NaN
-  const PISCO_INDEX i = node_index(u, inside, g.n - 2);
-  const PISCO_REAL f = u - PISCO_REAL(i);
-  PISCO_V4 w0, w1;
-  weight_pair(g, i, w0, w1);
-  return select_weights(inside, (1.0f - f) * w0 + f * w1);
-}
+#include "interpolate.glsl"
 
 // w . Lambda(-chi) S, S = (I, Q, U, V): the detector-weighted Stokes response of one pixel.
 PISCO_TEMPLATE

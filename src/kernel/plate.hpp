@@ -1,7 +1,6 @@
-// A half-wave plate's Mueller matrix at an angle (docs/physics.md, "Half-wave plates"), written once
-// for the library (pisco::rotated_mueller), the float64 reference and the CUDA kernel;
-// src/kernel/kernel.glsl's plate_matrix computes the same product in float32 (and its column 0 in float64)
-// from the plate's rows.
+// A half-wave plate's Mueller matrix at an angle (docs/physics.md, "Half-wave plates"): plate.glsl's
+// plate_rows, the one text every backend runs, on row-major 4x4 arrays for the library
+// (pisco::rotated_mueller), the float64 reference and the simd and CUDA kernels.
 #pragma once
 
 #include <cmath>
@@ -11,22 +10,16 @@
 
 namespace pisco::detail {
 
-// out = R(-theta) m0 R(theta), all row-major 4x4, with c = cos 2 theta, s = sin 2 theta and R(theta)
-// rows (1,0,0,0), (0,c,s,0), (0,-s,c,0), (0,0,0,1).
+// out = R(-theta) m0 R(theta), both row-major 4x4, with c = cos 2 theta, s = sin 2 theta.
 PISCO_HD void plate_at(const double* m0, double c, double s, double* out) {
-  double mr[16];  // m0 R(theta): columns 1 and 2 mix
-  for (int i = 0; i < 4; ++i) {
-    const double* row = m0 + 4 * i;
-    mr[4 * i] = row[0];
-    mr[4 * i + 1] = c * row[1] - s * row[2];
-    mr[4 * i + 2] = s * row[1] + c * row[2];
-    mr[4 * i + 3] = row[3];
-  }
-  for (int j = 0; j < 4; ++j) {  // R(-theta) (m0 R): rows 1 and 2 mix
-    out[j] = mr[j];
-    out[4 + j] = c * mr[4 + j] - s * mr[8 + j];
-    out[8 + j] = s * mr[4 + j] + c * mr[8 + j];
-    out[12 + j] = mr[12 + j];
+  const auto row = [&](int r) { return Vec4<double>{m0[4 * r], m0[4 * r + 1], m0[4 * r + 2], m0[4 * r + 3]}; };
+  Vec4<double> m[4];
+  plate_rows(row(0), row(1), row(2), row(3), c, s, m[0], m[1], m[2], m[3]);
+  for (int r = 0; r < 4; ++r) {
+    out[4 * r] = m[r].x;
+    out[4 * r + 1] = m[r].y;
+    out[4 * r + 2] = m[r].z;
+    out[4 * r + 3] = m[r].w;
   }
 }
 

@@ -6,7 +6,9 @@
 // goes through mul_rn, rounded by itself: `precise` in GLSL, __dmul_rn on CUDA devices, and on the host
 // a product the compiler may not fuse (tests/test_kernel_host.cpp builds this file with contraction
 // on to prove that nothing here depends on -ffp-contract=off). No `lf` literal: doubles are written
-// double(n) or double(m.5f), exact in both languages. The includer defines PISCO_PI (float64).
+// double(n) or double(m.5f), exact in both languages. The includer defines PISCO_PI (float64) and the
+// float64 functions GLSL lacks: pisco_cos and pisco_atan2_nonneg_y (fp64.glsl in the shaders, the C
+// library's cos and atan2 in C++).
 #if defined(PISCO_TEMPLATE_TEXT) || !defined(PISCO_RINGS_GLSL)
 #ifndef PISCO_TEMPLATE_TEXT
 #define PISCO_RINGS_GLSL
@@ -40,10 +42,69 @@ PISCO_FN double ring_edge_ysq(double z, double x) { return double(1) - mul_rn(z,
 
 // The argument whose floor bounds a ring's pixel indices at longitude phi: floor(arg(phi0 - dphi)) + 1
 // is the first pixel inside, floor(arg(phi0 + dphi)) the last; a ring of `count` pixels whose centres
-// sit at phi = (j + 1/2) 2 pi / count when `shifted`.
+// sit at phi = (j + 1/2) 2 pi / count when `shifted`; its factors, the ring's pixels per radian and
+// the offset of its pixel centres in pixels, also serve the simd disc walk's estimate
+// (src/simd/simd_disc.cpp), which ring_bound settles.
+PISCO_FN double ring_pixels_per_radian(uint count) { return double(count) * (double(0.5f) / PISCO_PI); }
+PISCO_FN double ring_shift(bool shifted) { return shifted ? double(0.5f) : double(0); }
 PISCO_FN double ring_bound(uint count, bool shifted, double phi) {
-  const double pixels_per_radian = double(count) * (double(0.5f) / PISCO_PI);
-  return mul_rn(pixels_per_radian, phi) - (shifted ? double(0.5f) : double(0));
+  return mul_rn(ring_pixels_per_radian(count), phi) - ring_shift(shifted);
+}
+
+// The rings of the disc of radius rho around colatitude theta0, HEALPix query_disc's: first ... last
+// (1-based; first > last when none), and whether the disc holds the north (south) pole, in which case
+// every ring north of `first` (south of `last`) lies wholly inside it.
+PISCO_FN void disc_ring_span(PISCO_RING_INT nside, double theta0, double rho, PISCO_OUT(PISCO_RING_INT) first,
+                             PISCO_OUT(PISCO_RING_INT) last, PISCO_OUT(bool) north, PISCO_OUT(bool) south) {
+  const PISCO_RING_INT nrings = 4 * nside - 1;
+  const double rlat1 = theta0 - rho;
+  first = ring_above(nside, pisco_cos(rlat1)) + 1;
+  north = rlat1 <= double(0) && first > 1;
+  const double rlat2 = theta0 + rho;
+  last = ring_above(nside, pisco_cos(rlat2));
+  if (last > nrings) last = nrings;
+  if (first < 1) first = 1;
+  south = rlat2 >= PISCO_PI && last + 1 < 4 * nside;
+}
+
+// A ring's half-width in longitude within the disc, dphi = atan2(sqrt(ysq), x), from where it crosses
+// the disc's edge (ring_edge_x's x and ring_edge_ysq's ysq > 0); the ring has no pixel inside unless
+// dphi > 0.
+PISCO_FN double ring_half_width(double x, double ysq) { return pisco_atan2_nonneg_y(sqrt(ysq), x); }
+
+// The pixels of a ring (count, shifted) within dphi of phi0: indices lo ... hi, which may run past the
+// ring's ends (ring_pixel_ranges takes them modulo the ring).
+PISCO_FN void ring_pixel_span(uint count, bool shifted, double phi0, double dphi, PISCO_OUT(PISCO_RING_INT) lo,
+                              PISCO_OUT(PISCO_RING_INT) hi) {
+  lo = PISCO_RING_INT(floor(ring_bound(count, shifted, phi0 - dphi))) + 1;
+  hi = PISCO_RING_INT(floor(ring_bound(count, shifted, phi0 + dphi)));
+}
+
+// Pixels lo ... hi of the ring whose `count` pixels start at `first`, taken modulo the ring: the ranges
+// [b0, b0 + l0) and [b1, b1 + l1), one, or two where they wrap through phi = 0 (then [first, ...)
+// comes first). Returns how many (0 when lo > hi; lengths 0 where absent).
+PISCO_FN int ring_pixel_ranges(uint first, uint count, PISCO_RING_INT lo, PISCO_RING_INT hi, PISCO_OUT(uint) b0,
+                               PISCO_OUT(uint) l0, PISCO_OUT(uint) b1, PISCO_OUT(uint) l1) {
+  b0 = 0u;
+  l0 = 0u;
+  b1 = 0u;
+  l1 = 0u;
+  if (lo > hi) return 0;
+  const PISCO_RING_INT nr = PISCO_RING_INT(count);
+  if (hi >= nr) {
+    lo -= nr;
+    hi -= nr;
+  }
+  if (lo < 0) {
+    b0 = first;
+    l0 = uint(hi + 1);
+    b1 = first + uint(lo + nr);
+    l1 = uint(-lo);
+    return 2;
+  }
+  b0 = first + uint(lo);
+  l0 = uint(hi - lo + 1);
+  return 1;
 }
 
 #endif

@@ -171,16 +171,16 @@ class SimdBackend final : public Backend {
     monopole_ = float32_monopole(sky);
     boundary_ = cap_boundary(sky.nside(), in_->quadrature);
     per_sample_ = in_->normalization == Normalization::per_sample;
-    exact_ = monopole_ != 0.0 || per_sample_;
+    float64_ = monopole_ != 0.0 || per_sample_;
     pack_sky(sky.nside(), 0, {sky.I(), sky.Q(), sky.U(), sky.V()}, sky_);
     tables_.reserve(in_->detectors.size());
-    for (std::size_t d = 0; d < in_->detectors.size(); ++d) tables_.push_back(detector_tables(in_->detectors[d], d, exact_));
+    for (std::size_t d = 0; d < in_->detectors.size(); ++d) tables_.push_back(detector_tables(in_->detectors[d], d, float64_));
   }
 
   std::string name() const override { return "simd"; }
   std::string device() const override {
     return "Highway " + kernel_.description + ", " + std::to_string(pool_.size()) + " threads" +
-           (exact_ ? ", float64 path (monopole or per-sample normalization)" : "");
+           (float64_ ? ", float64 path (monopole or per-sample normalization)" : "");
   }
 
   // Computed at submit(), as the reference: the results are ready when the call returns.
@@ -234,7 +234,7 @@ class SimdBackend final : public Backend {
   // value, summed by the scatter kernel from the weights it scatters (ScatterInput::normal). Not on
   // the float64 path (a monopole or the per-sample normalization): that one sums the forward in
   // other arithmetic, and the engine convolves and scatters in two passes instead.
-  bool has_normal() const override { return !exact_; }
+  bool has_normal() const override { return !float64_; }
   std::uint64_t normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select) override {
     return scatter(detector, pointing, select, Pass::normal);
   }
@@ -325,7 +325,7 @@ class SimdBackend final : public Backend {
                 PackedSky& out) const {
     const std::size_t count = maps[0].size();
     for (auto* c : {&out.kx, &out.ky, &out.kz, &out.i, &out.q, &out.u, &out.v}) c->assign(count + simd::pad_floats, 0.0f);
-    if (exact_)
+    if (float64_)
       for (auto* c : {&out.vx, &out.vy, &out.vz}) c->assign(count + simd::pad_floats, 0.0);
     const PixelVectors vectors(nside);
     constexpr std::size_t piece = std::size_t(1) << 16;
@@ -343,7 +343,7 @@ class SimdBackend final : public Backend {
         out.u[p] = float(maps[2][p]);
         out.v[p] = float(maps[3][p]);
       }
-      if (exact_)
+      if (float64_)
         for (std::size_t j = 0; j < n; ++j) {
           out.vx[first + j] = xyz[3 * j];
           out.vy[first + j] = xyz[3 * j + 1];
@@ -536,7 +536,7 @@ class SimdBackend final : public Backend {
   simd::RingColumns ring_columns_;
   double monopole_ = 0.0;
   CapBoundary boundary_;
-  bool per_sample_ = false, exact_ = false;
+  bool per_sample_ = false, float64_ = false;  // float64_: the float64 path (monopole or per-sample normalization)
   PackedSky sky_, polar_;  // the sky, and its polar copy's band (set_polar_sky)
   std::vector<DetectorTables> tables_;
   std::uint64_t evaluated_ = 0;

@@ -275,9 +275,9 @@ HWY_INLINE void lookup_pairs(DD dd, const double* table, hn::Vec<hn::RebindToSig
 // Radial and Plate as Sample's; `monopole` and `norm` receive the sums (at finish(), where they are
 // kept in vectors).
 template <bool Radial, bool Plate>
-struct ExactSums {
+struct Float64Sums {
 #if HWY_TARGET == HWY_SCALAR
-  ExactSums(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, const double (&col0)[4],
+  Float64Sums(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, const detail::Vec4<double>& col0,
             double& monopole, double& norm)
       : sky(sky), in(in), fd(*in.frame), col0(col0), monopole(monopole), norm(norm),
         weights{det.weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d},
@@ -285,19 +285,20 @@ struct ExactSums {
   const KernelSky& sky;
   const SampleInput& in;
   const detail::SampleFrame<double>& fd;
-  const double (&col0)[4];
+  const detail::Vec4<double>& col0;
   double &monopole, &norm;
   const detail::ArrayGrid<double> weights, norm_weights;
   void operator()(std::size_t p, std::size_t count, float* xs, float* ys) {
     for (std::size_t l = 0; l < count; ++l) {
       const detail::Vec3<double> kd{sky.vx[p + l], sky.vy[p + l], sky.vz[p + l]};
-      const double x = detail::dot(kd, fd.theta_p), y = detail::dot(kd, fd.phi_p);
+      double x, y;
+      detail::beam_coordinates(kd, fd.theta_p, fd.phi_p, x, y);
       xs[l] = float(x);
       ys[l] = float(y);
       const detail::Vec4<double> w =
           Radial ? detail::interpolate_radial(weights, x * x + y * y) : detail::interpolate_weights(weights, x, y);
       if (in.monopole)
-        monopole += sky.boundary.at(p + l) * (Plate ? w.x * col0[0] + w.y * col0[1] + w.z * col0[2] + w.w * col0[3] : w.x);
+        monopole += sky.boundary.at(p + l) * (Plate ? detail::plate_monopole_weight(w, col0) : w.x);
       if (in.per_sample)
         norm += (Radial ? detail::interpolate_radial(norm_weights, x * x + y * y)
                         : detail::interpolate_weights(norm_weights, x, y)).x;
@@ -309,7 +310,7 @@ struct ExactSums {
   using DD = hn::Rebind<double, DH>;
   using DL = hn::RebindToSigned<DD>;
   using VD = hn::Vec<DD>;
-  ExactSums(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, const double (&col0)[4],
+  Float64Sums(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, const detail::Vec4<double>& col0,
             double& monopole, double& norm)
       : sky(sky), det(det), in(in), monopole(monopole), norm(norm), H(hn::Lanes(dd)) {
     const detail::SampleFrame<double>& fd = *in.frame;
@@ -319,7 +320,7 @@ struct ExactSums {
     max_node_d = hn::Set(dd, double(det.grid_n - 2)), n_d = hn::Set(dd, double(det.grid_n));
     inv_d = hn::Set(dd, det.grid_inv_step_d), a_d = hn::Set(dd, det.grid_a_d);
     mono_acc = zero_d, norm_acc = zero_d;
-    for (int a = 0; a < 4; ++a) mcol[a] = hn::Set(dd, col0[a]);
+    mcol = {hn::Set(dd, col0.x), hn::Set(dd, col0.y), hn::Set(dd, col0.z), hn::Set(dd, col0.w)};
   }
   const KernelSky& sky;
   const KernelDetector& det;
@@ -331,7 +332,8 @@ struct ExactSums {
   const DL dl;
   const std::size_t H;
   VD th_x, th_y, th_z, ph_x, ph_y, ph_z, zero_d, one_d, last_d, max_node_d, n_d, inv_d, a_d;
-  VD mono_acc, norm_acc, mcol[4];
+  VD mono_acc, norm_acc;
+  Vec4<VD> mcol;  // M(theta)'s column 0
 
   void operator()(std::size_t p, std::size_t count, float* xs, float* ys) {
     hn::Vec<hn::Half<DF>> xf[2], yf[2];
@@ -401,8 +403,8 @@ struct ExactSums {
       if (in.monopole) {
         VD w = column(det.pairs64[0]);
         if constexpr (Plate) {
-          w = hn::Mul(w, mcol[0]);
-          for (int a = 1; a < 4; ++a) w = hn::Add(w, hn::Mul(column(det.pairs64[a]), mcol[a]));
+          w = plate_monopole_weight(Vec4<VD>{w, column(det.pairs64[1]), column(det.pairs64[2]), column(det.pairs64[3])},
+                                    mcol);
         }
         // Pixels [p, p + count) lie in one ring: its weight, where the caps meet the belt.
         const double ring = sky.boundary.at(p);
@@ -425,22 +427,22 @@ struct ExactSums {
 };
 
 // One sample. Radial: weights from a radial profile (else a 2D grid); Columns: weight columns stored
-// (2: w_U = w_V = 0); Plate: effective weights w M(theta); Exact: the float64 sums (monopole,
+// (2: w_U = w_V = 0); Plate: effective weights w M(theta); Float64: the float64 sums (monopole,
 // per-sample normalization), whose float64 beam coordinates the float32 evaluation then uses too,
 // as the GPU kernels do (docs/vulkan.md, "Precision").
 // flatten: the formulas, the lambdas and Highway's operations inlined into one loop (left to its
 // heuristics, GCC calls pixel_geometry<F> out of line and passes its vectors through memory).
-template <bool Radial, int Columns, bool Plate, bool Exact>
+template <bool Radial, int Columns, bool Plate, bool Float64>
 HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
   const DF df;
   const std::size_t N = hn::Lanes(df);
   const detail::SampleFrame<double>& fd = *in.frame;
   const SampleFrame<F> f = broadcast(fd);
   Vec4<F> mcols[4];  // Plate: the columns of M(theta) in float32, and its column 0 in float64
-  double col0[4] = {1.0, 0.0, 0.0, 0.0};
+  detail::Vec4<double> col0{1.0, 0.0, 0.0, 0.0};
   if constexpr (Plate) {
     plate_columns(in.plate, mcols);
-    for (int a = 0; a < 4; ++a) col0[a] = in.plate[4 * a];
+    col0 = {in.plate[0], in.plate[4], in.plate[8], in.plate[12]};
   }
   const RecordGrid<Columns> grid{det.records[0], det.records[Columns == 4 ? 1 : 0], det.grid_n, F(det.grid_a),
                                  F(det.grid_inv_step), Radial ? 1 : 3};
@@ -449,15 +451,15 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   F sum(zero), carry(zero);
   double monopole = 0.0, norm = 0.0;
 
-  // The float64 sums (ExactSums) and the pixels' beam coordinates they round to float32.
-  ExactSums<Radial, Plate> exact(sky, det, in, col0, monopole, norm);
+  // The float64 sums (Float64Sums) and the pixels' beam coordinates they round to float32.
+  Float64Sums<Radial, Plate> float64(sky, det, in, col0, monopole, norm);
 
   // One vector of pixels: s[0..6] hold kx, ky, kz, I - I0, Q, U, V, and s[7], s[8] the float64 beam
-  // coordinates rounded to float32 (Exact); lanes outside `live` add nothing.
+  // coordinates rounded to float32 (Float64); lanes outside `live` add nothing.
   auto evaluate = [&](const VF* s, MF live) HWY_ATTR {
     const Vec3<F> k{F(s[0]), F(s[1]), F(s[2])};
     PixelGeometry<F> g = pixel_geometry(f, k);
-    if constexpr (Exact) {
+    if constexpr (Float64) {
       g.x = F(s[7]);
       g.y = F(s[8]);
     }
@@ -486,7 +488,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   // starts the next staging vector. The order depends only on the disc (deterministic results).
   const float* const columns[7] = {sky.kx, sky.ky, sky.kz, sky.i, sky.q, sky.u, sky.v};
   constexpr int quantities = (Columns == 4 || Plate) ? 7 : 6;  // V only where a weight multiplies it
-  constexpr int staged = Exact ? 9 : 7;
+  constexpr int staged = Float64 ? 9 : 7;
   HWY_ALIGN float xs[max_lanes] = {};
   HWY_ALIGN float ys[max_lanes] = {};
   VF stage[9], q[9];
@@ -498,8 +500,8 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
     std::size_t p = begin;
     for (; p + N <= end; p += N) {
       for (int c = 0; c < quantities; ++c) q[c] = hn::LoadU(df, columns[c] + p);
-      if constexpr (Exact) {
-        exact(p, N, xs, ys);
+      if constexpr (Float64) {
+        float64(p, N, xs, ys);
         q[7] = hn::Load(df, xs);
         q[8] = hn::Load(df, ys);
       }
@@ -507,7 +509,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
     }
     if (p == end) continue;
     const std::size_t rest = end - p;
-    if constexpr (Exact) exact(p, rest, xs, ys);
+    if constexpr (Float64) float64(p, rest, xs, ys);
     const RestStaging staging(fill);
     for (int c = 0; c < staged; ++c) {
       if (c >= quantities && c < 7) continue;
@@ -523,7 +525,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
   }
   if (fill > 0) evaluate(stage, hn::FirstN(df, fill));
 
-  if constexpr (Exact) exact.finish();
+  if constexpr (Float64) float64.finish();
   HWY_ALIGN float totals[max_lanes];
   hn::Store(hn::Sub(sum.v, carry.v), df, totals);
   double total = 0.0;
@@ -534,7 +536,7 @@ HWY_NOINLINE HWY_FLATTEN void Sample(const KernelSky& sky, const KernelDetector&
 }
 
 template <bool Radial, int Columns, bool Plate>
-HWY_INLINE void SampleExact(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
+HWY_INLINE void SampleFloat64(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
   if (in.monopole || in.per_sample)
     Sample<Radial, Columns, Plate, true>(sky, det, in, out);
   else
@@ -544,9 +546,9 @@ HWY_INLINE void SampleExact(const KernelSky& sky, const KernelDetector& det, con
 template <bool Radial, int Columns>
 HWY_INLINE void SamplePlate(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, SampleSums& out) {
   if (in.plate)
-    SampleExact<Radial, Columns, true>(sky, det, in, out);
+    SampleFloat64<Radial, Columns, true>(sky, det, in, out);
   else
-    SampleExact<Radial, Columns, false>(sky, det, in, out);
+    SampleFloat64<Radial, Columns, false>(sky, det, in, out);
 }
 
 template <bool Radial>
