@@ -55,7 +55,8 @@ struct HwpAngleStream {
   // or with step_seconds <= 0).
   void check() const;
   // check(), and what float64 carries over `samples` samples (docs/formats.md, "Times, rates and
-  // angles"): sample times, the rotation's angle, the step count. Throws pisco::Error naming the field.
+  // angles"): sample times, the rotation's angle, the step count. Throws pisco::Error naming the field
+  // (time_problem's as its key()).
   void check(std::size_t samples) const;
   // What float64 cannot carry over `samples` samples, by field: start_time (the sample times),
   // frequency, step_seconds. Part of check(samples).

@@ -49,10 +49,12 @@ struct CesScan {
   double boresight_period = 86400.0;       // seconds each boresight angle is held
   std::size_t samples = 0;                 // total number of samples
 
-  // Checks the parameters; throws pisco::Error naming the field.
+  // Checks the parameters; throws pisco::Error naming the field (in its message, or as its key() for
+  // what time_problem finds).
   void check() const;
   // What float64 cannot carry over the run (docs/formats.md, "Times, rates and angles"), by field:
-  // start_unix (the sample times), az_speed, earth (its rotation), boresight_period. Part of check().
+  // start_unix (the sample times, and the Earth's rotation from them), az_speed, boresight_period.
+  // Part of check().
   std::optional<TimeProblem> time_problem() const;
   // Boresight pointing of samples [first, first + count), appended to `out` (cleared first).
   void generate(std::size_t first, std::size_t count, Pointing& out) const;
@@ -114,7 +116,8 @@ struct SatelliteScan {
   enum class Frame { ecliptic, equatorial, galactic } frame = Frame::ecliptic;
   std::size_t samples = 0;                           // total number of samples
 
-  // Checks the parameters; throws pisco::Error naming the field.
+  // Checks the parameters; throws pisco::Error naming the field (in its message, or as its key() for
+  // what time_problem finds).
   void check() const;
   // What float64 cannot carry over the run (docs/formats.md, "Times, rates and angles"), by field:
   // start_time (the sample times), spin_period, precession_period, year. Part of check().

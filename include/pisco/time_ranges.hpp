@@ -8,6 +8,8 @@
 #include <optional>
 #include <string>
 
+#include "pisco/error.hpp"
+
 namespace pisco {
 
 // A sample's time may be rounded by at most this fraction of the sample interval.
@@ -21,6 +23,8 @@ inline constexpr double angle_resolution = 1e-5;
 struct TimeProblem {
   std::string field;
   std::string what;
+  // As the input error a check() throws: what is wrong, keyed by the field (Error::key, Error::named).
+  Error error() const { return Error(what, ErrorKind::input, field); }
 };
 
 // Samples at start + i / sample_rate, i < samples: every time finite and resolved to time_resolution

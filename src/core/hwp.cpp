@@ -58,9 +58,7 @@ void HwpAngleStream::check() const {
 
 void HwpAngleStream::check(std::size_t samples) const {
   check();
-  if (const auto p = time_problem(samples))
-    throw Error("half-wave plate: " + (p->field == "start_time" ? std::string("start_time and sample_rate") : p->field) +
-                ": " + p->what);
+  if (const auto p = time_problem(samples)) throw p->error();
 }
 
 // docs/formats.md, "Times, rates and angles".

@@ -10,10 +10,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <limits>
 #include <optional>
 #include <set>
 #include <sstream>
+#include <string_view>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -115,6 +118,15 @@ class Table {
   // An error of the table as a whole (a library check of several keys together).
   [[noreturn]] void fail_table(const std::string& what) const {
     throw pisco::Error(file_.string() + ": [" + where_ + "] " + what);
+  }
+  // A library check's error (pisco::Error) for this table: under its key when the error carries the
+  // name of a field this table reads through a key of its own (`keys`: field, key), else as an error
+  // of the table, its field named (`context`: what the library calls the table's object).
+  [[noreturn]] void fail_checked(const pisco::Error& e, std::initializer_list<std::pair<std::string_view, std::string>> keys,
+                                 const std::string& context) const {
+    for (const auto& [field, key] : keys)
+      if (!e.key().empty() && e.key() == field) fail(key, e.what());
+    fail_table(e.named(context));
   }
   std::int64_t integer(const std::string& key, std::int64_t fallback) {
     used_.insert(key);

@@ -512,9 +512,11 @@ SimulationConfig read_simulation_file(const fs::path& file) {
 
 void check_hwp_times(const SimulationConfig& c, std::size_t samples) {
   if (!c.hwp.enabled || c.hwp.angles_from_file) return;
-  if (const auto p = c.hwp.stream.time_problem(samples)) {
-    const std::string key = p->field == "start_time" ? "start_time_s" : p->field == "frequency" ? c.hwp.rate_key : p->field;
-    throw pisco::Error(c.source.string() + ": [hwp] " + key + ": " + p->what + " (over the run's " +
+  try {
+    c.hwp.stream.check(samples);
+  } catch (const pisco::Error& e) {
+    const std::string key = e.key() == "start_time" ? "start_time_s" : e.key() == "frequency" ? c.hwp.rate_key : e.key();
+    throw pisco::Error(c.source.string() + ": [hwp] " + (key.empty() ? "" : key + ": ") + e.what() + " (over the run's " +
                        std::to_string(samples) + " samples)");
   }
 }

@@ -30,12 +30,7 @@ void CesScan::check() const {
   require(!boresight_angles.empty(), "boresight_angles must not be empty");
   for (double b : boresight_angles) require(std::isfinite(b), "boresight_angles must be finite");
   require(boresight_period > 0 && std::isfinite(boresight_period), "boresight_period must be positive");
-  if (const auto p = time_problem()) {
-    const std::string label = p->field == "start_unix" ? "start, sample_rate and samples"
-                              : p->field == "earth"    ? "the Earth's rotation"
-                                                       : p->field;
-    require(false, label + ": " + p->what);
-  }
+  if (const auto p = time_problem()) throw p->error();
 }
 
 // docs/formats.md, "Times, rates and angles": the sample times (Unix), the azimuth (from the run's
@@ -47,7 +42,7 @@ std::optional<TimeProblem> CesScan::time_problem() const {
   if (std::string why = turning_problem(az_speed, duration, sample_rate); !why.empty())
     return TimeProblem{"az_speed", why};
   if (std::string why = turning_problem(7.2921159e-5, std::abs(start_unix) + duration, sample_rate); !why.empty())
-    return TimeProblem{"earth", why};
+    return TimeProblem{"start_unix", "the Earth's rotation: " + why};
   if (boresight_angles.size() > 1)
     if (std::string why = stepping_problem(boresight_period, duration, sample_rate); !why.empty())
       return TimeProblem{"boresight_period", why};

@@ -74,8 +74,7 @@ void SatelliteScan::check() const {
   require(std::isfinite(year) && year > 0, "year", "must be positive");
   require(frame == Frame::ecliptic || frame == Frame::equatorial || frame == Frame::galactic, "frame",
           "must be ecliptic, equatorial or galactic");
-  if (const auto p = time_problem())
-    require(false, p->field == "start_time" ? "start_time, sample_rate and samples:" : p->field, p->what);
+  if (const auto p = time_problem()) throw p->error();
 }
 
 // docs/formats.md, "Times, rates and angles".

@@ -37,16 +37,13 @@ void read(Table& t, ScanConfig& s) {
   for (double b : t.numbers("boresight_deg", {0.0})) c.boresight_angles.push_back(b * deg);
   c.boresight_period = t.positive("boresight_period_hours", 24.0, 3600);
   s.nside = t.nside("nside", 128);  // the maps' default NSIDE
-  // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
-  if (const auto p = c.time_problem()) {
-    if (p->field == "start_unix") t.fail("start", p->what);
-    if (p->field == "az_speed") t.fail("az_speed_deg_s", p->what);
-    if (p->field == "boresight_period") t.fail("boresight_period_hours", p->what);
-  }
+  // The scan's own check, among it what float64 carries over the run (docs/formats.md, "Times, rates
+  // and angles"), its fields named by their keys.
   try {
     c.check();
   } catch (const Error& e) {
-    t.fail_table(e.what());
+    t.fail_checked(e, {{"start_unix", "start"}, {"az_speed", "az_speed_deg_s"}, {"boresight_period", "boresight_period_hours"}},
+                   "constant-elevation scan: ");
   }
 }
 

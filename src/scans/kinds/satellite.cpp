@@ -51,16 +51,14 @@ void read(Table& t, ScanConfig& s) {
                                     : SatelliteScan::Frame::galactic;
   c.samples = read_samples(t, c.sample_rate);
   s.nside = t.nside("nside", 64);  // the maps' default NSIDE
-  // What float64 carries over the run (docs/formats.md, "Times, rates and angles"), by key.
-  if (const auto p = c.time_problem()) {
-    if (p->field == "start_time") t.fail("start_time_s", p->what);
-    if (p->field == "spin_period") t.fail("spin_period_min", p->what);
-    if (p->field == "precession_period") t.fail("precession_period_min", p->what);
-  }
+  // The scan's own check, among it what float64 carries over the run (docs/formats.md, "Times, rates
+  // and angles"), its fields named by their keys.
   try {
     c.check();
   } catch (const Error& e) {
-    t.fail_table(e.what());
+    t.fail_checked(e, {{"start_time", "start_time_s"}, {"spin_period", "spin_period_min"},
+                       {"precession_period", "precession_period_min"}},
+                   "satellite scan: ");
   }
 }
 
