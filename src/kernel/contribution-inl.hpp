@@ -118,23 +118,9 @@ PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& e
   weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
 }
 
-// pixel.glsl as C++ templates of T (and of the grid type G). The macros that src/kernel/common.glsl
-// also defines (for the GLSL-as-C++ host tests) are saved and restored around it.
-#pragma push_macro("PISCO_FN")
-#pragma push_macro("PISCO_OUT")
-#pragma push_macro("PISCO_INOUT")
-#pragma push_macro("PISCO_PRECISE")
-#pragma push_macro("PISCO_F64")
-#undef PISCO_FN
-#undef PISCO_OUT
-#undef PISCO_INOUT
-#undef PISCO_PRECISE
-#undef PISCO_F64
-#define PISCO_TEMPLATE_TEXT 1
-#define PISCO_FN PISCO_HD
-#define PISCO_OUT(T) T&
-#define PISCO_INOUT(T) T&
-#define PISCO_PRECISE
+// pixel.glsl, plate.glsl and fixed_point.glsl as C++ templates of T (and of the grid type G), between
+// kernel/text_begin.hpp and text_end.hpp.
+#include "kernel/text_begin.hpp"
 #define PISCO_TEMPLATE template <class T>
 #define PISCO_TEMPLATE_GRID template <class T, class G>
 #define PISCO_REAL T
@@ -153,12 +139,10 @@ PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& e
 #define PISCO_PLATE_V4 Vec4<T>
 #define PISCO_PLATE_VEC4(a, b, c, d) \
   Vec4<T> { a, b, c, d }
-#define PISCO_F64 double
 using uint = unsigned int;
 #include "kernel/pixel.glsl"
 #include "kernel/plate.glsl"
 #include "kernel/fixed_point.glsl"
-#undef PISCO_TEMPLATE_TEXT
 #undef PISCO_TEMPLATE
 #undef PISCO_TEMPLATE_GRID
 #undef PISCO_REAL
@@ -175,11 +159,7 @@ using uint = unsigned int;
 #undef PISCO_PLATE_REAL
 #undef PISCO_PLATE_V4
 #undef PISCO_PLATE_VEC4
-#pragma pop_macro("PISCO_F64")
-#pragma pop_macro("PISCO_FN")
-#pragma pop_macro("PISCO_OUT")
-#pragma pop_macro("PISCO_INOUT")
-#pragma pop_macro("PISCO_PRECISE")
+#include "kernel/text_end.hpp"
 
 // Antenna basis (docs/physics.md) from trigonometric values of the pointing and of zeta.
 template <class T>

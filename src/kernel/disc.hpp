@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "kernel/fp64.hpp"
 #include "kernel/hd.hpp"
 
 namespace pisco::detail {
@@ -45,24 +46,15 @@ PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
 
 // The float64 ring arithmetic and disc walk shared with the shaders (src/kernel/rings.glsl): ring_above,
 // ring_edge_x, ring_edge_ysq, ring_bound, disc_ring_span, ring_half_width, ring_pixel_span and
-// ring_pixel_ranges; mul_rn is kernel/hd.hpp's, and the trigonometry GLSL lacks the C library's.
+// ring_pixel_ranges; mul_rn is kernel/hd.hpp's, and the trigonometry GLSL lacks the C library's
+// (kernel/fp64.hpp).
 constexpr double PISCO_PI = 3.141592653589793238462643383279502884;
-PISCO_HD double pisco_cos(double x) { return cos(x); }
-PISCO_HD double pisco_atan2_nonneg_y(double y, double x) { return atan2(y, x); }
-#pragma push_macro("PISCO_FN")
-#pragma push_macro("PISCO_OUT")
-#undef PISCO_FN
-#undef PISCO_OUT
-#define PISCO_TEMPLATE_TEXT 1
-#define PISCO_FN PISCO_HD
-#define PISCO_OUT(T) T&
+#include "kernel/text_begin.hpp"
 #define PISCO_RING_INT std::int64_t
 using uint = unsigned int;
 #include "kernel/rings.glsl"
 #undef PISCO_RING_INT
-#undef PISCO_TEMPLATE_TEXT
-#pragma pop_macro("PISCO_OUT")
-#pragma pop_macro("PISCO_FN")
+#include "kernel/text_end.hpp"
 
 // The table for all 4 nside - 1 rings; entry r - 1 describes ring r.
 std::vector<RingEntry> make_ring_table(int nside);

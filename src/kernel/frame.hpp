@@ -1,7 +1,7 @@
 // The antenna basis of one sample from its pointing, in either input form (docs/physics.md,
 // "Pointing as a rotation"), for the float64 reference, the host-side expansion and the CUDA kernel.
 // The per-sample maths is src/kernel/frame.glsl's, included here as C++ (with the C library's sine,
-// cosine and arctangent), the one text the shaders run too; tests/test_frame.cpp holds the shader build
+// cosine and arctangent, kernel/fp64.hpp), the one text the shaders run too; tests/test_frame.cpp holds the shader build
 // to it.
 //
 // - Quaternion pointing: q = q_boresight q_offset, composed per sample; the basis is the rotation's
@@ -16,6 +16,7 @@
 
 #include "kernel/contribution.hpp"
 #include "kernel/disc.hpp"
+#include "kernel/fp64.hpp"
 #include "kernel/hd.hpp"
 
 namespace pisco::detail {
@@ -24,30 +25,20 @@ struct Q4 {
   double x, y, z, w;  // scalar last
 };
 
-// atan2(y, x) for y >= 0 (frame.glsl's PISCO_ATAN2_NONNEG_Y): fabs takes -0.0 to the angle of +0.0.
-PISCO_HD double atan2_nonneg_y(double y, double x) { return atan2(fabs(y), x); }
-
 // src/kernel/frame.glsl's float64 part: pisco_quat_mul, pisco_rotation, pisco_in_basis,
 // pisco_direction_angles, pisco_sample_frame.
-#pragma push_macro("PISCO_FN")
-#pragma push_macro("PISCO_OUT")
-#undef PISCO_FN
-#undef PISCO_OUT
-#define PISCO_TEMPLATE_TEXT 1
-#define PISCO_FN PISCO_HD
-#define PISCO_OUT(T) T&
+#include "kernel/text_begin.hpp"
 #define PISCO_D3 Vec3<double>
 #define PISCO_D4 Q4
 #define PISCO_DVEC3(a, b, c) \
   Vec3<double> { a, b, c }
 #define PISCO_DVEC4(a, b, c, d) \
   Q4 { a, b, c, d }
-#define PISCO_COS cos
-#define PISCO_SIN sin
-#define PISCO_ATAN2_NONNEG_Y atan2_nonneg_y
+#define PISCO_COS pisco_cos
+#define PISCO_SIN pisco_sin
+#define PISCO_ATAN2_NONNEG_Y pisco_atan2_nonneg_y
 #define PISCO_TWO_PI 6.283185307179586476925286766559
 #include "kernel/frame.glsl"
-#undef PISCO_TEMPLATE_TEXT
 #undef PISCO_D3
 #undef PISCO_D4
 #undef PISCO_DVEC3
@@ -56,8 +47,7 @@ PISCO_HD double atan2_nonneg_y(double y, double x) { return atan2(fabs(y), x); }
 #undef PISCO_SIN
 #undef PISCO_ATAN2_NONNEG_Y
 #undef PISCO_TWO_PI
-#pragma pop_macro("PISCO_FN")
-#pragma pop_macro("PISCO_OUT")
+#include "kernel/text_end.hpp"
 
 PISCO_HD Q4 quat_mul(const Q4& a, const Q4& b) { return pisco_quat_mul(a, b); }
 
