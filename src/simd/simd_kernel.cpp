@@ -266,12 +266,78 @@ HWY_INLINE void lookup_pairs(DD dd, const double* table, hn::Vec<hn::RebindToSig
   g0 = hn::InterleaveLower(dd, even, odd);
   g1 = hn::InterleaveUpper(dd, even, odd);
 }
+
+// A vector of float64 lanes (half as many as F's) as the number type of the shared interpolation and
+// beam coordinates (kernel/interpolate.glsl, T = D), with its index vector L and mask MD: the float64
+// sums' weights, the reference's arithmetic lane by lane.
+using DD = hn::Rebind<double, hn::Half<DF>>;
+using DL = hn::RebindToSigned<DD>;
+struct L {
+  hn::Vec<DL> v;
+};
+struct MD {
+  hn::Mask<DD> v;
+};
+struct D {
+  hn::Vec<DD> v;
+  D() = default;
+  HWY_INLINE D(double x) : v(hn::Set(DD(), x)) {}                      // NOLINT: 1.0f, 0.0f in the formulas
+  HWY_INLINE D(hn::Vec<DD> x) : v(x) {}                                // NOLINT
+  HWY_INLINE explicit D(const L& i) : v(hn::ConvertTo(DD(), i.v)) {}  // double(i)
+};
+HWY_INLINE D operator+(const D& a, const D& b) { return D(hn::Add(a.v, b.v)); }
+HWY_INLINE D operator-(const D& a, const D& b) { return D(hn::Sub(a.v, b.v)); }
+HWY_INLINE D operator*(const D& a, const D& b) { return D(hn::Mul(a.v, b.v)); }
+HWY_INLINE MD operator>=(const D& a, const D& b) { return {hn::Ge(a.v, b.v)}; }
+HWY_INLINE MD operator<=(const D& a, const D& b) { return {hn::Le(a.v, b.v)}; }  // false for NaN
+HWY_INLINE MD operator&&(const MD& a, const MD& b) { return {hn::And(a.v, b.v)}; }
+HWY_INLINE L operator+(const L& a, const L& b) { return {hn::Add(a.v, b.v)}; }
+HWY_INLINE L operator+(const L& a, int b) { return {hn::Add(a.v, hn::Set(DL(), b))}; }
+HWY_INLINE L operator*(const L& a, int b) { return {hn::Mul(a.v, hn::Set(DL(), b))}; }
+HWY_INLINE D sqrt(const D& a) { return D(hn::Sqrt(a.v)); }
+HWY_INLINE D max(const D& a, float b) { return D(hn::Max(a.v, hn::Set(DD(), double(b)))); }
+
+template <>
+struct Lanes<D> {
+  using Index = L;
+  using Mask = MD;
+};
+
+// The interpolation's hooks for float64 lanes: the node clamped (lanes outside the grid, whose
+// weights select_weights discards, included), and one column's float64 records, (w(k), w(k + 1)) at
+// record 2 k of its table (simd_backend.cpp's pairs64), the edges' curvature terms after the nodes
+// (src/kernel/grid_curvature.hpp). Only x carries the column.
+HWY_INLINE L node_index(const D& u, const MD&, int top) {
+  return {hn::Min(hn::Max(hn::ConvertTo(DL(), u.v), hn::Zero(DL())), hn::Set(DL(), top))};
+}
+HWY_INLINE Vec4<D> select_weights(const MD& inside, const Vec4<D>& w) {
+  return {D(hn::IfThenElseZero(inside.v, w.x.v)), D(hn::IfThenElseZero(inside.v, w.y.v)),
+          D(hn::IfThenElseZero(inside.v, w.z.v)), D(hn::IfThenElseZero(inside.v, w.w.v))};
+}
+struct PairGrid {
+  const double* table;
+  int n;
+  D a, inv_step;  // nodes at x_i = -a + i * step (radial: r_i = i * step)
+};
+HWY_INLINE void weight_pair(const PairGrid& g, const L& k, Vec4<D>& w, Vec4<D>& next) {
+  hn::Vec<DD> w0, w1;
+  lookup_pairs(DD(), g.table, hn::Add(k.v, k.v), w0, w1);
+  w = {D(w0), D(0.0), D(0.0), D(0.0)};
+  next = {D(w1), D(0.0), D(0.0), D(0.0)};
+}
+HWY_INLINE void edge_x_pair(const PairGrid& g, const L&, const L& i, const L& j, Vec4<D>& ex0, Vec4<D>& ex1) {
+  weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
+}
+HWY_INLINE void edge_y_pair(const PairGrid& g, const L& k, Vec4<D>& ey0, Vec4<D>& ey1) {
+  weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
+}
 #endif
 
 // The float64 sums of pixels [p, p + count), count <= N, and their float64 beam coordinates
-// rounded to float32 into xs, ys: the reference's arithmetic (interpolate_radial,
-// interpolate_weights with T = double, the weights from its own tables), in vectors of N / 2
-// doubles; the branches of the interpolation become masks. Sums are kept per lane.
+// rounded to float32 into xs, ys: the reference's arithmetic (beam_coordinates, interpolate_radial,
+// interpolate_weights of kernel/interpolate.glsl), with T = D, vectors of N / 2 doubles, over the
+// reference's own float64 weights; the branches of the interpolation become masks. Sums are kept per
+// lane.
 // Radial and Plate as Sample's; `monopole` and `norm` receive the sums (at finish(), where they are
 // kept in vectors).
 template <bool Radial, bool Plate>
@@ -306,112 +372,57 @@ struct Float64Sums {
   }
   void finish() {}
 #else
-  using DH = hn::Half<DF>;
-  using DD = hn::Rebind<double, DH>;
-  using DL = hn::RebindToSigned<DD>;
   using VD = hn::Vec<DD>;
   Float64Sums(const KernelSky& sky, const KernelDetector& det, const SampleInput& in, const detail::Vec4<double>& col0,
             double& monopole, double& norm)
       : sky(sky), det(det), in(in), monopole(monopole), norm(norm), H(hn::Lanes(dd)) {
     const detail::SampleFrame<double>& fd = *in.frame;
-    th_x = hn::Set(dd, fd.theta_p.x), th_y = hn::Set(dd, fd.theta_p.y), th_z = hn::Set(dd, fd.theta_p.z);
-    ph_x = hn::Set(dd, fd.phi_p.x), ph_y = hn::Set(dd, fd.phi_p.y), ph_z = hn::Set(dd, fd.phi_p.z);
-    zero_d = hn::Zero(dd), one_d = hn::Set(dd, 1.0), last_d = hn::Set(dd, double(det.grid_n - 1));
-    max_node_d = hn::Set(dd, double(det.grid_n - 2)), n_d = hn::Set(dd, double(det.grid_n));
-    inv_d = hn::Set(dd, det.grid_inv_step_d), a_d = hn::Set(dd, det.grid_a_d);
-    mono_acc = zero_d, norm_acc = zero_d;
-    mcol = {hn::Set(dd, col0.x), hn::Set(dd, col0.y), hn::Set(dd, col0.z), hn::Set(dd, col0.w)};
+    theta_p = {D(fd.theta_p.x), D(fd.theta_p.y), D(fd.theta_p.z)};
+    phi_p = {D(fd.phi_p.x), D(fd.phi_p.y), D(fd.phi_p.z)};
+    a = D(det.grid_a_d), inv_step = D(det.grid_inv_step_d);
+    mono_acc = hn::Zero(dd), norm_acc = hn::Zero(dd);
+    mcol = {D(col0.x), D(col0.y), D(col0.z), D(col0.w)};
   }
   const KernelSky& sky;
   const KernelDetector& det;
   const SampleInput& in;
   double &monopole, &norm;
   const DF df;
-  const DH dh;
+  const hn::Half<DF> dh;
   const DD dd;
-  const DL dl;
   const std::size_t H;
-  VD th_x, th_y, th_z, ph_x, ph_y, ph_z, zero_d, one_d, last_d, max_node_d, n_d, inv_d, a_d;
+  Vec3<D> theta_p, phi_p;
+  D a, inv_step;
   VD mono_acc, norm_acc;
-  Vec4<VD> mcol;  // M(theta)'s column 0
+  Vec4<D> mcol;  // M(theta)'s column 0
 
   void operator()(std::size_t p, std::size_t count, float* xs, float* ys) {
     hn::Vec<hn::Half<DF>> xf[2], yf[2];
     for (std::size_t h = 0; h < 2; ++h) {
       const std::size_t first = p + h * H;
       const std::size_t live = count > h * H ? std::min(H, count - h * H) : 0;
-      const VD kx = hn::LoadU(dd, sky.vx + first), ky = hn::LoadU(dd, sky.vy + first), kz = hn::LoadU(dd, sky.vz + first);
-      // dot(k, theta'), dot(k, phi') as the reference writes them.
-      const VD x = hn::Add(hn::Add(hn::Mul(kx, th_x), hn::Mul(ky, th_y)), hn::Mul(kz, th_z));
-      const VD y = hn::Add(hn::Add(hn::Mul(kx, ph_x), hn::Mul(ky, ph_y)), hn::Mul(kz, ph_z));
-      xf[h] = hn::DemoteTo(dh, x);
-      yf[h] = hn::DemoteTo(dh, y);
-      auto inside = hn::FirstN(dd, live);
-      VD c0, c1, c2, c3, fu = zero_d, fv = zero_d, gu = zero_d, gv = zero_d;  // interpolation coefficients of w(k), w(k + 1) in records rec and above
-      hn::Vec<decltype(dl)> rec, above, edge_x, edge_y;  // the edges' curvature terms (ex, ey)
-      if constexpr (Radial) {
-        const VD r2 = hn::Add(hn::Mul(x, x), hn::Mul(y, y));
-        const VD u = hn::Mul(hn::Sqrt(hn::Max(r2, zero_d)), inv_d);
-        inside = hn::And(inside, hn::Le(u, last_d));
-        const VD node = hn::Floor(hn::Min(hn::IfThenElseZero(inside, u), max_node_d));
-        const VD f = hn::Sub(u, node);
-        c0 = hn::Sub(one_d, f);
-        c1 = f;
-        rec = hn::ConvertTo(dl, hn::Add(node, node));
-      } else {
-        const VD u = hn::Mul(hn::Add(x, a_d), inv_d);
-        const VD v = hn::Mul(hn::Add(y, a_d), inv_d);
-        inside = hn::And(inside, hn::And(hn::And(hn::Ge(u, zero_d), hn::Ge(v, zero_d)),
-                                         hn::And(hn::Le(u, last_d), hn::Le(v, last_d))));
-        const VD i = hn::Floor(hn::Min(hn::IfThenElseZero(inside, u), max_node_d));
-        const VD j = hn::Floor(hn::Min(hn::IfThenElseZero(inside, v), max_node_d));
-        fu = hn::Sub(u, i);
-        fv = hn::Sub(v, j);
-        gu = hn::Sub(one_d, fu);
-        gv = hn::Sub(one_d, fv);
-        c0 = hn::Mul(gu, gv);
-        c1 = hn::Mul(fu, gv);
-        c2 = hn::Mul(gu, fv);
-        c3 = hn::Mul(fu, fv);
-        rec = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(j, n_d), i), hn::Set(dd, 2.0)));
-        above = hn::Add(rec, hn::Set(dl, 2 * det.grid_n));
-        // Records n^2 + i n + j (ex) and 2 n^2 + j n + i (ey), kernel/grid_curvature.hpp.
-        const std::int64_t nodes = std::int64_t(det.grid_n) * det.grid_n;
-        edge_x = hn::ConvertTo(dl, hn::Mul(hn::Add(hn::Mul(i, n_d), j), hn::Set(dd, 2.0)));
-        edge_x = hn::Add(edge_x, hn::Set(dl, 2 * nodes));
-        edge_y = hn::Add(rec, hn::Set(dl, 4 * nodes));
-      }
-      // The reference's interpolation of one column (records of its float64 weights), the same sums
-      // in the same order: c0 w(i) + c1 w(i + 1) (+ c2 w(i, j + 1) + c3 w(i + 1, j + 1), less the edges' curvature terms).
+      const Vec3<D> k{D(hn::LoadU(dd, sky.vx + first)), D(hn::LoadU(dd, sky.vy + first)), D(hn::LoadU(dd, sky.vz + first))};
+      D x, y;
+      beam_coordinates(k, theta_p, phi_p, x, y);
+      xf[h] = hn::DemoteTo(dh, x.v);
+      yf[h] = hn::DemoteTo(dh, y.v);
+      // One column's weights at the pixels (the shared interpolation, kernel/interpolate.glsl).
       auto column = [&](const double* table) HWY_ATTR {
-        VD g0, g1;
-        lookup_pairs(dd, table, rec, g0, g1);
-        if constexpr (Radial) {
-          return hn::Add(hn::Mul(c0, g0), hn::Mul(c1, g1));
-        } else {
-          VD h0, h1, ex0, ex1, ey0, ey1;
-          lookup_pairs(dd, table, above, h0, h1);
-          lookup_pairs(dd, table, edge_x, ex0, ex1);
-          lookup_pairs(dd, table, edge_y, ey0, ey1);
-          const VD bilinear =
-              hn::Add(hn::Add(hn::Add(hn::Mul(c0, g0), hn::Mul(c1, g1)), hn::Mul(c2, h0)), hn::Mul(c3, h1));
-          const VD ex = hn::Mul(hn::Mul(fu, gu), hn::Add(hn::Mul(gv, ex0), hn::Mul(fv, ex1)));
-          const VD ey = hn::Mul(hn::Mul(fv, gv), hn::Add(hn::Mul(gu, ey0), hn::Mul(fu, ey1)));
-          return hn::Sub(hn::Sub(bilinear, ex), ey);
-        }
+        const PairGrid g{table, det.grid_n, a, inv_step};
+        return (Radial ? interpolate_radial(g, x * x + y * y) : interpolate_weights(g, x, y)).x;
       };
+      const auto live_lanes = hn::FirstN(dd, live);
       if (in.monopole) {
-        VD w = column(det.pairs64[0]);
-        if constexpr (Plate) {
-          w = plate_monopole_weight(Vec4<VD>{w, column(det.pairs64[1]), column(det.pairs64[2]), column(det.pairs64[3])},
+        D w = column(det.pairs64[0]);
+        if constexpr (Plate)
+          w = plate_monopole_weight(Vec4<D>{w, column(det.pairs64[1]), column(det.pairs64[2]), column(det.pairs64[3])},
                                     mcol);
-        }
         // Pixels [p, p + count) lie in one ring: its weight, where the caps meet the belt.
         const double ring = sky.boundary.at(p);
-        if (ring != 1.0) w = hn::Mul(w, hn::Set(dd, ring));
-        mono_acc = hn::Add(mono_acc, hn::IfThenElseZero(inside, w));
+        if (ring != 1.0) w = w * D(ring);
+        mono_acc = hn::Add(mono_acc, hn::IfThenElseZero(live_lanes, w.v));
       }
-      if (in.per_sample) norm_acc = hn::Add(norm_acc, hn::IfThenElseZero(inside, column(det.pairs64[4])));
+      if (in.per_sample) norm_acc = hn::Add(norm_acc, hn::IfThenElseZero(live_lanes, column(det.pairs64[4]).v));
     }
     hn::StoreU(hn::Combine(df, xf[1], xf[0]), df, xs);
     hn::StoreU(hn::Combine(df, yf[1], yf[0]), df, ys);
