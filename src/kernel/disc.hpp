@@ -51,9 +51,13 @@ PISCO_HD double ring_z(std::int64_t nside, std::int64_t ring) {
 constexpr double PISCO_PI = 3.141592653589793238462643383279502884;
 #include "kernel/text_begin.hpp"
 #define PISCO_RING_INT std::int64_t
+#define PISCO_RING_TEMPLATE template <class T>
+#define PISCO_RING_REAL T
 using uint = unsigned int;
 #include "kernel/rings.glsl"
 #undef PISCO_RING_INT
+#undef PISCO_RING_TEMPLATE
+#undef PISCO_RING_REAL
 #include "kernel/text_end.hpp"
 
 // The table for all 4 nside - 1 rings; entry r - 1 describes ring r.

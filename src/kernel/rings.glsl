@@ -14,6 +14,8 @@
 #define PISCO_RINGS_GLSL
 #include "common.glsl"
 #define PISCO_RING_INT int
+#define PISCO_RING_TEMPLATE
+#define PISCO_RING_REAL double
 
 #ifndef __cplusplus
 // A float64 product rounded by itself, never fused with the addition or subtraction it feeds (the
@@ -37,8 +39,16 @@ PISCO_FN PISCO_RING_INT ring_above(PISCO_RING_INT nside, double z) {
 // cos theta0, xa = 1 / sin theta0): x = cos(dphi) sin(theta_ring) in the units of the ring's radius,
 // and ysq = 1 - z^2 - x^2 (the ring crosses the edge only where ysq > 0; its half-width in longitude
 // is then atan2(sqrt(ysq), x)).
-PISCO_FN double ring_edge_x(double z, double z0, double xa, double cos_rho) { return (cos_rho - mul_rn(z, z0)) * xa; }
-PISCO_FN double ring_edge_ysq(double z, double x) { return double(1) - mul_rn(z, z) - mul_rn(x, x); }
+// Templates of the number type in C++ (PISCO_RING_TEMPLATE, PISCO_RING_REAL): double, or the simd disc
+// walk's vectors of float64 lanes, a vector of rings at a time (src/simd/simd_disc.cpp).
+PISCO_RING_TEMPLATE
+PISCO_FN PISCO_RING_REAL ring_edge_x(PISCO_RING_REAL z, PISCO_RING_REAL z0, PISCO_RING_REAL xa, PISCO_RING_REAL cos_rho) {
+  return (cos_rho - mul_rn(z, z0)) * xa;
+}
+PISCO_RING_TEMPLATE
+PISCO_FN PISCO_RING_REAL ring_edge_ysq(PISCO_RING_REAL z, PISCO_RING_REAL x) {
+  return PISCO_RING_REAL(1) - mul_rn(z, z) - mul_rn(x, x);
+}
 
 // The argument whose floor bounds a ring's pixel indices at longitude phi: floor(arg(phi0 - dphi)) + 1
 // is the first pixel inside, floor(arg(phi0 + dphi)) the last; a ring of `count` pixels whose centres

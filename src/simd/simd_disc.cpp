@@ -41,11 +41,24 @@ namespace pisco::detail::simd {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
+// The ring edges' arithmetic, kernel/rings.glsl's, on float64 lanes: the text again in this target's
+// namespace, its ring_edge_x and ring_edge_ysq with T = D (float64_lanes-inl.h).
+#include "simd/float64_lanes-inl.h"
+#include "kernel/text_begin.hpp"
+#define PISCO_RING_INT std::int64_t
+#define PISCO_RING_TEMPLATE template <class T>
+#define PISCO_RING_REAL T
+#include "kernel/rings.glsl"
+#undef PISCO_RING_INT
+#undef PISCO_RING_TEMPLATE
+#undef PISCO_RING_REAL
+#include "kernel/text_end.hpp"
+
 // The disc's pixel ranges, exactly for_each_disc_range's (kernel/disc.hpp), with the arctangent of
 // each ring's half-width taken a vector of rings at a time. The reference computes
 // floor(arg(phi0 -+ dphi)) with dphi = atan2(sqrt(ysq), x), the C library's arctangent, some 30 ns a
 // ring: a third of this backend's time at rho_max = 5 deg. Here x and ysq are the reference's
-// (ring_edge's operations, in vectors), the square root is IEEE's in both, and the arctangent is Highway's (within 3
+// (rings.glsl's ring_edge_x and ring_edge_ysq on vectors of rings), the square root is IEEE's in both, and the arctangent is Highway's (within 3
 // ulp), so the vector's dphi is within 1e-15 rad of the reference's; a bound is taken from it only
 // when floor() gives the same integer anywhere within a margin (count / 2 pi x 1e-12 + 1e-9) of the
 // argument, far wider than that error and than the arithmetic's rounding. A ring where either bound
@@ -68,8 +81,8 @@ std::size_t DiscRanges(const RingEntry* rings, const RingColumns* columns, std::
   emit_north_cap(rings, d, emit);
   // Rings a block at a time: the block's vectors (independent of one another: the processor overlaps
   // their long square-root, division and polynomial chains), then the ranges. Each ring's edge x,
-  // ysq is ring_edge's arithmetic, operation for operation (correctly rounded in a vector lane as in
-  // a scalar register, no operation fused: simd.cmake), from the columns' z; lanes past the disc's
+  // ysq is the reference's text itself (correctly rounded in a vector lane as in a scalar register,
+  // no operation fused: simd.cmake), from the columns' z; lanes past the disc's
   // last ring read the columns' padding and are not used.
   constexpr std::size_t block = 64;
   static_assert(block % (HWY_MAX_BYTES / sizeof(double)) == 0, "whole vectors of doubles per block");
@@ -78,16 +91,16 @@ std::size_t DiscRanges(const RingEntry* rings, const RingColumns* columns, std::
   const VD zero = hn::Zero(dd), half_pi = hn::Set(dd, 0.5 * pi), pi_v = hn::Set(dd, pi);
   const VD phi_v = hn::Set(dd, phi0), rel = hn::Set(dd, 1e-12), abs_margin = hn::Set(dd, margin_abs);
   const VD one = hn::Set(dd, 1.0), tiny = hn::Set(dd, 1e-300);
-  const VD z0 = hn::Set(dd, d.z0), xa = hn::Set(dd, d.xa), cr = hn::Set(dd, cos_rho);
+  const D z0(d.z0), xa(d.xa), cr(cos_rho);
   for (std::int64_t first = d.first; first <= d.last; first += std::int64_t(block)) {
     const std::size_t n = std::size_t(std::min<std::int64_t>(std::int64_t(block), d.last - first + 1));
     const std::size_t padded = (n + L - 1) / L * L;
     const std::size_t at = std::size_t(first - 1);  // ring `first`'s entry
     for (std::size_t v = 0; v < padded; v += L) {
-      const VD z = hn::LoadU(dd, columns->z.data() + at + v);
-      // ring_edge: x = (cos_rho - z z0) xa, ysq = 1 - z^2 - x^2.
-      const VD xv = hn::Mul(hn::Sub(cr, hn::Mul(z, z0)), xa);
-      const VD ysq_v = hn::Sub(hn::Sub(one, hn::Mul(z, z)), hn::Mul(xv, xv));
+      const D z = D(hn::LoadU(dd, columns->z.data() + at + v));
+      // ring_edge's x = (cos_rho - z z0) xa and ysq = 1 - z^2 - x^2, the shared text.
+      const VD xv = ring_edge_x(z, z0, xa, cr).v;
+      const VD ysq_v = ring_edge_ysq(z, D(xv)).v;
       hn::Store(xv, dd, x + v);
       hn::Store(ysq_v, dd, ysq + v);
       const VD s = hn::Sqrt(hn::Max(ysq_v, zero));

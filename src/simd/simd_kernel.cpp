@@ -25,6 +25,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <type_traits>
 #include <vector>
 
 #include "simd/simd_kernel.hpp"
@@ -267,33 +268,10 @@ HWY_INLINE void lookup_pairs(DD dd, const double* table, hn::Vec<hn::RebindToSig
   g1 = hn::InterleaveUpper(dd, even, odd);
 }
 
-// A vector of float64 lanes (half as many as F's) as the number type of the shared interpolation and
-// beam coordinates (kernel/interpolate.glsl, T = D), with its index vector L and mask MD: the float64
-// sums' weights, the reference's arithmetic lane by lane.
-using DD = hn::Rebind<double, hn::Half<DF>>;
-using DL = hn::RebindToSigned<DD>;
-struct L {
-  hn::Vec<DL> v;
-};
-struct MD {
-  hn::Mask<DD> v;
-};
-struct D {
-  hn::Vec<DD> v;
-  D() = default;
-  HWY_INLINE D(double x) : v(hn::Set(DD(), x)) {}                      // NOLINT: 1.0f, 0.0f in the formulas
-  HWY_INLINE D(hn::Vec<DD> x) : v(x) {}                                // NOLINT
-  HWY_INLINE explicit D(const L& i) : v(hn::ConvertTo(DD(), i.v)) {}  // double(i)
-};
-HWY_INLINE D operator+(const D& a, const D& b) { return D(hn::Add(a.v, b.v)); }
-HWY_INLINE D operator-(const D& a, const D& b) { return D(hn::Sub(a.v, b.v)); }
-HWY_INLINE D operator*(const D& a, const D& b) { return D(hn::Mul(a.v, b.v)); }
-HWY_INLINE MD operator>=(const D& a, const D& b) { return {hn::Ge(a.v, b.v)}; }
-HWY_INLINE MD operator<=(const D& a, const D& b) { return {hn::Le(a.v, b.v)}; }  // false for NaN
-HWY_INLINE MD operator&&(const MD& a, const MD& b) { return {hn::And(a.v, b.v)}; }
-HWY_INLINE L operator+(const L& a, const L& b) { return {hn::Add(a.v, b.v)}; }
-HWY_INLINE L operator+(const L& a, int b) { return {hn::Add(a.v, hn::Set(DL(), b))}; }
-HWY_INLINE L operator*(const L& a, int b) { return {hn::Mul(a.v, hn::Set(DL(), b))}; }
+// The float64 lanes D of the shared texts (float64_lanes-inl.h: half as many lanes as F's), for the
+// float64 sums' beam coordinates and interpolation.
+#include "simd/float64_lanes-inl.h"
+static_assert(std::is_same_v<DD, hn::Rebind<double, hn::Half<DF>>>, "a vector of D holds half a vector of F");
 HWY_INLINE D sqrt(const D& a) { return D(hn::Sqrt(a.v)); }
 HWY_INLINE D max(const D& a, float b) { return D(hn::Max(a.v, hn::Set(DD(), double(b)))); }
 
