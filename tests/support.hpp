@@ -14,12 +14,13 @@
 
 namespace pisco_test {
 
-// The message of the pisco::Error that f throws ("no error" if none; other exceptions are named).
+// The message of the pisco::Error that f throws, its key named before it where it has one
+// (Error::named); "no error" if none; other exceptions are named.
 inline std::string error_of(const std::function<void()>& f) {
   try {
     f();
   } catch (const pisco::Error& e) {
-    return e.what();
+    return e.named();
   } catch (const std::exception& e) {
     return std::string("not a pisco::Error: ") + e.what();
   }

@@ -9,9 +9,11 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <numbers>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "pisco/beamsor.hpp"
@@ -187,11 +189,49 @@ TEST(Checks, HalfWavePlateBounds) {
                "detector 'plated': half-wave plate: transmits up to 1e+200 times the light");
 }
 
+// Each beam option is checked once, by pisco::check_beam_options, which every builder calls: its error
+// is keyed by the field (Error::key), for a simulation file to name by its own key.
+TEST(Checks, BeamOptionsAreKeyedByTheirField) {
+  const auto key_of = [](const std::function<void()>& f) -> std::string {
+    try {
+      f();
+    } catch (const pisco::Error& e) {
+      return e.key();
+    }
+    return "no error";
+  };
+  pisco::check_beam_options(pisco::BeamOptions{});  // the defaults
+  std::vector<std::pair<std::string, std::function<void(pisco::BeamOptions&)>>> cases = {
+      {"rho_max", [](pisco::BeamOptions& o) { o.rho_max = 90 * deg; }},
+      {"rho_max", [](pisco::BeamOptions& o) { o.rho_max = 0.0; }},
+      {"grid_step", [](pisco::BeamOptions& o) { o.grid_step = -1e-3; }},
+      {"split.rho_main", [](pisco::BeamOptions& o) { o.split.rho_main = 6 * deg; }},
+      {"split.taper", [](pisco::BeamOptions& o) { o.split = {2 * deg, 3 * deg, 0}; }},
+      {"split.nside", [](pisco::BeamOptions& o) { o.split = {2 * deg, 0.0, 12}; }},
+      {"cross_polar", [](pisco::BeamOptions& o) { o.cross_polar = NAN; }},
+      {"mueller", [](pisco::BeamOptions& o) { o.mueller[0][0] = -1.0; }},
+      {"far_sidelobe.level", [](pisco::BeamOptions& o) { o.far_sidelobe.level = -1e-3; }},
+      {"far_sidelobe.radius", [](pisco::BeamOptions& o) { o.far_sidelobe = {1e-3, 6 * deg, 1 * deg, 0.0, 0.0}; }},
+      {"far_sidelobe.width", [](pisco::BeamOptions& o) { o.far_sidelobe = {1e-3, 4 * deg, 0.0, 0.0, 0.0}; }},
+      {"far_sidelobe.asymmetry", [](pisco::BeamOptions& o) { o.far_sidelobe = {1e-3, 4 * deg, 1 * deg, 0.0, 1.5}; }},
+  };
+  for (const auto& [key, spoil] : cases) {
+    pisco::BeamOptions o;
+    spoil(o);
+    EXPECT_EQ(key_of([&] { pisco::check_beam_options(o); }), key);
+    EXPECT_EQ(key_of([&] { pisco::Beamsor::gaussian(1 * deg, o); }), key) << "the builder checks with it";
+  }
+  EXPECT_EQ(key_of([] { pisco::check_beam_width(10.5 * deg, 5 * deg, "fwhm_x"); }), "fwhm_x");
+  EXPECT_EQ(key_of([] { pisco::check_beam_width(-1 * deg, 5 * deg, "fwhm"); }), "fwhm");
+  EXPECT_EQ(key_of([] { pisco::Beamsor::elliptical_gaussian(1 * deg, 11 * deg, 0.0, {}); }), "fwhm_y");
+  pisco::check_beam_width(9.9 * deg, 5 * deg, "fwhm");  // its half-maximum radius within rho_max
+}
+
 TEST(Checks, BeamConstantMuellerBounds) {
   pisco::BeamOptions o;
   o.mueller[0][0] = 0.0;
   expect_error([&] { pisco::Beamsor::gaussian(1 * deg, o); },
-               "beam: the constant Mueller matrix (mueller): M00 = 0 (T to T) is not positive");
+               "mueller: the constant Mueller matrix: M00 = 0 (T to T) is not positive");
   o.mueller = pisco::identity_mueller();
   o.mueller[1][0] = 2.0;
   expect_error([&] { pisco::Beamsor::gaussian(1 * deg, o); }, "|M10| = 2 exceeds (1 + 0.01) M00 = 1.01");

@@ -515,11 +515,11 @@ TEST_F(Cli, BeamFilesAndSplitBeams) {
   expect_error("run " + write("far.toml", config(sky, "[beams.main]\ntype = \"grasp\"\nfile = \"horn.grd\"\nrho_max_deg = 8\n")).string(),
                "is beyond it");
   expect_error("run " + write("split.toml", config(sky, grasp + "sidelobe_split_deg = 6.0\n")).string(),
-               "sidelobe_split_deg: expected less than rho_max_deg");
+               "sidelobe_split_deg: 6 deg must lie in (0, rho_max = 4.5 deg)");
   expect_error("run " + write("nside.toml", config(sky, grasp + "sidelobe_nside = 64\n")).string(),
                "only with sidelobe_split_deg");
   expect_error("run " + write("pw2.toml", config(sky, grasp + "sidelobe_split_deg = 3.0\nsidelobe_nside = 48\n")).string(),
-               "sidelobe_nside: expected a power of two");
+               "sidelobe_nside: 48 must be a power of two up to 8192");
   // sidelobe_nside above the sky's (64 here): refused, not silently lowered.
   expect_error("run " + write("above.toml", config(sky, grasp + "sidelobe_split_deg = 3.0\nsidelobe_nside = 128\n")).string(),
                "sidelobe_nside = 128 is above the sky's NSIDE 64");

@@ -205,17 +205,17 @@ TEST(Ground, FarSidelobesAreTheirFormula) {
   EXPECT_EQ(pisco::Beamsor::elliptical_gaussian(fwhm, 1.0001 * fwhm, 0.3, round).sidelobe_band_limit(), band);
 
   for (const auto& [far, needle] : std::vector<std::pair<pisco::FarSidelobe, std::string>>{
-           {{-1.0, 50 * deg, 6 * deg, 0, 0}, "level"},
-           {{1e-4, 85 * deg, 6 * deg, 0, 0}, "radius 85 deg must lie in (0, rho_max = 80 deg]"},
-           {{1e-4, 50 * deg, 0.0, 0, 0}, "width must be a positive angle"},
-           {{1e-4, 50 * deg, 6 * deg, 0, 1.5}, "asymmetry must lie in [0, 1]"}}) {
+           {{-1.0, 50 * deg, 6 * deg, 0, 0}, "far_sidelobe.level: expected a finite power ratio"},
+           {{1e-4, 85 * deg, 6 * deg, 0, 0}, "far_sidelobe.radius: the ring's radius, 85 deg, must lie in (0, rho_max = 80 deg]"},
+           {{1e-4, 50 * deg, 0.0, 0, 0}, "far_sidelobe.width: expected a positive width"},
+           {{1e-4, 50 * deg, 6 * deg, 0, 1.5}, "far_sidelobe.asymmetry: expected a number in [0, 1]"}}) {
     pisco::BeamOptions b = split;
     b.far_sidelobe = far;
     try {
       (void)pisco::Beamsor::gaussian(fwhm, b);
       ADD_FAILURE() << needle;
     } catch (const pisco::Error& e) {
-      EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+      EXPECT_NE(e.named().find(needle), std::string::npos) << e.named();
     }
   }
 }

@@ -190,7 +190,8 @@ TEST(SidelobeSplit, BadSplitsNameTheProblem) {
     Beamsor::from_field(ring_beam, 20 * deg, 0.2 * deg, "ring", 0.0, false, s);
     FAIL();
   } catch (const pisco::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("rho_main = 25 deg must lie in (0, rho_max = 20 deg)"), std::string::npos) << e.what();
+    EXPECT_EQ(e.key(), "split.rho_main");
+    EXPECT_NE(std::string(e.what()).find("25 deg must lie in (0, rho_max = 20 deg)"), std::string::npos) << e.what();
   }
   s.rho_main = 5 * deg;
   s.nside = 100;

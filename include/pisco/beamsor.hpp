@@ -73,6 +73,18 @@ struct BeamOptions {
   FarSidelobe far_sidelobe;              // Gaussian beams only; off by default
 };
 
+// Checks `options` (docs/beams.md), as every builder does: rho_max in (0, 90) deg, grid_step finite
+// and not negative (0: the default step), the sidelobe split (its main part within rho_max, its taper
+// within the main part, its NSIDE a power of two), cross_polar finite, the constant Mueller matrix
+// (MuellerBounds::relative) and the far sidelobe. Throws pisco::Error (ErrorKind::input) keyed by the
+// field it concerns (Error::key): rho_max, grid_step, split.rho_main, split.taper, split.nside,
+// cross_polar, mueller, far_sidelobe.level, far_sidelobe.radius, far_sidelobe.width,
+// far_sidelobe.angle or far_sidelobe.asymmetry; a simulation file names the error by its own key.
+void check_beam_options(const BeamOptions& options);
+// A Gaussian's FWHM (radians): positive, finite, and its half-maximum radius within rho_max. Throws
+// pisco::Error keyed by `field`.
+void check_beam_width(double fwhm, double rho_max, const std::string& field);
+
 class Beamsor {
  public:
   // Function of the antenna-basis direction (rho, sigma) returning the (unnormalized) Mueller matrix.

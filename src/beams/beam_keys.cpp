@@ -12,12 +12,33 @@ namespace pisco::detail {
 
 constexpr double arcmin = deg / 60;
 
+// The library's check of the options read so far (pisco::check_beam_options, the one check of each
+// option), its errors named by this table's keys.
+void check_options(const Table& t, const BeamOptions& options) {
+  try {
+    pisco::check_beam_options(options);
+  } catch (const Error& e) {
+    t.fail_checked(e,
+                   {{"rho_max", "rho_max_deg"},
+                    {"grid_step", "grid_step_arcmin"},
+                    {"split.rho_main", "sidelobe_split_deg"},
+                    {"split.taper", "sidelobe_taper_deg"},
+                    {"split.nside", "sidelobe_nside"},
+                    {"cross_polar", "cross_polar"},
+                    {"mueller", "mueller"},
+                    {"far_sidelobe.radius", "far_sidelobe_deg"},
+                    {"far_sidelobe.width", "far_sidelobe_width_deg"},
+                    {"far_sidelobe.angle", "far_sidelobe_angle_deg"},
+                    {"far_sidelobe.asymmetry", "far_sidelobe_asymmetry"}},
+                   "beam: ");
+  }
+}
+
 // The beam's disc and grid step.
 void read_beam_grid(Table& t, BeamConfig& b) {
-  b.options.rho_max = t.positive("rho_max_deg", 5.0) * deg;
-  if (b.options.rho_max >= std::numbers::pi / 2) t.fail("rho_max_deg", "expected less than 90 deg");
+  b.options.rho_max = t.number("rho_max_deg", 5.0) * deg;
   b.options.grid_step = t.number("grid_step_arcmin", 0.0) * arcmin;
-  if (b.options.grid_step < 0) t.fail("grid_step_arcmin", "expected a positive step (or 0 for the default)");
+  check_options(t, b.options);
   // A grid has at least five nodes across the disc: a coarser one does not sample the beam.
   if (b.options.grid_step > b.options.rho_max / 2)
     t.fail("grid_step_arcmin", "a step of " + Table::format(b.options.grid_step / arcmin) +
@@ -30,10 +51,12 @@ void read_beam_grid(Table& t, BeamConfig& b) {
 // Beamsor::max_grid_nodes nodes a side at the step it implies (by default 1/16 of the smallest FWHM on a
 // 2D grid, 1/20 for a round beam's radial profile; 1/20 here, the finer of the two).
 double read_width(Table& t, const BeamConfig& b, const std::string& key) {
-  const double fwhm = t.positive(key, 1.5) * deg;
-  if (fwhm / 2 >= b.options.rho_max)
-    t.fail(key, "a FWHM of " + Table::format(fwhm / deg) + " deg is wider than the beam grid: its half-maximum "
-                "radius must fit within rho_max_deg = " + Table::format(b.options.rho_max / deg));
+  const double fwhm = t.number(key, 1.5) * deg;
+  try {
+    pisco::check_beam_width(fwhm, b.options.rho_max, key);
+  } catch (const Error& e) {
+    t.fail_checked(e, {{key, key}}, "beam: ");
+  }
   // At least two nodes within the FWHM: a coarser grid makes the beam another beam (TOD off by factors).
   if (b.options.grid_step > fwhm / 2)
     t.fail("grid_step_arcmin", "a step of " + Table::format(b.options.grid_step / arcmin) +
@@ -58,18 +81,14 @@ void read_sidelobe_split(Table& t, BeamConfig& b) {
   if (!t.has("sidelobe_split_deg"))
     t.fail(t.has("sidelobe_taper_deg") ? "sidelobe_taper_deg" : "sidelobe_nside",
            "only with sidelobe_split_deg, the radius of the beam's main part");
+  // Given, the main part's radius is positive (the library's 0 is no split at all).
   b.options.split.rho_main = t.positive("sidelobe_split_deg", 1.0) * deg;
-  if (!(b.options.split.rho_main < b.options.rho_max))
-    t.fail("sidelobe_split_deg", "expected less than rho_max_deg = " + Table::format(b.options.rho_max / deg) +
-                                     ": the main part lies within the beam's disc");
   b.options.split.taper = t.number("sidelobe_taper_deg", 0.0) * deg;
-  if (!(b.options.split.taper >= 0 && b.options.split.taper <= b.options.split.rho_main))
-    t.fail("sidelobe_taper_deg", "expected a width in [0, sidelobe_split_deg] (0: a quarter of it)");
   const double nside = t.number("sidelobe_nside", 0.0);
-  const int n = nside >= 0 && nside <= 8192 ? static_cast<int>(nside) : -1;  // converted only within range
-  if (!(n >= 0 && nside == n && (n & (n - 1)) == 0))
-    t.fail("sidelobe_nside", "expected a power of two up to 8192 (or 0: chosen from the sidelobes' band limit)");
-  b.options.split.nside = n;
+  if (!(nside >= -1e9 && nside <= 1e9 && nside == std::floor(nside)))  // converted only within range
+    t.fail("sidelobe_nside", "expected an integer, a power of two up to 8192 (or 0: chosen from the sidelobes' band limit)");
+  b.options.split.nside = static_cast<int>(nside);
+  check_options(t, b.options);
 }
 
 // A far sidelobe ring (docs/beams.md, "Far sidelobes"): its keys only with far_sidelobe_db.
@@ -79,20 +98,15 @@ static void read_far_sidelobe(Table& t, BeamConfig& b) {
       if (t.has(key)) t.fail(key, "a far sidelobe needs far_sidelobe_db");
     return;
   }
+  // The level in dB (the library's is a power ratio); the rest the library checks.
   const double db = t.number("far_sidelobe_db", 0.0);
   if (!(db <= 0.0 && db >= -200.0)) t.fail("far_sidelobe_db", "expected a level in [-200, 0] dB of the main beam's peak");
   pisco::FarSidelobe& far = b.options.far_sidelobe;
   far.level = std::pow(10.0, db / 10.0);
   far.radius = t.number("far_sidelobe_deg", 0.0) * deg;
-  if (!(far.radius > 0.0 && far.radius <= b.options.rho_max))
-    t.fail("far_sidelobe_deg", "expected the ring's radius in (0, rho_max_deg = " + Table::format(b.options.rho_max / deg) + "]");
   far.width = t.number("far_sidelobe_width_deg", 0.0) * deg;
-  if (!(far.width > 0.0 && far.width <= 180.0 * deg))
-    t.fail("far_sidelobe_width_deg", "expected a positive width (deg, at most 180)");
   far.angle = t.number("far_sidelobe_angle_deg", 0.0) * deg;
   far.asymmetry = t.number("far_sidelobe_asymmetry", 0.0);
-  if (!(far.asymmetry >= 0.0 && far.asymmetry <= 1.0))
-    t.fail("far_sidelobe_asymmetry", "expected a number in [0, 1] (0: a uniform ring, 1: a single lobe)");
 }
 
 // An analytic beam's polarization: its cross-polar part, far sidelobe and Mueller matrix.
@@ -106,9 +120,9 @@ void read_analytic_beam(Table& t, BeamConfig& b) {
   const std::vector<double> m = t.numbers("mueller", {});
   if (!m.empty()) {
     if (m.size() != 16) t.fail("mueller", "expected 16 numbers (a 4x4 Mueller matrix, row by row)");
-    if (!(m[0] > 0)) t.fail("mueller", "the first element (T to T) must be positive: the beam's total response");
     for (int i = 0; i < 16; ++i) b.options.mueller[i / 4][i % 4] = m[i];
   }
+  check_options(t, b.options);
 }
 
 void read_beam_file(Table& t, BeamConfig& b, const std::string& needs) {

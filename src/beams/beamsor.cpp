@@ -18,10 +18,27 @@ namespace {
 constexpr double pi = std::numbers::pi;
 using detail::degrees_text;
 
-void check_rho_max(double rho_max, const char* who) {
+// An input error about the option `field` (Error::key; docs/library.md, "Errors").
+[[noreturn]] void fail_option(const char* field, const std::string& what) { throw Error(what, ErrorKind::input, field); }
+
+void check_rho_max(double rho_max) {
   if (!(rho_max > 0.0 && rho_max < pi / 2))
-    throw Error(std::string(who) + ": rho_max = " + degrees_text(rho_max) +
-                " is outside (0, 90) deg; beams are limited to the front hemisphere");
+    fail_option("rho_max", degrees_text(rho_max) + " is outside (0, 90) deg; beams are limited to the front hemisphere");
+}
+
+// A split's main part within rho_max, its taper within the main part (0: a quarter of it), and the
+// outer part's NSIDE a power of two (0: from its band limit).
+void check_split(const SidelobeSplit& split, double rho_max) {
+  if (split.rho_main == 0.0) return;
+  if (!(std::isfinite(split.rho_main) && split.rho_main > 0.0 && split.rho_main < rho_max))
+    fail_option("split.rho_main", degrees_text(split.rho_main) + " must lie in (0, rho_max = " + degrees_text(rho_max) +
+                                      "): the main part lies within the beam's disc");
+  if (!(std::isfinite(split.taper) && split.taper >= 0.0 && split.taper <= split.rho_main))
+    fail_option("split.taper", degrees_text(split.taper) + " must lie in [0, rho_main = " + degrees_text(split.rho_main) +
+                                   "] (0: a quarter of it)");
+  if (split.nside != 0 && !(split.nside > 0 && split.nside <= 8192 && (split.nside & (split.nside - 1)) == 0))
+    fail_option("split.nside", std::to_string(split.nside) +
+                                   " must be a power of two up to 8192 (or 0: chosen from the outer part's band limit)");
 }
 
 // Gauss-Legendre nodes and weights on [-1, 1] by Newton iteration on P_n.
@@ -102,16 +119,45 @@ Beamsor::Field gaussian_field(double sx, double sy, double angle, const BeamOpti
   };
 }
 
-void check_fwhm(double fwhm, double rho_max, const char* what) {
+}  // namespace
+
+void check_beam_width(double fwhm, double rho_max, const std::string& field) {
   if (!(std::isfinite(fwhm) && fwhm > 0.0))
-    throw Error(std::string("beam: ") + what + " must be a positive finite angle, got " + degrees_text(fwhm));
+    throw Error("expected a positive finite angle, got " + degrees_text(fwhm), ErrorKind::input, field);
   if (fwhm / 2 >= rho_max)
-    throw Error(std::string("beam: ") + what + " = " + degrees_text(fwhm) +
-                " is wider than the beam grid: its half-maximum radius does not fit within rho_max = " +
-                degrees_text(rho_max));
+    throw Error("a FWHM of " + degrees_text(fwhm) +
+                    " is wider than the beam grid: its half-maximum radius does not fit within rho_max = " +
+                    degrees_text(rho_max),
+                ErrorKind::input, field);
 }
 
-}  // namespace
+void check_beam_options(const BeamOptions& options) {
+  check_rho_max(options.rho_max);
+  if (!(std::isfinite(options.grid_step) && options.grid_step >= 0.0))
+    fail_option("grid_step", "expected a positive finite angle (or 0 for the default step), got " +
+                                 degrees_text(options.grid_step));
+  check_split(options.split, options.rho_max);
+  if (!std::isfinite(options.cross_polar)) fail_option("cross_polar", "must be finite");
+  try {
+    check_mueller(options.mueller, "the constant Mueller matrix", MuellerBounds::relative);
+  } catch (const Error& e) {
+    fail_option("mueller", e.what());
+  }
+  const FarSidelobe& far = options.far_sidelobe;
+  if (!(std::isfinite(far.level) && far.level >= 0.0))
+    fail_option("far_sidelobe.level", "expected a finite power ratio of the main beam's peak, not negative, got " +
+                                          detail::number_text(far.level));
+  if (far.level == 0.0) return;
+  if (!(std::isfinite(far.radius) && far.radius > 0.0 && far.radius <= options.rho_max))
+    fail_option("far_sidelobe.radius", "the ring's radius, " + degrees_text(far.radius) + ", must lie in (0, rho_max = " +
+                                           degrees_text(options.rho_max) + "]");
+  if (!(std::isfinite(far.width) && far.width > 0.0 && far.width <= pi))
+    fail_option("far_sidelobe.width", "expected a positive width up to 180 deg, got " + degrees_text(far.width));
+  if (!std::isfinite(far.angle)) fail_option("far_sidelobe.angle", "must be finite");
+  if (!(far.asymmetry >= 0.0 && far.asymmetry <= 1.0))
+    fail_option("far_sidelobe.asymmetry", "expected a number in [0, 1] (0: a uniform ring, 1: a single lobe), got " +
+                                              detail::number_text(far.asymmetry));
+}
 
 Mueller identity_mueller() {
   Mueller m{};
@@ -274,7 +320,7 @@ void Beamsor::sample(const Field& field) {
 Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step,
                             std::string description, double feature_scale, bool radial,
                             const SidelobeSplit& split) {
-  check_rho_max(rho_max, "beam");
+  check_rho_max(rho_max);
   if (!(std::isfinite(grid_step) && grid_step > 0.0))
     throw Error("beam: grid_step must be a positive finite angle, got " + degrees_text(grid_step));
   if (grid_step > std::sin(split.rho_main > 0.0 ? split.rho_main : rho_max))
@@ -310,16 +356,9 @@ Beamsor Beamsor::from_field(const Field& field, double rho_max, double grid_step
 
 Beamsor Beamsor::split_field(const Field& field, double rho_max, double grid_step, std::string description,
                              double feature_scale, bool radial, const SidelobeSplit& split) {
+  check_split(split, rho_max);
   const double rho_main = split.rho_main;
-  if (!(std::isfinite(rho_main) && rho_main > 0.0 && rho_main < rho_max))
-    throw Error("beam: the sidelobe split's rho_main = " + degrees_text(rho_main) + " must lie in (0, rho_max = " +
-                degrees_text(rho_max) + ")");
   const double taper = split.taper == 0.0 ? rho_main / 4 : split.taper;
-  if (!(std::isfinite(taper) && taper > 0.0 && taper <= rho_main))
-    throw Error("beam: the sidelobe split's taper = " + degrees_text(taper) + " must lie in (0, rho_main = " +
-                degrees_text(rho_main) + "]");
-  if (split.nside != 0 && !(split.nside > 0 && split.nside <= 8192 && (split.nside & (split.nside - 1)) == 0))
-    throw Error("beam: the sidelobe split's nside = " + std::to_string(split.nside) + " must be a power of two in [1, 8192]");
   const double start = rho_main - taper;
   // tau: 1 within rho_main - taper, a half cosine down to 0 at rho_main.
   const auto tau = [=](double rho) {
@@ -389,32 +428,18 @@ Beamsor Beamsor::split_field(const Field& field, double rho_max, double grid_ste
 }
 
 Beamsor Beamsor::gaussian(double fwhm, const BeamOptions& options) {
-  check_rho_max(options.rho_max, "beam");
-  check_fwhm(fwhm, options.rho_max, "fwhm");
+  check_beam_options(options);
+  check_beam_width(fwhm, options.rho_max, "fwhm");
   return elliptical_gaussian(fwhm, fwhm, 0.0, options);
 }
 
 Beamsor Beamsor::elliptical_gaussian(double fwhm_x, double fwhm_y, double angle,
                                      const BeamOptions& options) {
-  check_rho_max(options.rho_max, "beam");
-  check_fwhm(fwhm_x, options.rho_max, "fwhm_x");
-  check_fwhm(fwhm_y, options.rho_max, "fwhm_y");
-  if (!std::isfinite(angle)) throw Error("beam: angle must be finite");
-  if (!std::isfinite(options.cross_polar)) throw Error("beam: cross_polar must be finite");
-  check_mueller(options.mueller, "beam: the constant Mueller matrix (mueller)", MuellerBounds::relative);
+  check_beam_options(options);
+  check_beam_width(fwhm_x, options.rho_max, "fwhm_x");
+  check_beam_width(fwhm_y, options.rho_max, "fwhm_y");
+  if (!std::isfinite(angle)) fail_option("angle", "must be finite");
   const FarSidelobe& far = options.far_sidelobe;
-  if (!(std::isfinite(far.level) && far.level >= 0.0))
-    throw Error("beam: the far sidelobe's level must be a finite power ratio, not negative");
-  if (far.level > 0.0) {
-    if (!(std::isfinite(far.radius) && far.radius > 0.0 && far.radius <= options.rho_max))
-      throw Error("beam: the far sidelobe's radius " + degrees_text(far.radius) + " must lie in (0, rho_max = " +
-                  degrees_text(options.rho_max) + "]");
-    if (!(std::isfinite(far.width) && far.width > 0.0 && far.width <= pi))
-      throw Error("beam: the far sidelobe's width must be a positive angle, got " + degrees_text(far.width));
-    if (!std::isfinite(far.angle)) throw Error("beam: the far sidelobe's angle must be finite");
-    if (!(far.asymmetry >= 0.0 && far.asymmetry <= 1.0))
-      throw Error("beam: the far sidelobe's asymmetry must lie in [0, 1]");
-  }
   const double to_sigma = 1.0 / std::sqrt(8.0 * std::log(2.0));
   const double smallest = std::min(fwhm_x, fwhm_y);
   const bool radial = fwhm_x == fwhm_y &&

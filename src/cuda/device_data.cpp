@@ -9,24 +9,37 @@
 
 namespace pisco::detail::cuda {
 
-std::vector<PixelRecord> pixel_records(int nside, std::size_t first_pixel,
-                                       const std::array<std::span<const double>, 4>& maps, double monopole,
-                                       const CapBoundary& boundary) {
-  const std::size_t count = maps[0].size();
-  std::vector<PixelRecord> out(count);
+namespace {
+
+// Calls f(i, n, xyz) for pixels first_pixel + [i, i + n) of [0, count), a piece at a time, with xyz their
+// unit vectors (3 doubles a pixel) made on all hardware threads.
+template <class F>
+void for_each_vector_piece(int nside, std::size_t first_pixel, std::size_t count, F&& f) {
   const PixelVectors vectors(nside);
   constexpr std::size_t piece = std::size_t(1) << 16;
   std::vector<double> xyz(3 * piece);
   for (std::size_t first = 0; first < count; first += piece) {
     const std::size_t n = std::min(piece, count - first);
     vectors.get(first_pixel + first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
+    f(first, n, xyz.data());
+  }
+}
+
+}  // namespace
+
+std::vector<PixelRecord> pixel_records(int nside, std::size_t first_pixel,
+                                       const std::array<std::span<const double>, 4>& maps, double monopole,
+                                       const CapBoundary& boundary) {
+  const std::size_t count = maps[0].size();
+  std::vector<PixelRecord> out(count);
+  for_each_vector_piece(nside, first_pixel, count, [&](std::size_t first, std::size_t n, const double* xyz) {
     for (std::size_t j = 0; j < n; ++j) {
       const std::size_t i = first + j;
       out[i] = {float(xyz[3 * j]),   float(xyz[3 * j + 1]), float(xyz[3 * j + 2]),
                 float(maps[0][i] - monopole * boundary.at(first_pixel + i)),
                 float(maps[1][i]),   float(maps[2][i]),     float(maps[3][i]), 0.0f};
     }
-  }
+  });
   return out;
 }
 
@@ -36,15 +49,10 @@ std::vector<PixelRecord> pixel_records(const SkyView& sky, double monopole, cons
 
 std::vector<double> pixel_vectors(int nside, std::size_t first_pixel, std::size_t count) {
   std::vector<double> out(count * 4, 0.0);
-  const PixelVectors vectors(nside);
-  constexpr std::size_t piece = std::size_t(1) << 16;
-  std::vector<double> xyz(3 * piece);
-  for (std::size_t first = 0; first < count; first += piece) {
-    const std::size_t n = std::min(piece, count - first);
-    vectors.get(first_pixel + first, n, xyz.data(), std::max(1u, std::thread::hardware_concurrency()));
+  for_each_vector_piece(nside, first_pixel, count, [&](std::size_t first, std::size_t n, const double* xyz) {
     for (std::size_t j = 0; j < n; ++j)
       for (int c = 0; c < 3; ++c) out[(first + j) * 4 + c] = xyz[3 * j + c];
-  }
+  });
   return out;
 }
 

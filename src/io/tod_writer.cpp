@@ -84,6 +84,19 @@ struct TodWriter::Impl {
   std::vector<float> buffer;
   std::vector<Quat> quats;
 
+  // The writer of `focal_plane`'s detectors, `samples` each, with the datasets asked for; its dataset
+  // access list without a chunk cache.
+  Impl(const std::string& where_, const FocalPlane& focal_plane, std::size_t samples_, TodPrecision precision_,
+       bool with_pointing_, bool with_flags_, bool with_weights_)
+      : where(where_), samples(samples_), precision(precision_), with_pointing(with_pointing_), with_flags(with_flags_),
+        with_weights(with_weights_) {
+    names.reserve(focal_plane.size());
+    for (const Detector& d : focal_plane.detectors()) names.push_back(d.name);
+    written.resize(focal_plane.size());
+    dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
+    check(H5Pset_chunk_cache(dapl.get(), 0, 0, 1.0), where, "cannot switch the chunk cache off");
+  }
+
   ~Impl() {
     Session session;
     // Abandoned (an error, a full disk, a signal): nothing may fail on the way out, whatever the disk.
@@ -261,19 +274,9 @@ void TodWriter::create(const FocalPlane& focal_plane, std::size_t samples_per_de
   check_target(file, focal_plane);
   std::error_code ec;
 
-  impl_ = std::make_unique<Impl>();
+  impl_ = std::make_unique<Impl>(where, focal_plane, samples_per_detector, precision, with_pointing, with_flags,
+                                 with_weights);
   Impl& s = *impl_;
-  s.where = where;
-  s.names.reserve(focal_plane.size());
-  for (const Detector& d : focal_plane.detectors()) s.names.push_back(d.name);
-  s.samples = samples_per_detector;
-  s.precision = precision;
-  s.with_pointing = with_pointing;
-  s.with_flags = with_flags;
-  s.with_weights = with_weights;
-  s.written.resize(focal_plane.size());
-  s.dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
-  check(H5Pset_chunk_cache(s.dapl.get(), 0, 0, 1.0), where, "cannot switch the chunk cache off");
 
   Handle fcpl = checked(H5Pcreate(H5P_FILE_CREATE), H5Pclose, where, "cannot create a file creation list");
   // Track link creation order so that readers list detectors in focal-plane order.
@@ -331,19 +334,10 @@ TodWriter TodWriter::open_shared(const fs::path& file, const FocalPlane& focal_p
   w.file_ = file;
   w.temporary_ = fs::path(file.string() + options.temporary_suffix);
   w.samples_ = samples_per_detector;
-  w.impl_ = std::make_unique<Impl>();
+  w.impl_ = std::make_unique<Impl>(where, focal_plane, samples_per_detector, precision, with_pointing, with_flags,
+                                   with_weights);
   Impl& s = *w.impl_;
-  s.where = where;
-  for (const Detector& d : focal_plane.detectors()) s.names.push_back(d.name);
-  s.samples = samples_per_detector;
-  s.precision = precision;
-  s.with_pointing = with_pointing;
-  s.with_flags = with_flags;
-  s.with_weights = with_weights;
-  s.written.resize(focal_plane.size());
   s.shared = options;
-  s.dapl = checked(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose, where, "cannot create a dataset access list");
-  check(H5Pset_chunk_cache(s.dapl.get(), 0, 0, 1.0), where, "cannot switch the chunk cache off");
   Handle fapl = file_access_plist(where);
   if (options.mpi_communicator) {
 #ifdef H5_HAVE_PARALLEL

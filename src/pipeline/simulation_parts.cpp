@@ -116,7 +116,7 @@ Beamsor make_beam(const BeamConfig& b, const fs::path& config, double angle,
     if (!kind.make) throw pisco::Error("a beam made of other tables' beams has no beamsor of its own", pisco::ErrorKind::internal);
     return kind.make(b, fo);
   } catch (const pisco::Error& e) {
-    throw pisco::Error(config.string() + ": [beams." + b.name + "] " + e.what());
+    throw pisco::Error(config.string() + ": [beams." + b.name + "] " + e.named());
   }
 }
 
