@@ -67,9 +67,9 @@ namespace hn = hwy::HWY_NAMESPACE;
 std::size_t DiscRanges(const RingEntry* rings, const RingColumns* columns, std::int64_t nside, double theta0,
                        double phi0, double rho, double cos_rho, std::vector<std::uint32_t>& ranges,
                        std::size_t* redone, double margin_abs) {
-  const hn::ScalableTag<double> dd;
-  using VD = hn::Vec<decltype(dd)>;
-  const std::size_t L = hn::Lanes(dd);
+  const DD dd;  // float64_lanes-inl.h's lanes
+  using VD = hn::Vec<DD>;
+  const std::size_t lanes = hn::Lanes(dd);
   const double pi = 3.141592653589793238462643383279502884;
   const DiscRings d = disc_rings(nside, theta0, rho);
   // At most two ranges a ring and one a polar cap, written through a pointer (the ranges are most of
@@ -94,13 +94,13 @@ std::size_t DiscRanges(const RingEntry* rings, const RingColumns* columns, std::
   const D z0(d.z0), xa(d.xa), cr(cos_rho);
   for (std::int64_t first = d.first; first <= d.last; first += std::int64_t(block)) {
     const std::size_t n = std::size_t(std::min<std::int64_t>(std::int64_t(block), d.last - first + 1));
-    const std::size_t padded = (n + L - 1) / L * L;
+    const std::size_t padded = (n + lanes - 1) / lanes * lanes;
     const std::size_t at = std::size_t(first - 1);  // ring `first`'s entry
-    for (std::size_t v = 0; v < padded; v += L) {
+    for (std::size_t v = 0; v < padded; v += lanes) {
       const D z = D(hn::LoadU(dd, columns->z.data() + at + v));
       // ring_edge's x = (cos_rho - z z0) xa and ysq = 1 - z^2 - x^2, the shared text.
-      const VD xv = ring_edge_x(z, z0, xa, cr).v;
-      const VD ysq_v = ring_edge_ysq(z, D(xv)).v;
+      const D edge_x = ring_edge_x(z, z0, xa, cr);
+      const VD xv = edge_x.v, ysq_v = ring_edge_ysq(z, edge_x).v;
       hn::Store(xv, dd, x + v);
       hn::Store(ysq_v, dd, ysq + v);
       const VD s = hn::Sqrt(hn::Max(ysq_v, zero));
