@@ -135,7 +135,13 @@ inline pisco::Mueller generic_plate() {
 inline std::string backend_unavailable(const std::string& backend) {
   for (const auto& b : pisco::Engine::backends())
     if (b.name == backend) return b.available ? "" : b.detail;
-  return "the backend '" + backend + "' is not compiled into this build";
+  return "the backend '" + backend + "' is unknown to this library";
+}
+
+// Sets the setting `name` where the options' backend takes it (every backend that has it under
+// "auto"): the parametrized suites give host threads and device chunks to the backends that have them.
+inline void set_taken(pisco::EngineOptions& o, const std::string& name, const pisco::EngineValue& value) {
+  if (o.backend == "auto" || pisco::backend_has_setting(o.backend, name)) o.set(name, value);
 }
 
 }  // namespace pisco_test

@@ -151,8 +151,8 @@ TEST_P(Adjoint, DotProductIdentity) {
       o.backend = GetParam();
       o.normalization = n;
       o.quadrature = q;
-      o.cpu.threads = o.simd.threads = 2;
-      o.vulkan.arithmetic = pisco::arithmetic_from(a);
+      pisco_test::set_taken(o, "threads", 2LL);
+      pisco_test::set_taken(o, "arithmetic", std::string(a));
       const DotTest t = dot_test(scene, o, p);
       std::cout << GetParam() << ", " << a << (n == pisco::Normalization::integral ? ", integral" : ", per-sample")
                 << (q == pisco::Quadrature::corrected ? ", corrected" : ", plain") << ": <As,d> = " << t.forward
@@ -178,7 +178,7 @@ TEST_P(Adjoint, DotProductIdentityWithSidelobes) {
   scene.focal_plane.add_pair("pair", 10 * deg, 0, 0);
   pisco::EngineOptions o;
   o.backend = GetParam();
-  o.cpu.threads = o.simd.threads = 2;
+  pisco_test::set_taken(o, "threads", 2LL);
   const DotTest t = dot_test(scene, o, pisco_test::random_pointing(300, 8));
   std::cout << GetParam() << ", split beam: difference / (||As|| ||d||) = " << t.relative() << "\n";
   EXPECT_LT(t.relative(), bar());
@@ -203,7 +203,7 @@ TEST_P(Adjoint, MatchesTheTransposeColumnByColumn) {
   const std::vector<double> h = plate_angles(p.size());
   pisco::EngineOptions o;
   o.backend = GetParam();
-  o.cpu.threads = o.simd.threads = 2;
+  pisco_test::set_taken(o, "threads", 2LL);
   // A^T d over every detector.
   pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
   std::vector<std::vector<double>> d;
@@ -244,8 +244,8 @@ TEST_P(Adjoint, DeterministicAcrossThreadsAndChunks) {
   const auto run = [&](unsigned threads, std::size_t chunk, std::size_t device_chunk = 0) {
     pisco::EngineOptions o;
     o.backend = GetParam();
-    o.cpu.threads = o.simd.threads = threads;
-    o.vulkan.chunk_samples = o.cuda.chunk_samples = device_chunk;
+    pisco_test::set_taken(o, "threads", (long long)threads);
+    pisco_test::set_taken(o, "chunk_samples", (long long)device_chunk);
     pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
     for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
       const std::vector<double> d = gaussian_tod(p.size(), det);
@@ -313,7 +313,7 @@ TEST_P(Adjoint, MatchesTheReference) {
   const auto run = [&](const std::string& backend, const std::string& arithmetic) {
     pisco::EngineOptions o;
     o.backend = backend;
-    o.vulkan.arithmetic = pisco::arithmetic_from(arithmetic);
+    pisco_test::set_taken(o, "arithmetic", arithmetic);
     pisco::Engine engine(scene.sky, scene.beams, scene.focal_plane, o);
     for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
       std::vector<double> d = gaussian_tod(p.size(), 40 + det);
@@ -365,7 +365,7 @@ TEST_P(Adjoint, NormalIsConvolveThenAdjoint) {
     const auto run = [&](bool fused, unsigned threads) {
       pisco::EngineOptions o;
       o.backend = GetParam();
-      o.cpu.threads = o.simd.threads = threads;
+      pisco_test::set_taken(o, "threads", (long long)threads);
       pisco::Engine engine(sky, scene.beams, scene.focal_plane, o);
       for (std::size_t det = 0; det < scene.focal_plane.size(); ++det) {
         const std::span<const double> angles =
@@ -428,7 +428,7 @@ TEST(SimdAdjointWideDiscs, SmallerTasksKeepTheBitsAndTheReference) {
   const auto run = [&](const std::string& backend, unsigned threads) {
     pisco::EngineOptions o;
     o.backend = backend;
-    o.cpu.threads = o.simd.threads = threads;
+    pisco_test::set_taken(o, "threads", (long long)threads);
     pisco::Engine engine(sky, beams, fp, o);
     for (std::size_t det = 0; det < fp.size(); ++det)
       engine.adjoint(det, p.view(), gaussian_tod(p.size(), 60 + det),
@@ -459,7 +459,7 @@ TEST(SimdAdjointWideDiscs, SmallerTasksKeepTheBitsAndTheReference) {
   for (const pisco::Quadrature q : {pisco::Quadrature::corrected, pisco::Quadrature::plain}) {
     pisco::EngineOptions o;
     o.backend = "simd";
-    o.simd.threads = 2;
+    o.set("threads", 2LL);
     o.quadrature = q;
     pisco::Engine engine(flat, beams, fp, o);
     pisco::Sky two(nside), fused(nside);
@@ -487,7 +487,7 @@ TEST(SimdAdjointWideDiscs, SmallerTasksKeepTheBitsAndTheReference) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, Adjoint, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Backends, Adjoint, ::testing::ValuesIn(pisco::Engine::backend_names()),
                          [](const auto& info) { return info.param; });
 
 TEST(AdjointErrors, BadArgumentsNameTheProblem) {

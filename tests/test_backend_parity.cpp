@@ -56,10 +56,10 @@ pisco::EngineOptions options(const std::string& name, std::size_t chunk = 0,
                              pisco::Normalization n = pisco::Normalization::integral) {
   pisco::EngineOptions o;
   o.backend = name;
-  o.vulkan.chunk_samples = o.cuda.chunk_samples = chunk;
+  pisco_test::set_taken(o, "chunk_samples", (long long)chunk);
   o.normalization = n;
 #ifdef PISCO_TEST_ARITHMETIC
-  o.vulkan.arithmetic = pisco::arithmetic_from(PISCO_TEST_ARITHMETIC);  // the vulkan kernel without float64, on any device
+  pisco_test::set_taken(o, "arithmetic", std::string(PISCO_TEST_ARITHMETIC));  // the vulkan kernel without float64, on any device
 #endif
   return o;
 }
@@ -312,9 +312,9 @@ TEST(BackendParity, UnknownDeviceIsAClearError) {
   SKIP_WITHOUT_DEVICE();
   const Scene s = scene(16);
   pisco::EngineOptions o = options(backend);
-  o.set_device("no-such-device");
+  o.set("device", "no-such-device");
   pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, o); }, "no-such-device");
-  o.set_device("99");
+  o.set("device", "99");
   pisco_test::expect_error([&] { pisco::Engine(s.sky, s.beams, s.focal_plane, o); }, "99");
 }
 

@@ -75,7 +75,7 @@ class BeamSequence : public ::testing::TestWithParam<std::string> {
     const std::string why = pisco_test::backend_unavailable(GetParam());
     if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
     options.backend = GetParam();
-    options.cpu.threads = options.simd.threads = 2;
+    pisco_test::set_taken(options, "threads", 2LL);
   }
   double bar() const { return GetParam() == "cpu" ? 1e-11 : 1e-7; }
   pisco::EngineOptions options;
@@ -223,7 +223,7 @@ TEST_P(BeamSequence, AccumulatesAndQueues) {
   EXPECT_GT(norm, 0.0);
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, BeamSequence, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Backends, BeamSequence, ::testing::ValuesIn(pisco::Engine::backend_names()),
                          [](const auto& info) { return info.param; });
 
 TEST(BeamSequenceErrors, NameTheDetectorTheNodeAndTheSample) {

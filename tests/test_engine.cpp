@@ -118,7 +118,7 @@ struct Scene {
 
 TEST(Engine, ReferenceEqualsBruteForce) {
   Scene s;
-  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}, .quadrature = pisco::Quadrature::plain});
+  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .settings = {{"threads", 2LL}}, .quadrature = pisco::Quadrature::plain});
   double worst = 0, rms = 0;
   for (std::size_t det = 0; det < s.fp.size(); ++det) {
     std::vector<double> tod(s.ptg.size(), NAN);
@@ -138,8 +138,8 @@ TEST(Engine, ReferenceEqualsBruteForce) {
 
 TEST(Engine, DeterministicAcrossThreadsAndChunks) {
   Scene s;
-  pisco::Engine one(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 1}});
-  pisco::Engine two(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}});
+  pisco::Engine one(s.sky, s.beams, s.fp, {.backend = "cpu", .settings = {{"threads", 1LL}}});
+  pisco::Engine two(s.sky, s.beams, s.fp, {.backend = "cpu", .settings = {{"threads", 2LL}}});
   std::vector<double> a(s.ptg.size()), b(s.ptg.size(), NAN), c(s.ptg.size(), NAN);
   one.convolve(1, s.ptg, a);
   two.convolve(1, s.ptg, b);
@@ -257,9 +257,6 @@ double max_abs_diff(const std::vector<double>& a, const std::vector<double>& b) 
 // The engine owns the offsets: a detector off the boresight, given the boresight's pointing (as
 // angles or as quaternions), gets the TOD of its own pointing (expanded on the host and given to a
 // detector on the boresight), not the boresight's.
-// Each backend's own options, and the one-name settings of simulation files, the command line and
-// Python: on every backend that has them under "auto", on the named one otherwise, and an error
-// naming the setting's backends where the named backend has no such setting.
 // Every setting by name through the one table (pisco::set_engine_option), as simulation files,
 // pisco-vk and Python set them; each error carries the setting's name as its key, and its message does
 // not repeat it (the caller names it as its own key, keyword or flag).
@@ -276,7 +273,7 @@ TEST(EngineOptions, EverySettingByNameThroughOneTable) {
   pisco::EngineOptions o;
   std::vector<std::string> names;
   for (const pisco::EngineSetting& s : pisco::engine_settings()) names.push_back(s.name);
-  EXPECT_EQ(names, (std::vector<std::string>{"backend", "device", "threads", "chunk_samples", "arithmetic",
+  EXPECT_EQ(names, (std::vector<std::string>{"backend", "threads", "device", "chunk_samples", "arithmetic",
                                               "normalization", "unseen", "quadrature"}));
   pisco::set_engine_option(o, "backend", std::string("auto"));
   pisco::set_engine_option(o, "device", std::string("1"));
@@ -287,14 +284,11 @@ TEST(EngineOptions, EverySettingByNameThroughOneTable) {
   pisco::set_engine_option(o, "unseen", std::string("flag"));
   pisco::set_engine_option(o, "quadrature", std::string("plain"));
   EXPECT_EQ(o.backend, "auto");
-  EXPECT_EQ(o.vulkan.device, "1");
-  EXPECT_EQ(o.cuda.device, "1");
-  EXPECT_EQ(o.simd.instruction_set, "1");
-  EXPECT_EQ(o.cpu.threads, 3u);
-  EXPECT_EQ(o.simd.threads, 3u);
-  EXPECT_EQ(o.vulkan.chunk_samples, 4096u);
-  EXPECT_EQ(o.cuda.chunk_samples, 4096u);
-  EXPECT_EQ(o.vulkan.arithmetic, pisco::Arithmetic::float_float);
+  EXPECT_EQ(o.text("device"), "1");
+  EXPECT_EQ(o.number("threads"), 3u);
+  EXPECT_EQ(o.number("chunk_samples"), 4096u);
+  EXPECT_EQ(o.text("arithmetic"), "float-float");
+  EXPECT_EQ(o.settings.size(), 4u);
   EXPECT_EQ(o.normalization, pisco::Normalization::per_sample);
   EXPECT_EQ(o.unseen, pisco::UnseenPolicy::flag);
   EXPECT_EQ(o.quadrature, pisco::Quadrature::plain);
@@ -305,9 +299,22 @@ TEST(EngineOptions, EverySettingByNameThroughOneTable) {
     EXPECT_EQ(pisco::quadrature_from(pisco::quadrature_name(v)), v);
   for (auto v : {pisco::UnseenPolicy::error, pisco::UnseenPolicy::zero, pisco::UnseenPolicy::flag})
     EXPECT_EQ(pisco::unseen_policy_from(pisco::unseen_policy_name(v)), v);
+  // What each takes, and the backends it applies to, as their entries declare them.
+  for (const pisco::EngineSetting& s : pisco::engine_settings()) {
+    const std::string n = s.name;
+    if (n == "threads") EXPECT_STREQ(s.backends, "cpu and simd");
+    if (n == "chunk_samples") EXPECT_STREQ(s.backends, "vulkan and cuda");
+    if (n == "arithmetic") EXPECT_STREQ(s.takes, "\"auto\", \"float64\" or \"float-float\"");
+    if (n == "device") {
+      EXPECT_STREQ(s.backends, "simd, vulkan and cuda");
+      EXPECT_STREQ(s.takes, "an instruction set (\"AVX3\", \"AVX2\", \"SSE4\", \"NEON\", ...) or \"auto\" (simd); \"auto\", "
+                            "a device's index or part of its name (vulkan and cuda)");
+    }
+    EXPECT_EQ(s.number, n == "threads" || n == "chunk_samples") << n;
+  }
 
   EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "normalisation", std::string("integral")); }),
-            "normalisation | not a setting of the engine (expected one of backend, device, threads, chunk_samples, "
+            "normalisation | not a setting of the engine (expected one of backend, threads, device, chunk_samples, "
             "arithmetic, normalization, unseen, quadrature)");
   EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "threads", std::string("4")); }), "threads | expected a number, got \"4\"");
   EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "chunk_samples", -1LL); }),
@@ -316,10 +323,13 @@ TEST(EngineOptions, EverySettingByNameThroughOneTable) {
             "quadrature | expected \"corrected\" or \"plain\", got the number 1");
   EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "unseen", std::string("mask")); }),
             "unseen | expected \"error\", \"zero\" or \"flag\", got \"mask\"");
+  EXPECT_EQ(key_of([&] { pisco::set_engine_option(o, "arithmetic", std::string("double")); }),
+            "arithmetic | expected \"auto\", \"float64\" or \"float-float\", got \"double\"");
   EXPECT_EQ(key_of([&] {
               pisco::set_engine_option(o, "threads", static_cast<long long>(pisco::Engine::max_threads()) + 1);
             }).substr(0, 40),
             "threads | expected 0 (all hardware threa");
+  EXPECT_EQ(o.number("threads"), 3u);  // a refused value leaves the options as they were
   pisco::EngineOptions cpu;
   pisco::set_engine_option(cpu, "backend", std::string("cpu"));
   EXPECT_EQ(key_of([&] { pisco::set_engine_option(cpu, "arithmetic", std::string("float64")); }),
@@ -333,71 +343,66 @@ TEST(EngineOptions, EverySettingByNameThroughOneTable) {
   }
 }
 
-TEST(EngineOptions, OneNameSettingsGoToTheBackendsThatHaveThem) {
-  pisco::EngineOptions all{.backend = "auto"};
-  all.set_device("1");
-  all.set_threads(3);
-  all.set_chunk_samples(100);
-  all.set_arithmetic(pisco::Arithmetic::float_float);
-  EXPECT_EQ(all.simd.instruction_set, "1");
-  EXPECT_EQ(all.vulkan.device, "1");
-  EXPECT_EQ(all.cuda.device, "1");
-  EXPECT_EQ(all.cpu.threads, 3u);
-  EXPECT_EQ(all.simd.threads, 3u);
-  EXPECT_EQ(all.vulkan.chunk_samples, 100u);
-  EXPECT_EQ(all.cuda.chunk_samples, 100u);
-  EXPECT_EQ(all.vulkan.arithmetic, pisco::Arithmetic::float_float);
+// Under "auto" a setting goes to every backend that takes it; a named backend takes its own, the
+// default of one it lacks says nothing, and another value is an error naming the backends that have
+// it, also when the backend is named after the setting, and when the engine is given the options.
+TEST(EngineOptions, SettingsGoToTheBackendsThatTakeThem) {
+  EXPECT_TRUE(pisco::backend_has_setting("simd", "device"));
+  EXPECT_TRUE(pisco::backend_has_setting("cpu", "threads"));
+  EXPECT_FALSE(pisco::backend_has_setting("cpu", "device"));
+  EXPECT_FALSE(pisco::backend_has_setting("vulkan", "threads"));
+  EXPECT_FALSE(pisco::backend_has_setting("no-such-backend", "threads"));
+  EXPECT_EQ(pisco::Engine::backend_names(), (std::vector<std::string>{"cpu", "simd", "vulkan", "cuda"}));
 
   pisco::EngineOptions vulkan{.backend = "vulkan"};
-  vulkan.set_device("0");
-  vulkan.set_threads(0);  // the default: nothing to say
-  EXPECT_EQ(vulkan.vulkan.device, "0");
-  EXPECT_EQ(vulkan.cuda.device, "auto");
-  EXPECT_EQ(vulkan.simd.instruction_set, "auto");
-  pisco_test::expect_error([&] { vulkan.set_threads(2); },
+  vulkan.set("device", "0").set("threads", 0LL).set("device", "");  // the default: nothing to say
+  EXPECT_EQ(vulkan.text("device"), "auto");
+  pisco_test::expect_error([&] { vulkan.set("threads", 2LL); },
                            "the vulkan backend has no threads setting (it applies to cpu and simd)");
-  EXPECT_EQ(vulkan.cpu.threads, 0u);
-
-  pisco::EngineOptions simd{.backend = "simd"};
-  simd.set_device("AVX2");
-  EXPECT_EQ(simd.simd.instruction_set, "AVX2");
-  EXPECT_EQ(simd.vulkan.device, "auto");
-  EXPECT_EQ(simd.device_of("simd"), &simd.simd.instruction_set);
-  EXPECT_EQ(simd.threads_of("simd"), &simd.simd.threads);
-  EXPECT_EQ(simd.threads_of("cuda"), nullptr);
-  EXPECT_EQ(simd.device_of("cpu"), nullptr);
+  EXPECT_EQ(vulkan.number("threads"), 0u);
 
   pisco::EngineOptions cpu{.backend = "cpu"};
-  cpu.set_device("auto");
-  cpu.set_chunk_samples(0);
-  cpu.set_arithmetic(pisco::Arithmetic::automatic);
-  pisco_test::expect_error([&] { cpu.set_device("0"); },
+  cpu.set("device", "auto").set("chunk_samples", 0LL).set("arithmetic", "auto");
+  pisco_test::expect_error([&] { cpu.set("device", "0"); },
                            "the cpu backend has no device setting (it applies to simd, vulkan and cuda)");
-  pisco_test::expect_error([&] { cpu.set_chunk_samples(10); },
+  pisco_test::expect_error([&] { cpu.set("chunk_samples", 10LL); },
                            "the cpu backend has no chunk_samples setting (it applies to vulkan and cuda)");
-  pisco_test::expect_error([&] { cpu.set_arithmetic(pisco::Arithmetic::float64); },
-                           "the cpu backend has no arithmetic setting (it applies to vulkan)");
 
-  // The simd backend takes its instruction set from its own options, not from another backend's device.
-  if (pisco_test::backend_unavailable("simd").empty()) {
-    const pisco::Sky sky(8);
-    pisco::FocalPlane fp;
-    fp.add_pair("p", 0, 0, 0);
-    pisco::BeamOptions o;
-    o.rho_max = 10 * pisco::deg;
-    const std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(4 * pisco::deg, o)};
-    pisco_test::expect_error(
-        [&] { pisco::Engine(sky, beams, fp, {.backend = "simd", .simd = {.instruction_set = "no-such-set"}}); },
-        "no-such-set");
-    EXPECT_NO_THROW(pisco::Engine(sky, beams, fp, {.backend = "simd", .vulkan = {.device = "no-such-set"}}));
-  }
+  // Named afterwards: the settings given are checked against it, and a refusal leaves the options.
+  pisco::EngineOptions later{.backend = "auto"};
+  later.set("threads", 4LL);
+  later.set("backend", "simd");
+  pisco_test::expect_error([&] { later.set("backend", "cuda"); },
+                           "the cuda backend has no threads setting (it applies to cpu and simd)");
+  EXPECT_EQ(later.backend, "simd");
+
+  // A setting read as a backend reads it: of the wrong type, an error naming it.
+  pisco::EngineOptions typed{.settings = {{"threads", std::string("two")}}};
+  pisco_test::expect_error([&] { typed.number("threads"); }, "expected a number, got \"two\"");
+
+  const pisco::Sky sky(8);
+  pisco::FocalPlane fp;
+  fp.add_pair("p", 0, 0, 0);
+  pisco::BeamOptions o;
+  o.rho_max = 10 * pisco::deg;
+  const std::vector<pisco::Beamsor> beams{pisco::Beamsor::gaussian(4 * pisco::deg, o)};
+  // The engine checks options made by hand as set() does.
+  EXPECT_EQ(pisco_test::error_of([&] { pisco::Engine(sky, beams, fp, {.backend = "cpu", .settings = {{"device", "1"}}}); }),
+            "device: the cpu backend has no device setting (it applies to simd, vulkan and cuda)");
+  EXPECT_EQ(pisco_test::error_of([&] { pisco::Engine(sky, beams, fp, {.settings = {{"thread", 2LL}}}); }).substr(0, 51),
+            "thread: not a setting of the engine (expected one o");
+  EXPECT_NO_THROW(pisco::Engine(sky, beams, fp, {.backend = "cpu", .settings = {{"chunk_samples", 0LL}}}));
+  // The simd backend's device is its instruction set.
+  if (pisco_test::backend_unavailable("simd").empty())
+    pisco_test::expect_error([&] { pisco::Engine(sky, beams, fp, {.backend = "simd", .settings = {{"device", "no-such-set"}}}); },
+                             "no-such-set");
 }
 
 TEST(Engine, OffsetDetectorsGetTheirOwnPointingInEveryForm) {
   Scene s;
   const pisco::FocalPlane moved = offset_focal_plane(s.fp);
-  pisco::Engine on_boresight(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}});
-  pisco::Engine offset(s.sky, s.beams, moved, {.backend = "cpu", .cpu = {.threads = 2}});
+  pisco::Engine on_boresight(s.sky, s.beams, s.fp, {.backend = "cpu", .settings = {{"threads", 2LL}}});
+  pisco::Engine offset(s.sky, s.beams, moved, {.backend = "cpu", .settings = {{"threads", 2LL}}});
   std::vector<pisco::Quat> quats;
   for (std::size_t i = 0; i < s.ptg.size(); ++i)
     quats.push_back(pisco::quat_from_pointing(s.ptg.theta[i], s.ptg.phi[i], s.ptg.psi[i]));
@@ -424,7 +429,7 @@ TEST(Engine, OffsetDetectorsGetTheirOwnPointingInEveryForm) {
 
 TEST(Engine, AccumulateAddsIntoTheTod) {
   Scene s;
-  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .cpu = {.threads = 2}});
+  pisco::Engine engine(s.sky, s.beams, s.fp, {.backend = "cpu", .settings = {{"threads", 2LL}}});
   std::vector<double> d(s.ptg.size()), sum(s.ptg.size());
   engine.convolve(2, s.ptg, d);
   for (std::size_t i = 0; i < sum.size(); ++i) sum[i] = 0.25 * double(i) - 3;
@@ -439,7 +444,7 @@ TEST(Engine, AccumulateAddsIntoTheTod) {
 TEST(Engine, SubmitThenWaitEqualsConvolve) {
   Scene s;
   const pisco::FocalPlane moved = offset_focal_plane(s.fp);
-  pisco::Engine engine(s.sky, s.beams, moved, {.backend = "cpu", .cpu = {.threads = 2}});
+  pisco::Engine engine(s.sky, s.beams, moved, {.backend = "cpu", .settings = {{"threads", 2LL}}});
   std::vector<std::vector<double>> direct(moved.size()), queued(moved.size());
   for (std::size_t det = 0; det < moved.size(); ++det) {
     direct[det].assign(s.ptg.size(), NAN);
@@ -579,21 +584,21 @@ TEST(Engine, SkyViewOfTheCallersArrays) {
   Scene s;
   std::vector<double> I(s.sky.I().begin(), s.sky.I().end()), Q(s.sky.Q().begin(), s.sky.Q().end()),
       U(s.sky.U().begin(), s.sky.U().end()), V(s.sky.V().begin(), s.sky.V().end());
-  pisco::Engine from_sky(s.sky, s.beams, s.fp, {.cpu = {.threads = 2}});
+  pisco::Engine from_sky(s.sky, s.beams, s.fp, {.settings = {{"threads", 2LL}}});
   std::vector<double> want(s.ptg.size()), got(s.ptg.size());
   from_sky.convolve(1, s.ptg, want);
   for (const char* backend : {"cpu", "simd"}) {
     if (std::string(backend) == "simd" && !pisco_test::backend_unavailable("simd").empty()) continue;
     std::vector<double> i2 = I, q2 = Q, u2 = U, v2 = V;
     pisco::Engine from_view(pisco::SkyView(s.sky.nside(), i2, q2, u2, v2), s.beams, s.fp,
-                            {.backend = backend, .cpu = {.threads = 2}, .simd = {.threads = 2}});
+                            {.backend = backend, .settings = {{"threads", 2LL}}});
     std::fill(i2.begin(), i2.end(), 1e30);  // the engine holds its own copy
     std::fill(q2.begin(), q2.end(), 1e30);
     from_view.convolve(1, s.ptg, got);
     if (std::string(backend) == "cpu") {
       EXPECT_EQ(got, want);
     } else {
-      pisco::Engine simd_sky(s.sky, s.beams, s.fp, {.backend = "simd", .simd = {.threads = 2}});
+      pisco::Engine simd_sky(s.sky, s.beams, s.fp, {.backend = "simd", .settings = {{"threads", 2LL}}});
       std::vector<double> simd_want(s.ptg.size());
       simd_sky.convolve(1, s.ptg, simd_want);
       EXPECT_EQ(got, simd_want);
@@ -602,8 +607,8 @@ TEST(Engine, SkyViewOfTheCallersArrays) {
   // No V: zero, as a Sky's V of zeros.
   pisco::Sky no_v = s.sky;
   std::fill(no_v.V().begin(), no_v.V().end(), 0.0);
-  pisco::Engine a(no_v, s.beams, s.fp, {.cpu = {.threads = 2}});
-  pisco::Engine b(pisco::SkyView(s.sky.nside(), I, Q, U), s.beams, s.fp, {.cpu = {.threads = 2}});
+  pisco::Engine a(no_v, s.beams, s.fp, {.settings = {{"threads", 2LL}}});
+  pisco::Engine b(pisco::SkyView(s.sky.nside(), I, Q, U), s.beams, s.fp, {.settings = {{"threads", 2LL}}});
   std::vector<double> ta(s.ptg.size()), tb(s.ptg.size());
   a.convolve(0, s.ptg, ta);
   b.convolve(0, s.ptg, tb);
@@ -633,6 +638,8 @@ TEST(Engine, BackendsReportCapabilities) {
     if (!b.available) continue;
     EXPECT_EQ(b.capabilities.float64, b.name == "cpu") << b.name;
     EXPECT_EQ(b.capabilities.worker_threads, b.name == "cpu" || b.name == "simd") << b.name;
+    EXPECT_EQ(b.capabilities.worker_threads, pisco::backend_has_setting(b.name, "threads")) << b.name;
+    EXPECT_EQ(b.capabilities.normal, b.name == "simd") << b.name;
     EXPECT_TRUE(b.capabilities.plates) << b.name;
     // The adjoint is where a backend says it is, and an error of kind unavailable elsewhere.
     {

@@ -161,7 +161,7 @@ TEST_P(GridBeams, TheDefaultStepIsWithin1e4OfTheConvergedBeam) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, GridBeams, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Backends, GridBeams, ::testing::ValuesIn(pisco::Engine::backend_names()),
                          [](const auto& info) { return info.param; });
 
 }  // namespace

@@ -126,8 +126,8 @@ TEST(Hwp, IdealPlateIsARotationOfThePolarization) {
   std::vector<pisco::Detector> with = plain.detectors();
   const double gammas[] = {0.0, 0.7, -1.9};
   for (std::size_t i = 0; i < with.size(); ++i) with[i].hwp = pisco::HalfWavePlate::ideal(gammas[i]);
-  pisco::Engine a(sky, beams, pisco::FocalPlane(with), {.backend = "cpu", .cpu = {.threads = 2}});
-  pisco::Engine b(sky, beams, plain, {.backend = "cpu", .cpu = {.threads = 2}});
+  pisco::Engine a(sky, beams, pisco::FocalPlane(with), {.backend = "cpu", .settings = {{"threads", 2LL}}});
+  pisco::Engine b(sky, beams, plain, {.backend = "cpu", .settings = {{"threads", 2LL}}});
   const pisco::Pointing p = random_pointing(400, 5);
   pisco::HwpAngleStream continuous;
   continuous.frequency_hz = 1.3;
@@ -180,7 +180,7 @@ TEST(Hwp, GenericPlateMatchesBruteForceInBothPlacements) {
                                    0.3 * double(beam)};
       fp.add(d);
     }
-  pisco::Engine engine(sky, beams, fp, {.backend = "cpu", .cpu = {.threads = 2}, .quadrature = pisco::Quadrature::plain});
+  pisco::Engine engine(sky, beams, fp, {.backend = "cpu", .settings = {{"threads", 2LL}}, .quadrature = pisco::Quadrature::plain});
   const pisco::Pointing p = random_pointing(60, 9);
   std::vector<double> h(p.size());
   for (std::size_t i = 0; i < h.size(); ++i) h[i] = 0.37 * double(i);

@@ -382,13 +382,13 @@ TEST(KernelOnHost, DiscsArePixelForPixelQueryDisc) {
 // The arithmetic a device gets: float-float where it lacks float64 or where asked for; float64 asked
 // of a device without it is an error naming the device, and an unknown name one naming the choices.
 TEST(KernelArithmetic, ChosenByTheDeviceOrAskedFor) {
-  using pisco::arithmetic_from;
+  using vk::arithmetic_from;
   EXPECT_FALSE(vk::use_float_float(true, "gpu", arithmetic_from("auto")));
   EXPECT_TRUE(vk::use_float_float(false, "gpu", arithmetic_from("auto")));
   EXPECT_TRUE(vk::use_float_float(true, "gpu", arithmetic_from("float-float")));
   EXPECT_TRUE(vk::use_float_float(false, "gpu", arithmetic_from("float-float")));
   EXPECT_FALSE(vk::use_float_float(true, "gpu", arithmetic_from("float64")));
-  pisco_test::expect_error([] { vk::use_float_float(false, "Apple M2", pisco::Arithmetic::float64); },
+  pisco_test::expect_error([] { vk::use_float_float(false, "Apple M2", vk::Arithmetic::float64); },
                            "Apple M2 lacks shaderFloat64");
   try {
     arithmetic_from("double");
@@ -396,8 +396,8 @@ TEST(KernelArithmetic, ChosenByTheDeviceOrAskedFor) {
   } catch (const pisco::Error& e) {
     EXPECT_EQ(e.named(), "arithmetic: expected \"auto\", \"float64\" or \"float-float\", got \"double\"");
   }
-  for (const auto a : {pisco::Arithmetic::automatic, pisco::Arithmetic::float64, pisco::Arithmetic::float_float})
-    EXPECT_EQ(arithmetic_from(pisco::arithmetic_name(a)), a);
+  for (const auto a : {vk::Arithmetic::automatic, vk::Arithmetic::float64, vk::Arithmetic::float_float})
+    EXPECT_EQ(arithmetic_from(vk::arithmetic_name(a)), a);
 }
 
 // One text for the maths (src/kernel/pixel.glsl, plate.glsl, rings.glsl): every shared function, run through

@@ -60,7 +60,7 @@ class PlateBeams : public ::testing::TestWithParam<std::string> {
     const std::string why = pisco_test::backend_unavailable(GetParam());
     if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
     options.backend = GetParam();
-    options.cpu.threads = options.simd.threads = 2;
+    pisco_test::set_taken(options, "threads", 2LL);
   }
   double bar() const { return GetParam() == "cpu" ? 1e-11 : 1e-7; }
   pisco::EngineOptions options;
@@ -229,7 +229,7 @@ TEST_P(PlateBeams, TheirAdjointIsTheirTranspose) {
   EXPECT_GT(std::abs(forward), 1e-3 * scale);
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, PlateBeams, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Backends, PlateBeams, ::testing::ValuesIn(pisco::Engine::backend_names()),
                          [](const auto& info) { return info.param; });
 
 TEST(PlateBeamsErrors, NameTheDetectorAndWhatIsWrong) {

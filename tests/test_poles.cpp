@@ -283,7 +283,7 @@ TEST_P(Poles, BandLimitedSkiesMatchTheirExactSmoothingEverywhere) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, Poles, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Backends, Poles, ::testing::ValuesIn(pisco::Engine::backend_names()),
                          [](const auto& info) { return info.param; });
 
 }  // namespace

@@ -180,7 +180,7 @@ TEST_P(Sidelobes, OuterPartsAreRightAtThePoles) {
   EXPECT_LE(worst / side, 2.5e-4);
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, Sidelobes, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Backends, Sidelobes, ::testing::ValuesIn(pisco::Engine::backend_names()),
                          [](const auto& info) { return info.param; });
 
 TEST(SidelobeSplit, BadSplitsNameTheProblem) {

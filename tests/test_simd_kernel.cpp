@@ -34,8 +34,8 @@ std::vector<std::string> instruction_sets() {
 pisco::EngineOptions on(const std::string& backend, const std::string& target, pisco::Normalization n) {
   pisco::EngineOptions o;
   o.backend = backend;
-  o.simd.instruction_set = target;
-  o.simd.threads = 2;
+  pisco_test::set_taken(o, "device", target);
+  pisco_test::set_taken(o, "threads", 2LL);
   o.normalization = n;
   return o;
 }

@@ -22,6 +22,7 @@
 #include "pisco/simulation.hpp"
 #include "support.hpp"
 #include "beams/beam_kind.hpp"
+#include "pipeline/mapmaker_kind.hpp"
 
 #include <healpix_base.h>
 #include <iomanip>
@@ -714,6 +715,32 @@ TEST_F(SimulationTest, FocalPlaneFiles) {
 }
 
 }  // namespace
+
+// Every kind of [mapmaker] is registered once (pipeline/mapmaker_kinds.cpp) under its MapmakerKind
+// and name; no key belongs to two kinds (the reader names the kind a stray key is for), and each kind
+// gives the NSIDE of its maps: binned the [output] maps_nside or the scan's, deconvolve the sky's.
+TEST(MapmakerKinds, EveryKindIsRegisteredOnceWithItsOwnKeys) {
+  using namespace pisco::detail;
+  std::set<std::string> names, keys;
+  for (const MapmakerKindEntry* k : mapmaker_kinds()) {
+    EXPECT_TRUE(names.insert(k->name).second) << k->name;
+    EXPECT_EQ(&mapmaker_kind(k->kind), k);
+    EXPECT_EQ(mapmaker_kind_named(k->name), k);
+    for (const char* key : k->keys) EXPECT_TRUE(keys.insert(key).second) << key;
+  }
+  EXPECT_EQ(names, (std::set<std::string>{"binned", "deconvolve"}));
+  EXPECT_EQ(mapmaker_kind_named("destriped"), nullptr);
+  pisco::SimulationConfig c;
+  c.scan.kind = pisco::ScanKind::raster;
+  c.scan.nside = 16;
+  const pisco::Sky sky(32);
+  EXPECT_EQ(binned_mapmaker_kind.maps_nside(c, sky), 16);
+  EXPECT_EQ(deconvolve_mapmaker_kind.maps_nside(c, sky), 32);
+  c.output.maps_nside = 8;
+  EXPECT_EQ(binned_mapmaker_kind.maps_nside(c, sky), 8);
+  pisco_test::expect_error([&] { deconvolve_mapmaker_kind.maps_nside(c, sky); },
+                           "[output] maps_nside: [mapmaker] type = \"deconvolve\" solves for the sky at its NSIDE 32; got 8");
+}
 
 // Every kind of [beams.NAME] table is registered once (beams/beam_kinds.cpp) under its BeamKind and
 // name, with what it is (made of other tables, turning with the detector), and makes what the

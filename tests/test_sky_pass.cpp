@@ -73,7 +73,7 @@ struct PassSetup {
     b.set_offset(6 * deg, -2 * deg, 0.4);
     fp.add(b);
     options.backend = backend;
-    options.cpu.threads = options.simd.threads = 2;
+    pisco_test::set_taken(options, "threads", 2LL);
     pisco::detail::EngineInputs in = pisco::detail::prepare_inputs(summed, beams, fp, options.normalization);
     in.quadrature = pisco::Quadrature::corrected;
     inputs = std::make_shared<const pisco::detail::EngineInputs>(std::move(in));
@@ -167,7 +167,7 @@ TEST_P(SkyPassTest, AccumulatingAddsAtEverySample) {
     EXPECT_NEAR(added[i] - (1000.0 + double(i)), once[i], 1e-9 * (1000.0 + double(i))) << "sample " << i;
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, SkyPassTest, ::testing::Values("cpu", "simd", "vulkan", "cuda"),
+INSTANTIATE_TEST_SUITE_P(Backends, SkyPassTest, ::testing::ValuesIn(pisco::Engine::backend_names()),
                          [](const auto& info) { return info.param; });
 
 }  // namespace

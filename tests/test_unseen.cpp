@@ -277,12 +277,12 @@ TEST(EngineLimits, ThreadsAndEfficiencies) {
   fp.add_pair("p", 0, 0, 0);
   const auto bs = beams();
   EXPECT_EQ(pisco::Engine::max_threads(), 64 * std::max(1u, std::thread::hardware_concurrency()));
-  EXPECT_TRUE(contains(error_of([&] { pisco::Engine(sky, bs, fp, {.cpu = {.threads = pisco::Engine::max_threads() + 1}}); }),
-                       "EngineOptions::cpu.threads = "));
+  EXPECT_TRUE(contains(error_of([&] { pisco::Engine(sky, bs, fp, {.settings = {{"threads", (long long)pisco::Engine::max_threads() + 1}}}); }),
+                       "threads: expected 0 (all hardware threads) or a number of threads up to "));
   EXPECT_TRUE(contains(error_of([&] {
-                         pisco::Engine(sky, bs, fp, {.backend = "simd", .simd = {.threads = pisco::Engine::max_threads() + 1}});
+                         pisco::Engine(sky, bs, fp, {.backend = "simd", .settings = {{"threads", (long long)pisco::Engine::max_threads() + 1}}});
                        }),
-                       "EngineOptions::simd.threads = "));
+                       "threads: expected 0 (all hardware threads) or a number of threads up to "));
   for (double eps : {-0.01, 1.5}) {
     pisco::FocalPlane bad;
     bad.add({"leaky", 0.0, eps, 1.0, 0});

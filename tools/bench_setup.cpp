@@ -60,7 +60,7 @@ int main(int argc, char** argv) {
     const double before = peak_gib();
     const auto t0 = std::chrono::steady_clock::now();
     pisco::EngineOptions options{.backend = backend};
-    options.set_device(device);
+    options.set("device", device);
     pisco::Engine engine(sky, beams, fp, options);
     const double setup = seconds_since(t0);
     const double after_setup = peak_gib();

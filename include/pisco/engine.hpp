@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -32,17 +33,9 @@ enum class Quadrature {
   plain,  // the equal-weight pixel sum everywhere (the paper's)
 };
 
-// The kernel's float64 work on the vulkan backend (frame, disc selection, monopole and
-// normalization): float64 on devices with shaderFloat64, float_float (pairs of float32) on any
-// device, or automatic: float64 where the device has it, float-float elsewhere.
-enum class Arithmetic { automatic, float64, float_float };
-
-// "auto", "float64" or "float-float" (the names of simulation files, the command line and Python);
-// throws pisco::Error (ErrorKind::input, key "arithmetic") naming them for any other.
-Arithmetic arithmetic_from(const std::string& name);
-std::string arithmetic_name(Arithmetic a);
-// The other settings' names, as arithmetic_from and arithmetic_name: "integral", "per_sample";
-// "corrected", "plain"; "error", "zero", "flag" (keys "normalization", "quadrature", "unseen").
+// The names of the engine-wide settings, both ways: "integral", "per_sample"; "corrected", "plain";
+// "error", "zero", "flag". The *_from functions throw pisco::Error (ErrorKind::input, key "normalization",
+// "quadrature" or "unseen") naming the names for any other.
 Normalization normalization_from(const std::string& name);
 std::string normalization_name(Normalization n);
 Quadrature quadrature_from(const std::string& name);
@@ -50,36 +43,19 @@ std::string quadrature_name(Quadrature q);
 UnseenPolicy unseen_policy_from(const std::string& name);
 std::string unseen_policy_name(UnseenPolicy u);
 
-// Each backend's own settings (EngineOptions). threads: worker threads, 0 = all hardware threads,
-// at most Engine::max_threads(). device: a device index, or part of its name; "auto" prefers a
-// discrete GPU (BackendInfo::devices). chunk_samples: samples per device chunk; 0 = fitted to the
-// device's limits.
-struct CpuOptions {
-  unsigned threads = 0;
-};
-struct SimdOptions {
-  unsigned threads = 0;
-  // A Highway target name, case-insensitive ("AVX3", "AVX2", "SSE4", "NEON", ...), or "auto": the best
-  // the processor supports (or the environment's PISCO_SIMD_TARGET).
-  std::string instruction_set = "auto";
-};
-struct VulkanOptions {
-  std::string device = "auto";
-  std::size_t chunk_samples = 0;
-  Arithmetic arithmetic = Arithmetic::automatic;
-};
-struct CudaOptions {
-  std::string device = "auto";
-  std::size_t chunk_samples = 0;
-};
+// A setting's value: text, or a number (threads, chunk_samples).
+using EngineValue = std::variant<std::string, long long>;
 
 struct EngineOptions {
-  std::string backend = "cpu";  // "cpu", "simd", "vulkan", "cuda" or "auto" (the fastest backend compiled in and present)
-  // Each backend reads its own; with "auto" the chosen one's apply.
-  CpuOptions cpu{};
-  SimdOptions simd{};
-  VulkanOptions vulkan{};
-  CudaOptions cuda{};
+  std::string backend = "cpu";  // "cpu", "simd", "vulkan", "cuda" or "auto" (the fastest backend present)
+  // The backends' own settings by name (engine_settings(): device, threads, chunk_samples, arithmetic),
+  // each declared by the backends that take it; set them through set() or set_engine_option, which
+  // check them. The backend the engine runs reads those it declares; the others are left at their
+  // defaults ("auto" for text, 0 for numbers): devices chosen and threads and chunks fitted to the
+  // machine. With backend "auto" a setting goes to every backend that takes it; a named backend
+  // that does not take it, given a value other than the default, is an input error naming the
+  // setting and the backends it applies to.
+  std::map<std::string, EngineValue> settings{};
   Normalization normalization = Normalization::integral;
   // UNSEEN pixels of the sky (a masked map, Sky::read_fits with UnseenPolicy::flag): an error by
   // default; taken as 0 with zero; taken as 0 with flag, and flag_samples() tells which samples' discs
@@ -92,39 +68,37 @@ struct EngineOptions {
   // its polar samples stay plain.
   Quadrature quadrature = Quadrature::corrected;
 
-  // The settings that a simulation file's [engine] table, the command line and Python give by one
-  // name for whichever backend runs, set on each backend they apply to: device (vulkan and cuda; the
-  // simd backend's instruction set), threads (cpu, simd), chunk_samples (vulkan, cuda), arithmetic
-  // (vulkan). With backend "auto" they go to all of those; a named backend they do not apply to, given
-  // a value other than the default ("auto", 0), is an input error naming the setting and the backend.
-  void set_device(const std::string& device);
-  void set_threads(unsigned threads);
-  void set_chunk_samples(std::size_t samples);
-  void set_arithmetic(Arithmetic arithmetic);
-  // The backend `name`'s threads, device (its instruction set for simd), or null where it has none.
-  unsigned* threads_of(const std::string& name);
-  std::string* device_of(const std::string& name);
+  // set_engine_option(*this, name, value).
+  EngineOptions& set(const std::string& name, const EngineValue& value);
+  // A backend setting as a backend reads it: the value given, else the default ("auto" for text, also
+  // for an empty text; 0 for a number). Throws pisco::Error (input, keyed) for a value of the other type.
+  std::string text(const std::string& name) const;
+  std::size_t number(const std::string& name) const;
 };
 
 // The engine's settings by name (docs/library.md, "Engine options"): the one table that simulation
-// files' [engine] tables, pisco-vk's options and Python's Engine keywords set them through.
+// files' [engine] tables, pisco-vk's options and Python's Engine keywords set them through. The
+// engine's own (backend, normalization, unseen, quadrature), then those the backends declare, each
+// once, with the backends it applies to, whether each backend is built into this library or not.
 struct EngineSetting {
   const char* name;      // "backend", "device", "threads", "chunk_samples", "arithmetic", "normalization",
                          // "unseen", "quadrature"
   const char* takes;     // what it takes, in words
-  const char* backends;  // the backends it applies to
+  const char* backends;  // the backends it applies to ("all", or names)
   bool number;           // a number (threads, chunk_samples), else text
 };
 std::span<const EngineSetting> engine_settings();
 
-// A setting's value: text, or a number for threads and chunk_samples.
-using EngineValue = std::variant<std::string, long long>;
-
-// Sets the setting `name` of `options` (backend first: the others go to the backends they apply to,
-// as EngineOptions::set_device and its siblings route them). Throws pisco::Error (ErrorKind::input)
-// with key() the setting's name for a name not in engine_settings(), a value of the wrong type or not
-// among those it takes, or a value other than the default for a named backend without the setting.
+// Sets the setting `name` of `options`: the engine's own into their members, the backends' into
+// EngineOptions::settings. Throws pisco::Error (ErrorKind::input) with key() the setting's name for a
+// name not in engine_settings(), a value of the wrong type or not among those it takes, or a value
+// other than the default for a named backend without the setting (setting the backend checks the
+// settings already given against it).
 void set_engine_option(EngineOptions& options, const std::string& name, const EngineValue& value);
+
+// Whether the backend `backend` ("cpu", "simd", "vulkan", "cuda") takes the setting `name`, as its
+// entry declares; false for an unknown backend or setting.
+bool backend_has_setting(const std::string& backend, const std::string& name);
 
 // What a backend can do, so that a caller (a framework, the simulation pipeline) decides by
 // capability rather than by the backend's name.
@@ -133,7 +107,9 @@ struct BackendCapabilities {
                                 // with float64 where it decides (docs/physics.md, "Device backends")
   bool plates = true;           // half-wave plates, at the aperture and between optics and detector
   bool adjoint = false;         // the transpose of convolve: Engine::adjoint
-  bool worker_threads = false;  // runs its own host threads: EngineOptions::threads applies
+  bool worker_threads = false;  // runs its own host threads: its "threads" setting applies
+  bool normal = false;          // a one-pass normal (Engine::normal: each pixel's weights computed once for
+                                // A^T A s); elsewhere the engine runs the forward pass and then the adjoint
   std::uint64_t device_memory = 0;  // bytes of memory of the device "auto" picks; 0: the host's memory
 };
 
@@ -141,7 +117,7 @@ struct BackendInfo {
   std::string name;
   bool available = false;
   std::string detail;  // device found, or why the backend is unavailable
-  // The indices (EngineOptions::device) of the devices "auto" chooses among: the usable ones of the
+  // The indices (the "device" setting) of the devices "auto" chooses among: the usable ones of the
   // kind it prefers (discrete GPUs before others), in index order; empty for cpu. Several processes on
   // one node (pisco-vk under MPI) share them out: process k takes devices[k % devices.size()].
   std::vector<std::size_t> devices;
@@ -290,8 +266,11 @@ class Engine {
   bool polar_copy() const noexcept;
   std::uint64_t polar_samples() const noexcept { return polar_samples_; }
 
-  // Backends compiled into the library, with availability on this machine.
+  // Every backend the library knows, built into it or not, with whether it runs on this machine (a
+  // backend not built says so in BackendInfo::detail) and what it can do.
   static std::vector<BackendInfo> backends();
+  // Their names ("cpu", "simd", "vulkan", "cuda"), without looking for devices.
+  static std::vector<std::string> backend_names();
 
   // Masked skies (EngineOptions::unseen = UnseenPolicy::flag): flags[i] = 1 where the disc of sample
   // i (the detector's, its offset applied; the convolution's own disc selection, HEALPix query_disc
@@ -318,7 +297,7 @@ class Engine {
                    std::span<const double> hwp_angle = {}) const;
   // The number of UNSEEN sky pixels taken as 0 (policies zero and flag).
   std::size_t unseen_pixels() const noexcept { return unseen_pixels_; }
-  // The largest EngineOptions::threads: 64 per hardware thread of this machine.
+  // The largest "threads" setting: 64 per hardware thread of this machine.
   static unsigned max_threads() noexcept;
 
  private:

@@ -97,11 +97,8 @@ struct HwpConfig {
 struct EngineConfig {
   EngineOptions options;
   std::size_t chunk_samples = 1 << 16;
-  // The backend settings the [engine] table gave (device, arithmetic, threads), as given, so that a
-  // backend named afterwards routes them again (set_backend).
-  std::vector<std::pair<std::string, EngineValue>> backend_settings;
   // Names the backend after the file was read (pisco-vk run -b, Python's backend=): the settings the
-  // file gave are routed to it again, and one it does not have is an error naming `source`'s key, as
+  // file gave are checked against it again, and one it does not have is an error naming `source`'s key, as
   // the file form's own refusal ("the vulkan backend has no threads setting (it applies to cpu and
   // simd)"), instead of a setting silently dropped.
   void set_backend(const std::string& name, const std::filesystem::path& source);

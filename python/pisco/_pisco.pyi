@@ -42,7 +42,7 @@ class InternalError(Error):
     """A broken invariant of the library itself: a bug to report."""
 
 class BackendInfo:
-    """A backend compiled into the library and whether it runs here."""
+    """A backend the library knows, whether it runs here and what it can do."""
 
     @property
     def name(self) -> str: ...
@@ -54,10 +54,10 @@ class BackendInfo:
 
     @property
     def capabilities(self) -> dict[str, bool | int]:
-        """What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own host threads: `threads` applies), device_memory (bytes of the device auto picks; 0: host memory)."""
+        """What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own host threads: `threads` applies), normal (a one-pass normal), device_memory (bytes of the device auto picks; 0: host memory)."""
 
 def devices() -> list[BackendInfo]:
-    """The backends compiled in ('cpu', 'simd', 'vulkan', 'cuda'), with availability and device or reason."""
+    """The backends the library knows ('cpu', 'simd', 'vulkan', 'cuda'), built or not, with availability and device or reason."""
 
 def offset_quat(xi: float, eta: float, gamma: float) -> Float64Array:
     """The offset quaternion (x, y, z, w) of focal-plane coordinates (xi, eta, gamma), radians."""

@@ -1,6 +1,7 @@
 // Beamsor builders, grid sampling, interpolation and the integral normalization (docs/physics.md,
 // "Beamsors").
 #include "pisco/beamsor.hpp"
+#include "pisco/beam_files.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -157,6 +158,15 @@ void check_beam_options(const BeamOptions& options) {
   if (!(far.asymmetry >= 0.0 && far.asymmetry <= 1.0))
     fail_option("far_sidelobe.asymmetry", "expected a number in [0, 1] (0: a uniform ring, 1: a single lobe), got " +
                                               detail::number_text(far.asymmetry));
+}
+
+void check_file_beam_options(const FileBeamOptions& options) {
+  BeamOptions o;
+  o.rho_max = options.rho_max;
+  o.grid_step = options.grid_step;
+  o.split = options.split;
+  check_beam_options(o);
+  if (!std::isfinite(options.angle)) fail_option("angle", "must be finite");
 }
 
 Mueller identity_mueller() {

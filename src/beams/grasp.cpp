@@ -528,9 +528,11 @@ std::vector<GraspBeam> GraspBeam::read(const std::filesystem::path& file) {
 }
 
 Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) {
-  if (!std::isfinite(options.angle)) throw Error(b.source + ": angle must be finite");
-  if (!(options.rho_max > 0 && options.rho_max < pi / 2))
-    throw Error(b.source + ": rho_max = " + detail::degrees_text(options.rho_max) + " is outside (0, 90) deg");
+  try {
+    check_file_beam_options(options);
+  } catch (const Error& e) {
+    throw Error(b.source + ": " + e.named(), e.kind());
+  }
   if (b.nx < 2 || b.ny < 2 || b.co.size() != static_cast<std::size_t>(b.nx) * b.ny || b.cx.size() != b.co.size())
     throw Error(b.source + ": the field holds " + std::to_string(b.co.size()) + " points; expected NX x NY = " +
                 std::to_string(b.nx) + " x " + std::to_string(b.ny));

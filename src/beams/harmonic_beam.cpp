@@ -386,7 +386,11 @@ HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
 
 Beamsor Beamsor::from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& options) {
   beam.check();
-  if (!std::isfinite(options.angle)) throw Error("harmonic beam " + beam.source + ": angle must be finite");
+  try {
+    check_file_beam_options(options);
+  } catch (const Error& e) {
+    throw Error("harmonic beam " + beam.source + ": " + e.named(), e.kind());
+  }
   const double step = options.grid_step > 0 ? options.grid_step : default_step(beam);
   const Synthesis synthesis(beam);
   // Rings by radius, computed once: the nodes' radii repeat eightfold, the quadrature's per panel node.

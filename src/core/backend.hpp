@@ -117,6 +117,29 @@ class Backend {
   virtual void take_adjoint(const std::array<std::span<double>, 4>& maps);
 };
 
+// A setting a backend takes (EngineOptions::settings; docs/library.md, "Engine options"): its name,
+// what it takes in words, whether a number, and a check of a value of that type (null: any).
+// Every backend setting's default is "auto" (text) or 0 (a number): chosen or fitted by the backend.
+// Backends that take a setting of the same name take it in the same sense.
+struct BackendSetting {
+  const char* name;
+  const char* takes;
+  bool number = false;
+  void (*check)(const EngineValue& value) = nullptr;
+};
+
+// The settings several backends share, in the same words: worker threads (the host backends), a
+// device and the samples of a device chunk (the device backends).
+BackendSetting threads_setting();
+BackendSetting device_setting();
+BackendSetting chunk_samples_setting();
+
+// Checks EngineOptions::settings against the backends that declare them (set_engine_option's checks):
+// the engine's first step. Throws pisco::Error (input) keyed by the setting.
+void check_engine_options(const EngineOptions& options);
+
+// A backend, built into this library or not: its name, its settings, how "auto" ranks it, and, where
+// built, how to find and make it.
 struct BackendEntry {
   std::string name;
   // "auto" picks the available backend with the highest priority: cuda 20, vulkan on a GPU 10, simd 5,
@@ -124,21 +147,40 @@ struct BackendEntry {
   // H200 (2026-11-26) cuda is 1.04 to 1.8 times NVIDIA's Vulkan up to rho_max = 20 deg with a quarter of
   // its set-up, Vulkan 1.1 times cuda at 25 to 30 deg; on two CPU cores simd is 2.6 to 2.7 times lavapipe
   // (2026-11-24, "the simd backend's weights in records").
-  int priority;
-  std::function<BackendInfo()> probe;
+  int priority = 0;
+  // The settings it takes, declared whether it is built or not, so that a simulation file reads the
+  // same on every build.
+  std::vector<BackendSetting> settings{};
+  // Whether it is present and what it can do; for a backend not built, unavailable and why.
+  std::function<BackendInfo()> probe = nullptr;
   // Makes the backend; it packs the sky's pixels from `sky` into what it keeps, during the call only.
   std::function<std::unique_ptr<Backend>(std::shared_ptr<const EngineInputs>, const SkyView&, const EngineOptions&)>
-      create;
+      create = nullptr;
   // When set, replaces `priority` for "auto" once the backend is known to be available (the vulkan
   // backend ranks below simd when its only device is a CPU: docs/vulkan.md says why).
   std::function<int()> auto_priority = nullptr;
+
+  bool takes(const std::string& setting) const {
+    for (const BackendSetting& s : settings)
+      if (setting == s.name) return true;
+    return false;
+  }
 };
 
+// Every backend, built or not, in the order "auto" breaks ties (core/engine.cpp).
 const std::vector<BackendEntry>& backend_registry();
 
+// A backend's entry is declared in its own folder (src/NAME/NAME_entry.cpp, compiled into every build),
+// which, where the backend is built (PISCO_HAVE_NAME), has the backend attach its probe and create,
+// and elsewhere marks it not built.
 BackendEntry cpu_backend_entry();
-BackendEntry simd_backend_entry();    // src/simd/, when built with Highway
-BackendEntry vulkan_backend_entry();  // src/vulkan/, when built with Vulkan
-BackendEntry cuda_backend_entry();    // src/cuda/, when built with CUDA
+BackendEntry simd_backend_entry();
+BackendEntry vulkan_backend_entry();
+BackendEntry cuda_backend_entry();
+void attach_simd_backend(BackendEntry& e);    // src/simd/, when built with Highway
+void attach_vulkan_backend(BackendEntry& e);  // src/vulkan/, when built with Vulkan
+void attach_cuda_backend(BackendEntry& e);    // src/cuda/, when built with CUDA
+// A backend this library was built without: unavailable, saying what its build needs.
+void mark_not_built(BackendEntry& e, const std::string& needs);
 
 }  // namespace pisco::detail

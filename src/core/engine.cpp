@@ -24,20 +24,8 @@ namespace pisco {
 namespace detail {
 
 const std::vector<BackendEntry>& backend_registry() {
-  static const std::vector<BackendEntry> registry = [] {
-    std::vector<BackendEntry> r;
-    r.push_back(cpu_backend_entry());
-#ifdef PISCO_HAVE_SIMD
-    r.push_back(simd_backend_entry());
-#endif
-#ifdef PISCO_HAVE_VULKAN
-    r.push_back(vulkan_backend_entry());
-#endif
-#ifdef PISCO_HAVE_CUDA
-    r.push_back(cuda_backend_entry());
-#endif
-    return r;
-  }();
+  static const std::vector<BackendEntry> registry{cpu_backend_entry(), simd_backend_entry(), vulkan_backend_entry(),
+                                                  cuda_backend_entry()};
   return registry;
 }
 
@@ -873,6 +861,12 @@ std::string Engine::backend_name() const { return main_->backend().name(); }
 std::string Engine::device_name() const { return main_->backend().device(); }
 double Engine::mean_disc_pixels() const noexcept {
   return samples_ ? double(pixels_) / double(samples_) : 0.0;
+}
+
+std::vector<std::string> Engine::backend_names() {
+  std::vector<std::string> out;
+  for (const auto& e : detail::backend_registry()) out.push_back(e.name);
+  return out;
 }
 
 std::vector<BackendInfo> Engine::backends() {

@@ -1,191 +1,240 @@
-// EngineOptions: each backend's own settings, and the one-name settings of simulation files, the
-// command line and Python routed to the backends they apply to (docs/library.md, "Engine options").
+// EngineOptions: the engine's own settings and the backends' by name, checked in one place against
+// the backends that declare them (docs/library.md, "Engine options").
+#include <algorithm>
 #include <span>
 #include <string>
 #include <variant>
 #include <vector>
 
+#include "core/backend.hpp"
+#include "core/names.hpp"
 #include "pisco/engine.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco {
 
 namespace {
-
-// The names of a setting's values.
-template <class E>
-struct Named {
-  const char* name;
-  E value;
-};
-constexpr Named<Arithmetic> arithmetics[] = {
-    {"auto", Arithmetic::automatic}, {"float64", Arithmetic::float64}, {"float-float", Arithmetic::float_float}};
-constexpr Named<Normalization> normalizations[] = {{"integral", Normalization::integral},
-                                                   {"per_sample", Normalization::per_sample}};
-constexpr Named<Quadrature> quadratures[] = {{"corrected", Quadrature::corrected}, {"plain", Quadrature::plain}};
-constexpr Named<UnseenPolicy> unseen_policies[] = {
+constexpr detail::Named<Normalization> normalizations[] = {{"integral", Normalization::integral},
+                                                           {"per_sample", Normalization::per_sample}};
+constexpr detail::Named<Quadrature> quadratures[] = {{"corrected", Quadrature::corrected}, {"plain", Quadrature::plain}};
+constexpr detail::Named<UnseenPolicy> unseen_policies[] = {
     {"error", UnseenPolicy::error}, {"zero", UnseenPolicy::zero}, {"flag", UnseenPolicy::flag}};
+}  // namespace
 
-// "a", "b" or "c", quoted.
-template <class E, std::size_t N>
-std::string listed(const Named<E> (&names)[N]) {
+Normalization normalization_from(const std::string& name) {
+  return detail::from_name(normalizations, name, "normalization");
+}
+std::string normalization_name(Normalization n) { return detail::name_of(normalizations, n); }
+Quadrature quadrature_from(const std::string& name) { return detail::from_name(quadratures, name, "quadrature"); }
+std::string quadrature_name(Quadrature q) { return detail::name_of(quadratures, q); }
+UnseenPolicy unseen_policy_from(const std::string& name) { return detail::from_name(unseen_policies, name, "unseen"); }
+std::string unseen_policy_name(UnseenPolicy u) { return detail::name_of(unseen_policies, u); }
+
+namespace detail {
+
+BackendSetting threads_setting() {
+  return {"threads", "worker threads, 0 for all hardware threads", true, [](const EngineValue& v) {
+            const long long n = std::get<long long>(v);
+            if (n > static_cast<long long>(Engine::max_threads()))
+              throw Error("expected 0 (all hardware threads) or a number of threads up to " +
+                              std::to_string(Engine::max_threads()) + " (64 per hardware thread of this machine), got " +
+                              std::to_string(n),
+                          ErrorKind::input, "threads");
+          }};
+}
+BackendSetting device_setting() { return {"device", "\"auto\", a device's index or part of its name"}; }
+BackendSetting chunk_samples_setting() {
+  return {"chunk_samples", "samples per device chunk, 0 to fit the device", true};
+}
+
+void mark_not_built(BackendEntry& e, const std::string& needs) {
+  e.probe = [name = e.name, needs] {
+    return BackendInfo{name, false, "not built into this library (its build needs " + needs + ")", {}, {}};
+  };
+  e.create = nullptr;
+}
+
+namespace {
+
+bool is_default(const EngineValue& v) {
+  if (const std::string* t = std::get_if<std::string>(&v)) return t->empty() || *t == "auto";
+  return std::get<long long>(v) == 0;
+}
+
+// "a, b and c"
+std::string and_list(const std::vector<std::string>& items) {
   std::string out;
-  for (std::size_t i = 0; i < N; ++i)
-    out += (i == 0 ? "" : i + 1 == N ? " or " : ", ") + std::string("\"") + names[i].name + "\"";
+  for (std::size_t i = 0; i < items.size(); ++i) out += (i == 0 ? "" : i + 1 == items.size() ? " and " : ", ") + items[i];
   return out;
 }
 
-template <class E, std::size_t N>
-E from_name(const Named<E> (&names)[N], const std::string& name, const char* key) {
-  for (const Named<E>& n : names)
-    if (name == n.name) return n.value;
-  throw Error("expected " + listed(names) + ", got \"" + name + "\"", ErrorKind::input, key);
-}
-
-template <class E, std::size_t N>
-std::string name_of(const Named<E> (&names)[N], E value) {
-  for (const Named<E>& n : names)
-    if (n.value == value) return n.name;
-  return names[0].name;
-}
-
-}  // namespace
-
-Arithmetic arithmetic_from(const std::string& name) { return from_name(arithmetics, name, "arithmetic"); }
-std::string arithmetic_name(Arithmetic a) { return name_of(arithmetics, a); }
-Normalization normalization_from(const std::string& name) { return from_name(normalizations, name, "normalization"); }
-std::string normalization_name(Normalization n) { return name_of(normalizations, n); }
-Quadrature quadrature_from(const std::string& name) { return from_name(quadratures, name, "quadrature"); }
-std::string quadrature_name(Quadrature q) { return name_of(quadratures, q); }
-UnseenPolicy unseen_policy_from(const std::string& name) { return from_name(unseen_policies, name, "unseen"); }
-std::string unseen_policy_name(UnseenPolicy u) { return name_of(unseen_policies, u); }
-
-namespace {
-// Whether a setting that the backends `takers` have applies under `backend` ("auto", or a name none
-// of them is: the engine names an unknown backend itself); a value other than the default for a
-// backend that has no such setting is an error.
-bool applies(const std::string& backend, std::initializer_list<const char*> takers, const char* setting,
-             bool is_default) {
-  bool known = backend == "auto";
-  for (const char* b : {"cpu", "simd", "vulkan", "cuda"}) known = known || backend == b;
-  if (!known || backend == "auto") return true;
-  for (const char* t : takers)
-    if (backend == t) return true;
-  if (is_default) return false;
-  std::string list;  // "simd, vulkan and cuda"
-  std::size_t i = 0;
-  for (const char* t : takers) {
-    list += t;
-    if (++i + 1 < takers.size()) list += ", ";
-    else if (i + 1 == takers.size()) list += " and ";
-  }
-  throw Error("the " + backend + " backend has no " + setting + " setting (it applies to " + list + ")",
-              ErrorKind::input, setting);
-}
-}  // namespace
-
-void EngineOptions::set_device(const std::string& device) {
-  if (!applies(backend, {"simd", "vulkan", "cuda"}, "device", device.empty() || device == "auto")) return;
-  // Under "auto" (or a name the engine will reject) every backend with a device gets it; else the named one.
-  const std::string value = device.empty() ? "auto" : device;
-  for (std::string* d : {&simd.instruction_set, &vulkan.device, &cuda.device})
-    if (std::string* own = device_of(backend); !own || own == d) *d = value;
-}
-
-void EngineOptions::set_threads(unsigned threads) {
-  if (!applies(backend, {"cpu", "simd"}, "threads", threads == 0)) return;
-  cpu.threads = simd.threads = threads;
-}
-
-void EngineOptions::set_chunk_samples(std::size_t samples) {
-  if (!applies(backend, {"vulkan", "cuda"}, "chunk_samples", samples == 0)) return;
-  vulkan.chunk_samples = cuda.chunk_samples = samples;
-}
-
-void EngineOptions::set_arithmetic(Arithmetic arithmetic) {
-  if (!applies(backend, {"vulkan"}, "arithmetic", arithmetic == Arithmetic::automatic)) return;
-  vulkan.arithmetic = arithmetic;
-}
-
-unsigned* EngineOptions::threads_of(const std::string& name) {
-  if (name == "cpu") return &cpu.threads;
-  if (name == "simd") return &simd.threads;
-  return nullptr;
-}
-
-std::string* EngineOptions::device_of(const std::string& name) {
-  if (name == "simd") return &simd.instruction_set;
-  if (name == "vulkan") return &vulkan.device;
-  if (name == "cuda") return &cuda.device;
-  return nullptr;
-}
-
-namespace {
-
-// Each setting once: its name, the backends it applies to, whether it takes a number, what it takes
-// (for the enums, their names' own list), and how it is set. engine_settings() is this table.
-struct Setting {
-  const char* name;
-  const char* backends;
-  bool number;
-  std::string takes;
-  void (*set)(EngineOptions& o, const std::string& text, long long number);
+// The backends' settings, each once: its declarations in registry order, the backends that take it,
+// and what it takes (one text where they agree, else each with its backends).
+struct Declared {
+  std::string name;
+  std::vector<std::pair<const BackendEntry*, BackendSetting>> by;
+  std::string backends, takes;
+  bool number = false;
 };
 
-const std::vector<Setting>& setting_table() {
-  static const std::vector<Setting> table{
-      {"backend", "all", false, "\"cpu\", \"simd\", \"vulkan\", \"cuda\" or \"auto\" (the fastest present)",
-       [](EngineOptions& o, const std::string& t, long long) { o.backend = t; }},
-      {"device", "simd, vulkan and cuda", false, "\"auto\", a device's index or part of its name; for simd, an instruction set",
-       [](EngineOptions& o, const std::string& t, long long) { o.set_device(t); }},
-      {"threads", "cpu and simd", true, "worker threads, 0 for all hardware threads",
-       [](EngineOptions& o, const std::string&, long long n) { o.set_threads(static_cast<unsigned>(n)); }},
-      {"chunk_samples", "vulkan and cuda", true, "samples per device chunk, 0 to fit the device",
-       [](EngineOptions& o, const std::string&, long long n) { o.set_chunk_samples(static_cast<std::size_t>(n)); }},
-      {"arithmetic", "vulkan", false, listed(arithmetics),
-       [](EngineOptions& o, const std::string& t, long long) { o.set_arithmetic(arithmetic_from(t)); }},
-      {"normalization", "all", false, listed(normalizations),
-       [](EngineOptions& o, const std::string& t, long long) { o.normalization = normalization_from(t); }},
-      {"unseen", "all", false, listed(unseen_policies),
-       [](EngineOptions& o, const std::string& t, long long) { o.unseen = unseen_policy_from(t); }},
-      {"quadrature", "all", false, listed(quadratures),
-       [](EngineOptions& o, const std::string& t, long long) { o.quadrature = quadrature_from(t); }},
+const std::vector<Declared>& declared() {
+  static const std::vector<Declared> all = [] {
+    std::vector<Declared> out;
+    for (const BackendEntry& e : backend_registry())
+      for (const BackendSetting& s : e.settings) {
+        auto it = std::find_if(out.begin(), out.end(), [&](const Declared& d) { return d.name == s.name; });
+        if (it == out.end()) it = out.insert(out.end(), Declared{s.name, {}, {}, {}, s.number});
+        it->by.emplace_back(&e, s);
+      }
+    for (Declared& d : out) {
+      std::vector<std::string> names;
+      std::vector<std::pair<std::string, std::vector<std::string>>> takes;  // each text, with its backends
+      for (const auto& [e, s] : d.by) {
+        names.push_back(e->name);
+        auto t = std::find_if(takes.begin(), takes.end(), [&](const auto& p) { return p.first == s.takes; });
+        if (t == takes.end()) t = takes.insert(takes.end(), {s.takes, {}});
+        t->second.push_back(e->name);
+      }
+      d.backends = and_list(names);
+      if (takes.size() == 1) d.takes = takes[0].first;
+      else
+        for (const auto& [text, by] : takes) d.takes += (d.takes.empty() ? "" : "; ") + text + " (" + and_list(by) + ")";
+    }
+    return out;
+  }();
+  return all;
+}
+
+const Declared* find_declared(const std::string& name) {
+  for (const Declared& d : declared())
+    if (d.name == name) return &d;
+  return nullptr;
+}
+
+// The engine's own settings, and how each is set.
+struct Own {
+  const char* name;
+  std::string takes;
+  void (*set)(EngineOptions& o, const std::string& text);
+};
+
+const std::vector<Own>& own_settings() {
+  static const std::vector<Own> table{
+      {"backend", "\"cpu\", \"simd\", \"vulkan\", \"cuda\" or \"auto\" (the fastest present)",
+       [](EngineOptions& o, const std::string& t) { o.backend = t; }},
+      {"normalization", listed(normalizations),
+       [](EngineOptions& o, const std::string& t) { o.normalization = normalization_from(t); }},
+      {"unseen", listed(unseen_policies), [](EngineOptions& o, const std::string& t) { o.unseen = unseen_policy_from(t); }},
+      {"quadrature", listed(quadratures), [](EngineOptions& o, const std::string& t) { o.quadrature = quadrature_from(t); }},
   };
   return table;
 }
 
+// Checks the backend setting `d` with `value` against the backend `backend`: its type; under a named
+// backend that takes it, that backend's check; else (under "auto", a name the engine rejects itself,
+// or a backend without the setting) every taker's check, and for a backend without it, that the
+// value is the default.
+void check_setting(const std::string& backend, const Declared& d, const EngineValue& value) {
+  const std::string* text = std::get_if<std::string>(&value);
+  const long long* number = std::get_if<long long>(&value);
+  if (d.number && !number) throw Error("expected a number, got \"" + *text + "\"", ErrorKind::input, d.name);
+  if (!d.number && !text)
+    throw Error("expected " + d.takes + ", got the number " + std::to_string(*number), ErrorKind::input, d.name);
+  if (number && *number < 0)
+    throw Error("expected a number of zero or more, got " + std::to_string(*number), ErrorKind::input, d.name);
+  const auto taker = std::find_if(d.by.begin(), d.by.end(), [&](const auto& b) { return b.first->name == backend; });
+  if (taker != d.by.end()) {
+    if (taker->second.check) taker->second.check(value);
+    return;
+  }
+  // Under "auto", or a backend without the setting: a value well formed for every backend that takes it.
+  for (const auto& [e, s] : d.by)
+    if (s.check) s.check(value);
+  bool known = false;
+  for (const BackendEntry& e : backend_registry()) known = known || e.name == backend;
+  if (known && !is_default(value))
+    throw Error("the " + backend + " backend has no " + d.name + " setting (it applies to " + d.backends + ")",
+                ErrorKind::input, d.name);
+}
+
+std::string all_names() {
+  std::string all;
+  for (const EngineSetting& s : engine_settings()) all += std::string(all.empty() ? "" : ", ") + s.name;
+  return all;
+}
+
 }  // namespace
+
+void check_engine_options(const EngineOptions& options) {
+  for (const auto& [name, value] : options.settings) {
+    const Declared* d = find_declared(name);
+    if (!d) throw Error("not a setting of the engine (expected one of " + all_names() + ")", ErrorKind::input, name);
+    check_setting(options.backend, *d, value);
+  }
+}
+
+}  // namespace detail
 
 std::span<const EngineSetting> engine_settings() {
   static const std::vector<EngineSetting> view = [] {
     std::vector<EngineSetting> v;
-    for (const Setting& s : setting_table()) v.push_back({s.name, s.takes.c_str(), s.backends, s.number});
+    const auto& own = detail::own_settings();
+    v.push_back({own[0].name, own[0].takes.c_str(), "all", false});
+    for (const detail::Declared& d : detail::declared())
+      v.push_back({d.name.c_str(), d.takes.c_str(), d.backends.c_str(), d.number});
+    for (std::size_t i = 1; i < own.size(); ++i) v.push_back({own[i].name, own[i].takes.c_str(), "all", false});
     return v;
   }();
   return view;
 }
 
 void set_engine_option(EngineOptions& options, const std::string& name, const EngineValue& value) {
-  const Setting* setting = nullptr;
-  for (const Setting& s : setting_table())
-    if (name == s.name) setting = &s;
-  if (!setting) {
-    std::string all;
-    for (const Setting& s : setting_table()) all += std::string(all.empty() ? "" : ", ") + s.name;
-    throw Error("not a setting of the engine (expected one of " + all + ")", ErrorKind::input, name);
+  for (const detail::Own& own : detail::own_settings()) {
+    if (name != own.name) continue;
+    const std::string* text = std::get_if<std::string>(&value);
+    if (!text)
+      throw Error("expected " + own.takes + ", got the number " + std::to_string(std::get<long long>(value)),
+                  ErrorKind::input, name);
+    EngineOptions changed = options;
+    own.set(changed, *text);
+    detail::check_engine_options(changed);  // the settings already given, against a new backend
+    options = std::move(changed);
+    return;
   }
+  const detail::Declared* d = detail::find_declared(name);
+  if (!d) throw Error("not a setting of the engine (expected one of " + detail::all_names() + ")", ErrorKind::input, name);
+  detail::check_setting(options.backend, *d, value);
   const std::string* text = std::get_if<std::string>(&value);
-  const long long* number = std::get_if<long long>(&value);
-  if (setting->number && !number) throw Error("expected a number, got \"" + *text + "\"", ErrorKind::input, name);
-  if (!setting->number && !text)
-    throw Error("expected " + setting->takes + ", got the number " + std::to_string(*number), ErrorKind::input, name);
-  if (number && *number < 0)
-    throw Error("expected a number of zero or more, got " + std::to_string(*number), ErrorKind::input, name);
-  if (name == "threads" && *number > static_cast<long long>(Engine::max_threads()))
-    throw Error("expected 0 (all hardware threads) or a number of threads up to " + std::to_string(Engine::max_threads()) +
-                    " (64 per hardware thread of this machine), got " + std::to_string(*number),
-                ErrorKind::input, name);
-  setting->set(options, text ? *text : std::string(), number ? *number : 0);
+  options.settings[name] = text && text->empty() ? EngineValue(std::string("auto")) : value;
+}
+
+EngineOptions& EngineOptions::set(const std::string& name, const EngineValue& value) {
+  set_engine_option(*this, name, value);
+  return *this;
+}
+
+std::string EngineOptions::text(const std::string& name) const {
+  const auto it = settings.find(name);
+  if (it == settings.end()) return "auto";
+  if (const std::string* t = std::get_if<std::string>(&it->second)) return t->empty() ? "auto" : *t;
+  throw Error("expected text, got the number " + std::to_string(std::get<long long>(it->second)), ErrorKind::input,
+              name);
+}
+
+std::size_t EngineOptions::number(const std::string& name) const {
+  const auto it = settings.find(name);
+  if (it == settings.end()) return 0;
+  if (const long long* n = std::get_if<long long>(&it->second); n && *n >= 0) return static_cast<std::size_t>(*n);
+  throw Error(std::holds_alternative<long long>(it->second)
+                  ? "expected a number of zero or more, got " + std::to_string(std::get<long long>(it->second))
+                  : "expected a number, got \"" + std::get<std::string>(it->second) + "\"",
+              ErrorKind::input, name);
+}
+
+bool backend_has_setting(const std::string& backend, const std::string& name) {
+  for (const detail::BackendEntry& e : detail::backend_registry())
+    if (e.name == backend) return e.takes(name);
+  return false;
 }
 
 }  // namespace pisco

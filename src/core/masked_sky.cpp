@@ -87,14 +87,6 @@ std::size_t flag_discs(const PreparedSky& sky, const PreparedDetector& det, cons
   return n;
 }
 
-void check_engine_options(const EngineOptions& options) {
-  for (const auto& [threads, name] : {std::pair{options.cpu.threads, "cpu"}, {options.simd.threads, "simd"}})
-    if (threads > Engine::max_threads())
-      throw Error("EngineOptions::" + std::string(name) + ".threads = " + std::to_string(threads) + " is more than " +
-                  std::to_string(Engine::max_threads()) +
-                  " (64 per hardware thread of this machine; expected 0 for all hardware threads, or at most that)");
-}
-
 }  // namespace detail
 
 // ---- Engine: masked skies (declared in pisco/engine.hpp)

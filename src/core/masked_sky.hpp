@@ -30,8 +30,4 @@ std::size_t flag_discs(const PreparedSky& sky, const PreparedDetector& det, cons
 std::size_t flag_discs(const PreparedSky& sky, const PreparedDetector& det, const std::vector<std::uint32_t>& masked,
                        const QuatPointingView& boresight, std::span<std::uint8_t> flags);
 
-// The limits of EngineOptions the engine checks before anything is made (docs/physics.md): threads
-// at most max_threads(). Throws pisco::Error naming the option.
-void check_engine_options(const EngineOptions& options);
-
 }  // namespace pisco::detail

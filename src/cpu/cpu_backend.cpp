@@ -261,20 +261,24 @@ class CpuBackend final : public Backend {
 
 BackendEntry cpu_backend_entry() {
   // Last for "auto": simd and vulkan on lavapipe are faster on the same cores (BENCHMARKS.md).
-  return {"cpu", -2,
-          [] {
-            BackendInfo info{"cpu", true,
-                             "float64 reference on " +
-                                 std::to_string(std::max(1u, std::thread::hardware_concurrency())) +
-                                 " hardware threads",
-                             {}, {}};
-            info.capabilities.float64 = true;
-            info.capabilities.worker_threads = true;
-            info.capabilities.adjoint = true;
-            return info;
-          },
-          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<CpuBackend>(std::move(in), sky, o.cpu.threads);
+  return {.name = "cpu",
+          .priority = -2,
+          .settings = {threads_setting()},
+          .probe =
+              [] {
+                BackendInfo info{"cpu", true,
+                                 "float64 reference on " +
+                                     std::to_string(std::max(1u, std::thread::hardware_concurrency())) +
+                                     " hardware threads",
+                                 {}, {}};
+                info.capabilities.float64 = true;
+                info.capabilities.worker_threads = true;
+                info.capabilities.adjoint = true;
+                return info;
+              },
+          .create = [](std::shared_ptr<const EngineInputs> in, const SkyView& sky,
+                       const EngineOptions& o) -> std::unique_ptr<Backend> {
+            return std::make_unique<CpuBackend>(std::move(in), sky, unsigned(o.number("threads")));
           }};
 }
 

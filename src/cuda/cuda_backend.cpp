@@ -50,7 +50,7 @@ struct Slot {
 class CudaBackend final : public Backend {
  public:
   CudaBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& maps, const EngineOptions& options)
-      : in_(std::move(inputs)), device_(open_device(options.cuda.device)) {
+      : in_(std::move(inputs)), device_(open_device(options.text("device"))) {
     check_kernel_image(device_.description());
     const PreparedSky& sky = in_->sky;
     per_sample_ = in_->normalization == Normalization::per_sample;
@@ -75,7 +75,7 @@ class CudaBackend final : public Backend {
 
     std::size_t free_bytes = 0, total_bytes = 0;
     PISCO_CUDA_CHECK(cudaMemGetInfo(&free_bytes, &total_bytes));
-    capacity_ = fit_chunk(options.cuda.chunk_samples, free_bytes);
+    capacity_ = fit_chunk(options.number("chunk_samples"), free_bytes);
     slots_.reserve(chunk_slots);
     capacity_ = fit_chunk_halving<DeviceOutOfMemory>(
         capacity_,
@@ -323,12 +323,12 @@ class CudaBackend final : public Backend {
 }  // namespace
 }  // namespace cuda
 
-BackendEntry cuda_backend_entry() {
-  // Above vulkan and cpu: on an NVIDIA machine "auto" runs the native backend.
-  return {"cuda", 20, [] { return cuda::probe(); },
-          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<cuda::CudaBackend>(std::move(in), sky, o);
-          }};
+void attach_cuda_backend(BackendEntry& e) {
+  e.probe = [] { return cuda::probe(); };
+  e.create = [](std::shared_ptr<const EngineInputs> in, const SkyView& sky,
+                const EngineOptions& o) -> std::unique_ptr<Backend> {
+    return std::make_unique<cuda::CudaBackend>(std::move(in), sky, o);
+  };
 }
 
 }  // namespace pisco::detail

@@ -167,12 +167,11 @@ void clean_element(const fs::path& file, int e, std::vector<double>& v, long lon
 }
 
 void check_read_arguments(const fs::path& file, double rho_max, double grid_step) {
-  if (!(rho_max > 0.0 && rho_max < pi / 2))
-    fail(file, "rho_max = " + degrees_text(rho_max) +
-                   " is outside (0, 90) deg; beams are limited to the front hemisphere");
-  if (!(std::isfinite(grid_step) && grid_step >= 0.0))
-    fail(file, "grid_step = " + degrees_text(grid_step) +
-                   " must be a finite angle >= 0 (0 = the file's pixel size)");
+  try {
+    check_file_beam_options({.rho_max = rho_max, .grid_step = grid_step});
+  } catch (const Error& e) {
+    fail(file, e.named());
+  }
 }
 
 // The polar cap of a beamsor file, in RING order: the pixels the grid can reach.

@@ -74,82 +74,21 @@ void lock_output_dir(const SimulationConfig& c, const SimulationOptions& options
   });
 }
 
-// The run's map-makers: the binned one when maps are asked for (its threads the stream's host share),
-// and the deconvolving one with [mapmaker] type = "deconvolve" (refused on a backend without the adjoint).
-void make_mapmakers(const SimulationConfig& c, const Sky& sky, Engine& engine, bool deconvolving, int maps_nside,
-                    unsigned host_threads, RunContext& cl, std::optional<pisco::BinnedMapmaker>& mapper,
-                    std::optional<pisco::DeconvolvingMapmaker>& deconvolver) {
+// The run's map-maker, of [mapmaker]'s kind, when maps are asked for (its threads the stream's host
+// share; with [ground], the ground's TOD binned beside), and the NSIDE of its maps.
+std::unique_ptr<RunMapmaker> make_mapmaker(const SimulationConfig& c, const Sky& sky, Engine& engine, bool ground,
+                                           unsigned host_threads, RunContext& cl, int& maps_nside) {
+  std::unique_ptr<RunMapmaker> made;
   cl.step([&] {
-    if (deconvolving && c.output.maps_nside > 0 && c.output.maps_nside != sky.nside())
-      throw pisco::Error(c.source.string() + ": [output] maps_nside: [mapmaker] type = \"deconvolve\" solves for the sky at its NSIDE " +
-                         std::to_string(sky.nside()) + "; got " + std::to_string(c.output.maps_nside) +
-                         " (leave maps_nside out, or set it to the sky's)");
-    if (c.output.maps && c.output.spectra && c.output.lmax > 4 * maps_nside)
+    if (!c.output.maps) return;
+    const MapmakerKindEntry& kind = mapmaker_kind(c.mapmaker.kind);
+    maps_nside = kind.maps_nside(c, sky);
+    if (c.output.spectra && c.output.lmax > 4 * maps_nside)
       throw pisco::Error(c.source.string() + ": [output] lmax: expected a multipole up to 4 maps_nside = " +
                          std::to_string(4 * maps_nside) + ", got " + std::to_string(c.output.lmax));
-    if (c.output.maps) {
-      mapper.emplace(maps_nside, c.output.rcond_min);
-      mapper->set_threads(host_threads);
-    }
-    if (deconvolving) {
-      for (const pisco::BackendInfo& b : pisco::Engine::backends())
-        if (b.name == engine.backend_name() && !b.capabilities.adjoint)
-          throw pisco::Error(c.source.string() + ": [mapmaker] type = \"deconvolve\" needs the adjoint, which the " +
-                                 engine.backend_name() + " backend on " + engine.device_name() +
-                                 " lacks; choose another [engine] backend",
-                             pisco::ErrorKind::unavailable);
-      pisco::DeconvolutionOptions o;
-      o.max_iterations = c.mapmaker.iterations;
-      o.tolerance = c.mapmaker.tolerance;
-      o.regularization = c.mapmaker.regularization;
-      if (c.mapmaker.regularize_polarization_only) o.regularize = pisco::DeconvolutionOptions::Regularize::polarization;
-      o.target_fwhm = c.mapmaker.target_fwhm;
-      if (cl.parallel()) o.reduce = [&cl](std::span<double> v) { cl.sum_in_place(v); };
-      deconvolver.emplace(engine, o);
-    }
+    made = kind.make({c, sky, engine, maps_nside, host_threads, ground, cl});
   });
-}
-
-// The deconvolving map-maker's solve: every process replays its own jobs of `plan` each iteration, and
-// the maps are summed over the processes (RunContext::sum_in_place), so that all run the same
-// iterations. Its progress goes to `say`, its figures and warnings into `result`.
-std::optional<pisco::DeconvolvedMaps> deconvolve(const SimulationConfig& c, const JobPlan& plan, const FocalPlane& fp,
-                                                 const ScanSource& scan, pisco::DeconvolvingMapmaker& deconvolver,
-                                                 const std::function<void(const std::string&)>& say,
-                                                 SimulationResult& result) {
-  say(printf_text("mapmaker: deconvolving each detector's beam by conjugate gradients, at most %d iterations "
-                  "(tolerance %g, regularization %g), reconvolved to a Gaussian of FWHM %g deg (0: not reconvolved)\n",
-                  c.mapmaker.iterations, c.mapmaker.tolerance, c.mapmaker.regularization,
-                  c.mapmaker.target_fwhm * 180 / std::numbers::pi));
-  const auto survey = [&](const std::function<void(const pisco::SurveyChunk&)>& visit) {
-    replay_survey(plan, c, fp, scan, visit);
-  };
-  std::optional<pisco::DeconvolvedMaps> deconvolved =
-      deconvolver.solve(survey, [&](const pisco::DeconvolutionProgress& p) {
-        say(printf_text("mapmaker: iteration %d, residual %.3g of ||A^T d|| (%.1f s)\n", p.iteration, p.residual,
-                        p.seconds));
-      });
-  say(printf_text("mapmaker: %s after %d iterations, %.2f s each\n", deconvolved->converged ? "converged" : "stopped",
-                  deconvolved->iterations, deconvolved->seconds_per_iteration));
-  for (const std::string& line : deconvolved->left_out) say(printf_text("mapmaker: left out %s\n", line.c_str()));
-  result.deconvolution_iterations = deconvolved->iterations;
-  result.deconvolution_residual = deconvolved->residuals.empty() ? 0.0 : deconvolved->residuals.back();
-  result.deconvolution_converged = deconvolved->converged;
-  if (!deconvolved->converged) {
-    const auto& r = deconvolved->residuals;
-    const auto best = std::min_element(r.begin(), r.end());
-    result.warnings.push_back(detail::printf_text(
-        "the deconvolving map-maker did not converge: residual %.3g of ||A^T d|| after %d iterations (the "
-        "smallest, %.3g, at iteration %d), above [mapmaker] tolerance = %g; raise iterations, or the "
-        "tolerance to what the backend reaches (float32 kernels stop near 1e-4), or add regularization",
-        result.deconvolution_residual, deconvolved->iterations, best == r.end() ? 0.0 : *best,
-        int(best - r.begin()) + 1, c.mapmaker.tolerance));
-  }
-  if (deconvolved->polarization_unconstrained)
-    result.warnings.push_back(
-        "the scan's polarization angles constrain Q and U in no pixel the beams reach (one angle per "
-        "pixel?): the deconvolved maps hold I alone, Q and U are unseen");
-  return deconvolved;
+  return made;
 }
 
 // [ground]: the pickup over every process's samples (SimulationResult's ground_ fields).
@@ -202,21 +141,6 @@ void make_ground_engine(const SimulationConfig& c, const Sky& sky, const std::ve
   say("ground: NSIDE %d in the horizon frame, %s, from %.6g to %.6g %s; backend %s\n", ground_sky->nside(),
       c.ground.file.empty() ? "the model" : c.ground.file.string().c_str(), *lo, *hi, sky.units().c_str(),
       ground_engine->backend_name().c_str());
-}
-
-// The leader's maps and spectra (binned, or deconvolved with binned ones beside), and the ground's
-// maps when it was binned; returns why nothing was solved, empty when something was.
-std::string write_maps(const SimulationConfig& c, const Sky& sky, int maps_nside,
-                       const std::optional<pisco::DeconvolvedMaps>& deconvolved, pisco::BinnedMapmaker& mapper,
-                       pisco::BinnedMapmaker* ground_mapper, bool flagging, RunObserver& obs, SimulationResult& result) {
-  const auto log = [&](const std::string& line) { obs.log(line); };
-  const MapOutputs out = deconvolved ? write_deconvolved_maps(c, sky, maps_nside, *deconvolved, mapper, log)
-                                     : write_binned_maps(c, sky, maps_nside, mapper, flagging, log);
-  result.written.insert(result.written.end(), out.written.begin(), out.written.end());
-  if (ground_mapper && out.nothing_solved.empty())
-    for (const auto& f : write_ground_maps(c, sky, maps_nside, *ground_mapper, log)) result.written.push_back(f);
-  result.solved_pixels = out.solved;
-  return out.nothing_solved;
 }
 
 // A run that would write nothing is refused before it starts (spectra and plots come from the maps).
@@ -289,21 +213,14 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   const bool per_detector_file = scan->per_detector();
   const std::size_t samples_per_detector = scan->samples_per_detector();
   const std::uint64_t total = std::uint64_t(samples_per_detector) * fp.size();
-  // [mapmaker] type = "deconvolve": maps at the engine's NSIDE, the sky's (binned ones too, for hits
-  // and comparison), solved after the run by conjugate gradients that replay the survey.
-  const bool deconvolving = c.output.maps && c.mapmaker.kind == MapmakerKind::deconvolve;
-  const int maps_nside = deconvolving ? sky.nside() : pisco::maps_nside(c, sky);
   say("scan: %s, %zu detectors x %zu samples\n", scan_kind_name(c.scan.kind), fp.size(), samples_per_detector);
 
   // The host's share of this process (the engine's threads on the cpu and simd backends) for the
   // per-sample host work of the stream: detector pointing and binning.
   const unsigned host_threads = stream_host_threads(c, engine, cl);
-  std::optional<pisco::BinnedMapmaker> mapper;
-  std::optional<pisco::DeconvolvingMapmaker> deconvolver;
-  make_mapmakers(c, sky, engine, deconvolving, maps_nside, host_threads, cl, mapper, deconvolver);
-  // [ground]: its TOD alone binned as the maps are, to show what it leaves in them.
-  std::optional<pisco::BinnedMapmaker> ground_mapper;
-  if (ground_engine && mapper) ground_mapper.emplace(maps_nside, c.output.rcond_min).set_threads(host_threads);
+  int maps_nside = 0;
+  const std::unique_ptr<RunMapmaker> mapmaker =
+      make_mapmaker(c, sky, engine, ground_engine.has_value(), host_threads, cl, maps_nside);
   const fs::path tod_path = c.output.dir / "tod.h5";
   std::optional<pisco::TodWriter> tod_file;
   if (c.output.tod) tod_file = open_tod_file(c, tod_path, sky, made, engine, fp, samples_per_detector, flagging, cl);
@@ -318,10 +235,8 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
   const auto tc = std::chrono::steady_clock::now();
   std::uint64_t flagged = 0;
   {
-    JobStream stream(c, fp, *scan, engine,
-                     {mapper ? &*mapper : nullptr, ground_mapper ? &*ground_mapper : nullptr,
-                      deconvolver ? &*deconvolver : nullptr, tod_file ? &*tod_file : nullptr},
-                     flagging, chunk, host_threads, obs, ground_engine ? &*ground_engine : nullptr);
+    JobStream stream(c, fp, *scan, engine, {mapmaker.get(), tod_file ? &*tod_file : nullptr}, flagging, chunk,
+                     host_threads, obs, ground_engine ? &*ground_engine : nullptr);
     stream.run(plan, cl);
     flagged = stream.flagged();
     if (ground_engine) ground_summary(stream.ground_stats(), cl, result, sky.units(), say_line);
@@ -339,25 +254,25 @@ SimulationResult Simulation::run(RunContext& cl, RunObserver* observer) const {
     written.push_back(tod_path);
   }
   result.flagged = flagged = cl.sum(flagged);
-  if (mapper) cl.step([&] { result.reduced_bytes = cl.sum(cl.reduce(*mapper)); });
-  if (ground_mapper) cl.step([&] { result.reduced_bytes += cl.sum(cl.reduce(*ground_mapper)); });
+  if (mapmaker) cl.step([&] { result.reduced_bytes = mapmaker->reduce(cl); });
   if (flagging)
     say("flags: %llu of %llu samples flagged (their disc holds an UNSEEN pixel)%s\n",
         static_cast<unsigned long long>(flagged), static_cast<unsigned long long>(total),
         tod_file ? "; the TOD file's 'flags' datasets" : "");
 
-  // The deconvolving map-maker: every process replays its own jobs each iteration, and the maps are
-  // summed over the processes (RunContext::sum_in_place), so that all run the same iterations.
-  std::optional<pisco::DeconvolvedMaps> deconvolved;
-  if (deconvolver) deconvolved = deconvolve(c, plan, fp, *scan, *deconvolver, say_line, result);
-
-  // Maps and spectra: the leader's, from the normal equations of every process. A run whose maps solve
-  // no pixel has no maps to speak of: no spectra (and pisco-vk makes no plots and exits with status 4).
+  // What the map-maker solves beyond the reduction (the deconvolving one replays the survey), then
+  // its maps and spectra: the leader's. A run whose maps solve no pixel has no maps to speak of: no
+  // spectra (and pisco-vk makes no plots and exits with status 4).
+  const std::function<void(const std::string&)> log = [&](const std::string& line) { obs.log(line); };
+  const MapmakerEnd end{c, sky, maps_nside, flagging, plan, fp, *scan, say_line, log, result};
+  if (mapmaker) mapmaker->solve(end);
   std::string nothing_solved;
   cl.step([&] {
-    if (cl.leader() && mapper)
-      nothing_solved = write_maps(c, sky, maps_nside, deconvolved, *mapper, ground_mapper ? &*ground_mapper : nullptr,
-                                  flagging, obs, result);
+    if (!cl.leader() || !mapmaker) return;
+    const MapOutputs out = mapmaker->write(end);
+    result.written.insert(result.written.end(), out.written.begin(), out.written.end());
+    result.solved_pixels = out.solved;
+    nothing_solved = out.nothing_solved;
   });
   result.nothing_solved = cl.broadcast(nothing_solved);
 

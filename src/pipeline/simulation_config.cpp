@@ -15,6 +15,7 @@
 #include "io/toml_table.hpp"
 #include "beams/beam_kind.hpp"
 #include "core/registry.hpp"
+#include "pipeline/mapmaker_kind.hpp"
 #include "scans/scan_kind.hpp"
 #include "pisco/healpix_map.hpp"
 #include "pisco/spectra.hpp"
@@ -61,10 +62,11 @@ SkyConfig read_sky(Table t) {
   s.seed = static_cast<std::uint64_t>(t.integer_in("seed", 1, 0, INT64_MAX, "a non-negative integer"));
   if (t.has("unseen") && s.file.empty())
     t.fail("unseen", "only for a map file (file = \"map.fits\"): what to do with its UNSEEN pixels");
-  const std::string unseen = t.choice("unseen", "error", {"error", "zero", "flag"});
-  s.unseen = unseen == "error" ? pisco::UnseenPolicy::error
-             : unseen == "zero" ? pisco::UnseenPolicy::zero
-                                : pisco::UnseenPolicy::flag;
+  try {
+    s.unseen = pisco::unseen_policy_from(t.string("unseen", "error"));  // the engine's names, one list
+  } catch (const pisco::Error& e) {
+    t.fail("unseen", e.what());
+  }
   s.unpolarized = t.boolean("unpolarized", false);
   s.cl_file = t.input_file("cl_file");
   s.bb_template = t.input_file("bb_template");
@@ -143,13 +145,6 @@ ScanConfig read_scan(Table t) {
 // The TOD is streamed in chunks of at most this many samples (two buffers of 128 MiB at float64).
 constexpr std::int64_t max_chunk_samples = std::int64_t(1) << 24;
 
-// Routes the [engine] settings a file gave (EngineConfig::backend_settings) to the backend that
-// options.backend names (pisco::set_engine_option); its error for a setting that backend does not
-// have carries the setting's key.
-void route_settings(EngineConfig& e) {
-  for (const auto& [key, value] : e.backend_settings) pisco::set_engine_option(e.options, key, value);
-}
-
 EngineConfig read_engine(Table t) {
   EngineConfig e;
   // Each setting as pisco::set_engine_option takes it; its errors name their key.
@@ -161,16 +156,13 @@ EngineConfig read_engine(Table t) {
     }
   };
   set("backend", t.string("backend", "auto"));
-  if (t.has("device")) e.backend_settings.emplace_back("device", t.string("device", "auto"));
-  if (t.has("arithmetic")) e.backend_settings.emplace_back("arithmetic", t.string("arithmetic", "auto"));
-  if (t.has("threads")) e.backend_settings.emplace_back("threads", t.integer("threads", 0));
-  for (const char* key : {"normalization", "quadrature"})
-    if (t.has(key)) set(key, t.string(key, ""));
-  // A setting the named backend does not have is an error naming its key.
-  try {
-    route_settings(e);
-  } catch (const pisco::Error& err) {
-    t.fail(err.key(), err.what());
+  // Then every other setting of the engine's table by its name, but two: chunk_samples here is the
+  // stream's chunk (below; the device backends fit theirs), and unseen belongs to the [sky] map.
+  for (const pisco::EngineSetting& s : pisco::engine_settings()) {
+    const std::string key = s.name;
+    if (key == "backend" || key == "chunk_samples" || key == "unseen" || !t.has(key)) continue;
+    if (s.number) set(s.name, static_cast<long long>(t.integer(key, 0)));
+    else set(s.name, t.string(key, ""));
   }
   const auto chunk = t.integer_in("chunk_samples", 1 << 16, 1, max_chunk_samples,
                                   "a number of samples from 1 to " + std::to_string(max_chunk_samples));
@@ -182,20 +174,13 @@ EngineConfig read_engine(Table t) {
 }  // namespace
 
 void EngineConfig::set_backend(const std::string& name, const std::filesystem::path& source) {
-  EngineConfig routed;
-  routed.options.backend = name;
-  routed.options.normalization = options.normalization;
-  routed.options.quadrature = options.quadrature;
-  routed.options.unseen = options.unseen;
-  routed.backend_settings = backend_settings;
   try {
-    route_settings(routed);
+    pisco::set_engine_option(options, "backend", name);  // checks the file's settings against it
   } catch (const pisco::Error& err) {
     throw pisco::Error((source.empty() ? std::string("simulation") : source.string()) + ": " + err.named("[engine] ") +
                            "; the backend was named after the file (" + name + ")",
                        err.kind());
   }
-  options = std::move(routed.options);
 }
 
 namespace {
@@ -229,17 +214,20 @@ OutputConfig read_output(Table t) {
 }
 
 // [mapmaker] (docs/config.md).
+// [mapmaker]: its type, through the registry of kinds (pipeline/mapmaker_kind.hpp), and that kind's
+// keys; another kind's key is an error naming that kind.
 MapmakerConfig read_mapmaker(Table t) {
   MapmakerConfig m;
-  m.kind = t.choice("type", "binned", {"binned", "deconvolve"}) == "binned" ? MapmakerKind::binned : MapmakerKind::deconvolve;
-  const bool deconvolve = m.kind == MapmakerKind::deconvolve;
-  for (const char* key : {"iterations", "tolerance", "regularization", "regularize", "target_fwhm_deg"})
-    if (!deconvolve && t.has(key)) t.fail(key, "only for type = \"deconvolve\"");
-  m.iterations = static_cast<int>(t.integer_in("iterations", 40, 1, 100000, "a number of iterations from 1 to 100000"));
-  m.tolerance = t.number_in("tolerance", 1e-6, 1e-15, 0.5, "a relative residual in [1e-15, 0.5]");
-  m.regularization = t.number_in("regularization", 1e-3, 0.0, 1.0, "a fraction of the Rayleigh quotient in [0, 1]");
-  m.regularize_polarization_only = t.choice("regularize", "all", {"all", "polarization"}) == "polarization";
-  m.target_fwhm = t.number_in("target_fwhm_deg", 0.0, 0.0, 90.0, "0 (none) or a FWHM in degrees below 90") * deg;
+  const detail::MapmakerKindEntry& kind =
+      *detail::mapmaker_kind_named(t.choice("type", "binned", detail::registered_names(detail::mapmaker_kinds())));
+  m.kind = kind.kind;
+  for (const detail::MapmakerKindEntry* other : detail::mapmaker_kinds())
+    for (const char* key : other->keys)
+      if (t.has(key) && std::find_if(kind.keys.begin(), kind.keys.end(), [&](const char* k) {
+                          return std::string_view(k) == key;
+                        }) == kind.keys.end())
+        t.fail(key, std::string("only for type = \"") + other->name + "\"");
+  kind.read(t, m);
   t.finish();
   return m;
 }
@@ -487,14 +475,7 @@ SimulationConfig read_simulation_file(const fs::path& file) {
   if (const toml::table* mapmaker = t.table("mapmaker")) {
     Table mt(*mapmaker, "mapmaker", file);
     c.mapmaker = read_mapmaker(mt);
-    if (c.mapmaker.kind == MapmakerKind::deconvolve) {
-      // What the deconvolving map-maker does not do, said where the file asks for it.
-      if (!c.output.maps) mt.fail("type", "\"deconvolve\" makes maps: set [output] maps = true");
-      if (c.sky.unseen == pisco::UnseenPolicy::flag)
-        mt.fail("type", "\"deconvolve\" models every sample; it cannot leave out the samples [sky] unseen = \"flag\" flags");
-      if (c.hwp.ideal_mapmaker)
-        mt.fail("type", "\"deconvolve\" models each detector's own plate; [hwp] mapmaker = \"ideal\" is for the binned map-maker");
-    }
+    detail::mapmaker_kind(c.mapmaker.kind).check(c, mt);  // what the kind refuses of the rest of the file
   }
   assign_plates(c, file);
   c.sample_rate = scan_sample_rate(c.scan);

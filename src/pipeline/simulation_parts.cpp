@@ -227,13 +227,14 @@ Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const 
     if (cl.node_size() <= 1) return false;
     for (const auto& b : pisco::Engine::backends()) {
       if (b.name != backend) continue;
-      if (b.capabilities.worker_threads) {  // the host's threads are what the processes share
-        if (unsigned* threads = o.threads_of(backend); threads && *threads == 0) {
-          *threads = std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
+      if (pisco::backend_has_setting(backend, "threads")) {  // the host's threads are what the processes share
+        if (o.number("threads") == 0) {
+          o.settings["threads"] = (long long)std::max(1u, std::thread::hardware_concurrency() / unsigned(cl.node_size()));
           return true;
         }
-      } else if (std::string* device = o.device_of(backend); device && (*device == "auto" || device->empty()) && !b.devices.empty()) {
-        *device = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
+      } else if (pisco::backend_has_setting(backend, "device") && o.text("device") == "auto" &&
+                 !b.devices.empty()) {
+        o.settings["device"] = std::to_string(b.devices[std::size_t(cl.node_rank()) % b.devices.size()]);
         return true;
       }
     }

@@ -65,8 +65,8 @@ void replay_survey(const JobPlan& plan, const SimulationConfig& c, const FocalPl
 // The threads of this process's per-sample host work in the stream: the engine's own on the cpu and
 // simd backends when they are set, else the host's hardware threads shared by the node's processes.
 unsigned stream_host_threads(const SimulationConfig& c, const Engine& engine, const RunContext& cl) {
-  EngineOptions o = c.engine.options;
-  if (const unsigned* threads = o.threads_of(engine.backend_name()); threads && *threads > 0) return *threads;
+  if (backend_has_setting(engine.backend_name(), "threads"))
+    if (const std::size_t threads = c.engine.options.number("threads"); threads > 0) return unsigned(threads);
   return std::max(1u, std::thread::hardware_concurrency() / unsigned(std::max(1, cl.node_size())));
 }
 

@@ -23,6 +23,7 @@
 #include <unistd.h>
 
 #include "scans/scan_kind.hpp"
+#include "pipeline/mapmaker_kind.hpp"
 #include "core/detector_pointing.hpp"
 #include "core/thread_pool.hpp"
 #include "io/input_file.hpp"
@@ -261,11 +262,9 @@ decltype(auto) with_view(const pisco::SurveyChunk& chunk, F&& f) {
   return chunk.quaternions ? f(chunk.quats) : f(chunk.angles);
 }
 
-// What the TOD streams into: the map-makers and the TOD file (each absent when not asked for).
+// What the TOD streams into: the run's map-maker and the TOD file (each absent when not asked for).
 struct StreamSinks {
-  pisco::BinnedMapmaker* binned = nullptr;
-  pisco::BinnedMapmaker* ground = nullptr;  // [ground]: the ground's TOD alone, binned
-  pisco::DeconvolvingMapmaker* deconvolver = nullptr;  // its right-hand side A^T d
+  RunMapmaker* mapmaker = nullptr;
   pisco::TodWriter* tod = nullptr;
 };
 
@@ -421,38 +420,25 @@ class JobStream {
     const std::span<double> t(tod_[j.slot].data(), count);
     if (!c_.sources.empty()) add_sources(j, t);
     if (ground_) add_ground(j, t);
-    // The binned map-maker takes the boresight's quaternions (one conversion per time chunk for every
-    // detector) and applies the detector's offset itself; the detector's angles are made only for the
-    // TOD file's pointing or weights, or from a per-detector file.
+    // A map-maker that reads the pointing takes the boresight's quaternions (one conversion per time
+    // chunk for every detector) and applies the detector's offset itself; the detector's angles are
+    // made only for the TOD file's pointing or weights, or from a per-detector file.
     const bool tod_pointing = sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights);
+    const bool reads = sinks_.mapmaker && sinks_.mapmaker->reads_pointing();
     const pisco::QuatPointingView boresight =
-        sinks_.binned && !tod_pointing ? pointing_.boresight_quats(j.pointing_slot, host_) : pisco::QuatPointingView{};
-    const bool from_boresight = sinks_.binned && !tod_pointing && boresight.size() == count;
-    if ((sinks_.binned && !from_boresight) || tod_pointing)
+        reads && !tod_pointing ? pointing_.boresight_quats(j.pointing_slot, host_) : pisco::QuatPointingView{};
+    const bool from_boresight = reads && !tod_pointing && boresight.size() == count;
+    if ((reads && !from_boresight) || tod_pointing)
       with_view(chunk, [&](const auto& view) {
         pisco::detail::detector_pointing(view, fp_[chunk.detector].offset, own_, host_);
       });
     const pisco::PointingView detector_view = own_.view();
     std::span<const std::uint8_t> fl;
     if (flagging_) fl = flag_samples(chunk);
-    if (from_boresight)
-      sinks_.binned->add_from_boresight(modelled_[chunk.detector], boresight.subspan(0, count), t, chunk.hwp_angle, fl);
-    else if (sinks_.binned)
-      sinks_.binned->add(modelled_[chunk.detector], detector_view, t, chunk.hwp_angle, fl);
-    if (sinks_.ground && ground_) {
-      const std::span<const double> g(ground_tod_.data(), count);
-      if (from_boresight)
-        sinks_.ground->add_from_boresight(modelled_[chunk.detector], boresight.subspan(0, count), g, chunk.hwp_angle, fl);
-      else
-        sinks_.ground->add(modelled_[chunk.detector], detector_view, g, chunk.hwp_angle, fl);
-    }
-    if (sinks_.deconvolver) {  // the right-hand side A^T d, chunk by chunk
-      try {
-        sinks_.deconvolver->add(chunk, t);
-      } catch (const pisco::Error& e) {
-        throw pisco::Error(c_.source.string() + ": [mapmaker] type = \"deconvolve\": " + e.what(), e.kind());
-      }
-    }
+    if (sinks_.mapmaker)
+      sinks_.mapmaker->add({chunk, modelled_[chunk.detector], t,
+                            ground_ ? std::span<const double>(ground_tod_.data(), count) : std::span<const double>(), fl,
+                            from_boresight ? boresight.subspan(0, count) : pisco::QuatPointingView{}, detector_view});
     if (sinks_.tod && c_.output.tod_weights) {  // the map-maker's weights of each sample
       const std::span<const double> h = chunk.hwp_angle;
       weights_.resize(3 * count);

@@ -148,10 +148,8 @@ BeamOptions beam_options(double rho_max, double grid_step, double cross_polar, c
     o.cross_polar_pattern = CrossPolarPattern::quadrupole;
   else
     throw nb::value_error(("cross_polar_pattern: expected 'uniform' or 'quadrupole', got '" + pattern + "'").c_str());
-  if (!mueller.is_none()) {
-    o.mueller = mueller_from(mueller, "mueller");
-    check_mueller_arg(o.mueller, "mueller", MuellerBounds::relative);
-  }
+  // Its bounds are the library's check (check_beam_options, keyed "mueller"), when the beam is made.
+  if (!mueller.is_none()) o.mueller = mueller_from(mueller, "mueller");
   o.split = split_from(sidelobes);
   o.far_sidelobe = far_sidelobe_from(far);
   return o;
@@ -900,7 +898,7 @@ void bind_focal_plane(nb::module_& m) {
 }
 
 void bind_helpers(nb::module_& m) {
-  nb::class_<BackendInfo>(m, "BackendInfo", "A backend compiled into the library and whether it runs here.")
+  nb::class_<BackendInfo>(m, "BackendInfo", "A backend the library knows, whether it runs here and what it can do.")
       .def_ro("name", &BackendInfo::name)
       .def_ro("available", &BackendInfo::available)
       .def_ro("detail", &BackendInfo::detail, "The device found, or why the backend is unavailable.")
@@ -912,18 +910,20 @@ void bind_helpers(nb::module_& m) {
             d["plates"] = b.capabilities.plates;
             d["adjoint"] = b.capabilities.adjoint;
             d["worker_threads"] = b.capabilities.worker_threads;
+            d["normal"] = b.capabilities.normal;
             d["device_memory"] = b.capabilities.device_memory;
             return d;
           },
           "What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own "
-          "host threads: `threads` applies), device_memory (bytes of the device auto picks; 0: host memory).")
+          "host threads: `threads` applies), normal (a one-pass normal), device_memory (bytes of the device auto picks; "
+          "0: host memory).")
       .def("__repr__", [](const BackendInfo& b) {
         return "pisco.BackendInfo('" + b.name + "', available=" + (b.available ? "True" : "False") + ", '" +
                b.detail + "')";
       });
   m.def("devices", &Engine::backends,
-        "The backends compiled in ('cpu', 'simd', 'vulkan', 'cuda'), each with whether it is available on this\n"
-        "machine and its device or the reason it is not.");
+        "The backends the library knows ('cpu', 'simd', 'vulkan', 'cuda'), built into it or not, each with whether\n"
+        "it is available on this machine and its device or the reason it is not.");
   m.def("offset_quat", [](double xi, double eta, double gamma) { return quat_array(offset_quat(xi, eta, gamma)); },
         "xi"_a, "eta"_a, "gamma"_a, "The offset quaternion of focal-plane coordinates (xi, eta, gamma), radians.");
   m.def(

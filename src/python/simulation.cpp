@@ -65,13 +65,7 @@ void apply(Simulation& s, const std::optional<std::filesystem::path>& output_dir
     s.config().output.dir = *output_dir;
   }
   if (backend) s.config().engine.set_backend(*backend, s.config().source);
-  if (device) {
-    try {
-      s.config().engine.options.set_device(*device);
-    } catch (const pisco::Error& e) {
-      throw pisco::Error(std::string("device: ") + e.what(), e.kind());
-    }
-  }
+  if (device) pisco::set_engine_option(s.config().engine.options, "device", *device);  // keyed "device"
 }
 
 Simulation from_file(const std::filesystem::path& path, const std::optional<std::filesystem::path>& output_dir,

@@ -165,8 +165,8 @@ class SimdBackend final : public Backend {
  public:
   SimdBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options)
       : in_(std::move(inputs)),
-        pool_(options.simd.threads ? options.simd.threads : hardware_threads()),
-        kernel_(simd::choose_kernel(requested_target(options.simd.instruction_set))),
+        pool_(options.number("threads") ? unsigned(options.number("threads")) : hardware_threads()),
+        kernel_(simd::choose_kernel(requested_target(options.text("device")))),
         ring_columns_(in_->sky.rings) {
     monopole_ = float32_monopole(sky);
     boundary_ = cap_boundary(sky.nside(), in_->quadrature);
@@ -546,26 +546,25 @@ class SimdBackend final : public Backend {
 
 }  // namespace
 
-BackendEntry simd_backend_entry() {
-  // Above the float64 reference and vulkan on a CPU device (lavapipe), below a GPU: BENCHMARKS.md.
-  return {"simd", 5,
-          [] {
-            try {
-              const simd::Kernel k = simd::choose_kernel(requested_target(""));
-              BackendInfo info{"simd", true,
-                               "Highway " + k.description + " on " + std::to_string(hardware_threads()) +
-                                   " hardware threads",
-                               {}, {}};
-              info.capabilities.worker_threads = true;
-              info.capabilities.adjoint = true;
-              return info;
-            } catch (const Error& e) {
-              return BackendInfo{"simd", false, e.what(), {}, {}};
-            }
-          },
-          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<SimdBackend>(std::move(in), sky, o);
-          }};
+void attach_simd_backend(BackendEntry& e) {
+  e.probe = [] {
+    try {
+      const simd::Kernel k = simd::choose_kernel(requested_target(""));
+      BackendInfo info{"simd", true,
+                       "Highway " + k.description + " on " + std::to_string(hardware_threads()) + " hardware threads",
+                       {}, {}};
+      info.capabilities.worker_threads = true;
+      info.capabilities.adjoint = true;
+      info.capabilities.normal = true;
+      return info;
+    } catch (const Error& e) {
+      return BackendInfo{"simd", false, e.what(), {}, {}};
+    }
+  };
+  e.create = [](std::shared_ptr<const EngineInputs> in, const SkyView& sky,
+                const EngineOptions& o) -> std::unique_ptr<Backend> {
+    return std::make_unique<SimdBackend>(std::move(in), sky, o);
+  };
 }
 
 }  // namespace pisco::detail

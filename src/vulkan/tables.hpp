@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "kernel/cap_boundary.hpp"
+#include "vulkan/vulkan_options.hpp"
 #include "core/backend.hpp"
 #include "core/prepared.hpp"
 #include "interface.h"

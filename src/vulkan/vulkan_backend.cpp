@@ -26,6 +26,7 @@
 #include "vulkan/context.hpp"
 #include "vulkan/pipeline.hpp"
 #include "vulkan/tables.hpp"
+#include "vulkan/vulkan_options.hpp"
 
 namespace pisco::detail {
 namespace {
@@ -79,7 +80,7 @@ class VulkanBackend final : public Backend {
     std::array<std::vector<double>, 4> maps;  // I, Q, U, V
   };
 
-  void setup(const vk::DeviceInfo& info, const SkyView& sky, const EngineOptions& options);
+  void setup(const vk::DeviceInfo& info, const SkyView& sky, const vk::VulkanOptions& settings);
   void release() noexcept;
   // A device-local uniform texel buffer holding `bytes` of `data`, viewed as R32G32B32A32_UINT texels
   // (src/kernel/interface.h): every table the kernel reads.
@@ -140,11 +141,12 @@ class VulkanBackend final : public Backend {
 
 VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const SkyView& sky, const EngineOptions& options)
     : in_(std::move(inputs)) {
+  const vk::VulkanOptions settings = vk::vulkan_options(options);
   auto instance = vk::Instance::get();
-  const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), options.vulkan.device);
+  const vk::DeviceInfo info = vk::choose_device(vk::enumerate_devices(*instance), settings.device);
   device_ = std::make_unique<vk::Device>(std::move(instance), info);
   try {
-    setup(info, sky, options);
+    setup(info, sky, settings);
   } catch (const Error& e) {
     release();  // the destructor does not run for a constructor that throws
     throw Error(std::string(e.what()) + " (device " + info.describe() + ")", e.kind());
@@ -154,14 +156,14 @@ VulkanBackend::VulkanBackend(std::shared_ptr<const EngineInputs> inputs, const S
   }
 }
 
-void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, const EngineOptions& options) {
+void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, const vk::VulkanOptions& settings) {
   const auto& fn = device_->fn();
 
   VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
   pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
   pi.queueFamilyIndex = info.queue_family;
   PISCO_VK(fn.vkCreateCommandPool(device_->handle(), &pi, nullptr, &pool_));
-  const bool ff = vk::use_float_float(info.float64, info.name, options.vulkan.arithmetic);
+  const bool ff = vk::use_float_float(info.float64, info.name, settings.arithmetic);
   const std::span<const std::uint32_t> spirv =
       ff ? std::span<const std::uint32_t>(pisco_spv_convolve_ff, sizeof(pisco_spv_convolve_ff) / sizeof(std::uint32_t))
          : std::span<const std::uint32_t>(pisco_spv_convolve, sizeof(pisco_spv_convolve) / sizeof(std::uint32_t));
@@ -201,7 +203,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, c
   // Chunks: as asked, or the default, within the device's buffer range and dispatch limits.
   const std::size_t by_range = info.max_storage_buffer_range / (4 * sizeof(double));
   const std::size_t by_groups = std::size_t(info.max_groups_x) * info.max_groups_y;  // one sample per group at worst
-  std::size_t chunk = options.vulkan.chunk_samples ? options.vulkan.chunk_samples : default_chunk;
+  std::size_t chunk = settings.chunk_samples ? settings.chunk_samples : default_chunk;
   chunk = std::max<std::size_t>(1, std::min({chunk, by_range, by_groups}));
   make_slots(chunk);
   // Compile, at set-up, the pipelines the detectors will use.
@@ -674,46 +676,45 @@ void VulkanBackend::take_adjoint(const std::array<std::span<double>, 4>& maps) {
 
 }  // namespace
 
-BackendEntry vulkan_backend_entry() {
-  return {"vulkan", 10,
-          [] {
-            try {
-              auto instance = vk::Instance::get();
-              const auto devices = vk::enumerate_devices(*instance);
-              std::string usable, unusable;
-              for (const auto& d : devices)
-                (d.unusable.empty() ? usable : unusable) += (std::to_string(d.index) + ": " + d.describe() +
-                                                             (d.unusable.empty() ? "" : " (" + d.unusable + ")") + "; ");
-              if (usable.empty())
-                return BackendInfo{"vulkan", false,
-                                   devices.empty() ? "no Vulkan device was found (for a CPU device, install "
-                                                     "mesa-vulkan-drivers)"
-                                                   : "no usable Vulkan device: " + unusable.substr(0, unusable.size() - 2),
-                                   {}, {}};
-              const vk::DeviceInfo chosen = vk::choose_device(devices, "auto");
-              const std::string pick = chosen.describe();
-              std::string detail = usable + unusable;
-              BackendInfo info{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")", {}, {}};
-              for (const auto& d : devices)
-                if (d.unusable.empty() && d.type == chosen.type) info.devices.push_back(d.index);
-              info.capabilities.device_memory = chosen.device_memory;
-              info.capabilities.adjoint = chosen.int64_atomics;
-              return info;
-            } catch (const Error& e) {
-              return BackendInfo{"vulkan", false, e.what(), {}, {}};
-            }
-          },
-          [](std::shared_ptr<const EngineInputs> in, const SkyView& sky, const EngineOptions& o) -> std::unique_ptr<Backend> {
-            return std::make_unique<VulkanBackend>(std::move(in), sky, o);
-          },
-          [] {
-            try {
-              const auto d = vk::choose_device(vk::enumerate_devices(*vk::Instance::get()), "auto");
-              return d.type == VK_PHYSICAL_DEVICE_TYPE_CPU ? -1 : 10;
-            } catch (const Error&) {
-              return -1;
-            }
-          }};
+void attach_vulkan_backend(BackendEntry& e) {
+  e.probe = [] {
+    try {
+      auto instance = vk::Instance::get();
+      const auto devices = vk::enumerate_devices(*instance);
+      std::string usable, unusable;
+      for (const auto& d : devices)
+        (d.unusable.empty() ? usable : unusable) +=
+            (std::to_string(d.index) + ": " + d.describe() + (d.unusable.empty() ? "" : " (" + d.unusable + ")") + "; ");
+      if (usable.empty())
+        return BackendInfo{"vulkan", false,
+                           devices.empty() ? "no Vulkan device was found (for a CPU device, install mesa-vulkan-drivers)"
+                                           : "no usable Vulkan device: " + unusable.substr(0, unusable.size() - 2),
+                           {}, {}};
+      const vk::DeviceInfo chosen = vk::choose_device(devices, "auto");
+      const std::string pick = chosen.describe();
+      std::string detail = usable + unusable;
+      BackendInfo info{"vulkan", true, detail.substr(0, detail.size() - 2) + " (auto: " + pick + ")", {}, {}};
+      for (const auto& d : devices)
+        if (d.unusable.empty() && d.type == chosen.type) info.devices.push_back(d.index);
+      info.capabilities.device_memory = chosen.device_memory;
+      info.capabilities.adjoint = chosen.int64_atomics;
+      return info;
+    } catch (const Error& e) {
+      return BackendInfo{"vulkan", false, e.what(), {}, {}};
+    }
+  };
+  e.create = [](std::shared_ptr<const EngineInputs> in, const SkyView& sky,
+                const EngineOptions& o) -> std::unique_ptr<Backend> {
+    return std::make_unique<VulkanBackend>(std::move(in), sky, o);
+  };
+  e.auto_priority = [] {
+    try {
+      const auto d = vk::choose_device(vk::enumerate_devices(*vk::Instance::get()), "auto");
+      return d.type == VK_PHYSICAL_DEVICE_TYPE_CPU ? -1 : 10;
+    } catch (const Error&) {
+      return -1;
+    }
+  };
 }
 
 }  // namespace pisco::detail

@@ -455,6 +455,7 @@ def test_engine_errors_and_close():
     assert caps["cpu"]["float64"] and caps["cpu"]["worker_threads"] and caps["cpu"]["device_memory"] == 0
     assert all(c["plates"] for c in caps.values())
     assert all(c["adjoint"] for name, c in caps.items() if name != "vulkan")  # vulkan: with int64 atomics
+    assert all(c["normal"] == (name == "simd") for name, c in caps.items())  # the one-pass normal
     with pytest.raises(TypeError, match="beams: expected a pisco.Beamsor"):
         pisco.Engine(sky, [beam, "beam"], fp, backend="cpu")
     bad = pisco.FocalPlane()
@@ -1246,9 +1247,9 @@ def test_plate_and_beam_mueller_bounds():
     # A beam's constant matrix: M00 > 0, no entry above it; any overall scale.
     leaky = np.eye(4)
     leaky[1, 0] = 2.0
-    with pytest.raises(ValueError, match=r"^mueller: \|M10\| = 2 exceeds \(1 \+ 0.01\) M00 = 1.01"):
+    with pytest.raises(ValueError, match=r"^mueller: the constant Mueller matrix: \|M10\| = 2 exceeds \(1 \+ 0.01\) M00 = 1.01"):
         pisco.Beamsor.gaussian(1 * deg, mueller=leaky)
-    with pytest.raises(ValueError, match=r"^mueller: M00 = 0 \(T to T\) is not positive"):
+    with pytest.raises(ValueError, match=r"^mueller: the constant Mueller matrix: M00 = 0 \(T to T\) is not positive"):
         pisco.Beamsor.gaussian(1 * deg, mueller=np.diag([0.0, 1, 1, 1]))
     pisco.Beamsor.gaussian(1 * deg, mueller=1e6 * np.eye(4))
 
