@@ -511,37 +511,6 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
     const d::Vec4<float> vc = d::effective_weights(wc, colc[0], colc[1], colc[2], colc[3]);
     ASSERT_EQ(bits(vg.x), bits(vc.x));
     ASSERT_EQ(bits(vg.w), bits(vc.w));
-    {  // a plate at an angle (plate.glsl): M(theta)'s rows, and the monopole's weight behind it
-#if PISCO_FF
-      using PV = glm::vec4;
-      using PR = float;
-#else
-      using PV = glm::dvec4;
-      using PR = double;
-#endif
-      PV r[4], m[4];
-      d::Vec4<PR> rc[4], mc[4];
-      for (int i = 0; i < 4; ++i) {
-        r[i] = PV(u(rng), u(rng), u(rng), u(rng));
-        rc[i] = {r[i].x, r[i].y, r[i].z, r[i].w};
-      }
-      const PR c = std::cos(PR(2) * PR(th)), s = std::sin(PR(2) * PR(th));
-      glsl::plate_rows(r[0], r[1], r[2], r[3], c, s, m[0], m[1], m[2], m[3]);
-      d::plate_rows(rc[0], rc[1], rc[2], rc[3], c, s, mc[0], mc[1], mc[2], mc[3]);
-      // R(-theta) M0 R(theta) as a plain matrix product, in float64.
-      const double R[4][4] = {{1, 0, 0, 0}, {0, double(c), double(s), 0}, {0, -double(s), double(c), 0}, {0, 0, 0, 1}};
-      for (int i = 0; i < 4; ++i) {
-        const PR got[4] = {mc[i].x, mc[i].y, mc[i].z, mc[i].w};
-        for (int j = 0; j < 4; ++j) {
-          ASSERT_EQ(bits(m[i][j]), bits(got[j])) << "plate_rows, case " << t;
-          double want = 0;
-          for (int k = 0; k < 4; ++k)
-            for (int l = 0; l < 4; ++l) want += R[k][i] * double(r[k][l]) * R[l][j];
-          ASSERT_NEAR(double(got[j]), want, sizeof(PR) == 4 ? 1e-6 : 1e-15) << "plate_rows, case " << t;
-        }
-      }
-      ASSERT_EQ(bits(glsl::plate_monopole_weight(m[1], r[2])), bits(d::plate_monopole_weight(mc[1], rc[2])));
-    }
     float sg = u(rng), cg = 1e-8f * u(rng), sc = sg, cc = cg;
     const float value = 1e-3f * u(rng);
     glsl::kahan_add(sg, cg, value);
@@ -556,7 +525,52 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
 #endif
     ++checked;
   }
-  // The cap-boundary rings, pixel by pixel around them.
+  std::cout << checked << " random cases, every value the same bits in both builds\n";
+}
+
+// A plate at an angle (src/kernel/plate.glsl): M(theta)'s rows in both builds, the same bits and the
+// plain matrix product R(-theta) M0 R(theta), and the monopole's weight behind it.
+TEST(SharedMaths, PlateRowsGiveTheSameBitsInBothBuilds) {
+  namespace d = pisco::detail;
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (int t = 0; t < 20000; ++t) {
+    const float th = std::acos(u(rng));
+#if PISCO_FF
+    using PV = glm::vec4;
+    using PR = float;
+#else
+    using PV = glm::dvec4;
+    using PR = double;
+#endif
+    PV r[4], m[4];
+    d::Vec4<PR> rc[4], mc[4];
+    for (int i = 0; i < 4; ++i) {
+      r[i] = PV(u(rng), u(rng), u(rng), u(rng));
+      rc[i] = {r[i].x, r[i].y, r[i].z, r[i].w};
+    }
+    const PR c = std::cos(PR(2) * PR(th)), s = std::sin(PR(2) * PR(th));
+    glsl::plate_rows(r[0], r[1], r[2], r[3], c, s, m[0], m[1], m[2], m[3]);
+    d::plate_rows(rc[0], rc[1], rc[2], rc[3], c, s, mc[0], mc[1], mc[2], mc[3]);
+    // R(-theta) M0 R(theta) as a plain matrix product, in float64.
+    const double R[4][4] = {{1, 0, 0, 0}, {0, double(c), double(s), 0}, {0, -double(s), double(c), 0}, {0, 0, 0, 1}};
+    for (int i = 0; i < 4; ++i) {
+      const PR got[4] = {mc[i].x, mc[i].y, mc[i].z, mc[i].w};
+      for (int j = 0; j < 4; ++j) {
+        ASSERT_EQ(bits(m[i][j]), bits(got[j])) << "plate_rows, case " << t;
+        double want = 0;
+        for (int k = 0; k < 4; ++k)
+          for (int l = 0; l < 4; ++l) want += R[k][i] * double(r[k][l]) * R[l][j];
+        ASSERT_NEAR(double(got[j]), want, sizeof(PR) == 4 ? 1e-6 : 1e-15) << "plate_rows, case " << t;
+      }
+    }
+    ASSERT_EQ(bits(glsl::plate_monopole_weight(m[1], r[2])), bits(d::plate_monopole_weight(mc[1], rc[2])));
+  }
+}
+
+// The cap-boundary rings (src/kernel/cap_boundary.hpp), pixel by pixel around them, in both builds.
+TEST(SharedMaths, CapBoundaryRingsInBothBuilds) {
+  namespace d = pisco::detail;
   for (const unsigned nside : {1u, 2u, 16u, 1024u, 8192u}) {
     ASSERT_EQ(glsl::cap_boundary_north(nside), d::cap_boundary_north(nside));
     ASSERT_EQ(glsl::cap_boundary_south(nside), d::cap_boundary_south(nside));
@@ -565,7 +579,6 @@ TEST(SharedMaths, PixelFunctionsGiveTheSameBitsInBothBuilds) {
       for (unsigned p = first > 2 ? first - 2 : 0; p < first + count + 2; ++p)
         ASSERT_EQ(glsl::on_cap_boundary(p, north, south, count), d::on_cap_boundary(p, north, south, count));
   }
-  std::cout << checked << " random cases, every value the same bits in both builds\n";
 }
 
 // The adjoints' fixed point (src/kernel/fixed_point.glsl, the vulkan and CUDA adjoints' text): round(v g)

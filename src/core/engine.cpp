@@ -15,7 +15,7 @@
 #include "core/prepared.hpp"
 #include "core/sky_pass.hpp"
 #include "core/sources.hpp"
-#include "beams/sidelobes.hpp"
+#include "core/outer_sky.hpp"
 #include "core/text.hpp"
 #include "pisco/hwp.hpp"
 #include "pisco/error.hpp"

@@ -1,5 +1,5 @@
 // A sky's spherical harmonic coefficients through HEALPix C++ and back: what the split beams' coarse
-// sky (sidelobes.cpp) and the deconvolving map-maker's smoothing to a target beam go through.
+// sky (outer_sky.cpp) and the deconvolving map-maker's smoothing to a target beam go through.
 #pragma once
 
 #include <filesystem>

@@ -318,6 +318,21 @@ void write_spectra(const std::filesystem::path& file, const Spectra& s, const st
   write_file_atomically(file, o.str());
 }
 
+// A case's files in `dir`: its maps, hits, spectra (with the r = 0.1 reference) and beam window.
+void write_case_files(const std::filesystem::path& dir, int nside, const SurveyRun& run, const Spectra& spectra,
+                      const std::vector<double>& ref, int lmax) {
+  std::filesystem::create_directories(dir);
+  write_healpix_map(dir / "maps.fits", nside, {{"I_STOKES", run.maps.I}, {"Q_STOKES", run.maps.Q}, {"U_STOKES", run.maps.U}},
+                    "uK_CMB");
+  std::vector<double> hits(run.maps.hits.begin(), run.maps.hits.end());
+  write_healpix_map(dir / "hits.fits", nside, {{"HITS", hits}}, "samples");
+  write_spectra(dir / "spectra.txt", spectra, ref, lmax);
+  std::ostringstream bl;
+  bl << "# beam window of the mean radial profile of the focal plane's beams\n# l b_l\n";
+  for (std::size_t l = 0; l < run.bl.size(); ++l) bl << l << ' ' << run.bl[l] << '\n';
+  write_file_atomically(dir / "beam_window.txt", bl.str());
+}
+
 }  // namespace
 
 CaseResult class_survey(Scale scale, const std::string& backend, const SurveyOptions& options) {
@@ -364,19 +379,7 @@ CaseResult class_survey(Scale scale, const std::string& backend, const SurveyOpt
                   s.leak.crossing > 0 ? fmt("above r = 0.1 from l = %.0f", s.leak.crossing).c_str() : "below r = 0.1 throughout",
                   double(s.run.samples), s.run.seconds, s.fsky);
     r.notes.push_back(line);
-    if (!options.report_dir.empty()) {
-      const auto dir = options.report_dir / "F" / s.name;
-      std::filesystem::create_directories(dir);
-      write_healpix_map(dir / "maps.fits", g.nside, {{"I_STOKES", s.run.maps.I}, {"Q_STOKES", s.run.maps.Q}, {"U_STOKES", s.run.maps.U}},
-                        "uK_CMB");
-      std::vector<double> hits(s.run.maps.hits.begin(), s.run.maps.hits.end());
-      write_healpix_map(dir / "hits.fits", g.nside, {{"HITS", hits}}, "samples");
-      write_spectra(dir / "spectra.txt", s.spectra, ref, lmax);
-      std::ostringstream bl;
-      bl << "# beam window of the mean radial profile of the focal plane's beams\n# l b_l\n";
-      for (std::size_t l = 0; l < s.run.bl.size(); ++l) bl << l << ' ' << s.run.bl[l] << '\n';
-      write_file_atomically(dir / "beam_window.txt", bl.str());
-    }
+    if (!options.report_dir.empty()) write_case_files(options.report_dir / "F" / s.name, g.nside, s.run, s.spectra, ref, lmax);
   }
   r.notes.insert(r.notes.begin(), "engine: " + subs[0].run.device);
   r.notes.push_back("paper (CLASS, NSIDE 128, a week): delta_p 0.42%: 0.02 uK^2 at l = 190, above r = 0.1 from l = 160; "

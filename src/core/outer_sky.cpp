@@ -1,6 +1,6 @@
 // The outer parts of split beams: their sky's NSIDE and the band-limited copy of the sky (docs/beams.md,
 // "Sidelobes").
-#include "beams/sidelobes.hpp"
+#include "core/outer_sky.hpp"
 
 #include <algorithm>
 #include <cmath>
