@@ -89,11 +89,12 @@ const std::vector<Declared>& declared() {
     for (Declared& d : out) {
       std::vector<std::string> names;
       std::vector<std::pair<std::string, std::vector<std::string>>> takes;  // each text, with its backends
-      for (const auto& [e, s] : d.by) {
-        names.push_back(e->name);
-        auto t = std::find_if(takes.begin(), takes.end(), [&](const auto& p) { return p.first == s.takes; });
-        if (t == takes.end()) t = takes.insert(takes.end(), {s.takes, {}});
-        t->second.push_back(e->name);
+      for (const auto& by : d.by) {
+        const std::string name = by.first->name, text = by.second.takes;
+        names.push_back(name);
+        auto t = std::find_if(takes.begin(), takes.end(), [&](const auto& p) { return p.first == text; });
+        if (t == takes.end()) t = takes.insert(takes.end(), {text, {}});
+        t->second.push_back(name);
       }
       d.backends = and_list(names);
       if (takes.size() == 1) d.takes = takes[0].first;
