@@ -376,6 +376,24 @@ TEST(EngineOptions, SettingsGoToTheBackendsThatTakeThem) {
                            "the cuda backend has no threads setting (it applies to cpu and simd)");
   EXPECT_EQ(later.backend, "simd");
 
+  // Options for another backend (the one "auto" chose, [ground]'s): its own settings kept, the others
+  // dropped, and a device given for another named backend left with it; the engine-wide ones kept.
+  pisco::EngineOptions simd_options{.backend = "simd", .quadrature = pisco::Quadrature::plain};
+  simd_options.set("threads", 2LL).set("device", "AVX2");
+  const pisco::EngineOptions for_vulkan = pisco::options_for_backend(simd_options, "vulkan");
+  EXPECT_EQ(for_vulkan.backend, "vulkan");
+  EXPECT_TRUE(for_vulkan.settings.empty());
+  EXPECT_EQ(for_vulkan.quadrature, pisco::Quadrature::plain);
+  const pisco::EngineOptions for_cpu = pisco::options_for_backend(simd_options, "cpu");
+  EXPECT_EQ(for_cpu.number("threads"), 2u);
+  EXPECT_EQ(for_cpu.settings.size(), 1u);
+  pisco::EngineOptions any{.backend = "auto"};
+  any.set("threads", 3LL).set("device", "1").set("arithmetic", "float-float");
+  const pisco::EngineOptions for_cuda = pisco::options_for_backend(any, "cuda");
+  EXPECT_EQ(for_cuda.text("device"), "1");
+  EXPECT_EQ(for_cuda.settings.size(), 1u);
+  EXPECT_EQ(pisco::options_for_backend(any, "vulkan").text("arithmetic"), "float-float");
+
   // A setting read as a backend reads it: of the wrong type, an error naming it.
   pisco::EngineOptions typed{.settings = {{"threads", std::string("two")}}};
   pisco_test::expect_error([&] { typed.number("threads"); }, "expected a number, got \"two\"");

@@ -42,8 +42,9 @@ struct FileBeamOptions {
 
 // Checks `options` as every file beam's builder does before it reads further (check_beam_options'
 // checks of rho_max, grid_step and the split, and the angle finite). Throws pisco::Error (input)
-// keyed by the field: rho_max, grid_step, angle, split.rho_main, split.taper or split.nside.
-void check_file_beam_options(const FileBeamOptions& options);
+// keyed by the field: rho_max, grid_step, angle, split.rho_main, split.taper or split.nside; with a
+// `source` (the beam's file), one that reads "source: field: what" instead.
+void check_file_beam_options(const FileBeamOptions& options, const std::string& source = "");
 
 // Harmonic beam coefficients, the beam axis at the north pole, sigma = longitude: T, E and B in
 // healpy's layout (index m (2 lmax + 1 - m) / 2 + l for 0 <= m <= mmax <= l <= lmax), with the

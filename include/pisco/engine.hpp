@@ -100,6 +100,12 @@ void set_engine_option(EngineOptions& options, const std::string& name, const En
 // entry declares; false for an unknown backend or setting.
 bool backend_has_setting(const std::string& backend, const std::string& name);
 
+// `options` for the backend `backend` instead (the backend "auto" chose, a second engine on another
+// backend): without the settings `backend` does not take, and without the device where the options
+// named another backend (a device belongs to the backend it was given for; under "auto" it was
+// given for all). The engine-wide settings are kept.
+EngineOptions options_for_backend(const EngineOptions& options, const std::string& backend);
+
 // What a backend can do, so that a caller (a framework, the simulation pipeline) decides by
 // capability rather than by the backend's name.
 struct BackendCapabilities {
@@ -109,7 +115,9 @@ struct BackendCapabilities {
   bool adjoint = false;         // the transpose of convolve: Engine::adjoint
   bool worker_threads = false;  // runs its own host threads: its "threads" setting applies
   bool normal = false;          // a one-pass normal (Engine::normal: each pixel's weights computed once for
-                                // A^T A s); elsewhere the engine runs the forward pass and then the adjoint
+                                // A^T A s) for detectors of its float32 path without a split beam or a
+                                // plate before the detector; elsewhere the engine runs the forward pass
+                                // and then the adjoint
   std::uint64_t device_memory = 0;  // bytes of memory of the device "auto" picks; 0: the host's memory
 };
 

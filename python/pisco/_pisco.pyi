@@ -54,7 +54,7 @@ class BackendInfo:
 
     @property
     def capabilities(self) -> dict[str, bool | int]:
-        """What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own host threads: `threads` applies), normal (a one-pass normal), device_memory (bytes of the device auto picks; 0: host memory)."""
+        """What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own host threads: `threads` applies), normal (a one-pass normal on its float32 path), device_memory (bytes of the device auto picks; 0: host memory)."""
 
 def devices() -> list[BackendInfo]:
     """The backends the library knows ('cpu', 'simd', 'vulkan', 'cuda'), built or not, with availability and device or reason."""

@@ -160,13 +160,18 @@ void check_beam_options(const BeamOptions& options) {
                                               detail::number_text(far.asymmetry));
 }
 
-void check_file_beam_options(const FileBeamOptions& options) {
-  BeamOptions o;
-  o.rho_max = options.rho_max;
-  o.grid_step = options.grid_step;
-  o.split = options.split;
-  check_beam_options(o);
-  if (!std::isfinite(options.angle)) fail_option("angle", "must be finite");
+void check_file_beam_options(const FileBeamOptions& options, const std::string& source) {
+  try {
+    BeamOptions o;
+    o.rho_max = options.rho_max;
+    o.grid_step = options.grid_step;
+    o.split = options.split;
+    check_beam_options(o);
+    if (!std::isfinite(options.angle)) fail_option("angle", "must be finite");
+  } catch (const Error& e) {
+    if (source.empty()) throw;
+    throw Error(source + ": " + e.named(), e.kind());
+  }
 }
 
 Mueller identity_mueller() {

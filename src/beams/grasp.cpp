@@ -528,11 +528,7 @@ std::vector<GraspBeam> GraspBeam::read(const std::filesystem::path& file) {
 }
 
 Beamsor Beamsor::from_grasp(const GraspBeam& b, const FileBeamOptions& options) {
-  try {
-    check_file_beam_options(options);
-  } catch (const Error& e) {
-    throw Error(b.source + ": " + e.named(), e.kind());
-  }
+  check_file_beam_options(options, b.source);
   if (b.nx < 2 || b.ny < 2 || b.co.size() != static_cast<std::size_t>(b.nx) * b.ny || b.cx.size() != b.co.size())
     throw Error(b.source + ": the field holds " + std::to_string(b.co.size()) + " points; expected NX x NY = " +
                 std::to_string(b.nx) + " x " + std::to_string(b.ny));

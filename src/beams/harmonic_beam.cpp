@@ -386,11 +386,7 @@ HarmonicBeam HarmonicBeam::read_fits(const std::filesystem::path& file) {
 
 Beamsor Beamsor::from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& options) {
   beam.check();
-  try {
-    check_file_beam_options(options);
-  } catch (const Error& e) {
-    throw Error("harmonic beam " + beam.source + ": " + e.named(), e.kind());
-  }
+  check_file_beam_options(options, "harmonic beam " + beam.source);
   const double step = options.grid_step > 0 ? options.grid_step : default_step(beam);
   const Synthesis synthesis(beam);
   // Rings by radius, computed once: the nodes' radii repeat eightfold, the quadrature's per panel node.
@@ -403,7 +399,8 @@ Beamsor Beamsor::from_harmonic(const HarmonicBeam& beam, const FileBeamOptions& 
     const double rho_grid = options.split.rho_main > 0 ? options.split.rho_main : options.rho_max;
     const double a = std::sin(rho_grid);
     std::vector<double> keys;
-    // With a rho_max or grid_step that from_field refuses nothing is synthesized ahead: from_field says why.
+    // rho_max, the split and grid_step are checked above (check_file_beam_options); a degenerate step
+    // synthesizes nothing ahead, and from_field says why.
     const bool valid = rho_grid > 0 && rho_grid < std::numbers::pi / 2 && std::isfinite(step) && step > 0;
     if (valid && radial) {
       const double h = step / radial_oversampling;

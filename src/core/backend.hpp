@@ -170,7 +170,8 @@ struct BackendEntry {
 // Every backend, built or not, in the order "auto" breaks ties (core/engine.cpp).
 const std::vector<BackendEntry>& backend_registry();
 
-// A backend's entry is declared in its own folder (src/NAME/NAME_entry.cpp, compiled into every build),
+// A backend's entry is declared in its own folder (src/NAME/NAME_entry.cpp, compiled into every build;
+// the cpu backend's, always built, in cpu_backend.cpp),
 // which, where the backend is built (PISCO_HAVE_NAME), has the backend attach its probe and create,
 // and elsewhere marks it not built.
 BackendEntry cpu_backend_entry();

@@ -119,10 +119,16 @@ struct Own {
   void (*set)(EngineOptions& o, const std::string& text);
 };
 
+// "cpu", "simd", ... or "auto" (the fastest present): the registry's names.
+std::string backend_takes() {
+  std::string out;
+  for (const BackendEntry& e : backend_registry()) out += (out.empty() ? "\"" : ", \"") + e.name + "\"";
+  return out + " or \"auto\" (the fastest present)";
+}
+
 const std::vector<Own>& own_settings() {
   static const std::vector<Own> table{
-      {"backend", "\"cpu\", \"simd\", \"vulkan\", \"cuda\" or \"auto\" (the fastest present)",
-       [](EngineOptions& o, const std::string& t) { o.backend = t; }},
+      {"backend", backend_takes(), [](EngineOptions& o, const std::string& t) { o.backend = t; }},
       {"normalization", listed(normalizations),
        [](EngineOptions& o, const std::string& t) { o.normalization = normalization_from(t); }},
       {"unseen", listed(unseen_policies), [](EngineOptions& o, const std::string& t) { o.unseen = unseen_policy_from(t); }},
@@ -158,10 +164,10 @@ void check_setting(const std::string& backend, const Declared& d, const EngineVa
                 ErrorKind::input, d.name);
 }
 
-std::string all_names() {
+[[noreturn]] void unknown_setting(const std::string& name) {
   std::string all;
   for (const EngineSetting& s : engine_settings()) all += std::string(all.empty() ? "" : ", ") + s.name;
-  return all;
+  throw Error("not a setting of the engine (expected one of " + all + ")", ErrorKind::input, name);
 }
 
 }  // namespace
@@ -169,7 +175,7 @@ std::string all_names() {
 void check_engine_options(const EngineOptions& options) {
   for (const auto& [name, value] : options.settings) {
     const Declared* d = find_declared(name);
-    if (!d) throw Error("not a setting of the engine (expected one of " + all_names() + ")", ErrorKind::input, name);
+    if (!d) unknown_setting(name);
     check_setting(options.backend, *d, value);
   }
 }
@@ -203,7 +209,7 @@ void set_engine_option(EngineOptions& options, const std::string& name, const En
     return;
   }
   const detail::Declared* d = detail::find_declared(name);
-  if (!d) throw Error("not a setting of the engine (expected one of " + detail::all_names() + ")", ErrorKind::input, name);
+  if (!d) detail::unknown_setting(name);
   detail::check_setting(options.backend, *d, value);
   const std::string* text = std::get_if<std::string>(&value);
   options.settings[name] = text && text->empty() ? EngineValue(std::string("auto")) : value;
@@ -230,6 +236,16 @@ std::size_t EngineOptions::number(const std::string& name) const {
                   ? "expected a number of zero or more, got " + std::to_string(std::get<long long>(it->second))
                   : "expected a number, got \"" + std::get<std::string>(it->second) + "\"",
               ErrorKind::input, name);
+}
+
+EngineOptions options_for_backend(const EngineOptions& options, const std::string& backend) {
+  EngineOptions o = options;
+  const bool another = options.backend != "auto" && options.backend != backend;
+  o.backend = backend;
+  std::erase_if(o.settings, [&](const auto& setting) {
+    return !backend_has_setting(backend, setting.first) || (another && setting.first == "device");
+  });
+  return o;
 }
 
 bool backend_has_setting(const std::string& backend, const std::string& name) {

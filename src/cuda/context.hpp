@@ -1,5 +1,5 @@
 // The CUDA devices of this machine: probing without crashing where there is no driver or no device,
-// and opening the one EngineOptions::device asks for.
+// and opening the one the "device" setting asks for.
 #pragma once
 
 #include <cstddef>

@@ -1,4 +1,4 @@
-// Device choice from EngineOptions::device for the cuda backend, apart from the runtime so that it is
+// Device choice from the "device" setting for the cuda backend, apart from the runtime so that it is
 // testable anywhere: the rule of gpu/device_choice.hpp with every device usable and of equal rank,
 // so "auto" (or empty) is device 0. Throws pisco::Error naming the request and the devices present.
 #pragma once

@@ -1,4 +1,4 @@
-// Choosing a device from EngineOptions::device, one rule for the vulkan and the cuda backends (and
+// Choosing a device from the "device" setting, one rule for the vulkan and the cuda backends (and
 // `pisco-vk devices`): "auto" (or empty) takes the usable device of highest rank, the first among
 // equals; a number is an index into the backend's device list; anything else picks the first device
 // whose name contains it, case-insensitively. Independent of any runtime, so it is testable anywhere.

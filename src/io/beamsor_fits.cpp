@@ -167,11 +167,7 @@ void clean_element(const fs::path& file, int e, std::vector<double>& v, long lon
 }
 
 void check_read_arguments(const fs::path& file, double rho_max, double grid_step) {
-  try {
-    check_file_beam_options({.rho_max = rho_max, .grid_step = grid_step});
-  } catch (const Error& e) {
-    fail(file, e.named());
-  }
+  check_file_beam_options({.rho_max = rho_max, .grid_step = grid_step}, file.string());
 }
 
 // The polar cap of a beamsor file, in RING order: the pixels the grid can reach.

@@ -130,8 +130,11 @@ void make_ground_engine(const SimulationConfig& c, const Sky& sky, const std::ve
   cl.step([&] { ground_sky.emplace(make_ground_sky(c.ground, sky, c.source)); });
   cl.step([&] {
     try {
-      SimulationConfig ground_config = c;  // [ground] backend, with [engine]'s other settings
-      if (!c.ground.backend.empty()) ground_config.engine.options.backend = c.ground.backend;
+      // [ground] backend, with [engine]'s other settings that it takes (a device given for [engine]'s
+      // named backend stays with it).
+      SimulationConfig ground_config = c;
+      if (!c.ground.backend.empty())
+        ground_config.engine.options = options_for_backend(c.engine.options, c.ground.backend);
       ground_engine.emplace(make_engine(*ground_sky, beams, fp, ground_config, cl));
     } catch (const Error& e) {
       throw Error(c.source.string() + ": [ground]: " + e.what(), e.kind());

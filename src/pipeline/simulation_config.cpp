@@ -388,7 +388,11 @@ GroundConfig read_ground(Table t, const ScanConfig& scan, const fs::path& file) 
   if (scan.kind != ScanKind::ces)
     throw pisco::Error(file.string() + ": [ground]: the ground is seen from constant-elevation scans; [scan] type is \"" +
                        std::string(scan_kind_name(scan.kind)) + "\" (expected \"ces\")");
-  if (t.has("backend")) g.backend = t.choice("backend", "", {"cpu", "simd", "vulkan", "cuda", "auto"});
+  if (t.has("backend")) {
+    std::vector<std::string> backends = pisco::Engine::backend_names();
+    backends.push_back("auto");
+    g.backend = t.choice("backend", "", backends);
+  }
   g.file = t.input_file("file");
   if (!g.file.empty()) {
     for (const char* key : {"temperature_k", "frequency_ghz", "horizon_deg", "horizon_width_deg", "nside"})

@@ -245,7 +245,7 @@ Engine make_engine(const SkyView& sky, const std::vector<Beamsor>& beams, const 
   std::optional<Engine> engine_holder;
   engine_holder.emplace(sky, beams, fp, o);
   if (engine_options.backend == "auto") {
-    o.backend = engine_holder->backend_name();
+    o = pisco::options_for_backend(o, engine_holder->backend_name());  // its settings alone, now named
     if (share_out(o.backend, o)) {
       engine_holder.reset();
       engine_holder.emplace(sky, beams, fp, o);

@@ -915,7 +915,7 @@ void bind_helpers(nb::module_& m) {
             return d;
           },
           "What it can do: float64 (every operation in float64), plates, adjoint, worker_threads (its own "
-          "host threads: `threads` applies), normal (a one-pass normal), device_memory (bytes of the device auto picks; "
+          "host threads: `threads` applies), normal (a one-pass normal on its float32 path), device_memory (bytes of the device auto picks; "
           "0: host memory).")
       .def("__repr__", [](const BackendInfo& b) {
         return "pisco.BackendInfo('" + b.name + "', available=" + (b.available ? "True" : "False") + ", '" +

@@ -231,7 +231,7 @@ static int main_body(int argc, char** argv) {
 
   RunArgs run_args;
   const CLI::App* run = add_run_command(app, run_args);
-  app.add_subcommand("devices", "List the backends compiled in, the devices found, and why a backend is missing.");
+  app.add_subcommand("devices", "List the backends, the devices found, and why a backend is missing (not built, or no device).");
   pisco_cli::BenchOptions bench_options;
   add_bench_command(app, bench_options);
   ValidateOptions vo;
