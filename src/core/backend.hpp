@@ -134,6 +134,10 @@ BackendSetting threads_setting();
 BackendSetting device_setting();
 BackendSetting chunk_samples_setting();
 
+// A setting's value against its type: text, or a number of zero or more (`takes` says what the
+// text one takes). Throws pisco::Error (input) keyed `name`.
+void check_value_type(const std::string& name, bool number, const std::string& takes, const EngineValue& value);
+
 // Checks EngineOptions::settings against the backends that declare them (set_engine_option's checks):
 // the engine's first step. Throws pisco::Error (input) keyed by the setting.
 void check_engine_options(const EngineOptions& options);

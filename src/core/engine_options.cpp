@@ -47,6 +47,14 @@ BackendSetting chunk_samples_setting() {
   return {"chunk_samples", "samples per device chunk, 0 to fit the device", true};
 }
 
+void check_value_type(const std::string& name, bool number, const std::string& takes, const EngineValue& value) {
+  const std::string* t = std::get_if<std::string>(&value);
+  const long long* n = std::get_if<long long>(&value);
+  if (number && !n) throw Error("expected a number, got \"" + *t + "\"", ErrorKind::input, name);
+  if (!number && !t) throw Error("expected " + takes + ", got the number " + std::to_string(*n), ErrorKind::input, name);
+  if (n && *n < 0) throw Error("expected a number of zero or more, got " + std::to_string(*n), ErrorKind::input, name);
+}
+
 void mark_not_built(BackendEntry& e, const std::string& needs) {
   e.probe = [name = e.name, needs] {
     return BackendInfo{name, false, "not built into this library (its build needs " + needs + ")", {}, {}};
@@ -59,13 +67,6 @@ namespace {
 bool is_default(const EngineValue& v) {
   if (const std::string* t = std::get_if<std::string>(&v)) return t->empty() || *t == "auto";
   return std::get<long long>(v) == 0;
-}
-
-// "a, b and c"
-std::string and_list(const std::vector<std::string>& items) {
-  std::string out;
-  for (std::size_t i = 0; i < items.size(); ++i) out += (i == 0 ? "" : i + 1 == items.size() ? " and " : ", ") + items[i];
-  return out;
 }
 
 // The backends' settings, each once: its declarations in registry order, the backends that take it,
@@ -96,10 +97,10 @@ const std::vector<Declared>& declared() {
         if (t == takes.end()) t = takes.insert(takes.end(), {text, {}});
         t->second.push_back(name);
       }
-      d.backends = and_list(names);
+      d.backends = series_text(names, "and");
       if (takes.size() == 1) d.takes = takes[0].first;
       else
-        for (const auto& [text, by] : takes) d.takes += (d.takes.empty() ? "" : "; ") + text + " (" + and_list(by) + ")";
+        for (const auto& [text, by] : takes) d.takes += (d.takes.empty() ? "" : "; ") + text + " (" + series_text(by, "and") + ")";
     }
     return out;
   }();
@@ -121,9 +122,10 @@ struct Own {
 
 // "cpu", "simd", ... or "auto" (the fastest present): the registry's names.
 std::string backend_takes() {
-  std::string out;
-  for (const BackendEntry& e : backend_registry()) out += (out.empty() ? "\"" : ", \"") + e.name + "\"";
-  return out + " or \"auto\" (the fastest present)";
+  std::vector<std::string> quoted;
+  for (const BackendEntry& e : backend_registry()) quoted.push_back("\"" + e.name + "\"");
+  quoted.push_back("\"auto\"");
+  return series_text(quoted, "or") + " (the fastest present)";
 }
 
 const std::vector<Own>& own_settings() {
@@ -142,13 +144,7 @@ const std::vector<Own>& own_settings() {
 // or a backend without the setting) every taker's check, and for a backend without it, that the
 // value is the default.
 void check_setting(const std::string& backend, const Declared& d, const EngineValue& value) {
-  const std::string* text = std::get_if<std::string>(&value);
-  const long long* number = std::get_if<long long>(&value);
-  if (d.number && !number) throw Error("expected a number, got \"" + *text + "\"", ErrorKind::input, d.name);
-  if (!d.number && !text)
-    throw Error("expected " + d.takes + ", got the number " + std::to_string(*number), ErrorKind::input, d.name);
-  if (number && *number < 0)
-    throw Error("expected a number of zero or more, got " + std::to_string(*number), ErrorKind::input, d.name);
+  check_value_type(d.name, d.number, d.takes, value);
   const auto taker = std::find_if(d.by.begin(), d.by.end(), [&](const auto& b) { return b.first->name == backend; });
   if (taker != d.by.end()) {
     if (taker->second.check) taker->second.check(value);
@@ -223,19 +219,16 @@ EngineOptions& EngineOptions::set(const std::string& name, const EngineValue& va
 std::string EngineOptions::text(const std::string& name) const {
   const auto it = settings.find(name);
   if (it == settings.end()) return "auto";
-  if (const std::string* t = std::get_if<std::string>(&it->second)) return t->empty() ? "auto" : *t;
-  throw Error("expected text, got the number " + std::to_string(std::get<long long>(it->second)), ErrorKind::input,
-              name);
+  detail::check_value_type(name, false, "text", it->second);
+  const std::string& t = std::get<std::string>(it->second);
+  return t.empty() ? "auto" : t;
 }
 
 std::size_t EngineOptions::number(const std::string& name) const {
   const auto it = settings.find(name);
   if (it == settings.end()) return 0;
-  if (const long long* n = std::get_if<long long>(&it->second); n && *n >= 0) return static_cast<std::size_t>(*n);
-  throw Error(std::holds_alternative<long long>(it->second)
-                  ? "expected a number of zero or more, got " + std::to_string(std::get<long long>(it->second))
-                  : "expected a number, got \"" + std::get<std::string>(it->second) + "\"",
-              ErrorKind::input, name);
+  detail::check_value_type(name, true, "", it->second);
+  return static_cast<std::size_t>(std::get<long long>(it->second));
 }
 
 EngineOptions options_for_backend(const EngineOptions& options, const std::string& backend) {

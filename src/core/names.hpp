@@ -4,7 +4,9 @@
 
 #include <cstddef>
 #include <string>
+#include <vector>
 
+#include "core/text.hpp"
 #include "pisco/error.hpp"
 
 namespace pisco::detail {
@@ -18,10 +20,9 @@ struct Named {
 // "a", "b" or "c", quoted.
 template <class E, std::size_t N>
 std::string listed(const Named<E> (&names)[N]) {
-  std::string out;
-  for (std::size_t i = 0; i < N; ++i)
-    out += (i == 0 ? "" : i + 1 == N ? " or " : ", ") + std::string("\"") + names[i].name + "\"";
-  return out;
+  std::vector<std::string> quoted;
+  for (const Named<E>& n : names) quoted.push_back(std::string("\"") + n.name + "\"");
+  return series_text(quoted, "or");
 }
 
 // The value named `name`; throws pisco::Error (input, keyed `key`) listing the names for any other.

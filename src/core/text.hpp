@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "pisco/units.hpp"
 
@@ -33,6 +34,14 @@ inline std::string bytes_text(double bytes) {
   int u = 0;
   while (bytes >= 1000.0 && u < 5) bytes /= 1000.0, ++u;
   return number_text(bytes, u == 0 ? 6 : 3) + " " + units[u];
+}
+
+// Items as a series: "a", "a and b", "a, b and c" (with `conjunction` "and"; "or" likewise).
+inline std::string series_text(const std::vector<std::string>& items, const char* conjunction) {
+  std::string out;
+  for (std::size_t i = 0; i < items.size(); ++i)
+    out += (i == 0 ? "" : i + 1 == items.size() ? std::string(" ") + conjunction + " " : std::string(", ")) + items[i];
+  return out;
 }
 
 // printf into a string.

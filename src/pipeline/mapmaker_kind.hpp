@@ -31,9 +31,8 @@ struct MapmakerJob {
   std::span<const double> tod;          // the sky's TOD (with sources and ground)
   std::span<const double> ground;       // [ground]: the ground's TOD alone; empty without
   std::span<const std::uint8_t> flags;  // [sky] unseen = "flag": the samples to leave out; empty: none
-  // The pointing, where the map-maker reads it (RunMapmaker::reads_pointing): the boresight's
-  // quaternions, the map-maker applying the detector's offset itself, or, where `boresight` is empty,
-  // the detector's own angles.
+  // The pointing: the boresight's quaternions, the map-maker applying the detector's offset itself,
+  // or, where `boresight` is empty, the detector's own angles.
   QuatPointingView boresight;
   PointingView detector;
 };
@@ -66,8 +65,6 @@ struct MapmakerEnd {
 class RunMapmaker {
  public:
   virtual ~RunMapmaker() = default;
-  // Whether it reads the jobs' pointing (the stream then makes it for it).
-  virtual bool reads_pointing() const = 0;
   // A job's TOD, on the stream's thread, in the order of the process's jobs.
   virtual void add(const MapmakerJob& job) = 0;
   // After the stream, on every process: sums what the processes added (RunContext::reduce); returns

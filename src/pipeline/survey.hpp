@@ -420,15 +420,15 @@ class JobStream {
     const std::span<double> t(tod_[j.slot].data(), count);
     if (!c_.sources.empty()) add_sources(j, t);
     if (ground_) add_ground(j, t);
-    // A map-maker that reads the pointing takes the boresight's quaternions (one conversion per time
-    // chunk for every detector) and applies the detector's offset itself; the detector's angles are
-    // made only for the TOD file's pointing or weights, or from a per-detector file.
+    // The map-maker takes the boresight's quaternions (one conversion per time chunk for every
+    // detector) and applies the detector's offset itself; the detector's angles are made only for the
+    // TOD file's pointing or weights, or from a per-detector file.
     const bool tod_pointing = sinks_.tod && (c_.output.tod_pointing || c_.output.tod_weights);
-    const bool reads = sinks_.mapmaker && sinks_.mapmaker->reads_pointing();
+    const bool mapping = sinks_.mapmaker != nullptr;
     const pisco::QuatPointingView boresight =
-        reads && !tod_pointing ? pointing_.boresight_quats(j.pointing_slot, host_) : pisco::QuatPointingView{};
-    const bool from_boresight = reads && !tod_pointing && boresight.size() == count;
-    if ((reads && !from_boresight) || tod_pointing)
+        mapping && !tod_pointing ? pointing_.boresight_quats(j.pointing_slot, host_) : pisco::QuatPointingView{};
+    const bool from_boresight = mapping && !tod_pointing && boresight.size() == count;
+    if ((mapping && !from_boresight) || tod_pointing)
       with_view(chunk, [&](const auto& view) {
         pisco::detail::detector_pointing(view, fp_[chunk.detector].offset, own_, host_);
       });

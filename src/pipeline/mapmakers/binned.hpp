@@ -13,7 +13,6 @@ namespace pisco::detail {
 class BinnedRun : public RunMapmaker {
  public:
   explicit BinnedRun(const MapmakerSetup& s);
-  bool reads_pointing() const override { return true; }
   void add(const MapmakerJob& job) override;
   std::uint64_t reduce(RunContext& cl) override;
   MapOutputs write(const MapmakerEnd& end) override;
