@@ -1,6 +1,9 @@
-// The polar copy resampled around each pole (polar_copy.hpp; docs/physics.md, "The quadrature").
+// The polar copy made around each pole (polar_copy.hpp; docs/physics.md, "The quadrature").
 //
-// Per pole, the copy is linear in the sky and made in five steps, each with its transpose below:
+// Within the fit's zone a copy pixel is the least-squares fit's value at its place (polar_fit.hpp);
+// beyond it (reaches of more than 64 rings), the rings' interpolation, blended with the fit over the
+// zone's last rings. Per pole, the interpolation is linear in the sky and made in five steps, each
+// with its transpose below:
 // 1. each ring's samples, Q and U turned into the frame transported from the pole, and their DFT;
 // 2. each ring's spectrum at 4x its length: the modes it resolves, and for the innermost rings the
 //    modes it cannot resolve, predicted from the rings beyond (outermost first) and taken out of the
@@ -27,6 +30,7 @@
 #include <fftw3.h>
 #include <healpix_base.h>
 
+#include "core/polar_fit.hpp"
 #include "core/poles.hpp"
 #include "core/thread_pool.hpp"
 #include "pisco/error.hpp"
@@ -55,12 +59,6 @@ constexpr int kDealiasRings = 16;
 constexpr int kPredictPoints = 8;
 constexpr int kStencil = 2 * kHalfWidth * kPhiPoints;
 
-// FFTW's planner is not thread-safe (its execution is): plans are made and destroyed under one lock.
-std::mutex& planner_mutex() {
-  static std::mutex m;
-  return m;
-}
-
 fftw_complex* fftw(cd* p) { return reinterpret_cast<fftw_complex*>(p); }
 
 // Plans by length and direction for arrays of any alignment, made before any thread runs them.
@@ -70,11 +68,11 @@ class Plans {
   Plans(const Plans&) = delete;
   Plans& operator=(const Plans&) = delete;
   ~Plans() {
-    std::lock_guard lock(planner_mutex());
+    std::lock_guard lock(fftw_planner_mutex());
     for (auto& [key, plan] : plans_) fftw_destroy_plan(plan);
   }
   void make(int n) {
-    std::lock_guard lock(planner_mutex());
+    std::lock_guard lock(fftw_planner_mutex());
     for (const int sign : {FFTW_FORWARD, FFTW_BACKWARD}) {
       fftw_plan& plan = plans_[{n, sign}];
       if (plan) continue;
@@ -182,18 +180,11 @@ struct Cap {
 // Stokes parameters in a frame turned by alpha are e^{-2 i alpha} (Q + i U) (COSMO convention).
 cd to_pole_frame(int sign, double phi) { return std::polar(1.0, 2.0 * sign * phi); }
 
-// The ring index of colatitude theta from the pole, continuous: z = 1 - t^2 / (3 NSIDE^2) in the
-// cap, 4/3 - 2t / (3 NSIDE) in the belt.
-double ring_coordinate(double theta, int nside) {
-  const double n = nside, z = std::cos(theta);
-  return z >= 2.0 / 3.0 ? n * std::sqrt(3.0 * (1.0 - z)) : 2.0 * n - 1.5 * n * z;
-}
-
 // The rings that a copy of the given reach reads: up to the one kHalfWidth + 1 beyond reach, and at
 // least kPoleRings + kPredictPoints. 0 when the sky has too few.
 int rings_needed(int nside, double reach) {
-  const int t = static_cast<int>(std::ceil(ring_coordinate(reach, nside)));
-  const int need = std::max(t + kHalfWidth + 1, kPoleRings + kPredictPoints);
+  const int t = static_cast<int>(std::ceil(polar_ring_coordinate(reach, nside)));
+  const int need = std::max({t + kHalfWidth + 1, kPoleRings + kPredictPoints, PolarFit::rings_for(nside, reach)});
   return need <= 4 * nside - 1 ? need : 0;
 }
 
@@ -338,15 +329,22 @@ struct Stencil {
   std::array<double, kStencil> weight{};
 };
 
-Stencil stencil(const Base& base, const Cap& cap, int64 pixel) {
+// A copy pixel around a cap's pole: its colatitude t from the pole, its longitude, and the turn of
+// Q + iU from the frame transported from the pole into the copy's frame.
+struct CopyPoint {
+  double t = 0.0, phi = 0.0;
+  cd rotation;  // Q' + i U' = rotation (Q_c + i U_c)
+};
+
+CopyPoint copy_point(const Base& base, int s, int64 pixel) {
   const vec3 c = base.pix2vec(pixel);  // the copy's pixel centre; R^-1 (x', y', z') = (-z', y', x')
   const vec3 v(-c.z, c.y, c.x);
-  const int s = cap.sign;
+  CopyPoint out;
   const double t = std::atan2(std::hypot(v.x, v.y), s * v.z);  // colatitude from the cap's pole
   double phi = std::atan2(v.y, v.x);
   if (phi < 0.0) phi += 2.0 * pi;
-
-  Stencil out;
+  out.t = t;
+  out.phi = phi;
   // The frame transported from the pole, f1 and f2, against the copy's e_theta' carried back by R^-1.
   const double theta = s > 0 ? t : pi - t;
   const double ct = std::cos(theta), st = std::sin(theta), cp = std::cos(phi), sp = std::sin(phi);
@@ -357,11 +355,17 @@ Stencil stencil(const Base& base, const Cap& cap, int64 pixel) {
   const vec3 e_theta2(ct2 * cp2, ct2 * sp2, -st2);
   const vec3 b1(-e_theta2.z, e_theta2.y, e_theta2.x);
   out.rotation = std::polar(1.0, -2.0 * std::atan2(dotprod(b1, f2), dotprod(b1, f1)));
+  return out;
+}
 
+Stencil stencil(const Cap& cap, const CopyPoint& point) {
+  const double t = point.t, phi = point.phi;
+  Stencil out;
+  out.rotation = point.rotation;
   // Nodes in t along the great circle through the pole at phi: u < 0 ring |u| at phi + pi, u = 0 the
   // pole, u > 0 ring u at phi.
   // Lagrange weights by the barycentric formula on uniform nodes, lambda_j = (-1)^j C(n - 1, j).
-  const double ts = ring_coordinate(t, cap.nside), fl = std::floor(ts), x = ts - fl;
+  const double ts = polar_ring_coordinate(t, cap.nside), fl = std::floor(ts), x = ts - fl;
   const int lo = static_cast<int>(fl) - kHalfWidth + 1;
   std::array<double, 2 * kHalfWidth> wt{};
   if (x == 0.0) {
@@ -493,85 +497,233 @@ SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsig
   return polar_sky(polar_source(sky, reach), weigh_boundaries, threads);
 }
 
+namespace {
+// The fit's samples: each ring's pixels in both caps, I + iV and Q_c + iU_c (polar_fit.hpp), I less
+// the sky's mean (added back to the copy's pixels: a monopole thousands of times the rest, as a CMB
+// sky in K has, is then exact rather than fitted).
+std::vector<cd> fit_samples(const PolarFit& fit, const PolarSource& source) {
+  const std::size_t npix = 12 * std::size_t(source.nside) * std::size_t(source.nside);
+  std::vector<cd> out(fit.sample_count() * PolarFit::kFields);
+  for (const PolarFit::Ring& r : fit.rings())
+    for (int j = 0; j < r.n; ++j) {
+      const double phi = r.phi0 + 2.0 * pi * j / double(r.n);
+      cd* x = out.data() + (r.offset + std::size_t(j)) * PolarFit::kFields;
+      for (const int sign : {1, -1}) {
+        const SkyBand& rings = sign > 0 ? source.north : source.south;
+        const std::size_t p = sign > 0 ? r.start + std::size_t(j) : npix - r.start - std::size_t(r.n) + std::size_t(j);
+        const int f = sign > 0 ? 0 : 2;
+        x[f] = cd(rings.value(0, p) - source.mean, rings.value(3, p));
+        x[f + 1] = to_pole_frame(sign, phi) * cd(rings.value(1, p), rings.value(2, p));
+      }
+    }
+  return out;
+}
+
+// Their transpose, added into whole-sky maps; returns the sum of I's part, which the mean takes.
+double add_fit_samples_transpose(const PolarFit& fit, const std::vector<cd>& samples, Sky& out) {
+  const std::size_t npix = out.npix();
+  double mean_part = 0.0;
+  for (const PolarFit::Ring& r : fit.rings())
+    for (int j = 0; j < r.n; ++j) {
+      const double phi = r.phi0 + 2.0 * pi * j / double(r.n);
+      const cd* x = samples.data() + (r.offset + std::size_t(j)) * PolarFit::kFields;
+      for (const int sign : {1, -1}) {
+        const std::size_t p = sign > 0 ? r.start + std::size_t(j) : npix - r.start - std::size_t(r.n) + std::size_t(j);
+        const int f = sign > 0 ? 0 : 2;
+        const cd qu = std::conj(to_pole_frame(sign, phi)) * x[f + 1];
+        out.I()[p] += x[f].real();
+        out.V()[p] += x[f].imag();
+        out.Q()[p] += qu.real();
+        out.U()[p] += qu.imag();
+        mean_part += x[f].real();
+      }
+    }
+  return mean_part;
+}
+
+// A cap's copy pixels within reach: those the fit gives (weight w > 0) and those the rings'
+// interpolation gives (w < 1). Within the fit's zone w = 1; where the reach goes beyond it, w falls
+// from 1 to 0 over the zone's last kBlendRings rings (a raised cosine in the colatitude), so that the
+// copy passes from one reconstruction to the other without a step (the two differ at the pixel
+// scale for power near 3 NSIDE, which a beam with a sharp edge would read at the seam).
+constexpr int kBlendRings = 16;
+struct Targets {
+  std::vector<int64> near, far;
+  std::vector<CopyPoint> near_points, far_points;
+  std::vector<double> near_weights, far_weights;
+};
+Targets split_targets(const Base& base, int sign, double reach, const PolarFit& fit) {
+  Targets out;
+  const double zone = fit.zone();
+  const auto& rings = fit.rings();
+  const int zone_rings = static_cast<int>(rings.size()) - PolarFit::kMarginRings;
+  const bool beyond = reach > zone;
+  const double start = beyond ? rings[std::size_t(std::max(zone_rings - kBlendRings, 1) - 1)].theta : zone;
+  for (const int64 pixel : targets(base, sign, reach)) {
+    const CopyPoint point = copy_point(base, sign, pixel);
+    const double w = point.t <= start ? 1.0 : point.t > zone ? 0.0 : 0.5 * (1.0 + std::cos(pi * (point.t - start) / (zone - start)));
+    if (w > 0.0) {
+      out.near.push_back(pixel);
+      out.near_points.push_back(point);
+      out.near_weights.push_back(w);
+    }
+    if (w < 1.0) {
+      out.far.push_back(pixel);
+      out.far_points.push_back(point);
+      out.far_weights.push_back(1.0 - w);
+    }
+  }
+  return out;
+}
+
+// Steps 1 to 4 of the rings' interpolation (for the copy's pixels beyond the fit's zone).
+void interpolate_rings(const PolarSource& source, int sign, Cap& cap, Plans& plans, ThreadPool& pool) {
+  make_plans(cap, plans);  // both caps' rings have the same lengths: planned once
+  const std::size_t K = cap.rings.size();
+  // 1. The rings' samples and DFTs.
+  std::array<std::vector<std::vector<cd>>, 2> spectra{std::vector<std::vector<cd>>(K), std::vector<std::vector<cd>>(K)};
+  pool.parallel_for(K, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const Ring& r = cap.rings[i];
+      std::array<std::vector<cd>, 2> x{std::vector<cd>(std::size_t(r.n)), std::vector<cd>(std::size_t(r.n))};
+      const SkyBand& rings = sign > 0 ? source.north : source.south;
+      for (int j = 0; j < r.n; ++j) {
+        const auto p = std::size_t(r.start + j);
+        x[0][j] = cd(rings.value(0, p), rings.value(3, p));
+        x[1][j] = to_pole_frame(sign, r.phi0 + 2.0 * pi * j / double(r.n)) * cd(rings.value(1, p), rings.value(2, p));
+      }
+      for (int f = 0; f < 2; ++f) {
+        spectra[f][i].resize(std::size_t(r.n));
+        plans.run(r.n, FFTW_FORWARD, x[f].data(), spectra[f][i].data());
+      }
+    }
+  });
+  // 2. Their upsampled spectra, from the outermost ring in.
+  for (std::size_t i = K; i-- > 0;)
+    for (int f = 0; f < 2; ++f) ring_spectrum(cap, i, spectra[f][i], cap.values[f]);
+  // 3. Their upsampled values.
+  pool.parallel_for(K, 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const Ring& r = cap.rings[i];
+      std::vector<cd> t(static_cast<std::size_t>(r.size()));
+      for (auto& values : cap.values) {
+        cd* v = values.data() + r.offset;
+        plans.run(r.size(), FFTW_BACKWARD, v, t.data());
+        for (int k = 0; k < r.size(); ++k) v[k] = t[k] / double(r.n);
+      }
+    }
+  });
+  // 4. The pole's value from the rings' means.
+  const std::vector<double>& c = pole_weights();
+  for (auto& values : cap.values) {
+    cd pole(0.0);
+    for (int q = 0; q < kPoleRings; ++q) {
+      const Ring& r = cap.rings[std::size_t(q)];
+      cd mean_q(0.0);
+      for (int k = 0; k < r.size(); ++k) mean_q += values[r.offset + k];
+      pole += c[q] * mean_q / double(r.size());
+    }
+    values[cap.pole] = pole;
+  }
+}
+
+// The transpose of steps 4 to 1, from the cap's values into whole-sky maps.
+void interpolate_rings_transpose(int sign, Cap& cap, Plans& plans, Sky& out) {
+  make_plans(cap, plans);
+  const std::size_t K = cap.rings.size();
+  // 4. The pole's value onto the rings' values.
+  const std::vector<double>& c = pole_weights();
+  for (auto& values : cap.values) {
+    const cd pole = values[cap.pole];
+    for (int q = 0; q < kPoleRings; ++q) {
+      const Ring& r = cap.rings[std::size_t(q)];
+      for (int k = 0; k < r.size(); ++k) values[r.offset + k] += c[q] * pole / double(r.size());
+    }
+  }
+  // 3. The inverse transform's transpose: (1/n) times the forward transform.
+  for (const Ring& r : cap.rings) {
+    std::vector<cd> t(static_cast<std::size_t>(r.size()));
+    for (auto& values : cap.values) {
+      cd* v = values.data() + r.offset;
+      plans.run(r.size(), FFTW_FORWARD, v, t.data());
+      for (int k = 0; k < r.size(); ++k) v[k] = t[k] / double(r.n);
+    }
+  }
+  // 2. and 1. From the innermost ring out: the spectra's transposes, the DFTs' (the backward
+  // transform), and the samples'.
+  for (std::size_t i = 0; i < K; ++i) {
+    const Ring& r = cap.rings[i];
+    std::array<std::vector<cd>, 2> x;
+    for (int f = 0; f < 2; ++f) {
+      std::vector<cd> cbar;
+      ring_spectrum_transpose(cap, i, cap.values[f], cbar);
+      x[f].resize(std::size_t(r.n));
+      plans.run(r.n, FFTW_BACKWARD, cbar.data(), x[f].data());
+    }
+    for (int j = 0; j < r.n; ++j) {
+      const auto p = static_cast<std::size_t>(r.start + j);
+      const cd qu = std::conj(to_pole_frame(sign, r.phi0 + 2.0 * pi * j / double(r.n))) * x[1][j];
+      out.I()[p] += x[0][j].real();
+      out.V()[p] += x[0][j].imag();
+      out.Q()[p] += qu.real();
+      out.U()[p] += qu.imag();
+    }
+  }
+}
+
+// A copy pixel's value, or its part added to what the fit gave it (`add`).
+void write_copy_pixel(SkyBand& out, int64 pixel, const cd& a, const cd& qu, bool add) {
+  const std::size_t p = static_cast<std::size_t>(pixel) - out.first;
+  const double k = add ? 1.0 : 0.0;
+  out.maps[0][p] = k * out.maps[0][p] + a.real();
+  out.maps[3][p] = k * out.maps[3][p] + a.imag();
+  out.maps[1][p] = k * out.maps[1][p] + qu.real();
+  out.maps[2][p] = k * out.maps[2][p] + qu.imag();
+}
+}  // namespace
+
 SkyBand polar_sky(const PolarSource& source, bool weigh_boundaries, unsigned threads) {
   const double reach = source.reach;
   check_reach(source.nside, reach, "the sky's polar copy");
   const Base base(source.nside, RING, SET_NSIDE);
   const auto band = polar_band(source.nside, reach);
-  const std::size_t first = band[0], count = band[1];
   SkyBand out;
   out.nside = source.nside;
-  out.first = first;
+  out.first = band[0];
   const double mean = source.mean;
-  for (int c = 0; c < 4; ++c) out.maps[std::size_t(c)].assign(count, c == 0 ? mean : 0.0);
+  for (int c = 0; c < 4; ++c) out.maps[std::size_t(c)].assign(band[1], c == 0 ? mean : 0.0);
 
   ThreadPool pool(threads ? threads : std::max(1u, std::thread::hardware_concurrency()));
+  // The fit around both poles, for the copy's pixels within its zone.
+  const std::shared_ptr<const PolarFit> fitted = polar_fit_for(source.nside, reach, pool);
+  const PolarFit& fit = *fitted;
+  const PolarFit::Modes modes = fit.fit(fit_samples(fit, source), pool);
   Plans plans;
   for (const int sign : {1, -1}) {
+    const Targets targets = split_targets(base, sign, reach, fit);
+    const int f = sign > 0 ? 0 : 2;
+    pool.parallel_for(targets.near.size(), 64, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const CopyPoint& point = targets.near_points[i];
+        const PolarFit::Values v = fit.value(modes, point.t, point.phi);
+        const double w = targets.near_weights[i];
+        write_copy_pixel(out, targets.near[i], w * (v[std::size_t(f)] + mean), w * (point.rotation * v[std::size_t(f + 1)]), false);
+      }
+    });
+    if (targets.far.empty()) continue;
+    // Beyond the zone: the rings interpolated (steps 1 to 4) and each pixel's stencil (step 5).
     Cap cap = make_cap(base, sign, reach);
-    make_plans(cap, plans);  // both caps' rings have the same lengths: planned once
-    const std::size_t K = cap.rings.size();
-    // 1. The rings' samples and DFTs.
-    std::array<std::vector<std::vector<cd>>, 2> spectra{std::vector<std::vector<cd>>(K), std::vector<std::vector<cd>>(K)};
-    pool.parallel_for(K, 1, [&](std::size_t begin, std::size_t end) {
+    interpolate_rings(source, sign, cap, plans, pool);
+    pool.parallel_for(targets.far.size(), 256, [&](std::size_t begin, std::size_t end) {
       for (std::size_t i = begin; i < end; ++i) {
-        const Ring& r = cap.rings[i];
-        std::array<std::vector<cd>, 2> x{std::vector<cd>(std::size_t(r.n)), std::vector<cd>(std::size_t(r.n))};
-        const SkyBand& rings = sign > 0 ? source.north : source.south;
-        for (int j = 0; j < r.n; ++j) {
-          const auto p = std::size_t(r.start + j);
-          x[0][j] = cd(rings.value(0, p), rings.value(3, p));
-          x[1][j] = to_pole_frame(sign, r.phi0 + 2.0 * pi * j / double(r.n)) * cd(rings.value(1, p), rings.value(2, p));
-        }
-        for (int f = 0; f < 2; ++f) {
-          spectra[f][i].resize(std::size_t(r.n));
-          plans.run(r.n, FFTW_FORWARD, x[f].data(), spectra[f][i].data());
-        }
-      }
-    });
-    // 2. Their upsampled spectra, from the outermost ring in.
-    for (std::size_t i = K; i-- > 0;)
-      for (int f = 0; f < 2; ++f) ring_spectrum(cap, i, spectra[f][i], cap.values[f]);
-    // 3. Their upsampled values.
-    pool.parallel_for(K, 1, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t i = begin; i < end; ++i) {
-        const Ring& r = cap.rings[i];
-        std::vector<cd> t(static_cast<std::size_t>(r.size()));
-        for (auto& values : cap.values) {
-          cd* v = values.data() + r.offset;
-          plans.run(r.size(), FFTW_BACKWARD, v, t.data());
-          for (int k = 0; k < r.size(); ++k) v[k] = t[k] / double(r.n);
-        }
-      }
-    });
-    // 4. The pole's value from the rings' means.
-    const std::vector<double>& c = pole_weights();
-    for (auto& values : cap.values) {
-      cd pole(0.0);
-      for (int q = 0; q < kPoleRings; ++q) {
-        const Ring& r = cap.rings[std::size_t(q)];
-        cd mean_q(0.0);
-        for (int k = 0; k < r.size(); ++k) mean_q += values[r.offset + k];
-        pole += c[q] * mean_q / double(r.size());
-      }
-      values[cap.pole] = pole;
-    }
-    // 5. The copy's pixels.
-    const std::vector<int64> pixels = targets(base, sign, reach);
-    pool.parallel_for(pixels.size(), 256, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t i = begin; i < end; ++i) {
-        const Stencil st = stencil(base, cap, pixels[i]);
+        const Stencil st = stencil(cap, targets.far_points[i]);
         cd a(0.0), b(0.0);
         for (int k = 0; k < st.count; ++k) {
           a += st.weight[k] * cap.values[0][st.index[k]];
           b += st.weight[k] * cap.values[1][st.index[k]];
         }
-        const cd qu = st.rotation * b;
-        const std::size_t p = static_cast<std::size_t>(pixels[i]) - first;
-        out.maps[0][p] = a.real();
-        out.maps[3][p] = a.imag();
-        out.maps[1][p] = qu.real();
-        out.maps[2][p] = qu.imag();
+        const double w = targets.far_weights[i];
+        write_copy_pixel(out, targets.far[i], w * a, w * (st.rotation * b), w < 1.0);
       }
     });
   }
@@ -579,9 +731,10 @@ SkyBand polar_sky(const PolarSource& source, bool weigh_boundaries, unsigned thr
   return out;
 }
 
-Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach) {
+Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach, unsigned threads) {
   check_reach(maps.nside, reach, "the adjoint of the sky's polar copy");
-  const auto [first, count] = polar_band(maps.nside, reach);
+  const auto band = polar_band(maps.nside, reach);
+  const std::size_t first = band[0], count = band[1];  // not a structured binding: the lambda below takes first
   if (maps.first != first || maps.size() != count)
     throw Error("the adjoint of the sky's polar copy: a band of pixels " + std::to_string(maps.first) + " to " +
                 std::to_string(maps.first + maps.size()) + "; expected " + std::to_string(first) + " to " +
@@ -590,65 +743,46 @@ Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach) 
   SkyBand in = maps;
   if (weigh_boundaries) weigh_band(in);
   Sky out(maps.nside);
-  // The mean-I fill of the band's pixels outside the caps: each pixel's I gets their sum / Npix.
+  ThreadPool pool(threads ? threads : std::max(1u, std::thread::hardware_concurrency()));
+  const std::shared_ptr<const PolarFit> fitted = polar_fit_for(maps.nside, reach, pool);
+  const PolarFit& fit = *fitted;
+  PolarFit::Modes bar = fit.zero_modes();
+  // The mean-I fill of the band's pixels outside the caps, the mean in the fitted pixels, less the mean
+  // taken from the fit's samples: each pixel's I gets their sum / Npix.
   double rest = 0.0;
   for (const double x : in.maps[0]) rest += x;
   Plans plans;
   for (const int sign : {1, -1}) {
+    const Targets targets = split_targets(base, sign, reach, fit);
+    const int f = sign > 0 ? 0 : 2;
+    const auto at = [&](int64 pixel) { return static_cast<std::size_t>(pixel) - first; };
+    for (std::size_t i = 0; i < targets.near.size(); ++i) {
+      const std::size_t p = at(targets.near[i]);  // w of its I is the mean's: that part stays in `rest`
+      const double w = targets.near_weights[i];
+      rest -= (1.0 - w) * in.maps[0][p];
+      PolarFit::Values v{};
+      v[std::size_t(f)] = w * cd(in.maps[0][p], in.maps[3][p]);
+      v[std::size_t(f + 1)] = w * (std::conj(targets.near_points[i].rotation) * cd(in.maps[1][p], in.maps[2][p]));
+      fit.add_value_transpose(bar, targets.near_points[i].t, targets.near_points[i].phi, v);
+    }
+    if (targets.far.empty()) continue;
     Cap cap = make_cap(base, sign, reach);
-    make_plans(cap, plans);  // both caps' rings have the same lengths: planned once
-    const std::size_t K = cap.rings.size();
     // 5. The copy's pixels onto the stencils.
-    for (const int64 pixel : targets(base, sign, reach)) {
-      const std::size_t p = static_cast<std::size_t>(pixel) - first;
-      rest -= in.maps[0][p];
-      const Stencil st = stencil(base, cap, pixel);
-      const cd a(in.maps[0][p], in.maps[3][p]);
-      const cd b = std::conj(st.rotation) * cd(in.maps[1][p], in.maps[2][p]);
+    for (std::size_t i = 0; i < targets.far.size(); ++i) {
+      const std::size_t p = at(targets.far[i]);
+      const double w = targets.far_weights[i];
+      if (w == 1.0) rest -= in.maps[0][p];  // (a blended pixel's was taken above)
+      const Stencil st = stencil(cap, targets.far_points[i]);
+      const cd a = w * cd(in.maps[0][p], in.maps[3][p]);
+      const cd b = w * (std::conj(st.rotation) * cd(in.maps[1][p], in.maps[2][p]));
       for (int k = 0; k < st.count; ++k) {
         cap.values[0][st.index[k]] += st.weight[k] * a;
         cap.values[1][st.index[k]] += st.weight[k] * b;
       }
     }
-    // 4. The pole's value onto the rings' values.
-    const std::vector<double>& c = pole_weights();
-    for (auto& values : cap.values) {
-      const cd pole = values[cap.pole];
-      for (int q = 0; q < kPoleRings; ++q) {
-        const Ring& r = cap.rings[std::size_t(q)];
-        for (int k = 0; k < r.size(); ++k) values[r.offset + k] += c[q] * pole / double(r.size());
-      }
-    }
-    // 3. The inverse transform's transpose: (1/n) times the forward transform.
-    for (const Ring& r : cap.rings) {
-      std::vector<cd> t(static_cast<std::size_t>(r.size()));
-      for (auto& values : cap.values) {
-        cd* v = values.data() + r.offset;
-        plans.run(r.size(), FFTW_FORWARD, v, t.data());
-        for (int k = 0; k < r.size(); ++k) v[k] = t[k] / double(r.n);
-      }
-    }
-    // 2. and 1. From the innermost ring out: the spectra's transposes, the DFTs' (the backward
-    // transform), and the samples'.
-    for (std::size_t i = 0; i < K; ++i) {
-      const Ring& r = cap.rings[i];
-      std::array<std::vector<cd>, 2> x;
-      for (int f = 0; f < 2; ++f) {
-        std::vector<cd> cbar;
-        ring_spectrum_transpose(cap, i, cap.values[f], cbar);
-        x[f].resize(std::size_t(r.n));
-        plans.run(r.n, FFTW_BACKWARD, cbar.data(), x[f].data());
-      }
-      for (int j = 0; j < r.n; ++j) {
-        const auto p = static_cast<std::size_t>(r.start + j);
-        const cd qu = std::conj(to_pole_frame(sign, r.phi0 + 2.0 * pi * j / double(r.n))) * x[1][j];
-        out.I()[p] += x[0][j].real();
-        out.V()[p] += x[0][j].imag();
-        out.Q()[p] += qu.real();
-        out.U()[p] += qu.imag();
-      }
-    }
+    interpolate_rings_transpose(sign, cap, plans, out);
   }
+  rest -= add_fit_samples_transpose(fit, fit.fit_transpose(bar, pool), out);
   const double fill = rest / double(out.npix());
   for (double& x : out.I()) x += fill;
   return out;

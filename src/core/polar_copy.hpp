@@ -1,14 +1,18 @@
-// The sky's polar copy, resampled locally (docs/physics.md, "The quadrature"): the sky turned by R
-// (poles.hpp's polar_rotation) on the pixels where the turned poles land, interpolated from the
-// sky's own pixels around each pole.
+// The sky's polar copy (docs/physics.md, "The quadrature"): the sky turned by R (poles.hpp's
+// polar_rotation) on the pixels where the turned poles land, made from the sky's own pixels around
+// each pole. Within the zone of the least-squares fit (polar_fit.hpp: a band-limited field fitted to
+// the pixels of the rings around the pole, every azimuthal mode at once) a copy pixel is the fitted
+// field's value; beyond it, for reaches of more than 64 rings, it is interpolated from the rings, and
+// the two are blended over the zone's last rings.
 //
-// Around a pole each HEALPix ring is equally spaced in phi: its values are upsampled by FFT (the
-// ring's own trigonometric interpolant, exact for every Fourier mode the ring holds) and read between
-// the upsampled points by Lagrange interpolation in phi; across rings, Lagrange interpolation in the
-// signed colatitude along the great circle through the pole (a ring's values at phi + pi are that
-// line's samples beyond the pole). Q and U are interpolated in the frame parallel-transported from the
-// pole (smooth through it, where the local theta/phi frame turns once per ring) and turned at the end
-// into the copy's own frame. The copy is linear in the sky; polar_sky_adjoint is its exact transpose.
+// The interpolation: around a pole each HEALPix ring is equally spaced in phi: its values are upsampled
+// by FFT (the ring's own trigonometric interpolant, exact for every Fourier mode the ring holds) and
+// read between the upsampled points by Lagrange interpolation in phi; across rings, Lagrange
+// interpolation in the signed colatitude along the great circle through the pole (a ring's values at
+// phi + pi are that line's samples beyond the pole). Q and U are fitted and interpolated in the frame
+// parallel-transported from the pole (smooth through it, where the local theta/phi frame turns once
+// per ring) and turned at the end into the copy's own frame. The copy is linear in the sky;
+// polar_sky_adjoint is its exact transpose.
 #pragma once
 
 #include <array>
@@ -53,7 +57,7 @@ SkyBand polar_sky(const PolarSource& source, bool weigh_boundaries, unsigned thr
 // Its transpose (docs/physics.md, "The adjoint"): <polar_sky(s), m> = <s, polar_sky_adjoint(m)> to
 // rounding, in the inner product sum_p of the four maps over the band. `maps` is a band of the same
 // extent; the result is the whole sky.
-Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach);
+Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach, unsigned threads = 0);
 // The band's pixels of whole-sky maps (the adjoint's maps as the backends give them).
 SkyBand band_of(const SkyView& maps, std::size_t first, std::size_t count);
 // Whether a copy of that reach can be made at `nside`: its stencils need kHalfWidth + 1 rings beyond
