@@ -498,6 +498,12 @@ SkyBand polar_sky(const SkyView& sky, bool weigh_boundaries, double reach, unsig
 }
 
 namespace {
+// Pixel j of the fit's ring r in the north (sign 1) or the south cap: the south's ring t mirrors the
+// north's, from the sky's end.
+std::size_t cap_pixel(const PolarFit::Ring& r, int j, int sign, std::size_t npix) {
+  return sign > 0 ? r.start + std::size_t(j) : npix - r.start - std::size_t(r.n) + std::size_t(j);
+}
+
 // The fit's samples: each ring's pixels in both caps, I + iV and Q_c + iU_c (polar_fit.hpp), I less
 // the sky's mean (added back to the copy's pixels: a monopole thousands of times the rest, as a CMB
 // sky in K has, is then exact rather than fitted).
@@ -510,7 +516,7 @@ std::vector<cd> fit_samples(const PolarFit& fit, const PolarSource& source) {
       cd* x = out.data() + (r.offset + std::size_t(j)) * PolarFit::kFields;
       for (const int sign : {1, -1}) {
         const SkyBand& rings = sign > 0 ? source.north : source.south;
-        const std::size_t p = sign > 0 ? r.start + std::size_t(j) : npix - r.start - std::size_t(r.n) + std::size_t(j);
+        const std::size_t p = cap_pixel(r, j, sign, npix);
         const int f = sign > 0 ? 0 : 2;
         x[f] = cd(rings.value(0, p) - source.mean, rings.value(3, p));
         x[f + 1] = to_pole_frame(sign, phi) * cd(rings.value(1, p), rings.value(2, p));
@@ -528,7 +534,7 @@ double add_fit_samples_transpose(const PolarFit& fit, const std::vector<cd>& sam
       const double phi = r.phi0 + 2.0 * pi * j / double(r.n);
       const cd* x = samples.data() + (r.offset + std::size_t(j)) * PolarFit::kFields;
       for (const int sign : {1, -1}) {
-        const std::size_t p = sign > 0 ? r.start + std::size_t(j) : npix - r.start - std::size_t(r.n) + std::size_t(j);
+        const std::size_t p = cap_pixel(r, j, sign, npix);
         const int f = sign > 0 ? 0 : 2;
         const cd qu = std::conj(to_pole_frame(sign, phi)) * x[f + 1];
         out.I()[p] += x[f].real();

@@ -106,6 +106,8 @@ PISCO_FIT_CLONES void analyze(const double* __restrict table, std::size_t J, std
 }
 
 double* doubles(cd* p) { return reinterpret_cast<double*>(p); }
+// The sign of lambda_{l,-m} against lambda_{lm}: (-1)^m for m < 0.
+double mode_sign(int m) { return m < 0 && (m % 2) ? -1.0 : 1.0; }
 const double* doubles(const cd* p) { return reinterpret_cast<const double*>(p); }
 }  // namespace
 
@@ -360,16 +362,7 @@ void PolarFit::run_fft(int n, int sign, const cd* in, cd* out) const {
 
 void PolarFit::forward(const std::vector<cd>& c, std::vector<cd>& samples, ThreadPool& pool) const {
   const std::size_t T = rings_.size(), W = std::size_t(2 * M_ + 1);
-  std::vector<cd> modes(W * T * F, cd(0.0));
-  pool.parallel_for(W, 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t mi = begin; mi < end; ++mi) {
-      const int m = int(mi) - M_;
-      const Mode& mode = modes_[std::size_t(std::abs(m))];
-      const double sign = m < 0 && (m % 2) ? -1.0 : 1.0;
-      synthesize(mode.at_rings.data(), std::size_t(counts_[mi]), T, doubles(c.data() + offsets_[mi] * F), sign,
-                 doubles(modes.data() + mi * T * F));
-    }
-  });
+  const std::vector<cd> modes = synthesize_modes(c, &Mode::at_rings, T, pool);
   samples.assign(samples_ * F, cd(0.0));
   pool.parallel_for(T, 1, [&](std::size_t begin, std::size_t end) {
     std::vector<cd> bins;
@@ -404,16 +397,7 @@ void PolarFit::adjoint(const std::vector<cd>& samples, std::vector<cd>& c, Threa
       }
     }
   });
-  c.assign(coefficients_ * F, cd(0.0));
-  pool.parallel_for(W, 4, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t mi = begin; mi < end; ++mi) {
-      const int m = int(mi) - M_;
-      const Mode& mode = modes_[std::size_t(std::abs(m))];
-      const double sign = m < 0 && (m % 2) ? -1.0 : 1.0;
-      analyze(mode.at_rings.data(), std::size_t(counts_[mi]), T, doubles(modes.data() + mi * T * F), sign,
-              doubles(c.data() + offsets_[mi] * F));
-    }
-  });
+  c = analyze_modes(modes, &Mode::at_rings, T, pool);
 }
 
 void PolarFit::normal(const std::vector<cd>& c, std::vector<cd>& out, std::vector<cd>& scratch, ThreadPool& pool) const {
@@ -444,34 +428,42 @@ std::vector<cd> PolarFit::solve(const std::vector<cd>& rhs, ThreadPool& pool) co
   return x;
 }
 
-PolarFit::Modes PolarFit::to_grid(const std::vector<cd>& c, ThreadPool& pool) const {
-  const std::size_t G = std::size_t(grid_), W = std::size_t(2 * M_ + 1);
-  Modes out(W * G * F, cd(0.0));
+// Each signed m's values at n points (the rings or the grid) from its coefficients, lambda_{l,-m} being
+// (-1)^m lambda_{lm}; and the transpose.
+std::vector<cd> PolarFit::synthesize_modes(const std::vector<cd>& c, std::vector<double> Mode::*table, std::size_t n,
+                                           ThreadPool& pool) const {
+  const std::size_t W = std::size_t(2 * M_ + 1);
+  std::vector<cd> out(W * n * F, cd(0.0));
   pool.parallel_for(W, 4, [&](std::size_t begin, std::size_t end) {
     for (std::size_t mi = begin; mi < end; ++mi) {
       const int m = int(mi) - M_;
-      const Mode& mode = modes_[std::size_t(std::abs(m))];
-      const double sign = m < 0 && (m % 2) ? -1.0 : 1.0;
-      synthesize(mode.at_grid.data(), std::size_t(counts_[mi]), G, doubles(c.data() + offsets_[mi] * F), sign,
-                 doubles(out.data() + mi * G * F));
+      synthesize((modes_[std::size_t(std::abs(m))].*table).data(), std::size_t(counts_[mi]), n,
+                 doubles(c.data() + offsets_[mi] * F), mode_sign(m), doubles(out.data() + mi * n * F));
     }
   });
   return out;
 }
 
-std::vector<cd> PolarFit::from_grid(const Modes& in, ThreadPool& pool) const {
-  const std::size_t G = std::size_t(grid_), W = std::size_t(2 * M_ + 1);
+std::vector<cd> PolarFit::analyze_modes(const std::vector<cd>& in, std::vector<double> Mode::*table, std::size_t n,
+                                        ThreadPool& pool) const {
+  const std::size_t W = std::size_t(2 * M_ + 1);
   std::vector<cd> c(coefficients_ * F, cd(0.0));
   pool.parallel_for(W, 4, [&](std::size_t begin, std::size_t end) {
     for (std::size_t mi = begin; mi < end; ++mi) {
       const int m = int(mi) - M_;
-      const Mode& mode = modes_[std::size_t(std::abs(m))];
-      const double sign = m < 0 && (m % 2) ? -1.0 : 1.0;
-      analyze(mode.at_grid.data(), std::size_t(counts_[mi]), G, doubles(in.data() + mi * G * F), sign,
-              doubles(c.data() + offsets_[mi] * F));
+      analyze((modes_[std::size_t(std::abs(m))].*table).data(), std::size_t(counts_[mi]), n,
+              doubles(in.data() + mi * n * F), mode_sign(m), doubles(c.data() + offsets_[mi] * F));
     }
   });
   return c;
+}
+
+PolarFit::Modes PolarFit::to_grid(const std::vector<cd>& c, ThreadPool& pool) const {
+  return synthesize_modes(c, &Mode::at_grid, std::size_t(grid_), pool);
+}
+
+std::vector<cd> PolarFit::from_grid(const Modes& in, ThreadPool& pool) const {
+  return analyze_modes(in, &Mode::at_grid, std::size_t(grid_), pool);
 }
 
 PolarFit::Modes PolarFit::fit(const std::vector<cd>& samples, ThreadPool& pool) const {

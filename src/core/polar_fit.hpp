@@ -100,6 +100,12 @@ class PolarFit {
   void normal(const std::vector<cd>& c, std::vector<cd>& out, std::vector<cd>& scratch, ThreadPool& pool) const;
   // The Chebyshev iteration's fixed polynomial in N applied to rhs (symmetric: its own transpose).
   std::vector<cd> solve(const std::vector<cd>& rhs, ThreadPool& pool) const;
+  // Coefficients -> each mode's values at n points, from a table of Mode (at_rings or at_grid), and
+  // the transpose.
+  std::vector<cd> synthesize_modes(const std::vector<cd>& c, std::vector<double> Mode::*table, std::size_t n,
+                                   ThreadPool& pool) const;
+  std::vector<cd> analyze_modes(const std::vector<cd>& in, std::vector<double> Mode::*table, std::size_t n,
+                                ThreadPool& pool) const;
   // Coefficients -> grid modes (E), and its transpose.
   Modes to_grid(const std::vector<cd>& c, ThreadPool& pool) const;
   std::vector<cd> from_grid(const Modes& g, ThreadPool& pool) const;
