@@ -6,7 +6,7 @@
 # module (its runtime preloaded into Python), and the MPI build's tests sanitized
 # (scripts/run-mpi-tests.sh with PISCO_SANITIZE=1, in <repo>/build-mpi-asan). Called by .ci/run after
 # scripts/run-tests.sh (which sets the machine up and makes the Python tests' environment); extra
-# arguments go to the first two ctest runs.
+# arguments go to the first ctest run, and without them the ground's tests run after it.
 #
 # - The cuda backend is left out: nvcc's device code cannot be sanitized (its host side is the same
 #   as the other backends'). The vulkan backend is in, on lavapipe.
@@ -49,23 +49,28 @@ cmake --build "$build" -j"$(nproc)"
 export OMP_WAIT_POLICY=passive
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 export LSAN_OPTIONS="suppressions=$root/tests/sanitizers/lsan.supp:print_suppressions=0"
-# Cli.DeconvolveExampleAsTheReadmeSays runs assets/examples/deconvolve.toml whole (four minutes under
-# the sanitizers); SimulationTest.DeconvolvingMapmakerTakesTheBeamMismatchOut takes the same code
-# through a smaller run.
+# Two examples run whole are left to the plain build, each over four minutes under the sanitizers:
+# Cli.DeconvolveExampleAsTheReadmeSays (assets/examples/deconvolve.toml; SimulationTest.
+# DeconvolvingMapmakerTakesTheBeamMismatchOut takes the same code through a smaller run) and
+# Cli.GroundExampleAsTheReadmeSays (ground_pickup.toml's 108,000 samples of 6,000-pixel discs; the
+# ground's own tests, Ground.* and GroundRun.MistakesAreNamed, run here instead, below).
 tests=(--test-dir "$build" --output-on-failure -j"$(nproc)" -L "unit|cli|robustness|simd"
-       -E "consumer_find_package|readme_library_example|cli_installed|Cli.DeconvolveExampleAsTheReadmeSays")
+       -E "consumer_find_package|readme_library_example|cli_installed|Cli.DeconvolveExampleAsTheReadmeSays|Cli.GroundExampleAsTheReadmeSays")
+ground=(--test-dir "$build" --output-on-failure -j"$(nproc)" -R "^Ground\.|^GroundRun\.MistakesAreNamed$")
 # allocator_may_return_null: a corrupted FITS header can make CFITSIO ask for an impossible allocation,
 # which the C library refuses (CFITSIO then reports a memory error, and the reader names the file);
 # AddressSanitizer aborts on it unless told to refuse it the same way.
 asan="halt_on_error=1:strict_string_checks=1:allocator_may_return_null=1"
+no_vulkan=()
 if [ "${PISCO_SANITIZE_NO_VULKAN:-0}" = 1 ]; then
   echo "run-sanitizers: memory errors, undefined behaviour and leaks (no Vulkan driver)"
-  ASAN_OPTIONS="detect_leaks=1:$asan" \
-    VK_DRIVER_FILES=/nonexistent.json VK_ICD_FILENAMES=/nonexistent.json ctest "${tests[@]}" "$@"
+  no_vulkan=(VK_DRIVER_FILES=/nonexistent.json VK_ICD_FILENAMES=/nonexistent.json)
 else
   echo "run-sanitizers: memory errors, undefined behaviour and leaks (vulkan on lavapipe)"
-  ASAN_OPTIONS="detect_leaks=1:$asan" ctest "${tests[@]}" "$@"
 fi
+env "${no_vulkan[@]}" ASAN_OPTIONS="detect_leaks=1:$asan" ctest "${tests[@]}" "$@"
+# The ground's tests, unless extra arguments chose the tests.
+(($#)) || env "${no_vulkan[@]}" ASAN_OPTIONS="detect_leaks=1:$asan" ctest "${ground[@]}"
 if [ -x "$venv/bin/python" ]; then
   # Python itself is not sanitized: the module's runtimes are preloaded so that they come first, and
   # leaks are not checked (the interpreter keeps its objects until exit).

@@ -10,6 +10,7 @@
 #include <bit>
 #include <cmath>
 #include <random>
+#include <set>
 #include <cstring>
 #include <limits>
 #include <numbers>
@@ -119,7 +120,7 @@ void load_sky(const pisco::Sky& sky, const pisco::detail::PreparedSky& prepared,
   vk::pack_sky_lo(sky.npix(), xyz.data(), lo.data());
   glsl::sky = texels(records);
   glsl::sky_lo = texels(lo);
-  glsl::rings = texels(vk::pack_rings(prepared, mode.ff));
+  glsl::rings = texels(vk::pack_rings(prepared, mode.boundary, mode.ff));
 }
 
 // The TOD of `detector` by the kernel source, sample by sample (one invocation a sample), with the
@@ -272,7 +273,7 @@ TEST(KernelOnHost, ThePolarCopysBandReadsAsTheWholeCopy) {
     const vk::Grids grids = vk::pack_grids(in, mode);
     glsl::weight_pairs = texels(grids.w32);
     glsl::weights64 = texels(grids.w64);
-    glsl::rings = texels(vk::pack_rings(in.sky, mode.ff));
+    glsl::rings = texels(vk::pack_rings(in.sky, mode.boundary, mode.ff));
     // The tables of pixels [first, first + count) of the maps (whose values start at maps_first).
     const auto tables = [&](const std::array<std::span<const double>, 4>& maps, std::size_t maps_first,
                             std::size_t first, std::size_t count) {
@@ -568,17 +569,44 @@ TEST(SharedMaths, PlateRowsGiveTheSameBitsInBothBuilds) {
   }
 }
 
-// The cap-boundary rings (src/kernel/cap_boundary.hpp), pixel by pixel around them, in both builds.
+// The rings about the caps' edges (src/kernel/cap_boundary.hpp), pixel by pixel around them, in both
+// builds, against HEALPix's own ring numbers; and CapBoundary's weights by ring.
 TEST(SharedMaths, CapBoundaryRingsInBothBuilds) {
   namespace d = pisco::detail;
-  for (const unsigned nside : {1u, 2u, 16u, 1024u, 8192u}) {
+  for (const unsigned nside : {1u, 2u, 3u, 16u, 1024u, 8192u}) {
     ASSERT_EQ(glsl::cap_boundary_north(nside), d::cap_boundary_north(nside));
     ASSERT_EQ(glsl::cap_boundary_south(nside), d::cap_boundary_south(nside));
-    const unsigned north = d::cap_boundary_north(nside), south = d::cap_boundary_south(nside), count = 4 * nside;
+    const T_Healpix_Base<int64> base(int(nside), RING, SET_NSIDE);
+    const d::CapBoundary b = d::cap_boundary(int(nside), pisco::Quadrature::corrected);
+    const auto [north_run, south_run] = d::cap_boundary_runs(int(nside));
+    const unsigned north = d::cap_boundary_north(nside), south = d::cap_boundary_south(nside);
+    std::set<unsigned> pixels;  // two rings and more on either side of each edge
     for (const unsigned first : {north, south})
-      for (unsigned p = first > 2 ? first - 2 : 0; p < first + count + 2; ++p)
-        ASSERT_EQ(glsl::on_cap_boundary(p, north, south, count), d::on_cap_boundary(p, north, south, count));
+      for (unsigned p = first > 8 * nside ? first - 8 * nside : 0; p < std::min<std::size_t>(first + 16 * nside, base.Npix()); ++p)
+        pixels.insert(p);
+    std::size_t weighted = 0;
+    for (const unsigned p : pixels) {
+        const unsigned ring = d::cap_boundary_ring(p, nside);
+        ASSERT_EQ(glsl::cap_boundary_ring(p, nside), ring) << "NSIDE " << nside << ", pixel " << p;
+        const long t = long(base.pix2ring(p));  // 1-based
+        const long n = long(nside);
+        const unsigned want = (t == n || t == 3 * n) ? d::CAP_EDGE_RING
+                              : (t == n + 1 || t == 3 * n - 1) ? d::CAP_BELT_RING
+                              : (t == n - 1 || t == 3 * n + 1) ? d::CAP_LAST_RING : 0u;
+        ASSERT_EQ(ring, want) << "NSIDE " << nside << ", pixel " << p << " on ring " << t;
+        const bool in_runs = (p >= north_run.first && p < north_run.second) || (p >= south_run.first && p < south_run.second);
+        ASSERT_EQ(in_runs, ring != 0u) << "NSIDE " << nside << ", pixel " << p;
+        const double c = ring == d::CAP_EDGE_RING ? d::cap_edge_c0 : d::cap_edge_c1;
+        const double spacing = ring == d::CAP_LAST_RING ? double(n - 1) : double(n);
+        ASSERT_EQ(b.at(p), ring == 0u ? 1.0 : 1.0 - c / spacing) << "NSIDE " << nside << ", pixel " << p;
+        ASSERT_EQ(d::cap_boundary(int(nside), pisco::Quadrature::plain).at(p), 1.0);
+        weighted += ring != 0u;
+      }
+    // Six rings, of 4 NSIDE pixels but the caps' last two, of 4 (NSIDE - 1); five at NSIDE 1.
+    EXPECT_EQ(weighted, nside == 1 ? 12u : 24u * nside - 8u) << "NSIDE " << nside;
   }
+  // The uniform sky's term: c_0 + 2 c_1 = 1/12.
+  EXPECT_NEAR(d::cap_edge_c0 + 2 * d::cap_edge_c1, 1.0 / 12.0, 1e-17);
 }
 
 // The adjoints' fixed point (src/kernel/fixed_point.glsl, the vulkan and CUDA adjoints' text): round(v g)

@@ -2,11 +2,13 @@
 // of band-limited skies, random polarized ones with and without a monopole and dipole and two point
 // sources near the poles, against their exact harmonic smoothing evaluated at each sample, at
 // colatitudes 0, 0.3, 1, 3 and 30 deg from both poles, on the rings where the polar caps meet the belt
-// and across phi = 0, on every backend present. The plain pixel sum fails the same bars at the poles.
+// and across phi = 0, on every backend present. The plain pixel sum fails the same bars at the poles,
+// and reads one bright pixel as a point at every colatitude, as the band-limited reading cannot.
 #include <gtest/gtest.h>
 
 #include <alm.h>
 #include <alm_healpix_tools.h>
+#include <healpix_base.h>
 #include <healpix_map.h>
 #include <xcomplex.h>
 
@@ -280,6 +282,60 @@ TEST_P(Poles, BandLimitedSkiesMatchTheirExactSmoothingEverywhere) {
         EXPECT_GT(engine.polar_samples(), 0u);
       }
     }
+  }
+}
+
+// One bright pixel 2 deg from a pole and one at the equator (docs/physics.md, "The quadrature"): with
+// quadrature = "plain" the pixel sum reads each pixel as a point, the same at every colatitude, so that
+// a sample at a given offset from either pixel reads the same; the corrected quadrature reads the map
+// as a band-limited sky, which near a pole is not the point (its polar copy's least-squares fit). No
+// linear reading of a map gives both: a map is the sum of its pixels.
+TEST(OnePixel, IsAPointAtEveryColatitudeWithThePlainQuadrature) {
+  const int nside = 64;
+  const Healpix_Base base(nside, RING, SET_NSIDE);
+  const double fwhm = 6 * std::sqrt(pi / 3) / nside;
+  pisco::BeamOptions bo;
+  bo.rho_max = 2.5 * fwhm;
+  const pisco::Beamsor beam = pisco::Beamsor::gaussian(fwhm, bo);
+  pisco::FocalPlane fp;
+  pisco::Detector det;
+  det.name = "d";
+  fp.add(det);
+  const int near = int(base.ang2pix(pointing(2.0 * deg, 0.3))), far = int(base.ang2pix(pointing(pi / 2 + 0.01, 0.3)));
+  pisco::Sky sky(nside);
+  sky.I()[std::size_t(near)] = 1.0;
+  sky.I()[std::size_t(far)] = 1.0;
+  // Samples at 0 to 1.5 FWHM from each pixel's centre c, in three directions: c cos r + sin r (cos a
+  // e_theta + sin a e_phi).
+  pisco::Pointing p;
+  for (const int pix : {near, far}) {
+    const pointing c = base.pix2ang(pix);
+    const vec3 n = c.to_vec3(), et(std::cos(c.theta) * std::cos(c.phi), std::cos(c.theta) * std::sin(c.phi), -std::sin(c.theta)),
+               ep(-std::sin(c.phi), std::cos(c.phi), 0.0);
+    for (const double r : {0.0, 0.3, 0.6, 1.0, 1.5})
+      for (const double a : {0.0, 1.6, 3.5}) {
+        const vec3 v = n * std::cos(r * fwhm) + (et * std::cos(a) + ep * std::sin(a)) * std::sin(r * fwhm);
+        const pointing q(v);
+        p.push_back(q.theta, q.phi, 0.7);
+      }
+  }
+  const std::size_t half = p.size() / 2;
+  for (const pisco::Quadrature quadrature : {pisco::Quadrature::plain, pisco::Quadrature::corrected}) {
+    pisco::EngineOptions o;
+    o.backend = "cpu";
+    o.quadrature = quadrature;
+    pisco::Engine engine(sky, {beam}, fp, o);
+    std::vector<double> d(p.size());
+    engine.convolve(0, p, d);
+    const double peak = d[half];  // on the equator's pixel
+    double worst = 0.0;
+    for (std::size_t i = 0; i < half; ++i) worst = std::max(worst, std::abs(d[i] - d[half + i]));
+    const bool plain = quadrature == pisco::Quadrature::plain;
+    std::printf("%s quadrature: 2 deg from the pole against the equator, worst %.1e of the peak\n",
+                plain ? "plain" : "corrected", worst / peak);
+    ASSERT_GT(peak, 0.0);
+    if (plain) EXPECT_LE(worst, 1e-9 * peak) << "a pixel read as a point is the same pixel everywhere";
+    else EXPECT_GT(worst, 1e-3 * peak) << "the band-limited reading near a pole is not the point (docs/physics.md)";
   }
 }
 

@@ -468,9 +468,9 @@ namespace {
 void weigh_band(SkyBand& band) {
   const CapBoundary b = cap_boundary(band.nside, Quadrature::corrected);
   const std::size_t end = band.first + band.size();
-  for (const std::size_t ring : {std::size_t(b.north), std::size_t(b.south)})
+  for (const auto& [first, last] : cap_boundary_runs(band.nside))
     for (auto& map : band.maps)
-      for (std::size_t p = std::max(ring, band.first); p < std::min(ring + b.count, end); ++p) map[p - band.first] *= b.weight;
+      for (std::size_t p = std::max(first, band.first); p < std::min(last, end); ++p) map[p - band.first] *= b.at(p);
 }
 }  // namespace
 

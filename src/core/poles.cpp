@@ -5,26 +5,30 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <utility>
 
 #include "pisco/error.hpp"
 
 namespace pisco::detail {
 
 CapBoundary cap_boundary(int nside, Quadrature quadrature) {
-  const std::uint32_t n = static_cast<std::uint32_t>(nside);
   CapBoundary b;
-  b.north = cap_boundary_north(n);
-  b.south = cap_boundary_south(n);
-  b.count = 4 * n;
-  b.weight = quadrature == Quadrature::corrected ? 1.0 - 1.0 / (12.0 * double(n)) : 1.0;
+  if (quadrature == Quadrature::corrected) b.nside = static_cast<std::uint32_t>(nside);
   return b;
+}
+
+std::array<std::pair<std::size_t, std::size_t>, 2> cap_boundary_runs(int nside) {
+  const auto n = static_cast<std::uint32_t>(nside);
+  const std::size_t north = cap_boundary_north(n), south = cap_boundary_south(n), north_end = north + 8 * n;
+  // At NSIDE 1, where ring 2 is both NSIDE + 1 and 3 NSIDE - 1, the second run starts after the first.
+  return {std::pair{north - 4 * (n - 1), north_end}, std::pair{std::max(south - 4 * n, north_end), south + 8 * n - 4}};
 }
 
 void weigh_cap_boundaries(Sky& sky) {
   const CapBoundary b = cap_boundary(sky.nside(), Quadrature::corrected);
-  for (const std::size_t first : {std::size_t(b.north), std::size_t(b.south)})
+  for (const auto& [first, end] : cap_boundary_runs(sky.nside()))
     for (auto map : {sky.I(), sky.Q(), sky.U(), sky.V()})
-      for (std::size_t p = first; p < first + b.count; ++p) map[p] *= b.weight;
+      for (std::size_t p = first; p < end; ++p) map[p] *= b.at(p);
 }
 
 double polar_cut(double rho_max, int nside) {

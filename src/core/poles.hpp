@@ -7,13 +7,15 @@
 //   The copy is resampled from the pixels around each pole (polar_copy.hpp).
 // - the two rings where the polar caps meet the equatorial belt (z = +-2/3), where the rings' spacing
 //   changes its law: the rule's slope jumps there, and Euler-Maclaurin's term for the jump is
-//   -1/(12 NSIDE) of those rings' own pixel sum. Their pixels are weighted by 1 - 1/(12 NSIDE).
+//   -1/(12 NSIDE) of those rings' own pixel sum. That term is spread over each edge ring and its two
+//   neighbours (cap_boundary_weights), so that it holds for skies with power up to 3 NSIDE too.
 #pragma once
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "core/backend.hpp"
@@ -25,10 +27,15 @@
 
 namespace pisco::detail {
 
-// The cap-boundary rings of `nside` (cap_boundary.hpp) with the weight of `quadrature`.
+// The rings about the caps' edges of `nside` with the weights of `quadrature` (cap_boundary.hpp:
+// Euler-Maclaurin's jump term spread over each edge ring and its two neighbours).
 CapBoundary cap_boundary(int nside, Quadrature quadrature);
 
-// Multiplies the pixels of rings NSIDE and 3 NSIDE (all four Stokes maps) by 1 - 1/(12 NSIDE).
+// The pixels of those six rings as two runs [first, end): rings NSIDE - 1 to NSIDE + 1 and 3 NSIDE - 1
+// to 3 NSIDE + 1.
+std::array<std::pair<std::size_t, std::size_t>, 2> cap_boundary_runs(int nside);
+
+// Multiplies the pixels of those six rings (all four Stokes maps) by their weights.
 void weigh_cap_boundaries(Sky& sky);
 
 // The rotation R that takes the sky to its polar copy: 90 deg about y, (x, y, z) -> (z, y, -x). The

@@ -12,7 +12,8 @@
 // over the invocations with a bounds check each, and GPUs read them through the texture cache.
 #define PISCO_BINDING_SKY 0        // texels, 2 per pixel: (kx, ky, kz, I - I0), (Q, U, V, 0)
 #define PISCO_BINDING_SKY_LO 1     // texels, 1 per pixel: k - float(k), so that float(k) + lo = k in float64
-#define PISCO_BINDING_RINGS 2      // texels, 1 per ring: z (low word, high word), first pixel, count | shifted << 31
+#define PISCO_BINDING_RINGS 2      // texels, 1 per ring: z (low word, high word), first pixel, count | shifted << 31;
+                                   // then 2: the monopole's weights by cap_boundary_ring (1, last, edge, belt)
 #define PISCO_BINDING_WEIGHTS 3    // texels: each node's COLUMNS weights, then its neighbour's; every detector's grid
 #define PISCO_BINDING_WEIGHTS64 4  // texels, 1 per node: float64 (w_I, Omega_pix B_TT / Omega~), low word first;
                                    // with PLATE 3 per node: (w_I, wn), (w_Q, w_U), (w_V, 0); and the plates' M0
@@ -62,7 +63,6 @@ layout(push_constant) uniform PushConstants {
   PISCO_F64 monopole;        // I0, subtracted from the float32 sky and added back in float64
   PISCO_F64 grid_a;          // half-width of the beam grid (= sin rho_max)
   PISCO_F64 grid_inv_step;   // 1 / node spacing
-  PISCO_F64 ring_weight;     // the monopole's weight on rings NSIDE and 3 NSIDE (src/core/poles.hpp)
   PISCO_F64 offset_quat[4];  // the detector's offset from the boresight (x, y, z, w)
   float grid_a32;
   float grid_inv_step32;
@@ -78,7 +78,7 @@ layout(push_constant) uniform PushConstants {
   uint plate_offset64;    // PLATE: the first texel of the plate's M0 (8 texels, 16 float64 row by row)
 #ifdef __cplusplus
 };
-static_assert(sizeof(PushConstants) == 128, "push constants must match the GLSL block");
+static_assert(sizeof(PushConstants) == 120, "push constants must match the GLSL block");
 }  // namespace pisco::detail::vk
 #else
 } pc;

@@ -63,11 +63,21 @@ PISCO_FN Grid sample_grid() {
 // M(theta) by columns in float32 (w * m = w M, effective_weights) from its rows (plate.glsl's plate_rows).
 PISCO_FN mat4 plate_matrix(vec4 m0, vec4 m1, vec4 m2, vec4 m3) { return transpose(mat4(m0, m1, m2, m3)); }
 
-// Whether pixel p lies on ring NSIDE or 3 NSIDE, where the polar caps meet the belt: the monopole's
-// weight sum counts it with pc.ring_weight (src/core/poles.hpp).
-PISCO_FN bool cap_boundary_pixel(uint p) {
-  return on_cap_boundary(p, cap_boundary_north(pc.nside), cap_boundary_south(pc.nside), 4u * pc.nside);
+// The monopole's weight on ring `ring` of cap_boundary_ring (pixel.glsl; src/core/poles.hpp): the
+// ring table keeps the four weights (1, then the caps' last rings', the edges', the belt's) in the two
+// texels after its 4 NSIDE - 1 rings, float64 or float-float, low word first.
+PISCO_FN uvec2 cap_weight_bits(uint ring) {
+  const uvec4 t = texelFetch(rings, int(4u * pc.nside - 1u + (ring >> 1u)));
+  return (ring & 1u) != 0u ? uvec2(t.z, t.w) : uvec2(t.x, t.y);
 }
+#if PISCO_FF
+PISCO_FN vec2 cap_weight(uint ring) {
+  const uvec2 b = cap_weight_bits(ring);
+  return vec2(uintBitsToFloat(b.x), uintBitsToFloat(b.y));
+}
+#else
+PISCO_FN double cap_weight(uint ring) { return packDouble2x32(cap_weight_bits(ring)); }
+#endif
 
 // The pixels [b0, b0 + l0) then [b1, b1 + l1), in one loop.
 PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_INOUT(Sums) acc) {
@@ -110,8 +120,10 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
     kahan_add(acc.sum, acc.comp, stokes_response(w, g.cos2chi, g.sin2chi, vec4(a.w, b.x, b.y, b.z)));
     if (FLOAT64) {
 #endif
-      const bool ring = cap_boundary_pixel(p);
+      // Off the six rings about the caps' edges (ring 0) the monopole's weight is 1.
+      const uint ring = cap_boundary_ring(p, pc.nside);
 #if PISCO_FF
+      const vec2 ring_weight = ring != 0u ? cap_weight(ring) : vec2(1.0f, 0.0f);
       const Stencil64 st = stencil64(smp.g, x64, y64);
       for (int q = 0; q < st.m; ++q) {
         if (PLATE) {
@@ -120,13 +132,13 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
           const vec2 w0 = ff_add(ff_add(ff_mul(wi, smp.m0[0]), ff_mul(wq, smp.m0[1])),
                                  ff_add(ff_mul(wu, smp.m0[2]), ff_mul(wv, smp.m0[3])));
           const vec2 c0 = ff_mul(st.c[q], w0);
-          acc.s0 = ff_add(acc.s0, ring ? ff_mul(pc.ring_weight, c0) : c0);
+          acc.s0 = ff_add(acc.s0, ring != 0u ? ff_mul(ring_weight, c0) : c0);
           acc.n0 = ff_add(acc.n0, ff_mul(st.c[q], wn));
         } else {
           vec2 wi, wn;
           weight64(st.k[q], wi, wn);
           const vec2 c0 = ff_mul(st.c[q], wi);
-          acc.s0 = ff_add(acc.s0, ring ? ff_mul(pc.ring_weight, c0) : c0);
+          acc.s0 = ff_add(acc.s0, ring != 0u ? ff_mul(ring_weight, c0) : c0);
           acc.n0 = ff_add(acc.n0, ff_mul(st.c[q], wn));
         }
       }
@@ -141,7 +153,7 @@ PISCO_FN void accumulate(Sample smp, uint b0, uint l0, uint b1, uint l1, PISCO_I
         const dvec4 wp = RADIAL ? interpolate_radial(g64, x64 * x64 + y64 * y64) : interpolate_weights(g64, x64, y64);
         s0 = plate_monopole_weight(dvec4(we.x, wp.x, wp.y, wp.z), smp.m0);
       }
-      acc.s0 += ring ? pc.ring_weight * s0 : s0;
+      acc.s0 += ring != 0u ? cap_weight(ring) * s0 : s0;
       acc.n0 += we.y;
 #endif
     }

@@ -178,11 +178,24 @@ PISCO_FN void kahan_add(PISCO_INOUT(PISCO_REAL) sum, PISCO_INOUT(PISCO_REAL) com
 }
 
 // The rings NSIDE and 3 NSIDE, where the polar caps meet the equatorial belt (docs/physics.md, "The
-// quadrature"): their first pixels, and whether pixel p lies on one (each has 4 NSIDE pixels).
+// quadrature"), and their neighbours: the first pixels of rings NSIDE and 3 NSIDE, and which of the
+// six rings about them pixel p lies on: CAP_LAST_RING for NSIDE - 1 and 3 NSIDE + 1 (the caps' last,
+// 4 (NSIDE - 1) pixels each), CAP_EDGE_RING for NSIDE and 3 NSIDE, CAP_BELT_RING for NSIDE + 1 and
+// 3 NSIDE - 1 (the belt's first, 4 NSIDE pixels each, like the edges), 0 for every other pixel.
+// NSIDE must be at most 16384 (12 NSIDE^2 < 2^32).
+const uint CAP_LAST_RING = 1u;
+const uint CAP_EDGE_RING = 2u;
+const uint CAP_BELT_RING = 3u;
 PISCO_FN uint cap_boundary_north(uint nside) { return 2u * nside * (nside - 1u); }
 PISCO_FN uint cap_boundary_south(uint nside) { return cap_boundary_north(nside) + 8u * nside * nside; }
-PISCO_FN bool on_cap_boundary(uint p, uint north, uint south, uint count) {
-  return p - north < count || p - south < count;
+PISCO_FN uint cap_boundary_ring(uint p, uint nside) {
+  // The six rings are two runs of pixels: rings NSIDE - 1 to NSIDE + 1 from the north's first, 3 NSIDE
+  // - 1 to 3 NSIDE + 1 from the south's; p - first < length exactly when p lies in the run (unsigned).
+  const uint edge = 4u * nside, last = edge - 4u;  // the pixels of an edge ring, of a cap's last ring
+  const uint n = p - (cap_boundary_north(nside) - last), s = p - (cap_boundary_south(nside) - edge);
+  if (n < last + 2u * edge) return n < last ? CAP_LAST_RING : n < last + edge ? CAP_EDGE_RING : CAP_BELT_RING;
+  if (s < last + 2u * edge) return s < edge ? CAP_BELT_RING : s < 2u * edge ? CAP_EDGE_RING : CAP_LAST_RING;
+  return 0u;
 }
 
 #if !PISCO_FF

@@ -93,15 +93,24 @@ void pack_sky_lo(std::size_t n, const double* xyz, float* out) {
   }
 }
 
-std::vector<std::uint32_t> pack_rings(const PreparedSky& sky, bool ff) {
+std::vector<std::uint32_t> pack_rings(const PreparedSky& sky, const CapBoundary& boundary, bool ff) {
   std::vector<std::uint32_t> rings;
-  rings.reserve(4 * sky.rings.size());
+  rings.reserve(4 * sky.rings.size() + 8);
   for (const RingEntry& r : sky.rings) {
     std::uint64_t z = 0;
     const double zv = ff ? ff_bits(r.z) : r.z;
     static_assert(sizeof(z) == sizeof(zv));
     std::memcpy(&z, &zv, sizeof(z));
     rings.insert(rings.end(), {std::uint32_t(z), std::uint32_t(z >> 32), r.first, r.count | (r.shifted ? 1u << 31 : 0u)});
+  }
+  // The monopole's weights on the rings about the caps' edges (kernel.glsl's cap_weight), float64 or
+  // float-float bits, low word first.
+  for (const uint ring : {0u, CAP_LAST_RING, CAP_EDGE_RING, CAP_BELT_RING}) {
+    const double w = boundary.weight(ring);
+    std::uint64_t bits = 0;
+    const double wv = ff ? ff_bits(w) : w;
+    std::memcpy(&bits, &wv, sizeof(bits));
+    rings.insert(rings.end(), {std::uint32_t(bits), std::uint32_t(bits >> 32)});
   }
   return rings;
 }
@@ -155,7 +164,6 @@ PushConstants push_constants(const EngineInputs& in, const Grids& grids, const K
   push.rho_max = det.rho_max;
   push.cos_rho_max = det.cos_rho_max;
   push.monopole = mode.monopole;
-  push.ring_weight = mode.boundary.weight;
   push.grid_a = det.grid_a;
   push.grid_inv_step = det.grid_inv_step;
   push.offset_quat[0] = det.offset.quat.x;
@@ -174,7 +182,7 @@ PushConstants push_constants(const EngineInputs& in, const Grids& grids, const K
   push.flags = (mode.per_sample ? PISCO_FLAG_PER_SAMPLE : 0u) | (quaternions || mode.ff ? PISCO_FLAG_QUATERNION : 0u) |
                (det.offset.active ? PISCO_FLAG_OFFSET : 0u);
   if (mode.ff)
-    for (double* x : {&push.rho_max, &push.cos_rho_max, &push.monopole, &push.ring_weight, &push.grid_a, &push.grid_inv_step,
+    for (double* x : {&push.rho_max, &push.cos_rho_max, &push.monopole, &push.grid_a, &push.grid_inv_step,
                       &push.offset_quat[0], &push.offset_quat[1], &push.offset_quat[2], &push.offset_quat[3]})
       *x = ff_bits(*x);
   return push;

@@ -50,8 +50,10 @@ void pack_sky(const std::array<std::span<const double>, 4>& maps, std::size_t ma
               std::size_t first, std::size_t n, const double* xyz, float* out);
 // 4 floats a pixel: k - float(k), 0.
 void pack_sky_lo(std::size_t n, const double* xyz, float* out);
-// One texel a ring: z (two words), first pixel, count | shifted << 31.
-std::vector<std::uint32_t> pack_rings(const PreparedSky& sky, bool ff);
+// One texel a ring: z (two words), first pixel, count | shifted << 31; then two texels of the
+// monopole's weights on the rings about the caps' edges, boundary.weight(ring) for ring 0 to 3 as
+// cap_boundary_ring numbers them (two words each).
+std::vector<std::uint32_t> pack_rings(const PreparedSky& sky, const CapBoundary& boundary, bool ff);
 
 // Every detector's beam grid: float32 weight pairs, and the float64 (or float-float) tables.
 struct Grids {

@@ -185,7 +185,7 @@ void VulkanBackend::setup(const vk::DeviceInfo& info, const SkyView& sky_maps, c
                 " texels in one texel buffer, but " + info.name + " binds at most " +
                 std::to_string(std::uint64_t(max_texels)) + " (maxTexelBufferElements); use the cpu backend", ErrorKind::device);
   upload_sky(sky.nside, {sky_maps.I(), sky_maps.Q(), sky_maps.U(), sky_maps.V()}, 0, sky_, sky_lo_, "the sky");
-  const std::vector<std::uint32_t> rings = vk::pack_rings(sky, mode_.ff);
+  const std::vector<std::uint32_t> rings = vk::pack_rings(sky, mode_.boundary, mode_.ff);
   rings_ = upload(rings.data(), rings.size() * sizeof(std::uint32_t), "the ring table");
 
   grids_ = vk::pack_grids(*in_, mode_);
