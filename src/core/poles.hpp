@@ -8,7 +8,7 @@
 // - the two rings where the polar caps meet the equatorial belt (z = +-2/3), where the rings' spacing
 //   changes its law: the rule's slope jumps there, and Euler-Maclaurin's term for the jump is
 //   -1/(12 NSIDE) of those rings' own pixel sum. That term is spread over each edge ring and its two
-//   neighbours (cap_boundary_weights), so that it holds for skies with power up to 3 NSIDE too.
+//   neighbours (kernel/cap_boundary.hpp), so that it holds for skies with power up to 3 NSIDE too.
 #pragma once
 
 #include <array>
