@@ -463,16 +463,6 @@ SkyBand band_of(const SkyView& maps, std::size_t first, std::size_t count) {
   return band;
 }
 
-namespace {
-// weigh_cap_boundaries (poles.hpp) on a band's pixels.
-void weigh_band(SkyBand& band) {
-  const CapBoundary b = cap_boundary(band.nside, Quadrature::corrected);
-  const std::size_t end = band.first + band.size();
-  for (const auto& [first, last] : cap_boundary_runs(band.nside))
-    for (auto& map : band.maps)
-      for (std::size_t p = std::max(first, band.first); p < std::min(last, end); ++p) map[p - band.first] *= b.at(p);
-}
-}  // namespace
 
 PolarSource polar_source(const SkyView& sky, double reach) {
   check_reach(sky.nside(), reach, "the sky's polar copy");
@@ -733,7 +723,7 @@ SkyBand polar_sky(const PolarSource& source, bool weigh_boundaries, unsigned thr
       }
     });
   }
-  if (weigh_boundaries) weigh_band(out);
+  if (weigh_boundaries) weigh_cap_boundaries(out.nside, out.first, {out.maps[0], out.maps[1], out.maps[2], out.maps[3]});
   return out;
 }
 
@@ -747,7 +737,7 @@ Sky polar_sky_adjoint(const SkyBand& maps, bool weigh_boundaries, double reach, 
                 std::to_string(first + count));
   const Base base(maps.nside, RING, SET_NSIDE);
   SkyBand in = maps;
-  if (weigh_boundaries) weigh_band(in);
+  if (weigh_boundaries) weigh_cap_boundaries(in.nside, in.first, {in.maps[0], in.maps[1], in.maps[2], in.maps[3]});
   Sky out(maps.nside);
   ThreadPool pool(threads ? threads : std::max(1u, std::thread::hardware_concurrency()));
   const std::shared_ptr<const PolarFit> fitted = polar_fit_for(maps.nside, reach, pool);

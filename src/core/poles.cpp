@@ -24,12 +24,15 @@ std::array<std::pair<std::size_t, std::size_t>, 2> cap_boundary_runs(int nside) 
   return {std::pair{north - 4 * (n - 1), north_end}, std::pair{std::max(south - 4 * n, north_end), south + 8 * n - 4}};
 }
 
-void weigh_cap_boundaries(Sky& sky) {
-  const CapBoundary b = cap_boundary(sky.nside(), Quadrature::corrected);
-  for (const auto& [first, end] : cap_boundary_runs(sky.nside()))
-    for (auto map : {sky.I(), sky.Q(), sky.U(), sky.V()})
-      for (std::size_t p = first; p < end; ++p) map[p] *= b.at(p);
+void weigh_cap_boundaries(int nside, std::size_t first, const std::array<std::span<double>, 4>& maps) {
+  const CapBoundary b = cap_boundary(nside, Quadrature::corrected);
+  const std::size_t end = first + maps[0].size();
+  for (const auto& [begin, stop] : cap_boundary_runs(nside))
+    for (const std::span<double> map : maps)
+      for (std::size_t p = std::max(begin, first); p < std::min(stop, end); ++p) map[p - first] *= b.at(p);
 }
+
+void weigh_cap_boundaries(Sky& sky) { weigh_cap_boundaries(sky.nside(), 0, {sky.I(), sky.Q(), sky.U(), sky.V()}); }
 
 double polar_cut(double rho_max, int nside) {
   const double pixel = std::sqrt(std::numbers::pi / 3.0) / nside;

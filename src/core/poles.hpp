@@ -35,8 +35,10 @@ CapBoundary cap_boundary(int nside, Quadrature quadrature);
 // to 3 NSIDE + 1.
 std::array<std::pair<std::size_t, std::size_t>, 2> cap_boundary_runs(int nside);
 
-// Multiplies the pixels of those six rings (all four Stokes maps) by their weights.
+// Multiplies the pixels of those six rings (all four Stokes maps) by their weights: a whole sky's, or
+// the maps of the pixels [first, first + size) of a sky at `nside` (a polar copy's band).
 void weigh_cap_boundaries(Sky& sky);
+void weigh_cap_boundaries(int nside, std::size_t first, const std::array<std::span<double>, 4>& maps);
 
 // The rotation R that takes the sky to its polar copy: 90 deg about y, (x, y, z) -> (z, y, -x). The
 // poles land on the equator at phi = 0 and pi; the old equator's points (+-1, 0, 0) become the poles.
