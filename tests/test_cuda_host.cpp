@@ -11,6 +11,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <string>
 
 #include <healpix_base.h>
 #include <pointing.h>
@@ -99,7 +100,9 @@ struct HostDevice {
   std::vector<pc::KernelDetector> detectors;
   bool monopole = false, per_sample = false;
 
-  HostDevice(const pisco::detail::EngineInputs& in, const pisco::Sky& maps) {
+  // With `four_columns`, every detector's float32 weights in the 4-column layout; otherwise in the
+  // kernel's (kernel_columns).
+  HostDevice(const pisco::detail::EngineInputs& in, const pisco::Sky& maps, bool four_columns = false) {
     const double i0 = pisco::detail::float32_monopole(maps);
     monopole = i0 != 0.0;
     per_sample = in.normalization == pisco::Normalization::per_sample;
@@ -107,13 +110,16 @@ struct HostDevice {
     pixels = pc::pixel_records(maps, i0, boundary);
     vectors = pc::pixel_vectors(maps);
     sky = {pixels.data(), vectors.data(), in.sky.rings.data(), in.sky.nside, i0, boundary};
+    std::vector<int> columns;
     for (const auto& d : in.detectors) {
-      weights.push_back(pc::float_weights(d));
+      columns.push_back(four_columns ? 4 : pc::kernel_columns(d));
+      weights.push_back(pc::float_weights(d, columns.back()));
       weights64.push_back(pc::float64_weights(d));
       plates.push_back(pc::plate_weights(d));
     }
     for (std::size_t k = 0; k < in.detectors.size(); ++k)
-      detectors.push_back(pc::kernel_detector(in.detectors[k], weights[k].data(), weights64[k].data(), plates[k].data()));
+      detectors.push_back(pc::kernel_detector(in.detectors[k], weights[k].data(), columns[k], weights64[k].data(),
+                                              plates[k].data()));
   }
 };
 
@@ -137,7 +143,7 @@ struct Emulated {
 // convolve_kernel of convolve.cu for every sample, one warp emulated on the host.
 // With `quats` (4 doubles a sample), the pointing is boresight quaternions rather than p's angles;
 // with `plate_angle`, the detector has an aperture plate at those angles (from its axis).
-template <bool Radial, bool Monopole, bool PerSample, bool Plate>
+template <bool Radial, bool Monopole, bool PerSample, bool Plate, int Columns>
 Emulated emulate(const pc::KernelSky& sky, const pc::KernelDetector& det, const pisco::Pointing& p,
                  const double* quats, const double* plate_angle) {
   Emulated out;
@@ -154,8 +160,8 @@ Emulated emulate(const pc::KernelSky& sky, const pc::KernelDetector& det, const 
     out.pixels += pc::walk_disc(sky, det, theta, phi, first, offset, true, [&](int count) {
       ++batches;
       for (int l = 0; l < pc::warp_lanes; ++l)
-        pc::process_batch<Radial, Monopole, PerSample, Plate>(sky, det, f, fd, first, offset, count, l, lanes[l],
-                                                              &plate);
+        pc::process_batch<Radial, Monopole, PerSample, Plate, Columns>(sky, det, f, fd, first, offset, count, l,
+                                                                       lanes[l], &plate);
     });
     out.most_batches = std::max(out.most_batches, batches);
     float sums[pc::warp_lanes];
@@ -173,8 +179,11 @@ Emulated emulate(const pc::KernelSky& sky, const pc::KernelDetector& det, const 
 template <bool Radial, bool Monopole, bool PerSample>
 Emulated emulate_plate(const HostDevice& dev, std::size_t d, const pisco::Pointing& p, const double* quats,
                        const double* plate_angle) {
-  if (plate_angle) return emulate<Radial, Monopole, PerSample, true>(dev.sky, dev.detectors[d], p, quats, plate_angle);
-  return emulate<Radial, Monopole, PerSample, false>(dev.sky, dev.detectors[d], p, quats, nullptr);
+  // The kernels' variants as convolve.cu's launch picks them: behind a plate always four columns.
+  const pc::KernelDetector& det = dev.detectors[d];
+  if (plate_angle) return emulate<Radial, Monopole, PerSample, true, 4>(dev.sky, det, p, quats, plate_angle);
+  if (det.columns == 2) return emulate<Radial, Monopole, PerSample, false, 2>(dev.sky, det, p, quats, nullptr);
+  return emulate<Radial, Monopole, PerSample, false, 4>(dev.sky, det, p, quats, nullptr);
 }
 
 Emulated emulate(const HostDevice& dev, std::size_t d, bool radial, const pisco::Pointing& p,
@@ -358,7 +367,7 @@ struct EmulatedAdjoint {
 // convolve.cu's adjoint for one detector, lanes in order and samples in the order given (reversed
 // with `reverse`): the norm pass (convolve_kernel with Norms) where per-sample, the batch's scale,
 // scatter_kernel's integer sums, and the fold (gpu/fixed_point.hpp).
-template <bool Radial, bool Float64, bool Plate>
+template <bool Radial, bool Float64, bool Plate, int Columns>
 EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::PreparedDetector& prepared, std::size_t d,
                                 const pisco::Pointing& p, std::vector<double> values, const double* plate_angle,
                                 bool reverse) {
@@ -380,7 +389,8 @@ EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::Prep
       pc::LaneSums lanes[pc::warp_lanes];
       pc::walk_disc(sky, det, theta, phi, first, offset, true, [&](int count) {
         for (int l = 0; l < pc::warp_lanes; ++l)
-          pc::process_batch<Radial, false, true, Plate>(sky, det, f, fd, first, offset, count, l, lanes[l], &plate);
+          pc::process_batch<Radial, false, true, Plate, Columns>(sky, det, f, fd, first, offset, count, l, lanes[l],
+                                                                 &plate);
       });
       double norm[pc::warp_lanes];
       for (int l = 0; l < pc::warp_lanes; ++l) norm[l] = lanes[l].norm;
@@ -401,8 +411,9 @@ EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::Prep
     if constexpr (Plate) plate = pc::plate_sample(det, plate_angle[i]);
     pc::walk_disc(sky, det, theta, phi, first, offset, true, [&](int count) {
       for (int l = 0; l < pc::warp_lanes; ++l)
-        pc::scatter_batch<Radial, Float64, Plate, false>(sky, det, f, fd, first, offset, count, l, values[i], &plate,
-                                                       [&](std::size_t c, std::int64_t q) { out.sums[c] += q; });
+        pc::scatter_batch<Radial, Float64, Plate, false, Columns>(
+            sky, det, f, fd, first, offset, count, l, values[i], &plate,
+            [&](std::size_t c, std::int64_t q) { out.sums[c] += q; });
     });
   }
   for (auto& m : out.maps) m.assign(npix, 0.0);
@@ -410,20 +421,25 @@ EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::Prep
   return out;
 }
 
+template <bool Radial, bool Float64>
+EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::PreparedDetector& prepared, std::size_t d,
+                                const pisco::Pointing& p, const std::vector<double>& values, const double* plate_angle,
+                                bool reverse) {
+  if (plate_angle) return emulate_adjoint<Radial, Float64, true, 4>(dev, prepared, d, p, values, plate_angle, reverse);
+  if (dev.detectors[d].columns == 2)
+    return emulate_adjoint<Radial, Float64, false, 2>(dev, prepared, d, p, values, plate_angle, reverse);
+  return emulate_adjoint<Radial, Float64, false, 4>(dev, prepared, d, p, values, plate_angle, reverse);
+}
+
 EmulatedAdjoint emulate_adjoint(const HostDevice& dev, const pisco::detail::PreparedDetector& prepared, std::size_t d,
                                 const pisco::Pointing& p, const std::vector<double>& values, const double* plate_angle,
                                 bool reverse = false) {
-  const int v = (prepared.radial ? 4 : 0) + (dev.monopole || dev.per_sample ? 2 : 0) + (plate_angle ? 1 : 0);
-  switch (v) {
-    case 0: return emulate_adjoint<false, false, false>(dev, prepared, d, p, values, plate_angle, reverse);
-    case 1: return emulate_adjoint<false, false, true>(dev, prepared, d, p, values, plate_angle, reverse);
-    case 2: return emulate_adjoint<false, true, false>(dev, prepared, d, p, values, plate_angle, reverse);
-    case 3: return emulate_adjoint<false, true, true>(dev, prepared, d, p, values, plate_angle, reverse);
-    case 4: return emulate_adjoint<true, false, false>(dev, prepared, d, p, values, plate_angle, reverse);
-    case 5: return emulate_adjoint<true, false, true>(dev, prepared, d, p, values, plate_angle, reverse);
-    case 6: return emulate_adjoint<true, true, false>(dev, prepared, d, p, values, plate_angle, reverse);
-    default: return emulate_adjoint<true, true, true>(dev, prepared, d, p, values, plate_angle, reverse);
-  }
+  const bool float64 = dev.monopole || dev.per_sample;
+  if (prepared.radial)
+    return float64 ? emulate_adjoint<true, true>(dev, prepared, d, p, values, plate_angle, reverse)
+                   : emulate_adjoint<true, false>(dev, prepared, d, p, values, plate_angle, reverse);
+  return float64 ? emulate_adjoint<false, true>(dev, prepared, d, p, values, plate_angle, reverse)
+                 : emulate_adjoint<false, false>(dev, prepared, d, p, values, plate_angle, reverse);
 }
 
 // The adjoint kernel's arithmetic against the reference's adjoint (the maps of every detector, at the
@@ -494,6 +510,48 @@ TEST(CudaHostKernel, AdjointMatchesTheReferenceAndTheForward) {
         if (d == 0) EXPECT_EQ(emulate_adjoint(dev, in.detectors[d], d, p, values, plate_angle, true).sums, got.sums) << what;
       }
     }
+}
+
+// The weights of detectors without w_U and w_V as (w_I, w_Q) pairs, one 16-byte load a node pair
+// (kernel_columns, IQPairGrid): the same TOD values (equal as numbers) and the same adjoint integers
+// as the 4-column layout, for radial and 2D beams, both normalizations, a plain and a 2.725 K monopole
+// sky, over the whole sphere and across both poles. The scene holds detectors of both layouts.
+TEST(CudaHostKernel, TwoColumnWeightsGiveTheFourColumnValues) {
+  pisco::Pointing p = random_pointing(400, 29);
+  for (int i = 0; i < 40; ++i) p.push_back(i % 2 ? pi - 0.05 * i * deg : 0.05 * i * deg, 0.37 * i, 0.11 * i);
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> g;
+  std::vector<double> values(p.size());
+  for (double& v : values) v = g(rng);
+  int paired = 0, four = 0;
+  for (const double monopole : {0.0, 2.725})
+    for (const auto norm : {pisco::Normalization::integral, pisco::Normalization::per_sample}) {
+      const Scene s = scene(32, monopole);
+      const auto in = pisco::detail::prepare_inputs(s.sky, s.beams, s.focal_plane, norm);
+      const HostDevice dev(in, s.sky), all_four(in, s.sky, true);
+      for (std::size_t d = 0; d < s.focal_plane.size(); ++d) {
+        const std::string what = s.focal_plane[d].name + (monopole ? ", monopole sky" : "") +
+                                 (norm == pisco::Normalization::per_sample ? ", per sample" : "");
+        EXPECT_EQ(all_four.detectors[d].columns, 4);
+        if (dev.detectors[d].columns != 2) {
+          ++four;
+          continue;
+        }
+        ++paired;
+        const bool radial = in.detectors[d].radial;
+        const Emulated a = emulate(dev, d, radial, p), b = emulate(all_four, d, radial, p);
+        ASSERT_EQ(a.tod.size(), b.tod.size());
+        std::size_t differ = 0;
+        for (std::size_t i = 0; i < a.tod.size(); ++i) differ += a.tod[i] != b.tod[i];
+        EXPECT_EQ(differ, 0u) << what << ": samples whose values differ";
+        EXPECT_EQ(a.pixels, b.pixels) << what;
+        EXPECT_EQ(emulate_adjoint(dev, in.detectors[d], d, p, values, nullptr).sums,
+                  emulate_adjoint(all_four, in.detectors[d], d, p, values, nullptr).sums)
+            << what;
+      }
+    }
+  EXPECT_GT(paired, 0) << "no detector took the paired layout";
+  EXPECT_GT(four, 0) << "no detector kept four columns";
 }
 
 // The cooperative disc walk (sample.hpp; convolve.cu's walk_disc_warp), its warp steps run lane by

@@ -57,6 +57,12 @@ std::vector<float> float32_weights(const PreparedDetector& d) {
   return w32;
 }
 
+int weight_columns(const PreparedDetector& d) {
+  for (std::size_t k = 0; k + 3 < d.weights.size(); k += 4)
+    if (d.weights[k + 2] != 0.0 || d.weights[k + 3] != 0.0) return 4;
+  return 2;
+}
+
 struct PixelVectors::Impl {
   Healpix_Base base;
 };

@@ -93,6 +93,11 @@ std::vector<double> reference_pixels(int nside, std::size_t first, const std::ar
 // twice as long. What is dropped adds up to less than 1e-12 of the response. One rule for both
 // float32 backends (docs/vulkan.md, "Precision").
 std::vector<float> float32_weights(const PreparedDetector& detector);
+// The weight columns a device table needs for `detector`: 2 when its w_U and w_V vanish at every node
+// (any beam without cross-polar response or Mueller leakage into U and V), so that a node and its
+// neighbour fit one 16-byte texel, (w_I, w_Q) of each; 4 otherwise. The vulkan and cuda backends'
+// layouts (docs/vulkan.md, docs/cuda.md).
+int weight_columns(const PreparedDetector& detector);
 // The monopole the float32 backends take out of the sky (docs/vulkan.md, "Precision"): the mean I0 of
 // I when it dominates the map, that is when |I0| > 10 x the RMS of I - I0; 0 otherwise. They add
 // I0 sum_k w_I(k) back in float64.

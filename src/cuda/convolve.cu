@@ -10,6 +10,20 @@ constexpr int warps_per_block = 8;
 constexpr int block_threads = warps_per_block * warp_lanes;
 constexpr unsigned full_mask = 0xffffffffu;
 
+// The blocks of block_threads an SM each variant is compiled to hold (__launch_bounds__'s second
+// argument; 0 leaves the registers to ptxas): 6 (40 registers a thread, 75% occupancy) for the radial
+// profile's float32 variants, 5 (48 registers, 62.5%) for the 2D grid's two-column ones, where ptxas
+// then keeps the pixel loop free of local memory and adds at most 7 instructions to it, its spills
+// falling in the disc walk and the frame (tests/cuda/kernel_budgets.py holds every variant's pixel
+// loop to that and to its instruction budget). The others keep more live in the loop (the float64
+// sums, a plate's matrix, four columns of a 2D grid) and spill there when held to fewer registers.
+template <bool Radial, bool Float64, bool Plate, int Columns>
+constexpr int min_blocks() {
+  if (Float64 || Plate) return 0;
+  if (Radial) return 6;
+  return Columns == 2 ? 5 : 0;
+}
+
 template <class T>
 __device__ __forceinline__ T warp_sum(T v) {
   // Butterfly: a fixed order, so the result does not depend on timing.
@@ -90,9 +104,10 @@ __device__ __forceinline__ std::uint32_t walk_warp_sample(const KernelSky& sky, 
 }
 
 // With Norms (the adjoint's first pass, PerSample and no Monopole), each sample's normalization is
-// written instead of its value.
-template <bool Radial, bool Monopole, bool PerSample, bool Plate, bool Norms = false>
-__global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, KernelDetector det, ChunkArgs chunk) {
+// written instead of its value. Columns: the float32 weights' layout (sample.hpp, FloatGrid).
+template <bool Radial, bool Monopole, bool PerSample, bool Plate, bool Norms, int Columns>
+__global__ void __launch_bounds__(block_threads, min_blocks<Radial, Monopole || PerSample, Plate, Columns>())
+    convolve_kernel(KernelSky sky, KernelDetector det, ChunkArgs chunk) {
   const int warp = int(threadIdx.x) / warp_lanes;
   const int lane = int(threadIdx.x) % warp_lanes;
   const std::size_t i = std::size_t(blockIdx.x) * warps_per_block + warp;
@@ -103,7 +118,8 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
       sky, det, chunk.pointing, chunk.quaternions, chunk.plate_angle, i, warp, lane,
       [&](const SampleFrame<float>& f, const SampleFrame<double>& fd, const std::uint32_t* first,
           const std::uint32_t* offset, int count, const PlateSample& plate) {
-        process_batch<Radial, Monopole, PerSample, Plate>(sky, det, f, fd, first, offset, count, lane, acc, &plate);
+        process_batch<Radial, Monopole, PerSample, Plate, Columns>(sky, det, f, fd, first, offset, count, lane, acc,
+                                                                   &plate);
       });
 
   const float sum = warp_sum(lane_total(acc));
@@ -117,8 +133,9 @@ __global__ void __launch_bounds__(block_threads) convolve_kernel(KernelSky sky, 
 
 // The adjoint's scatter (sample.hpp, scatter_batch): one warp per sample, its value times each pixel's
 // adjoint weights added to the fixed-point maps with integer atomics.
-template <bool Radial, bool Float64, bool Plate, bool Squares>
-__global__ void __launch_bounds__(block_threads) scatter_kernel(KernelSky sky, KernelDetector det, AdjointArgs chunk) {
+template <bool Radial, bool Float64, bool Plate, bool Squares, int Columns>
+__global__ void __launch_bounds__(block_threads, min_blocks<Radial, Float64, Plate, Columns>())
+    scatter_kernel(KernelSky sky, KernelDetector det, AdjointArgs chunk) {
   const int warp = int(threadIdx.x) / warp_lanes;
   const int lane = int(threadIdx.x) % warp_lanes;
   const std::size_t i = std::size_t(blockIdx.x) * warps_per_block + warp;
@@ -131,30 +148,33 @@ __global__ void __launch_bounds__(block_threads) scatter_kernel(KernelSky sky, K
       sky, det, chunk.pointing, chunk.quaternions, chunk.plate_angle, i, warp, lane,
       [&](const SampleFrame<float>& f, const SampleFrame<double>& fd, const std::uint32_t* first,
           const std::uint32_t* offset, int count, const PlateSample& plate) {
-        scatter_batch<Radial, Float64, Plate, Squares>(
+        scatter_batch<Radial, Float64, Plate, Squares, Columns>(
             sky, det, f, fd, first, offset, count, lane, value, &plate,
             [&](std::size_t k, std::int64_t q) { atomicAdd(sums + k, static_cast<unsigned long long>(q)); });
       });
   if (lane == 0) atomicAdd(chunk.pixels, static_cast<unsigned long long>(pixels));
 }
 
-template <bool Radial, bool Float64, bool Plate>
+template <bool Radial, bool Float64, bool Plate, int Columns>
 void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool squares,
                     cudaStream_t stream) {
   const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
   if (squares)
-    scatter_kernel<Radial, Float64, Plate, true><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+    scatter_kernel<Radial, Float64, Plate, true, Columns><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
   else
-    scatter_kernel<Radial, Float64, Plate, false><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+    scatter_kernel<Radial, Float64, Plate, false, Columns><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
 }
 
+// Behind a plate, always the four columns (kernel_columns); elsewhere the detector's layout.
 template <bool Radial, bool Float64>
 void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool plate, bool squares,
                     cudaStream_t stream) {
   if (plate)
-    launch_scatter<Radial, Float64, true>(sky, det, chunk, squares, stream);
+    launch_scatter<Radial, Float64, true, 4>(sky, det, chunk, squares, stream);
+  else if (det.columns == 2)
+    launch_scatter<Radial, Float64, false, 2>(sky, det, chunk, squares, stream);
   else
-    launch_scatter<Radial, Float64, false>(sky, det, chunk, squares, stream);
+    launch_scatter<Radial, Float64, false, 4>(sky, det, chunk, squares, stream);
 }
 
 template <bool Radial>
@@ -166,24 +186,36 @@ void launch_scatter(const KernelSky& sky, const KernelDetector& det, const Adjoi
     launch_scatter<Radial, false>(sky, det, chunk, plate, squares, stream);
 }
 
-template <bool Radial, bool Plate>
+template <bool Radial, bool Plate, int Columns>
 void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
   const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
-  convolve_kernel<Radial, false, true, Plate, true><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+  convolve_kernel<Radial, false, true, Plate, true, Columns><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
 }
 
-template <bool Radial, bool Monopole, bool PerSample, bool Plate>
+template <bool Radial, bool Plate>
+void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
+  if (!Plate && det.columns == 2)
+    launch_norms<Radial, false, 2>(sky, det, chunk, stream);
+  else
+    launch_norms<Radial, Plate, 4>(sky, det, chunk, stream);
+}
+
+template <bool Radial, bool Monopole, bool PerSample, bool Plate, int Columns>
 void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
   const unsigned blocks = unsigned((std::size_t(chunk.count) + warps_per_block - 1) / warps_per_block);
-  convolve_kernel<Radial, Monopole, PerSample, Plate><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
+  convolve_kernel<Radial, Monopole, PerSample, Plate, false, Columns><<<blocks, block_threads, 0, stream>>>(sky, det,
+                                                                                                          chunk);
 }
 
+// Behind a plate, always the four columns (kernel_columns); elsewhere the detector's layout.
 template <bool Radial, bool Monopole, bool PerSample>
 void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool plate, cudaStream_t stream) {
   if (plate)
-    launch<Radial, Monopole, PerSample, true>(sky, det, chunk, stream);
+    launch<Radial, Monopole, PerSample, true, 4>(sky, det, chunk, stream);
+  else if (det.columns == 2)
+    launch<Radial, Monopole, PerSample, false, 2>(sky, det, chunk, stream);
   else
-    launch<Radial, Monopole, PerSample, false>(sky, det, chunk, stream);
+    launch<Radial, Monopole, PerSample, false, 4>(sky, det, chunk, stream);
 }
 
 template <bool Radial, bool Monopole>
@@ -228,7 +260,7 @@ void launch_scatter(const KernelSky& sky, const KernelDetector& det, const Adjoi
 
 void check_kernel_image(const std::string& device) {
   cudaFuncAttributes attributes{};
-  const cudaError_t status = cudaFuncGetAttributes(&attributes, convolve_kernel<false, false, false, false>);
+  const cudaError_t status = cudaFuncGetAttributes(&attributes, convolve_kernel<false, false, false, false, false, 4>);
   if (status != cudaSuccess) {
     cudaGetLastError();
     throw Error("cuda: the kernel cannot run on " + device + ": " + cudaGetErrorString(status) +

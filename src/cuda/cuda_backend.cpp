@@ -66,10 +66,11 @@ class CudaBackend final : public Backend {
 
     for (const PreparedDetector& d : in_->detectors) {
       DetectorData data;
-      data.weights = upload(float_weights(d));
+      const int columns = kernel_columns(d);
+      data.weights = upload(float_weights(d, columns));
       if (float64()) data.weights64 = upload(float64_weights(d));
       if (float64() && d.plate == PreparedDetector::Plate::aperture) data.plate = upload(plate_weights(d));
-      data.kernel = kernel_detector(d, data.weights.data(), data.weights64.data(), data.plate.data());
+      data.kernel = kernel_detector(d, data.weights.data(), columns, data.weights64.data(), data.plate.data());
       detectors_.push_back(std::move(data));
     }
 

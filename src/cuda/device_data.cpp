@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <thread>
 
 #include "pisco/error.hpp"
@@ -58,7 +59,25 @@ std::vector<double> pixel_vectors(int nside, std::size_t first_pixel, std::size_
 
 std::vector<double> pixel_vectors(const SkyView& sky) { return pixel_vectors(sky.nside(), 0, sky.npix()); }
 
-std::vector<float> float_weights(const PreparedDetector& det) { return float32_weights(det); }
+int kernel_columns(const PreparedDetector& det) {
+  return det.plate == PreparedDetector::Plate::aperture ? 4 : weight_columns(det);
+}
+
+std::vector<float> float_weights(const PreparedDetector& det, int columns) {
+  std::vector<float> w = float32_weights(det);
+  if (columns == 4) return w;
+  const std::size_t nodes = w.size() / 4;
+  std::vector<float> pairs(w.size(), 0.0f);
+  for (std::size_t k = 0; k < nodes; ++k) {
+    pairs[4 * k] = w[4 * k];
+    pairs[4 * k + 1] = w[4 * k + 1];
+    if (k + 1 < nodes) {
+      pairs[4 * k + 2] = w[4 * k + 4];
+      pairs[4 * k + 3] = w[4 * k + 5];
+    }
+  }
+  return pairs;
+}
 
 std::vector<double> float64_weights(const PreparedDetector& det) {
   const std::size_t nodes = det.weights.size() / 4;
@@ -78,8 +97,11 @@ std::vector<double> plate_weights(const PreparedDetector& det) {
   return out;
 }
 
-KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, const double* weights64,
-                               const double* plate) {
+KernelDetector kernel_detector(const PreparedDetector& det, const float* weights, int columns,
+                               const double* weights64, const double* plate) {
+  if (columns != 4 && (columns != 2 || kernel_columns(det) != 2))
+    throw Error("cuda backend: " + std::to_string(columns) + " weight columns for a detector that needs " +
+                std::to_string(kernel_columns(det)));
   // The kernel reads each node's weights with 16-byte loads (contribution-inl.hpp, weight_pair).
   for (const void* table : {static_cast<const void*>(weights), static_cast<const void*>(weights64),
                             static_cast<const void*>(plate)})
@@ -87,6 +109,7 @@ KernelDetector kernel_detector(const PreparedDetector& det, const float* weights
       throw Error("cuda backend: a detector's weight table is not 16-byte aligned");
   KernelDetector k{};
   k.weights = weights;
+  k.columns = columns;
   k.weights64 = weights64;
   k.plate_weights = plate;
   for (int i = 0; i < 4; ++i)

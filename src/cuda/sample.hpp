@@ -23,6 +23,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 
 #include "kernel/cap_boundary.hpp"
 #include "kernel/contribution.hpp"
@@ -53,7 +54,10 @@ struct KernelSky {
 };
 
 struct KernelDetector {
-  const float* weights;         // w per node, 4 floats (reference layout, converted)
+  // w per node, 4 floats (reference layout, converted); with columns == 2, (w_I, w_Q) of node k and of
+  // node k + 1 (IQPairGrid), for detectors without w_U and w_V (device_data.hpp, kernel_columns)
+  const float* weights;
+  int columns;
   const double* weights64;      // (w_I, wn, 0, 0) per node in double; only on the float64 path
   const double* plate_weights;  // aperture plates: (w_Q, w_U, w_V, 0) per node in double, for the float64 sums
   int grid_n;
@@ -125,8 +129,8 @@ PISCO_HD std::uint32_t batch_pixel(const std::uint32_t* first, const std::uint32
 // On the float64 path (Float64), the beam coordinates come from the float64 pixel vectors, which float32 pixel vectors
 // would carry only to ~1e-7 (the largest float32 error otherwise, on steep beams); they are returned
 // in x, y for the float64 sums.
-template <bool Radial, bool Float64, bool Plate>
-PISCO_HD Vec4<float> pixel_weights(const KernelSky& sky, const ArrayGrid<float>& grid, const SampleFrame<float>& f,
+template <bool Radial, bool Float64, bool Plate, class Grid>
+PISCO_HD Vec4<float> pixel_weights(const KernelSky& sky, const Grid& grid, const SampleFrame<float>& f,
                                    const SampleFrame<double>& fd, std::uint32_t p, const PixelRecord& px,
                                    const PlateSample* plate, PixelGeometry<float>& g, double& x, double& y) {
   const Vec3<float> k{px.kx, px.ky, px.kz};
@@ -143,16 +147,29 @@ PISCO_HD Vec4<float> pixel_weights(const KernelSky& sky, const ArrayGrid<float>&
   return w;
 }
 
+// The float32 beam grid of a kernel variant: 4 columns a node (ArrayGrid), or with Columns == 2 the
+// (w_I, w_Q) pairs of IQPairGrid, one 16-byte load a node pair, whose U and V weights are zeros.
+template <int Columns>
+using FloatGrid = std::conditional_t<Columns == 2, IQPairGrid<float>, ArrayGrid<float>>;
+
+template <int Columns>
+PISCO_HD FloatGrid<Columns> float_grid(const KernelDetector& det) {
+  return {det.weights, det.grid_n, det.grid_a, det.grid_inv_step};
+}
+
 // The pixels of one batch that fall to `lane`: positions lane, lane + 32, ... of the batch. The
 // float64 path (Float64) is taken for the monopole's weight and for the per-sample normalization.
-template <bool Radial, bool Monopole, bool PerSample, bool Plate = false>
+// With Columns == 2 (no w_U, w_V; never behind a plate) the response leaves out the zero U and V
+// terms (stokes_response_iq): the same values.
+template <bool Radial, bool Monopole, bool PerSample, bool Plate = false, int Columns = 4>
 PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
                             const SampleFrame<double>& fd, const std::uint32_t* first,
                             const std::uint32_t* offset, int count, int lane, LaneSums& acc,
                             const PlateSample* plate = nullptr) {
   constexpr bool Float64 = Monopole || PerSample;
+  static_assert(Columns == 4 || (Columns == 2 && !Plate), "a plate mixes all four columns");
   const std::uint32_t total = offset[count];
-  const ArrayGrid<float> grid{det.weights, det.grid_n, det.grid_a, det.grid_inv_step};
+  const FloatGrid<Columns> grid = float_grid<Columns>(det);
   const ArrayGrid<double> weights64{det.weights64, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
   const ArrayGrid<double> plate64{det.plate_weights, det.grid_n, det.grid_a_d, det.grid_inv_step_d};
   int r = 0;
@@ -163,7 +180,8 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
     PixelGeometry<float> g;
     double x = 0.0, y = 0.0;
     const Vec4<float> w = pixel_weights<Radial, Float64, Plate>(sky, grid, f, fd, p, px, plate, g, x, y);
-    kahan_add(acc, stokes_response(w, g.cos2chi, g.sin2chi, S));
+    kahan_add(acc, Columns == 2 ? stokes_response_iq(w, g.cos2chi, g.sin2chi, S)
+                                : stokes_response(w, g.cos2chi, g.sin2chi, S));
     if constexpr (Float64) {
       const Vec4<double> we =
           Radial ? interpolate_radial(weights64, x * x + y * y) : interpolate_weights(weights64, x, y);
@@ -187,22 +205,36 @@ PISCO_HD void process_batch(const KernelSky& sky, const KernelDetector& det, con
 // round(v g_c) for its Stokes components c, g = stokes_adjoint(w, chi) (g_c^2 with Squares, the diagonal
 // of A^T A; kernel/fixed_point.glsl's fixed_share), through add(4 p + c, q): an integer atomic on the
 // device, so that the sums are the same bits whatever the order of the warps. The geometry and weights
-// are the forward's (Float64 as the forward's).
-template <bool Radial, bool Float64, bool Plate, bool Squares, class Add>
+// are the forward's (Float64 as the forward's). With Columns == 2, the V weight is zero and the U
+// weight's terms of w_U are signed zeros (stokes_adjoint_iq): the same integers.
+template <bool Radial, bool Float64, bool Plate, bool Squares, int Columns = 4, class Add>
 PISCO_HD void scatter_batch(const KernelSky& sky, const KernelDetector& det, const SampleFrame<float>& f,
                             const SampleFrame<double>& fd, const std::uint32_t* first, const std::uint32_t* offset,
                             int count, int lane, double value, const PlateSample* plate, Add&& add) {
+  static_assert(Columns == 4 || (Columns == 2 && !Plate), "a plate mixes all four columns");
   const std::uint32_t total = offset[count];
-  const ArrayGrid<float> grid{det.weights, det.grid_n, det.grid_a, det.grid_inv_step};
+  const FloatGrid<Columns> grid = float_grid<Columns>(det);
   int r = 0;
   for (std::uint32_t j = std::uint32_t(lane); j < total; j += warp_lanes) {
     const std::uint32_t p = batch_pixel(first, offset, j, r);
     PixelGeometry<float> g;
     double x = 0.0, y = 0.0;
     const Vec4<float> w = pixel_weights<Radial, Float64, Plate>(sky, grid, f, fd, p, sky.pixels[p], plate, g, x, y);
-    const Vec4<float> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
-    const float gs[4] = {a.x, a.y, a.z, a.w};
-    for (int c = 0; c < 4; ++c)
+    constexpr int stokes = Columns == 2 ? 3 : 4;  // I, Q, U (V's weight is zero) or I, Q, U, V
+    float gs[stokes];
+    if constexpr (Columns == 2) {
+      const Vec3<float> a = stokes_adjoint_iq(w, g.cos2chi, g.sin2chi);
+      gs[0] = a.x;
+      gs[1] = a.y;
+      gs[2] = a.z;
+    } else {
+      const Vec4<float> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
+      gs[0] = a.x;
+      gs[1] = a.y;
+      gs[2] = a.z;
+      gs[3] = a.w;
+    }
+    for (int c = 0; c < stokes; ++c)
       if (const std::int64_t q = fixed_share(value, gs[c], Squares)) add(4 * std::size_t(p) + std::size_t(c), q);
   }
 }

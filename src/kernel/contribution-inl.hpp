@@ -118,6 +118,40 @@ PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& e
   weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
 }
 
+// A beam grid of two columns stored a node pair to four values: entry k holds (w_I, w_Q) of node k
+// and of node k + 1, so that weight_pair is one 16-byte load on a CUDA device (the vulkan backend's
+// COLUMNS == 2 layout; src/cuda/device_data.hpp builds it). For detectors whose w_U and w_V vanish
+// (core/prepared.hpp, weight_columns): the weights' U and V come out as zeros.
+template <class T>
+struct IQPairGrid {
+  const T* weights;
+  int n;
+  T a, inv_step;
+};
+
+template <class T>
+PISCO_HD void weight_pair(const IQPairGrid<T>& g, int k, Vec4<T>& w, Vec4<T>& next) {
+  const T* p = g.weights + 4 * k;
+  w = {p[0], p[1], T(0), T(0)};
+  next = {p[2], p[3], T(0), T(0)};
+}
+#if defined(__CUDA_ARCH__)
+__device__ __forceinline__ void weight_pair(const IQPairGrid<float>& g, int k, Vec4<float>& w, Vec4<float>& next) {
+  const float4 t = reinterpret_cast<const float4*>(g.weights)[k];
+  w = {t.x, t.y, 0.0f, 0.0f};
+  next = {t.z, t.w, 0.0f, 0.0f};
+}
+#endif
+
+template <class T>
+PISCO_HD void edge_x_pair(const IQPairGrid<T>& g, int /*k*/, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
+  weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
+}
+template <class T>
+PISCO_HD void edge_y_pair(const IQPairGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& ey1) {
+  weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
+}
+
 // pixel.glsl, plate.glsl and fixed_point.glsl as C++ templates of T (and of the grid type G), between
 // kernel/text_begin.hpp and text_end.hpp.
 #include "kernel/text_begin.hpp"

@@ -11,15 +11,6 @@
 namespace pisco::detail::vk {
 namespace {
 
-// Weights stored per beam node: 2 when the detector's w_U and w_V vanish everywhere (any beam
-// without cross-polar response or Mueller leakage into U and V), so that a node and its neighbour fit
-// one 16-byte texel; 4 otherwise.
-std::uint32_t weight_columns(const PreparedDetector& d) {
-  for (std::size_t k = 0; k < d.weights.size(); k += 4)
-    if (d.weights[k + 2] != 0.0 || d.weights[k + 3] != 0.0) return 4;
-  return 2;
-}
-
 // x - double(float(x)): what float(x) lacks of x. Kept out of line: GCC 12's vectorizer at -O3 folds
 // x - double(float(x)) to zero when this runs inside a pixel loop.
 [[gnu::noinline]] float float_residual(double x) {
@@ -129,7 +120,7 @@ Grids pack_grids(const EngineInputs& in, const KernelMode& mode) {
     if (plate && mode.float64)
       while ((w64.size() / 2) % 3 != 0) w64.insert(w64.end(), {0.0, 0.0});
     g.offset64.push_back(std::uint32_t(w64.size() / 2 / (plate ? 3 : 1)));
-    const std::size_t columns = weight_columns(d);
+    const std::size_t columns = std::size_t(weight_columns(d));  // core/prepared.hpp
     g.columns.push_back(std::uint32_t(columns));
     const std::vector<float> dw = float32_weights(d);
     const std::size_t nodes = dw.size() / 4;
