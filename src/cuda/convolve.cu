@@ -11,17 +11,18 @@ constexpr int block_threads = warps_per_block * warp_lanes;
 constexpr unsigned full_mask = 0xffffffffu;
 
 // The blocks of block_threads an SM each variant is compiled to hold (__launch_bounds__'s second
-// argument; 0 leaves the registers to ptxas): 6 (40 registers a thread, 75% occupancy) for the radial
-// profile's float32 variants, 5 (48 registers, 62.5%) for the 2D grid's two-column ones, where ptxas
-// then keeps the pixel loop free of local memory and adds at most 7 instructions to it, its spills
-// falling in the disc walk and the frame (tests/cuda/kernel_budgets.py holds every variant's pixel
-// loop to that and to its instruction budget). The others keep more live in the loop (the float64
-// sums, a plate's matrix, four columns of a 2D grid) and spill there when held to fewer registers.
+// argument; 0 leaves the registers to ptxas): as many as keep its pixel loop free of local memory
+// (ptxas spills into the disc walk and the frame instead; tests/cuda/kernel_budgets.py holds every
+// pixel loop to no local memory and to its instruction budget). Without a plate: the float32 path 6
+// (40 registers a thread, 75% occupancy) on a radial profile, 5 (48, 62.5%) on a 2D grid of two weight
+// columns, 4 (64, 50%) of four; the float64 path 4 on a radial profile. Beyond those, or behind a
+// plate, local loads enter the loop (docs/cuda.md, "Budgets").
 template <bool Radial, bool Float64, bool Plate, int Columns>
 constexpr int min_blocks() {
-  if (Float64 || Plate) return 0;
+  if (Plate) return 0;
+  if (Float64) return Radial ? 4 : 0;
   if (Radial) return 6;
-  return Columns == 2 ? 5 : 0;
+  return Columns == 2 ? 5 : 4;
 }
 
 template <class T>

@@ -277,10 +277,12 @@ PISCO_HD std::uint32_t walk_disc(const KernelSky& sky, const KernelDetector& det
 // same bits. The kernel (convolve.cu, walk_disc_warp) supplies the warp's ballots and scans;
 // tests/test_cuda_host.cpp runs these steps lane by lane and requires walk_disc's batches.
 
-// Ring iz's non-empty ranges in the disc d, in for_each_disc_range's order.
+// Ring iz's non-empty ranges in the disc d, in for_each_disc_range's order: [begin0, end0) when count >= 1,
+// [begin1, end1) when 2. Named fields, not arrays: an array indexed by a lane's own count would live
+// in local memory (47 local loads a ring pass in the sm_90 code when it was one).
 struct RingRanges {
   int count = 0;
-  std::uint32_t begin[2] = {0, 0}, end[2] = {0, 0};
+  std::uint32_t begin0 = 0, end0 = 0, begin1 = 0, end1 = 0;
 };
 
 PISCO_HD RingRanges ring_ranges(const KernelSky& sky, const DiscRings& d, double phi0, double cos_rho,
@@ -292,8 +294,13 @@ PISCO_HD RingRanges ring_ranges(const KernelSky& sky, const DiscRings& d, double
   if (ysq <= 0) return out;  // the ring does not cross the disc boundary
   emit_ring_crossing(r, phi0, x, ysq, [&](std::uint32_t begin, std::uint32_t end) {
     if (end <= begin) return;
-    out.begin[out.count] = begin;
-    out.end[out.count] = end;
+    if (out.count == 0) {
+      out.begin0 = begin;
+      out.end0 = end;
+    } else {
+      out.begin1 = begin;
+      out.end1 = end;
+    }
     ++out.count;
   });
   return out;
@@ -320,9 +327,13 @@ PISCO_HD void stage_ranges(std::uint32_t* begin, std::uint32_t* end, int pending
                            int lane, const RingRanges& rr) {
   const std::uint32_t below = lanes_below(lane);
   const int at = pending + popcount32(one & below) + popcount32(two & below);
-  for (int k = 0; k < rr.count; ++k) {
-    begin[at + k] = rr.begin[k];
-    end[at + k] = rr.end[k];
+  if (rr.count >= 1) {
+    begin[at] = rr.begin0;
+    end[at] = rr.end0;
+  }
+  if (rr.count == 2) {
+    begin[at + 1] = rr.begin1;
+    end[at + 1] = rr.end1;
   }
 }
 
