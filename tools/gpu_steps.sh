@@ -66,6 +66,20 @@ step bench-cpu-5deg "$build/tools/pisco-vk" bench -b cpu --rho-max 5
 step bench-cuda-repeat1 "$build/tools/pisco-vk" bench -b cuda --repeat 1 --rho-max 1 5 10
 step bench-cuda-elliptical "$build/tools/pisco-vk" bench -b cuda --beam elliptical --repeat 2 --rho-max 5 10
 step bench-stream "$build/tools/pisco-vk" bench --stream --repeat 3
+# The kernels' registers by variant (convolve.cu's min_blocks) against ptxas's own choice, in one run:
+# a second build of the command line with -DPISCO_CUDA_REGISTERS_BY_VARIANT=OFF, the two alternated
+# (docs/cuda.md, "Budgets").
+step configure-ptxas cmake -S "$root" -B "$build-ptxas" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+  -DPISCO_WITH_CUDA=ON -DPISCO_WITH_VULKAN=OFF -DPISCO_BUILD_TESTS=OFF "-DCMAKE_CUDA_ARCHITECTURES=$cuda_arch" \
+  -DPISCO_CUDA_REGISTERS_BY_VARIANT=OFF
+step build-ptxas cmake --build "$build-ptxas" -j "$(nproc)" --target pisco-vk
+for round in 1 2; do
+  for b in "$build" "$build-ptxas"; do
+    step "registers-$round-$(basename "$b")" "$b/tools/pisco-vk" bench -b cuda --repeat 2 --rho-max 5 10
+    step "registers-elliptical-$round-$(basename "$b")" "$b/tools/pisco-vk" bench -b cuda --beam elliptical \
+      --repeat 2 --rho-max 5 10
+  done
+done
 # shellcheck disable=SC2086
 step ducc0 python3 "$root/tools/ducc0_compare.py" --pisco "$build/tools/pisco-vk" -b cuda --rho-max $radii
 
@@ -77,7 +91,8 @@ else
 fi
 
 echo | tee -a "$logs/summary.txt"
-for f in bench-cuda bench-cuda-repeat1 bench-cuda-elliptical bench-stream bench-vulkan bench-simd-1 bench-simd-2 bench-simd-4 bench-simd-8 bench-simd-16 ducc0; do
+for f in bench-cuda bench-cuda-repeat1 bench-cuda-elliptical bench-stream bench-vulkan bench-simd-1 bench-simd-2 bench-simd-4 bench-simd-8 bench-simd-16 ducc0 \
+  registers-{,elliptical-}{1,2}-"$(basename "$build")" registers-{,elliptical-}{1,2}-"$(basename "$build")-ptxas"; do
   [ -f "$logs/$f.log" ] && { echo "--- $f"; cat "$logs/$f.log"; } >>"$logs/summary.txt"
 done
 echo "logs in $logs"

@@ -17,12 +17,18 @@ constexpr unsigned full_mask = 0xffffffffu;
 // (40 registers a thread, 75% occupancy) on a radial profile, 5 (48, 62.5%) on a 2D grid of two weight
 // columns, 4 (64, 50%) of four; the float64 path 4 on a radial profile. Beyond those, or behind a
 // plate, local loads enter the loop (docs/cuda.md, "Budgets").
+// A build with -DPISCO_CUDA_REGISTERS_BY_VARIANT=OFF (PISCO_CUDA_PTXAS_REGISTERS) leaves every variant
+// to ptxas, to be timed beside this one.
 template <bool Radial, bool Float64, bool Plate, int Columns>
 constexpr int min_blocks() {
+#ifdef PISCO_CUDA_PTXAS_REGISTERS
+  return 0;
+#else
   if (Plate) return 0;
   if (Float64) return Radial ? 4 : 0;
   if (Radial) return 6;
   return Columns == 2 ? 5 : 4;
+#endif
 }
 
 template <class T>

@@ -45,5 +45,11 @@ target_link_libraries(pisco PRIVATE CUDA::cudart_static)
 target_compile_definitions(pisco PRIVATE PISCO_HAVE_CUDA)
 # Named in the error a device of another architecture gets.
 string(REPLACE ";" "," pisco_cuda_arch_list "${CMAKE_CUDA_ARCHITECTURES}")
-set_source_files_properties(cuda/convolve.cu PROPERTIES
-  COMPILE_DEFINITIONS "PISCO_CUDA_ARCHITECTURES=\"${pisco_cuda_arch_list}\"")
+# Each kernel variant's registers: for the blocks an SM of convolve.cu's min_blocks, or (OFF) as ptxas
+# chooses, for a build to compare with on a GPU (tools/gpu_steps.sh; docs/cuda.md, "Budgets").
+option(PISCO_CUDA_REGISTERS_BY_VARIANT "Compile each cuda kernel variant for the blocks an SM of convolve.cu's min_blocks" ON)
+set(pisco_convolve_definitions "PISCO_CUDA_ARCHITECTURES=\"${pisco_cuda_arch_list}\"")
+if(NOT PISCO_CUDA_REGISTERS_BY_VARIANT)
+  list(APPEND pisco_convolve_definitions PISCO_CUDA_PTXAS_REGISTERS)
+endif()
+set_source_files_properties(cuda/convolve.cu PROPERTIES COMPILE_DEFINITIONS "${pisco_convolve_definitions}")
