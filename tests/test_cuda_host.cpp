@@ -512,6 +512,76 @@ TEST(CudaHostKernel, AdjointMatchesTheReferenceAndTheForward) {
     }
 }
 
+// The frame, line of sight and disc rings as the warp makes them, their transcendental functions on
+// lanes of their own (convolve.cu's warp_sample_frame: angle_trig on lanes 0 to 5, the line of sight's
+// angles on lanes 0 and 1, the disc's cosines on lanes 0 to 2, each lane's value shuffled to all),
+// emulated lane by lane: the bits of sample_frame and disc_rings, for angles and quaternions, detectors
+// on and off the boresight, longitudes outside [0, 2 pi), and samples at and around both poles.
+TEST(CudaHostKernel, FrameOnLanesGivesTheSerialFrame) {
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const auto rings = pisco::detail::make_ring_table(128);
+  pc::KernelSky sky{};
+  sky.rings = rings.data();
+  sky.nside = 128;
+  const auto same = [](const pisco::detail::Vec3<double>& a, const pisco::detail::Vec3<double>& b) {
+    return a.x == b.x && a.y == b.y && a.z == b.z;
+  };
+  std::uint64_t checked = 0;
+  for (int detector = 0; detector < 3; ++detector) {
+    pc::KernelDetector det{};
+    det.rho_max = (detector == 2 ? 30.0 : 5.0) * deg;
+    det.cos_zeta = std::cos(0.3 * detector);
+    det.sin_zeta = std::sin(0.3 * detector);
+    if (detector > 0) {
+      const pisco::Quat o = pisco::quat_from_pointing(2.0 * deg, 0.7, 0.2);
+      det.offset = pisco::detail::make_offset({o.x, o.y, o.z, o.w});
+    }
+    for (int k = 0; k < 20000; ++k) {
+      double theta = std::acos(1 - 2 * u(rng));
+      if (k % 4 == 0) theta = k % 8 ? 3 * deg * u(rng) : pi - 3 * deg * u(rng);
+      if (k < 8) theta = k % 2 ? 0.0 : pi;
+      const double angles[4] = {theta, 6 * pi * u(rng) - 2 * pi, 2 * pi * u(rng), 0.0};
+      const pisco::Quat q = pisco::quat_from_pointing(angles[0], angles[1], angles[2]);
+      const double quat[4] = {q.x, q.y, q.z, q.w};
+      for (const bool quaternions : {false, true}) {
+        const double* b = quaternions ? quat : angles;
+        double theta0 = 0.0, phi0 = 0.0;
+        const auto serial = pc::sample_frame(b, quaternions, det, theta0, phi0);
+        const auto d0 = pisco::detail::disc_rings(sky.nside, theta0, det.rho_max);
+        // The warp, lane by lane.
+        double lanes[pc::warp_lanes] = {}, trig[pc::angle_trig_lanes] = {};
+        if (!quaternions) {
+          for (int l = 0; l < pc::angle_trig_lanes; ++l) lanes[l] = pc::angle_trig(b, l);
+          for (int l = 0; l < pc::angle_trig_lanes; ++l) trig[l] = lanes[l];
+        }
+        pisco::detail::Vec3<double> theta_p, phi_p, pv;
+        double theta1 = 0.0, phi1 = 0.0;
+        if (!pc::detector_basis(b, quaternions, det, trig, theta_p, phi_p, pv, theta1, phi1)) {
+          for (int l = 0; l < 2; ++l) lanes[l] = pisco::detail::pisco_direction_angle(pv, l);
+          theta1 = lanes[0];
+          phi1 = lanes[1];
+        }
+        for (int l = 0; l < 3; ++l) lanes[l] = pisco::detail::disc_cos(theta1, det.rho_max, l);
+        const auto d1 =
+            pisco::detail::disc_rings_from_cos(sky.nside, theta1, det.rho_max, lanes[0], lanes[1], lanes[2]);
+        const auto spread = pisco::detail::frame_with_zeta(theta_p, phi_p, pv, det.cos_zeta, det.sin_zeta);
+        ++checked;
+        const bool ok = theta0 == theta1 && phi0 == phi1 && same(serial.theta_p, spread.theta_p) &&
+                        same(serial.phi_p, spread.phi_p) && same(serial.p, spread.p) && same(serial.e_c, spread.e_c) &&
+                        d0.first == d1.first && d0.last == d1.last && d0.north == d1.north && d0.south == d1.south &&
+                        d0.z0 == d1.z0 && d0.xa == d1.xa;
+        if (!ok) {
+          ADD_FAILURE() << "detector " << detector << (quaternions ? ", quaternion" : ", angles") << " pointing ("
+                        << angles[0] << ", " << angles[1] << ", " << angles[2] << ")";
+          return;
+        }
+      }
+    }
+  }
+  EXPECT_EQ(checked, 120000u);
+}
+
 // The weights of detectors without w_U and w_V as (w_I, w_Q) pairs, one 16-byte load a node pair
 // (kernel_columns, IQPairGrid): the same TOD values (equal as numbers) and the same adjoint integers
 // as the 4-column layout, for radial and 2D beams, both normalizations, a plain and a 2.725 K monopole

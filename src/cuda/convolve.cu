@@ -38,16 +38,16 @@ __device__ __forceinline__ T warp_sum(T v) {
   return v;
 }
 
-// The disc of (theta, phi) walked by the whole warp, 32 rings a pass, one a lane (sample.hpp, "The
+// The disc d around longitude phi walked by the whole warp, 32 rings a pass, one a lane (sample.hpp, "The
 // cooperative disc walk"): each pass's ranges staged in ring order in `begin`/`end` (staging_ranges
 // each) with two ballots, and every batch_ranges of them handed to flush(count) with their pixel
 // offsets in `offset` (a warp scan), the caps first and last: walk_disc's batches, cut the same way.
 // Returns the disc's pixel count.
 template <class Flush>
-__device__ __forceinline__ std::uint32_t walk_disc_warp(const KernelSky& sky, const KernelDetector& det, double theta,
-                                                        double phi, std::uint32_t* begin, std::uint32_t* end,
-                                                        std::uint32_t* offset, int lane, Flush&& flush) {
-  const DiscRings d = disc_rings(sky.nside, theta, det.rho_max);
+__device__ __forceinline__ std::uint32_t walk_disc_warp(const KernelSky& sky, const KernelDetector& det,
+                                                        const DiscRings& d, double phi, std::uint32_t* begin,
+                                                        std::uint32_t* end, std::uint32_t* offset, int lane,
+                                                        Flush&& flush) {
   std::uint32_t pixels = 0;
   int pending = 0;  // ranges staged, the same in every lane
   // Hands out whole batches, and with `all` the rest as a last one.
@@ -85,6 +85,31 @@ __device__ __forceinline__ std::uint32_t walk_disc_warp(const KernelSky& sky, co
   return pixels;
 }
 
+// One sample's frame (sample_frame's bits), line of sight and disc rings, their transcendental
+// functions spread over the warp's lanes (sample.hpp, angle_trig): the cosines and sines of the
+// pointing's angles on lanes 0 to 5, the line of sight's angles (where they are not the pointing's)
+// on lanes 0 and 1, the disc's cosines on lanes 0 to 2, each shuffled to every lane.
+__device__ __forceinline__ SampleFrame<double> warp_sample_frame(const KernelSky& sky, const double* pointing,
+                                                                 bool quaternions, const KernelDetector& det,
+                                                                 int lane, double& theta, double& phi,
+                                                                 DiscRings& d) {
+  double trig[angle_trig_lanes] = {};
+  if (!quaternions) {
+    const double mine = lane < angle_trig_lanes ? angle_trig(pointing, lane) : 0.0;
+    for (int k = 0; k < angle_trig_lanes; ++k) trig[k] = __shfl_sync(full_mask, mine, k);
+  }
+  Vec3<double> theta_p, phi_p, p;
+  if (!detector_basis(pointing, quaternions, det, trig, theta_p, phi_p, p, theta, phi)) {
+    const double mine = lane < 2 ? pisco_direction_angle(p, lane) : 0.0;
+    theta = __shfl_sync(full_mask, mine, 0);
+    phi = __shfl_sync(full_mask, mine, 1);
+  }
+  const double mine = lane < 3 ? disc_cos(theta, det.rho_max, lane) : 0.0;
+  d = disc_rings_from_cos(sky.nside, theta, det.rho_max, __shfl_sync(full_mask, mine, 0),
+                          __shfl_sync(full_mask, mine, 1), __shfl_sync(full_mask, mine, 2));
+  return frame_with_zeta(theta_p, phi_p, p, det.cos_zeta, det.sin_zeta);
+}
+
 // One warp's sample: its frames (float64, and float32 for the pixels), its plate's Mueller matrix,
 // and its disc walked by the warp a batch of ranges at a time in the warp's share of the block's
 // shared arrays (walk_disc_warp), with batch(f, fd, first, offset, count, plate) run by the whole warp
@@ -98,13 +123,14 @@ __device__ __forceinline__ std::uint32_t walk_warp_sample(const KernelSky& sky, 
   __shared__ std::uint32_t end[warps_per_block][staging_ranges];
   __shared__ std::uint32_t offset[warps_per_block][warp_lanes + 1];
   double theta = 0.0, phi = 0.0;
-  const SampleFrame<double> fd = sample_frame(pointing + 4 * i, quaternions, det, theta, phi);
+  DiscRings d;
+  const SampleFrame<double> fd = warp_sample_frame(sky, pointing + 4 * i, quaternions, det, lane, theta, phi, d);
   const SampleFrame<float> f = to_float(fd);
   PlateSample plate;
   if constexpr (Plate) plate = plate_sample(det, plate_angle[i]);
   std::uint32_t* my_begin = begin[warp];
   std::uint32_t* my_offset = offset[warp];
-  return walk_disc_warp(sky, det, theta, phi, my_begin, end[warp], my_offset, lane, [&](int count) {
+  return walk_disc_warp(sky, det, d, phi, my_begin, end[warp], my_offset, lane, [&](int count) {
     batch(f, fd, my_begin, my_offset, count, plate);
     __syncwarp();  // every lane is done with the batch before the staging moves on
   });

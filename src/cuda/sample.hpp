@@ -108,6 +108,39 @@ PISCO_HD SampleFrame<double> sample_frame(const double* pointing, bool quaternio
   return angle_sample(pointing[0], pointing[1], pointing[2], det.offset, det.cos_zeta, det.sin_zeta, theta, phi);
 }
 
+// The same in steps whose transcendental functions the warp spreads over its lanes (convolve.cu's
+// warp_sample_frame; the same bits, tests/test_cuda_host.cpp):
+// 1. angle pointing: lane k < 6 takes angle_trig(pointing, k), the cosine and sine of theta, phi and psi;
+// 2. every lane builds the basis from the six (detector_basis); where the line of sight's angles are
+//    not the pointing's own (quaternions, an offset),
+// 3. lanes 0 and 1 take its theta and phi (frame.glsl's pisco_direction_angle);
+// 4. the disc's three cosines on lanes 0 to 2 (disc_cos of kernel/disc.hpp).
+constexpr int angle_trig_lanes = 6;
+PISCO_HD double angle_trig(const double* pointing, int k) {
+  const int angle = k >> 1;
+  const double x = angle == 0 ? pointing[0] : angle == 1 ? wrap_phi(pointing[1]) : pointing[2];
+  return (k & 1) != 0 ? pisco_sin(x) : pisco_cos(x);
+}
+
+// The detector's basis (theta', phi', p') of a sample from its pointing and, for angles, the six values
+// of angle_trig; returns whether theta and phi (set from angle pointing) are the line of sight's,
+// false when they are still to be taken from p (pisco_direction_angle).
+PISCO_HD bool detector_basis(const double* pointing, bool quaternions, const KernelDetector& det,
+                             const double trig[angle_trig_lanes], Vec3<double>& theta_p, Vec3<double>& phi_p,
+                             Vec3<double>& p, double& theta, double& phi) {
+  if (quaternions) {
+    const Q4 b{pointing[0], pointing[1], pointing[2], pointing[3]};
+    pisco_rotation(pisco_quat_mul(b, det.offset.quat), theta_p, phi_p, p);
+    return false;
+  }
+  theta = pointing[0];
+  phi = wrap_phi(pointing[1]);
+  pisco_angle_basis(trig[0], trig[1], trig[2], trig[3], trig[4], trig[5], theta_p, phi_p, p);
+  if (!det.offset.active) return true;
+  pisco_offset_basis(det.offset.quat, theta_p, phi_p, p);
+  return false;
+}
+
 PISCO_HD SampleFrame<float> to_float(const SampleFrame<double>& f) {
   auto v = [](const Vec3<double>& a) { return Vec3<float>{float(a.x), float(a.y), float(a.z)}; };
   return {v(f.theta_p), v(f.phi_p), v(f.p), v(f.e_c)};

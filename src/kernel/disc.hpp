@@ -79,6 +79,20 @@ PISCO_HD DiscRings disc_rings(std::int64_t nside, double theta0, double rho) {
   return d;
 }
 
+// The same from the three cosines, disc_cos(theta0, rho, k) for k = 0, 1, 2, computed by the caller
+// (the CUDA kernels take them on three lanes): the same bits.
+PISCO_HD double disc_cos(double theta0, double rho, int k) {
+  return pisco_cos(k == 0 ? theta0 : k == 1 ? theta0 - rho : theta0 + rho);
+}
+PISCO_HD DiscRings disc_rings_from_cos(std::int64_t nside, double theta0, double rho, double z0, double cos_north,
+                                       double cos_south) {
+  DiscRings d;
+  d.z0 = z0;
+  d.xa = 1.0 / sqrt((1.0 - d.z0) * (1.0 + d.z0));
+  disc_ring_span_cos(nside, theta0, rho, cos_north, cos_south, d.first, d.last, d.north, d.south);
+  return d;
+}
+
 // Where ring r crosses the disc's edge: x = cos(dphi) sin(theta_r) in the units of the ring's
 // radius, and ysq = 1 - z^2 - x^2 (the ring does not cross the edge unless ysq > 0); the ring's
 // half-width in longitude is then dphi = atan2(sqrt(ysq), x).

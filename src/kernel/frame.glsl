@@ -55,12 +55,43 @@ PISCO_FN PISCO_D3 pisco_in_basis(PISCO_D3 c, PISCO_D3 a, PISCO_D3 b, PISCO_D3 p)
                      c.x * a.z + c.y * b.z + c.z * p.z);
 }
 
-// theta in [0, pi] and phi in [0, 2 pi) of the unit vector p.
-PISCO_FN void pisco_direction_angles(PISCO_D3 p, PISCO_OUT(double) theta, PISCO_OUT(double) phi) {
+// theta in [0, pi] (k = 0) or phi in [0, 2 pi) (k = 1) of the unit vector p, each through one
+// arctangent of the same function (the CUDA kernels take the two on two lanes at once), and both.
+PISCO_FN double pisco_direction_angle(PISCO_D3 p, int k) {
   const double twopi = PISCO_TWO_PI;
-  theta = PISCO_ATAN2_NONNEG_Y(sqrt(p.x * p.x + p.y * p.y), p.z);
-  phi = p.y >= double(0) ? PISCO_ATAN2_NONNEG_Y(p.y, p.x) : twopi - PISCO_ATAN2_NONNEG_Y(-p.y, p.x);
-  if (phi >= twopi) phi = double(0);
+  const double y = k == 0 ? sqrt(p.x * p.x + p.y * p.y) : (p.y >= double(0) ? p.y : -p.y);
+  const double a = PISCO_ATAN2_NONNEG_Y(y, k == 0 ? p.z : p.x);
+  if (k == 0) return a;
+  const double phi = p.y >= double(0) ? a : twopi - a;
+  return phi >= twopi ? double(0) : phi;
+}
+PISCO_FN void pisco_direction_angles(PISCO_D3 p, PISCO_OUT(double) theta, PISCO_OUT(double) phi) {
+  theta = pisco_direction_angle(p, 0);
+  phi = pisco_direction_angle(p, 1);
+}
+
+// The boresight's basis from the cosines and sines of its angles (theta, phi, psi).
+PISCO_FN void pisco_angle_basis(double ct, double st, double cp, double sp, double cs, double ss,
+                                PISCO_OUT(PISCO_D3) theta_p, PISCO_OUT(PISCO_D3) phi_p, PISCO_OUT(PISCO_D3) p) {
+  const PISCO_D3 th = PISCO_DVEC3(ct * cp, ct * sp, -st);
+  const PISCO_D3 ph = PISCO_DVEC3(-sp, cp, double(0));
+  theta_p = PISCO_DVEC3(cs * th.x + ss * ph.x, cs * th.y + ss * ph.y, cs * th.z + ss * ph.z);
+  phi_p = PISCO_DVEC3(-ss * th.x + cs * ph.x, -ss * th.y + cs * ph.y, -ss * th.z + cs * ph.z);
+  p = PISCO_DVEC3(st * cp, st * sp, ct);
+}
+
+// A basis turned by a detector's offset: column c of the offset's rotation matrix holds the
+// detector's basis vector c in the boresight's basis (theta_p, phi_p, p).
+PISCO_FN void pisco_offset_basis(PISCO_D4 offset_quat, PISCO_INOUT(PISCO_D3) theta_p, PISCO_INOUT(PISCO_D3) phi_p,
+                                 PISCO_INOUT(PISCO_D3) p) {
+  PISCO_D3 mx, my, mz;
+  pisco_rotation(offset_quat, mx, my, mz);
+  const PISCO_D3 t = pisco_in_basis(mx, theta_p, phi_p, p);
+  const PISCO_D3 f = pisco_in_basis(my, theta_p, phi_p, p);
+  const PISCO_D3 d = pisco_in_basis(mz, theta_p, phi_p, p);
+  theta_p = t;
+  phi_p = f;
+  p = d;
 }
 
 // The detector basis (theta', phi', p') and line of sight of one sample. quaternion: the boresight
@@ -77,23 +108,10 @@ PISCO_FN void pisco_sample_frame(bool quaternion, bool offset, PISCO_D4 b, PISCO
   }
   theta = b.x;
   phi = b.y;
-  const double ct = PISCO_COS(b.x), st = PISCO_SIN(b.x);
-  const double cp = PISCO_COS(b.y), sp = PISCO_SIN(b.y);
-  const double cs = PISCO_COS(b.z), ss = PISCO_SIN(b.z);
-  const PISCO_D3 th = PISCO_DVEC3(ct * cp, ct * sp, -st);
-  const PISCO_D3 ph = PISCO_DVEC3(-sp, cp, double(0));
-  theta_p = PISCO_DVEC3(cs * th.x + ss * ph.x, cs * th.y + ss * ph.y, cs * th.z + ss * ph.z);
-  phi_p = PISCO_DVEC3(-ss * th.x + cs * ph.x, -ss * th.y + cs * ph.y, -ss * th.z + cs * ph.z);
-  p = PISCO_DVEC3(st * cp, st * sp, ct);
+  pisco_angle_basis(PISCO_COS(b.x), PISCO_SIN(b.x), PISCO_COS(b.y), PISCO_SIN(b.y), PISCO_COS(b.z), PISCO_SIN(b.z),
+                    theta_p, phi_p, p);
   if (offset) {
-    PISCO_D3 mx, my, mz;
-    pisco_rotation(offset_quat, mx, my, mz);
-    const PISCO_D3 t = pisco_in_basis(mx, theta_p, phi_p, p);
-    const PISCO_D3 f = pisco_in_basis(my, theta_p, phi_p, p);
-    const PISCO_D3 d = pisco_in_basis(mz, theta_p, phi_p, p);
-    theta_p = t;
-    phi_p = f;
-    p = d;
+    pisco_offset_basis(offset_quat, theta_p, phi_p, p);
     pisco_direction_angles(p, theta, phi);
   }
 }

@@ -63,18 +63,23 @@ PISCO_FN double ring_bound(uint count, bool shifted, double phi) {
 
 // The rings of the disc of radius rho around colatitude theta0, HEALPix query_disc's: first ... last
 // (1-based; first > last when none), and whether the disc holds the north (south) pole, in which case
-// every ring north of `first` (south of `last`) lies wholly inside it.
-PISCO_FN void disc_ring_span(PISCO_RING_INT nside, double theta0, double rho, PISCO_OUT(PISCO_RING_INT) first,
-                             PISCO_OUT(PISCO_RING_INT) last, PISCO_OUT(bool) north, PISCO_OUT(bool) south) {
+// every ring north of `first` (south of `last`) lies wholly inside it: disc_ring_span, and
+// disc_ring_span_cos with cos(theta0 - rho) and cos(theta0 + rho) from the caller (the CUDA kernels take
+// them on lanes of their own).
+PISCO_FN void disc_ring_span_cos(PISCO_RING_INT nside, double theta0, double rho, double cos_north, double cos_south,
+                                 PISCO_OUT(PISCO_RING_INT) first, PISCO_OUT(PISCO_RING_INT) last, PISCO_OUT(bool) north,
+                                 PISCO_OUT(bool) south) {
   const PISCO_RING_INT nrings = 4 * nside - 1;
-  const double rlat1 = theta0 - rho;
-  first = ring_above(nside, pisco_cos(rlat1)) + 1;
-  north = rlat1 <= double(0) && first > 1;
-  const double rlat2 = theta0 + rho;
-  last = ring_above(nside, pisco_cos(rlat2));
+  first = ring_above(nside, cos_north) + 1;
+  north = theta0 - rho <= double(0) && first > 1;
+  last = ring_above(nside, cos_south);
   if (last > nrings) last = nrings;
   if (first < 1) first = 1;
-  south = rlat2 >= PISCO_PI && last + 1 < 4 * nside;
+  south = theta0 + rho >= PISCO_PI && last + 1 < 4 * nside;
+}
+PISCO_FN void disc_ring_span(PISCO_RING_INT nside, double theta0, double rho, PISCO_OUT(PISCO_RING_INT) first,
+                             PISCO_OUT(PISCO_RING_INT) last, PISCO_OUT(bool) north, PISCO_OUT(bool) south) {
+  disc_ring_span_cos(nside, theta0, rho, pisco_cos(theta0 - rho), pisco_cos(theta0 + rho), first, last, north, south);
 }
 
 // A ring's half-width in longitude within the disc, dphi = atan2(sqrt(ysq), x), from where it crosses
