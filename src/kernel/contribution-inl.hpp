@@ -108,16 +108,6 @@ PISCO_HD void weight_pair(const ArrayGrid<T>& g, int k, Vec4<T>& w, Vec4<T>& nex
   node_pair(g.weights + 4 * k, w, next);
 }
 
-// The edges' curvature terms of cell (i, j), k = j n + i, after the nodes (src/kernel/grid_curvature.hpp).
-template <class T>
-PISCO_HD void edge_x_pair(const ArrayGrid<T>& g, int /*k*/, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
-  weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
-}
-template <class T>
-PISCO_HD void edge_y_pair(const ArrayGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& ey1) {
-  weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
-}
-
 // A beam grid of two columns stored a node pair to four values: entry k holds (w_I, w_Q) of node k
 // and of node k + 1, so that weight_pair is one 16-byte load on a CUDA device (the vulkan backend's
 // COLUMNS == 2 layout; src/cuda/device_data.hpp builds it). For detectors whose w_U and w_V vanish
@@ -143,12 +133,20 @@ __device__ __forceinline__ void weight_pair(const IQPairGrid<float>& g, int k, V
 }
 #endif
 
+// The edges' curvature terms of cell (i, j), k = j n + i, after the nodes (src/kernel/grid_curvature.hpp),
+// in either table's layout.
+template <class G>
+struct NodeTable : std::false_type {};
 template <class T>
-PISCO_HD void edge_x_pair(const IQPairGrid<T>& g, int /*k*/, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
+struct NodeTable<ArrayGrid<T>> : std::true_type {};
+template <class T>
+struct NodeTable<IQPairGrid<T>> : std::true_type {};
+template <class G, class T, std::enable_if_t<NodeTable<G>::value, int> = 0>
+PISCO_HD void edge_x_pair(const G& g, int /*k*/, int i, int j, Vec4<T>& ex0, Vec4<T>& ex1) {
   weight_pair(g, i * g.n + j + g.n * g.n, ex0, ex1);
 }
-template <class T>
-PISCO_HD void edge_y_pair(const IQPairGrid<T>& g, int k, Vec4<T>& ey0, Vec4<T>& ey1) {
+template <class G, class T, std::enable_if_t<NodeTable<G>::value, int> = 0>
+PISCO_HD void edge_y_pair(const G& g, int k, Vec4<T>& ey0, Vec4<T>& ey1) {
   weight_pair(g, k + 2 * g.n * g.n, ey0, ey1);
 }
 
