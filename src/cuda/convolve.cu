@@ -3,6 +3,8 @@
 #include "cuda/check.hpp"
 #include "cuda/convolve.cuh"
 
+#include <type_traits>
+
 namespace pisco::detail::cuda {
 namespace {
 
@@ -29,6 +31,18 @@ constexpr int min_blocks() {
   if (Radial) return 6;
   return Columns == 2 ? 5 : 4;
 #endif
+}
+
+// Calls f(plate, columns), both std::integral_constant, with the variant a detector's samples take:
+// behind a plate always four weight columns (kernel_columns), elsewhere the detector's own layout.
+template <class F>
+void with_layout(const KernelDetector& det, bool plate, F&& f) {
+  if (plate)
+    f(std::true_type{}, std::integral_constant<int, 4>{});
+  else if (det.columns == 2)
+    f(std::false_type{}, std::integral_constant<int, 2>{});
+  else
+    f(std::false_type{}, std::integral_constant<int, 4>{});
 }
 
 template <class T>
@@ -198,16 +212,12 @@ void launch_scatter(const KernelSky& sky, const KernelDetector& det, const Adjoi
     scatter_kernel<Radial, Float64, Plate, false, Columns><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
 }
 
-// Behind a plate, always the four columns (kernel_columns); elsewhere the detector's layout.
 template <bool Radial, bool Float64>
 void launch_scatter(const KernelSky& sky, const KernelDetector& det, const AdjointArgs& chunk, bool plate, bool squares,
                     cudaStream_t stream) {
-  if (plate)
-    launch_scatter<Radial, Float64, true, 4>(sky, det, chunk, squares, stream);
-  else if (det.columns == 2)
-    launch_scatter<Radial, Float64, false, 2>(sky, det, chunk, squares, stream);
-  else
-    launch_scatter<Radial, Float64, false, 4>(sky, det, chunk, squares, stream);
+  with_layout(det, plate, [&](auto plate_, auto columns) {
+    launch_scatter<Radial, Float64, decltype(plate_)::value, decltype(columns)::value>(sky, det, chunk, squares, stream);
+  });
 }
 
 template <bool Radial>
@@ -225,13 +235,6 @@ void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkAr
   convolve_kernel<Radial, false, true, Plate, true, Columns><<<blocks, block_threads, 0, stream>>>(sky, det, chunk);
 }
 
-template <bool Radial, bool Plate>
-void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
-  if (!Plate && det.columns == 2)
-    launch_norms<Radial, false, 2>(sky, det, chunk, stream);
-  else
-    launch_norms<Radial, Plate, 4>(sky, det, chunk, stream);
-}
 
 template <bool Radial, bool Monopole, bool PerSample, bool Plate, int Columns>
 void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, cudaStream_t stream) {
@@ -240,15 +243,11 @@ void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& ch
                                                                                                           chunk);
 }
 
-// Behind a plate, always the four columns (kernel_columns); elsewhere the detector's layout.
 template <bool Radial, bool Monopole, bool PerSample>
 void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool plate, cudaStream_t stream) {
-  if (plate)
-    launch<Radial, Monopole, PerSample, true, 4>(sky, det, chunk, stream);
-  else if (det.columns == 2)
-    launch<Radial, Monopole, PerSample, false, 2>(sky, det, chunk, stream);
-  else
-    launch<Radial, Monopole, PerSample, false, 4>(sky, det, chunk, stream);
+  with_layout(det, plate, [&](auto plate_, auto columns) {
+    launch<Radial, Monopole, PerSample, decltype(plate_)::value, decltype(columns)::value>(sky, det, chunk, stream);
+  });
 }
 
 template <bool Radial, bool Monopole>
@@ -274,10 +273,12 @@ void launch(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& ch
 void launch_norms(const KernelSky& sky, const KernelDetector& det, const ChunkArgs& chunk, bool radial, bool plate,
                   cudaStream_t stream) {
   if (chunk.count == 0) return;
-  if (radial)
-    plate ? launch_norms<true, true>(sky, det, chunk, stream) : launch_norms<true, false>(sky, det, chunk, stream);
-  else
-    plate ? launch_norms<false, true>(sky, det, chunk, stream) : launch_norms<false, false>(sky, det, chunk, stream);
+  with_layout(det, plate, [&](auto plate_, auto columns) {
+    if (radial)
+      launch_norms<true, decltype(plate_)::value, decltype(columns)::value>(sky, det, chunk, stream);
+    else
+      launch_norms<false, decltype(plate_)::value, decltype(columns)::value>(sky, det, chunk, stream);
+  });
   PISCO_CUDA_CHECK(cudaGetLastError());
 }
 

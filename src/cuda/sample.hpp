@@ -253,21 +253,15 @@ PISCO_HD void scatter_batch(const KernelSky& sky, const KernelDetector& det, con
     PixelGeometry<float> g;
     double x = 0.0, y = 0.0;
     const Vec4<float> w = pixel_weights<Radial, Float64, Plate>(sky, grid, f, fd, p, sky.pixels[p], plate, g, x, y);
-    constexpr int stokes = Columns == 2 ? 3 : 4;  // I, Q, U (V's weight is zero) or I, Q, U, V
-    float gs[stokes];
+    Vec4<float> a;
     if constexpr (Columns == 2) {
-      const Vec3<float> a = stokes_adjoint_iq(w, g.cos2chi, g.sin2chi);
-      gs[0] = a.x;
-      gs[1] = a.y;
-      gs[2] = a.z;
+      const Vec3<float> iqu = stokes_adjoint_iq(w, g.cos2chi, g.sin2chi);
+      a = {iqu.x, iqu.y, iqu.z, 0.0f};
     } else {
-      const Vec4<float> a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
-      gs[0] = a.x;
-      gs[1] = a.y;
-      gs[2] = a.z;
-      gs[3] = a.w;
+      a = stokes_adjoint(w, g.cos2chi, g.sin2chi);
     }
-    for (int c = 0; c < stokes; ++c)
+    const float gs[4] = {a.x, a.y, a.z, a.w};
+    for (int c = 0; c < (Columns == 2 ? 3 : 4); ++c)  // with two columns V's weight is zero
       if (const std::int64_t q = fixed_share(value, gs[c], Squares)) add(4 * std::size_t(p) + std::size_t(c), q);
   }
 }
@@ -312,7 +306,7 @@ PISCO_HD std::uint32_t walk_disc(const KernelSky& sky, const KernelDetector& det
 
 // Ring iz's non-empty ranges in the disc d, in for_each_disc_range's order: [begin0, end0) when count >= 1,
 // [begin1, end1) when 2. Named fields, not arrays: an array indexed by a lane's own count would live
-// in local memory (47 local loads a ring pass in the sm_90 code when it was one).
+// in local memory (47 of the 53 local loads in the sm_90 code of the common variants when it was one).
 struct RingRanges {
   int count = 0;
   std::uint32_t begin0 = 0, end0 = 0, begin1 = 0, end1 = 0;

@@ -87,22 +87,20 @@ void pack_sky_lo(std::size_t n, const double* xyz, float* out) {
 std::vector<std::uint32_t> pack_rings(const PreparedSky& sky, const CapBoundary& boundary, bool ff) {
   std::vector<std::uint32_t> rings;
   rings.reserve(4 * sky.rings.size() + 8);
-  for (const RingEntry& r : sky.rings) {
-    std::uint64_t z = 0;
-    const double zv = ff ? ff_bits(r.z) : r.z;
-    static_assert(sizeof(z) == sizeof(zv));
-    std::memcpy(&z, &zv, sizeof(z));
-    rings.insert(rings.end(), {std::uint32_t(z), std::uint32_t(z >> 32), r.first, r.count | (r.shifted ? 1u << 31 : 0u)});
-  }
-  // The monopole's weights on the rings about the caps' edges (kernel.glsl's cap_weight), float64 or
-  // float-float bits, low word first.
-  for (const uint ring : {0u, CAP_LAST_RING, CAP_EDGE_RING, CAP_BELT_RING}) {
-    const double w = boundary.weight(ring);
+  // A float64 number's bits (float-float with ff), low word first.
+  const auto words = [&](double x) {
+    const double v = ff ? ff_bits(x) : x;
     std::uint64_t bits = 0;
-    const double wv = ff ? ff_bits(w) : w;
-    std::memcpy(&bits, &wv, sizeof(bits));
+    static_assert(sizeof(bits) == sizeof(v));
+    std::memcpy(&bits, &v, sizeof(bits));
     rings.insert(rings.end(), {std::uint32_t(bits), std::uint32_t(bits >> 32)});
+  };
+  for (const RingEntry& r : sky.rings) {
+    words(r.z);
+    rings.insert(rings.end(), {r.first, r.count | (r.shifted ? 1u << 31 : 0u)});
   }
+  // The monopole's weights on the rings about the caps' edges (kernel.glsl's cap_weight).
+  for (const uint ring : {0u, CAP_LAST_RING, CAP_EDGE_RING, CAP_BELT_RING}) words(boundary.weight(ring));
   return rings;
 }
 
