@@ -3,6 +3,7 @@
 // test is skipped, with the reason printed, where the backend has no device on this machine.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
@@ -399,6 +400,109 @@ TEST(BackendParity, HalfWavePlatesMatchTheReference) {
       EXPECT_LE(st.max_err, 1e-4 * scale) << fp[d].name;
     }
   }
+}
+
+// Several detectors on one boresight chunk (docs/library.md, "Several detectors on one chunk"), as
+// submit() of a list of detectors and as submit() of parts of one share(): each detector's TOD has the
+// bits of its own submit(), over pointing that reaches both poles (the polar
+// copy's samples, submitted apart) and pointing that stays away from them, from angles and from
+// quaternions, written and accumulated, with offsets, a plate at the aperture (its angles the
+// detector's own) and one between the optics and the detector (four row detectors on one pointing).
+// A device backend stages each chunk's pointing once a slot instead of once a detector: counted exactly
+// on the pointing away from the poles, where every submission takes one device chunk.
+TEST(BackendParity, SeveralDetectorsOnOneChunkGiveEachDetectorsBits) {
+  SKIP_WITHOUT_DEVICE();
+  const Scene s = scene(64, 2.725);
+  std::vector<pisco::Detector> dets = s.focal_plane.detectors();
+  const double offsets[][3] = {{2 * deg, -1 * deg, 0.3}, {-4 * deg, 3 * deg, -1.2}, {0, 6 * deg, 0}, {1 * deg, 0, 2.5}};
+  for (std::size_t i = 0; i < dets.size(); ++i) dets[i].set_offset(offsets[i % 4][0], offsets[i % 4][1], offsets[i % 4][2]);
+  dets[1].hwp = pisco::HalfWavePlate{pisco_test::generic_plate(), pisco::HwpPlacement::aperture, 0.4};
+  dets[3].hwp = pisco::HalfWavePlate{pisco_test::generic_plate(), pisco::HwpPlacement::detector, -0.3};
+  const pisco::FocalPlane fp(dets);
+  std::vector<std::size_t> all(fp.size());
+  for (std::size_t d = 0; d < fp.size(); ++d) all[d] = d;
+  // Pointing across both poles, and pointing between colatitudes 60 and 120 deg.
+  const pisco::Pointing polar = random_pointing(1000, 53);
+  pisco::Pointing belt;
+  std::mt19937_64 rng(59);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (std::size_t i = 0; i < 900; ++i) belt.push_back((60 + 60 * u(rng)) * deg, 2 * pi * u(rng), 2 * pi * u(rng));
+  // The caller's chunks within the device's of 100 samples, and across them.
+  for (const std::size_t chunk : {std::size_t(90), std::size_t(250)})
+  for (const pisco::Pointing* p : std::array<const pisco::Pointing*, 2>{&polar, &belt}) {
+    std::vector<double> h(p->size());
+    for (std::size_t i = 0; i < h.size(); ++i) h[i] = 0.071 * double(i);
+    std::vector<pisco::Quat> q;
+    for (std::size_t i = 0; i < p->size(); ++i) q.push_back(pisco::quat_from_pointing(p->theta[i], p->phi[i], p->psi[i]));
+    for (const bool quats : {false, true})
+      for (const bool accumulate : {false, true}) {
+        pisco::Engine one(s.sky, s.beams, fp, options(backend, 100)), many(s.sky, s.beams, fp, options(backend, 100)),
+            shared(s.sky, s.beams, fp, options(backend, 100));
+        std::vector<std::vector<double>> a(fp.size(), std::vector<double>(p->size(), accumulate ? 0.5 : NAN)), b = a,
+                                         c = a;
+        const pisco::SharedPointing whole = quats ? shared.share(pisco::QuatPointingView{q}) : shared.share(p->view());
+        for (std::size_t off = 0; off < p->size(); off += chunk) {
+          const std::size_t n = std::min(chunk, p->size() - off);
+          const std::span<const double> hc = std::span<const double>(h).subspan(off, n);
+          std::vector<std::span<double>> tods;
+          for (std::size_t d = 0; d < fp.size(); ++d) {
+            const std::span<double> ta = std::span<double>(a[d]).subspan(off, n);
+            const std::span<const double> hd = fp[d].hwp ? hc : std::span<const double>();
+            if (quats) one.submit(d, pisco::QuatPointingView{q}.subspan(off, n), ta, accumulate, hd);
+            else one.submit(d, p->view().subspan(off, n), ta, accumulate, hd);
+            shared.submit(d, whole.subspan(off, n), std::span<double>(c[d]).subspan(off, n), accumulate, hd);
+            tods.push_back(std::span<double>(b[d]).subspan(off, n));
+          }
+          if (quats) many.submit(all, pisco::QuatPointingView{q}.subspan(off, n), tods, accumulate, hc);
+          else many.submit(all, p->view().subspan(off, n), tods, accumulate, hc);
+        }
+        one.wait();
+        many.wait();
+        shared.wait();
+        for (std::size_t d = 0; d < fp.size(); ++d)
+          for (std::size_t i = 0; i < p->size(); ++i)
+            for (const auto* other : {&b, &c})
+            ASSERT_EQ(std::bit_cast<std::uint64_t>(a[d][i]), std::bit_cast<std::uint64_t>((*other)[d][i]))
+                << (other == &b ? "a list of detectors: " : "parts of one share(): ")
+                << fp[d].name << ", sample " << i << (quats ? ", quaternions" : ", angles")
+                << (p == &polar ? ", across the poles" : ", away from the poles") << ", chunks of " << chunk;
+        std::cout << "chunks of " << chunk << ", " << (p == &polar ? "across the poles" : "away from the poles") << (quats ? ", quaternions" : ", angles")
+                  << ": pointing samples staged " << one.staged_samples() << " one detector a call, "
+                  << many.staged_samples() << " a list of detectors, " << shared.staged_samples()
+                  << " parts of one share()\n";
+        if (backend == "simd") {
+          EXPECT_EQ(one.staged_samples(), 0u);
+          EXPECT_EQ(many.staged_samples(), 0u);
+          EXPECT_EQ(shared.staged_samples(), 0u);
+        } else if (p == &belt && chunk == 90) {
+          // A detector a call: each detector's chunk staged once, the plate's rows in both slots;
+          // all at once: each chunk once in each of the two slots.
+          EXPECT_EQ(one.staged_samples(), p->size() * (fp.size() + 1));
+          EXPECT_EQ(many.staged_samples(), p->size() * 2);
+          EXPECT_EQ(shared.staged_samples(), p->size() * 2);
+        } else if (chunk == 90) {
+          EXPECT_LT(many.staged_samples(), one.staged_samples() / 2);
+          EXPECT_EQ(shared.staged_samples(), many.staged_samples());
+        }
+      }
+  }
+  // The arguments are checked before anything is queued.
+  pisco::Engine e(s.sky, s.beams, fp, options(backend, 100));
+  std::vector<double> t0(10), t1(10), t2(9);
+  const std::vector<std::span<double>> two{t0, t1}, short_one{t0, t2};
+  const std::vector<std::size_t> bad{0, fp.size()};
+  const pisco::PointingView v = belt.view().subspan(0, 10);
+  pisco_test::expect_error([&] { e.submit(all, v, two); }, "TOD buffers (expected one a detector)");
+  pisco_test::expect_error([&] { e.submit(bad, v, two); }, "detector index " + std::to_string(fp.size()));
+  pisco_test::expect_error([&] { e.submit(std::vector<std::size_t>{0, 2}, v, short_one); },
+                                    "has 9 samples but the pointing has 10");
+  pisco_test::expect_error([&] { e.submit(std::vector<std::size_t>{0, 1}, v, two); },
+                                    "has a half-wave plate: expected 10 plate angles");
+  pisco::Pointing nan = belt;
+  nan.theta[3] = NAN;
+  pisco_test::expect_error([&] { e.submit(std::vector<std::size_t>{0, 2}, nan.view().subspan(0, 10), two); },
+                                    "the shared boresight pointing: sample 3 has a non-finite theta");
+  pisco_test::expect_error([&] { e.submit(0, pisco::SharedPointing{}, t0); }, "was not made by Engine::share()");
 }
 
 }  // namespace

@@ -145,6 +145,34 @@ struct EngineInputs;
 class SkyPass;
 }  // namespace detail
 
+// A chunk of boresight pointing that several detectors' submissions read (Engine::share): the
+// caller's angles or quaternions, checked once, and the key by which a device backend knows it has
+// staged them already. It refers to the caller's arrays, which must outlive it.
+class SharedPointing {
+ public:
+  SharedPointing() = default;
+  std::size_t size() const noexcept { return quaternions_ ? quats_.size() : angles_.size(); }
+  bool quaternions() const noexcept { return quaternions_; }
+  const PointingView& angles() const noexcept { return angles_; }
+  const QuatPointingView& quats() const noexcept { return quats_; }
+  // Samples [offset, offset + count), still shared.
+  SharedPointing subspan(std::size_t offset, std::size_t count) const {
+    SharedPointing p = *this;
+    if (quaternions_) p.quats_ = quats_.subspan(offset, count);
+    else p.angles_ = angles_.subspan(offset, count);
+    p.first_ += offset;
+    return p;
+  }
+
+ private:
+  friend class Engine;
+  PointingView angles_;
+  QuatPointingView quats_;
+  bool quaternions_ = false;
+  std::uint64_t key_ = 0;   // unique to the share() that made it
+  std::size_t first_ = 0;   // its first sample within what share() was given
+};
+
 // Thread safety: one Engine is used by one thread at a time. Its members that change it (convolve,
 // submit, wait, adjoint, adjoint_diagonal, normal, take_adjoint, set_sky, and moving it) must not run
 // concurrently with any other member; guard a shared engine
@@ -197,6 +225,30 @@ class Engine {
   std::uint64_t submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
                        bool accumulate = false, std::span<const double> hwp_angle = {},
                        std::span<const double> time = {});
+  // Several detectors on one chunk of boresight pointing (a focal plane's detectors over a time chunk):
+  // share() checks the pointing once and returns it marked as shared; submit() given that (whole, or
+  // a part of it: SharedPointing::subspan) queues one detector as the submit() above does, the same
+  // bits, without checking the pointing again, and the device backends stage and upload it once for
+  // every detector rather than once each (twice, once per slot, while the detectors take turns in the
+  // two slots; each detector's offset is applied on the device). The pointing's values must stay as
+  // they were at share() until the last submit() given it has returned.
+  SharedPointing share(const PointingView& boresight);
+  SharedPointing share(const QuatPointingView& boresight);
+  std::uint64_t submit(std::size_t detector, const SharedPointing& boresight, std::span<double> tod,
+                       bool accumulate = false, std::span<const double> hwp_angle = {},
+                       std::span<const double> time = {});
+  // The same for a list of detectors in one call: tods[k] is detectors[k]'s TOD, of the pointing's size;
+  // hwp_angle goes to the detectors with a half-wave plate (needed when one has one), time to those whose
+  // beam changes with time. The indices and buffer sizes are checked before anything is queued; any
+  // other error (naming its detector) leaves the detectors before it queued, as submit() calls in turn
+  // would. Returns the last detector's ticket. (A caller that reads back each detector's TOD while the
+  // next ones convolve, as `pisco-vk run` does, calls share() and then submit() a detector at a time.)
+  std::uint64_t submit(std::span<const std::size_t> detectors, const PointingView& boresight,
+                       std::span<const std::span<double>> tods, bool accumulate = false,
+                       std::span<const double> hwp_angle = {}, std::span<const double> time = {});
+  std::uint64_t submit(std::span<const std::size_t> detectors, const QuatPointingView& boresight,
+                       std::span<const std::span<double>> tods, bool accumulate = false,
+                       std::span<const double> hwp_angle = {}, std::span<const double> time = {});
   // Waits for submission `ticket` and every earlier one; without a ticket, for all. Rethrows the
   // error of a failed submission, or of a TOD sample that is not finite (every submission waited for
   // is complete all the same: a later wait() does not report it again).
@@ -273,6 +325,10 @@ class Engine {
   // many submitted so far were.
   bool polar_copy() const noexcept;
   std::uint64_t polar_samples() const noexcept { return polar_samples_; }
+  // Pointing samples the device backends (vulkan, cuda) have staged for the device so far: each
+  // submission's once a detector, or once a slot for submit() with several detectors. 0 on the host
+  // backends, which read the caller's pointing where it lies.
+  std::uint64_t staged_samples() const noexcept;
 
   // Every backend the library knows, built into it or not, with whether it runs on this machine (a
   // backend not built says so in BackendInfo::detail) and what it can do.
@@ -309,13 +365,26 @@ class Engine {
   static unsigned max_threads() noexcept;
 
  private:
+  // A submission's pointing as other submissions read it too (detail::PointingInput::shared): the key
+  // they share (0: a key of its own), and whether it has been checked already.
+  struct Shared {
+    std::uint64_t key = 0;
+    std::size_t first = 0;  // the submission's first sample within the shared chunk
+    bool checked = false;
+  };
   // `node`: one of the engine's own detectors for a node of a beam that changes with time.
   template <class View>
   std::uint64_t submit_view(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
-                            std::span<const double> hwp_angle, std::span<const double> time, bool node = false);
+                            std::span<const double> hwp_angle, std::span<const double> time, bool node = false,
+                            Shared shared = {});
   template <class View>
   std::uint64_t submit_nodes(std::size_t detector, const View& boresight, std::span<double> tod, bool accumulate,
-                             std::span<const double> hwp_angle, std::span<const double> time);
+                             std::span<const double> hwp_angle, std::span<const double> time,
+                             bool pointing_checked);
+  template <class View>
+  std::uint64_t submit_detectors(std::span<const std::size_t> detectors, const View& boresight,
+                                 std::span<const std::span<double>> tods, bool accumulate,
+                                 std::span<const double> hwp_angle, std::span<const double> time);
   void finish_pending(std::uint64_t ticket);
   template <class View>
   void adjoint_view(std::size_t detector, const View& boresight, std::span<const double> tod,
@@ -329,7 +398,7 @@ class Engine {
   template <class View>
   void check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
                         std::span<const double> hwp_angle, std::vector<double>& plate_angle,
-                        std::span<const double> time, bool node = false) const;
+                        std::span<const double> time, bool node = false, bool pointing_checked = false) const;
   template <class View>
   void add_sources_view(std::size_t detector, const View& boresight, std::span<const double> time,
                         const std::vector<SourceTrack>& sources, std::span<double> tod,

@@ -36,15 +36,26 @@ struct PointingInput {
   // The sky the samples are summed on: 0 the sky itself, 1 its polar copy (Backend::set_polar_sky), onto
   // whose equator the engine has turned them.
   int sky = 0;
+  // Non-zero: these are samples [shared_first, shared_first + size()) of a pointing chunk that other
+  // submissions with the same `shared` also read (Engine::submit for several detectors, a plate's four
+  // rows, a beam's two nodes): a device backend whose staging buffer still holds exactly those samples
+  // may use it again instead of staging and uploading them anew. The plate angles are not part of it.
+  std::uint64_t shared = 0;
+  std::size_t shared_first = 0;
   std::size_t size() const noexcept { return quaternions ? quats.size() : angles.size(); }
   PointingInput subspan(std::size_t offset, std::size_t count) const {
     PointingInput p = *this;
+    p.shared_first += offset;
     if (quaternions) p.quats = quats.subspan(offset, count);
     else p.angles = angles.subspan(offset, count);
     if (!plate_angle.empty()) p.plate_angle = plate_angle.subspan(offset, count);
     return p;
   }
 };
+
+// A key for a newly shared pointing chunk (PointingInput::shared): unique within the process, whichever
+// engine asks, never 0.
+std::uint64_t next_shared_key() noexcept;
 
 // Sample i's antenna frame for detector `det` (its offset applied, frame.hpp), from either pointing
 // form, and its line of sight's theta and phi: the host backends' per-sample start.
@@ -115,6 +126,9 @@ class Backend {
   virtual std::uint64_t normal(std::size_t detector, const PointingInput& pointing, std::span<const double> select);
   // Adds the accumulated maps into maps[0..3] (npix each) and clears them.
   virtual void take_adjoint(const std::array<std::span<double>, 4>& maps);
+  // Pointing samples staged for the device so far (Engine::staged_samples); 0 for a backend that reads
+  // the caller's pointing where it lies.
+  virtual std::uint64_t staged_samples() const { return 0; }
 };
 
 // A setting a backend takes (EngineOptions::settings; docs/library.md, "Engine options"): its name,

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <future>
@@ -36,6 +37,11 @@ std::uint64_t Backend::adjoint(std::size_t detector, const PointingInput&, std::
 void Backend::take_adjoint(const std::array<std::span<double>, 4>&) {}
 std::uint64_t Backend::normal(std::size_t detector, const PointingInput&, std::span<const double>) {
   throw SubmissionError(detector, "the " + name() + " backend has no normal pass", ErrorKind::unavailable);
+}
+
+std::uint64_t next_shared_key() noexcept {
+  static std::atomic<std::uint64_t> last{0};
+  return last.fetch_add(1, std::memory_order_relaxed) + 1;
 }
 
 namespace {
@@ -273,7 +279,7 @@ using GroupStorage = std::conditional_t<std::is_same_v<View, PointingView>, Poin
 template <class View>
 void Engine::check_submission(const char* what, std::size_t detector, const View& boresight, std::size_t tod_size,
                               std::span<const double> hwp_angle, std::vector<double>& plate_angle,
-                              std::span<const double> time, bool node) const {
+                              std::span<const double> time, bool node, bool pointing_checked) const {
   const std::string op = what;
   if (detector >= (node ? detectors_.size() : focal_plane_.size()))
     throw Error(op + ": detector index " + std::to_string(detector) + " but the focal plane has " +
@@ -291,7 +297,7 @@ void Engine::check_submission(const char* what, std::size_t detector, const View
   if (tod_size != boresight.size())
     throw Error(op + ": the TOD buffer of detector '" + name + "' has " + std::to_string(tod_size) +
                 " samples but the pointing has " + std::to_string(boresight.size()));
-  check_pointing(boresight, ("pointing of detector '" + name + "'").c_str());
+  if (!pointing_checked) check_pointing(boresight, ("pointing of detector '" + name + "'").c_str());
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   // A beam that turns with the plate: the plate is in its beams, whose angle it needs all the same.
   const std::optional<PlateBeams>& plate_beams = node ? std::nullopt : focal_plane_[detector].plate_beams;
@@ -474,10 +480,12 @@ void Engine::abandon(std::size_t mark) noexcept {
 // completes.
 template <class View>
 std::uint64_t Engine::submit_nodes(std::size_t detector, const View& boresight, std::span<double> tod,
-                                   bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {
+                                   bool accumulate, std::span<const double> hwp_angle, std::span<const double> time,
+                                   bool pointing_checked) {
   auto pending = std::make_unique<Pending>();
   std::vector<double> plate_angle;
-  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, plate_angle, time);
+  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, plate_angle, time, false,
+                   pointing_checked);
   const std::string& name = detectors_[detector].name;
   if (accumulate) check_accumulated(name, tod);
   pending->groups = node_groups("convolve", detector, time, hwp_angle);
@@ -492,9 +500,11 @@ std::uint64_t Engine::submit_nodes(std::size_t detector, const View& boresight, 
       const View view = group_view(boresight, group.index, contiguous, own);
       const std::span<const double> h = node_plate(detector, hwp_angle, group, contiguous, plate);
       pending->values[g].resize(group.nodes.size());
+      // The group's nodes read the same samples, checked above.
+      const Shared shared{detail::next_shared_key(), 0, true};
       for (std::size_t j = 0; j < group.nodes.size(); ++j) {
         pending->values[g][j].assign(group.index.size(), 0.0);
-        submit_view(group.nodes[j], view, pending->values[g][j], false, h, {}, true);
+        submit_view(group.nodes[j], view, pending->values[g][j], false, h, {}, true, shared);
       }
     }
   } catch (...) {
@@ -513,15 +523,21 @@ std::uint64_t Engine::submit_nodes(std::size_t detector, const View& boresight, 
 template <class View>
 std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, std::span<double> tod,
                                   bool accumulate, std::span<const double> hwp_angle, std::span<const double> time,
-                                  bool node) {
-  if (!node && has_nodes(detector)) return submit_nodes(detector, boresight, tod, accumulate, hwp_angle, time);
+                                  bool node, Shared shared) {
+  if (!node && has_nodes(detector))
+    return submit_nodes(detector, boresight, tod, accumulate, hwp_angle, time, shared.checked);
   const auto host_start = std::chrono::steady_clock::now();
   auto pending = std::make_unique<Pending>();
-  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle, time, node);
+  check_submission("convolve", detector, boresight, tod.size(), hwp_angle, pending->plate_angle, time, node,
+                   shared.checked);
   const std::string& name = detectors_[detector].name;
   const detail::PreparedDetector& det = inputs_->detectors.at(detector);
   if (accumulate) check_accumulated(name, tod);
   detail::PointingInput input = input_of(boresight);
+  // A plate's four row detectors read the same pointing, as do the detectors of a submission for
+  // several (submit_detectors).
+  input.shared = shared.key != 0 ? shared.key : detail::next_shared_key();
+  input.shared_first = shared.first;
   if (det.plate == detail::PreparedDetector::Plate::aperture) input.plate_angle = pending->plate_angle;
   const bool split = !split_.empty() && split_[detector];
   try {
@@ -659,6 +675,81 @@ std::uint64_t Engine::submit(std::size_t detector, const PointingView& boresight
 std::uint64_t Engine::submit(std::size_t detector, const QuatPointingView& boresight, std::span<double> tod,
                              bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {
   return submit_view(detector, boresight, tod, accumulate, hwp_angle, time);
+}
+
+SharedPointing Engine::share(const PointingView& boresight) {
+  const auto host_start = std::chrono::steady_clock::now();
+  check_pointing(boresight, "the shared boresight pointing");
+  host_seconds_ += seconds_since(host_start);
+  SharedPointing p;
+  p.angles_ = boresight;
+  p.key_ = detail::next_shared_key();
+  return p;
+}
+
+SharedPointing Engine::share(const QuatPointingView& boresight) {
+  const auto host_start = std::chrono::steady_clock::now();
+  check_pointing(boresight, "the shared boresight pointing");
+  host_seconds_ += seconds_since(host_start);
+  SharedPointing p;
+  p.quats_ = boresight;
+  p.quaternions_ = true;
+  p.key_ = detail::next_shared_key();
+  return p;
+}
+
+std::uint64_t Engine::submit(std::size_t detector, const SharedPointing& boresight, std::span<double> tod,
+                             bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {
+  if (boresight.key_ == 0) throw Error("submit: the pointing was not made by Engine::share()");
+  const Shared shared{boresight.key_, boresight.first_, true};
+  return boresight.quaternions_
+             ? submit_view(detector, boresight.quats_, tod, accumulate, hwp_angle, time, false, shared)
+             : submit_view(detector, boresight.angles_, tod, accumulate, hwp_angle, time, false, shared);
+}
+
+// Several detectors on one chunk: the indices and buffers checked for all before any is queued, then
+// the pointing shared, and each detector queued as submit() queues it.
+template <class View>
+std::uint64_t Engine::submit_detectors(std::span<const std::size_t> detectors, const View& boresight,
+                                       std::span<const std::span<double>> tods, bool accumulate,
+                                       std::span<const double> hwp_angle, std::span<const double> time) {
+  if (tods.size() != detectors.size())
+    throw Error("submit: " + std::to_string(detectors.size()) + " detectors but " + std::to_string(tods.size()) +
+                " TOD buffers (expected one a detector)");
+  for (std::size_t k = 0; k < detectors.size(); ++k) {
+    if (detectors[k] >= focal_plane_.size())
+      throw Error("submit: detector index " + std::to_string(detectors[k]) + " (entry " + std::to_string(k) +
+                  ") but the focal plane has " + std::to_string(focal_plane_.size()) + " detectors");
+    if (tods[k].size() != boresight.size())
+      throw Error("submit: the TOD buffer of detector '" + focal_plane_[detectors[k]].name + "' has " +
+                  std::to_string(tods[k].size()) + " samples but the pointing has " +
+                  std::to_string(boresight.size()));
+  }
+  if (detectors.empty()) return main_->last_ticket();
+  const SharedPointing shared = share(boresight);
+  std::uint64_t ticket = 0;
+  for (std::size_t k = 0; k < detectors.size(); ++k) {
+    const Detector& d = focal_plane_[detectors[k]];
+    const bool plate = d.hwp.has_value() || d.plate_beams.has_value();
+    ticket = submit(detectors[k], shared, tods[k], accumulate, plate ? hwp_angle : std::span<const double>(), time);
+  }
+  return ticket;
+}
+
+std::uint64_t Engine::submit(std::span<const std::size_t> detectors, const PointingView& boresight,
+                             std::span<const std::span<double>> tods, bool accumulate,
+                             std::span<const double> hwp_angle, std::span<const double> time) {
+  return submit_detectors(detectors, boresight, tods, accumulate, hwp_angle, time);
+}
+
+std::uint64_t Engine::submit(std::span<const std::size_t> detectors, const QuatPointingView& boresight,
+                             std::span<const std::span<double>> tods, bool accumulate,
+                             std::span<const double> hwp_angle, std::span<const double> time) {
+  return submit_detectors(detectors, boresight, tods, accumulate, hwp_angle, time);
+}
+
+std::uint64_t Engine::staged_samples() const noexcept {
+  return main_->backend().staged_samples() + (outer_ ? outer_->backend().staged_samples() : 0);
 }
 
 void Engine::wait(std::uint64_t ticket) {

@@ -38,6 +38,7 @@ class SkyPass {
   SkyPass& operator=(const SkyPass&) = delete;
 
   Backend& backend() noexcept { return *backend_; }
+  const Backend& backend() const noexcept { return *backend_; }
   int nside() const noexcept { return nside_; }
   // Whether samples near the poles go to a polar copy (made or still being made).
   bool polar_copy() const noexcept { return polar_ready_ || setup_ != nullptr; }

@@ -41,6 +41,7 @@ struct Slot {
   PinnedArray<double> host_values;  // the adjoint's scaled values, made at its first use
   DeviceArray<double> dev_values;
   SlotJob job;
+  StagedPointing staged;  // the pointing dev_in holds
 
   explicit Slot(std::size_t capacity)
       : host_in(5 * capacity), host_out(capacity), host_pixels(1), dev_in(5 * capacity), dev_out(capacity),
@@ -163,6 +164,12 @@ class CudaBackend final : public Backend {
 
   void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(maps_, maps); }
 
+  std::uint64_t staged_samples() const override {
+    std::uint64_t n = 0;
+    for (const Slot& s : slots_) n += s.staged.staged();
+    return n;
+  }
+
   std::uint64_t wait(std::uint64_t ticket) override {
     make_current(device_);
     SlotJob current;
@@ -185,7 +192,10 @@ class CudaBackend final : public Backend {
   }
 
   [[noreturn]] void fail(const SlotJob& job, const std::string& what, ErrorKind kind) {
-    for (Slot& s : slots_) cudaStreamSynchronize(s.stream.get());
+    for (Slot& s : slots_) {
+      cudaStreamSynchronize(s.stream.get());
+      s.staged.forget();
+    }
     ring_.abandon();
     throw SubmissionError(job.detector, what + " (device " + device_.description() + ", detector " +
                                             std::to_string(job.detector) + ", samples " + std::to_string(job.first) +
@@ -264,11 +274,22 @@ class CudaBackend final : public Backend {
   }
 
   // Copies a chunk's pointing (4 doubles a sample) and plate angles to the slot's device buffer and
-  // clears its pixel counter.
+  // clears its pixel counter. Pointing the buffer already holds (PointingInput::shared: the same
+  // boresight chunk for another detector) is not copied again; the plate angles, the detector's own,
+  // always are.
   void stage(Slot& s, bool plate, const PointingInput& pointing) {
     const cudaStream_t stream = s.stream.get();
     const std::size_t count = pointing.size();
     double* host = s.host_in.data();
+    if (s.staged.reuse(pointing.shared, pointing.shared_first, count, pointing.quaternions)) {
+      if (plate) {
+        std::memcpy(host + 4 * count, pointing.plate_angle.data(), count * sizeof(double));
+        PISCO_CUDA_CHECK(cudaMemcpyAsync(s.dev_in.data() + 4 * count, host + 4 * count, count * sizeof(double),
+                                         cudaMemcpyHostToDevice, stream));
+      }
+      PISCO_CUDA_CHECK(cudaMemsetAsync(s.dev_pixels.data(), 0, sizeof(unsigned long long), stream));
+      return;
+    }
     if (pointing.quaternions) {
       std::memcpy(host, pointing.quats.quats.data(), count * sizeof(Quat));
     } else {

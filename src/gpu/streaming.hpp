@@ -24,6 +24,35 @@ struct SlotJob {
   bool accumulate = false;
 };
 
+// Which pointing samples a slot's staging buffer holds (PointingInput::shared): a submission that
+// reads the same samples of the same shared chunk, in the same form, need not stage them again.
+class StagedPointing {
+ public:
+  // Whether the buffer already holds samples [first, first + count) of shared chunk `shared` in this
+  // form; if not, records them as what it holds from now on (the caller stages them) and counts them.
+  // A `shared` of 0 is never held.
+  bool reuse(std::uint64_t shared, std::size_t first, std::size_t count, bool quaternions) {
+    if (shared != 0 && shared == shared_ && first == first_ && count == count_ && quaternions == quaternions_)
+      return true;
+    shared_ = shared;
+    first_ = first;
+    count_ = count;
+    quaternions_ = quaternions;
+    staged_ += count;
+    return false;
+  }
+  // After an error, or when the buffer is written with anything else.
+  void forget() noexcept { shared_ = 0; }
+  // Samples staged so far.
+  std::uint64_t staged() const noexcept { return staged_; }
+
+ private:
+  std::uint64_t shared_ = 0;
+  std::size_t first_ = 0, count_ = 0;
+  bool quaternions_ = false;
+  std::uint64_t staged_ = 0;
+};
+
 // Results of one slot into the caller's TOD: written, or added.
 inline void deliver(const SlotJob& job, const double* results) {
   if (job.accumulate)

@@ -191,7 +191,8 @@ class JobPointing {
   pisco::SurveyChunk load(const JobPlan::Span& job, std::vector<double>& hwp) {
     const bool per_detector = scan_.per_detector();
     const std::size_t key = per_detector ? job.detector : job.first;
-    if (key != loaded_) {
+    fresh_ = key != loaded_;
+    if (fresh_) {
       slot_ ^= 1;
       if (per_detector) file_[slot_] = scan_.detector_pointing(job.detector);
       else scan_.fill(job.first, job.count, bore_[slot_], pool_);
@@ -228,6 +229,8 @@ class JobPointing {
 
   // The slot of the chunk load() returned last: a chunk stays valid until two more loads.
   int chunk_slot() const { return chunk_slot_; }
+  // Whether load() loaded that chunk's pointing (rather than finding it loaded for the job before).
+  bool fresh() const { return fresh_; }
   // The boresight of the chunk in `slot` as quaternions: as loaded, or the angles turned into
   // quaternions (pisco::quat_from_pointing, on the pool's threads) the first time a detector of that
   // chunk asks. Per-detector files have none (empty).
@@ -248,6 +251,7 @@ class JobPointing {
   const ScanSource& scan_;
   pisco::detail::ThreadPool* pool_ = nullptr;
   int chunk_slot_ = 0;
+  bool fresh_ = false;
   std::array<BoresightChunk, 2> bore_;
   std::array<pisco::Pointing, 2> file_;
   std::array<std::vector<double>, 2> time_;  // the chunks' sample times, alternately (a beam that changes with time)
@@ -352,9 +356,18 @@ class JobStream {
       j.chunk = pointing_.load(span, hwp_[j.slot]);
       j.pointing_slot = pointing_.chunk_slot();
       const std::span<double> t(tod_[j.slot].data(), span.count);
-      j.ticket = with_view(j.chunk, [&](const auto& view) {
-        return engine_.submit(span.detector, view, t, false, j.chunk.hwp_angle, j.chunk.time);
-      });
+      if (!plan.detectors_outermost) {
+        // A boresight chunk is checked once, and staged for a device once a slot, for all its
+        // detectors (Engine::share).
+        pisco::SharedPointing& shared = shared_[std::size_t(j.pointing_slot)];
+        if (pointing_.fresh() || shared.size() != span.count)
+          shared = with_view(j.chunk, [&](const auto& view) { return engine_.share(view); });
+        j.ticket = engine_.submit(span.detector, shared, t, false, j.chunk.hwp_angle, j.chunk.time);
+      } else {
+        j.ticket = with_view(j.chunk, [&](const auto& view) {
+          return engine_.submit(span.detector, view, t, false, j.chunk.hwp_angle, j.chunk.time);
+        });
+      }
       if (pending_) finish(*pending_);
       pending_ = j;
       if (inject_failure && i > plan.my_first)
@@ -468,6 +481,7 @@ class JobStream {
   // same bits as on one thread.
   pisco::detail::ThreadPool host_;
   JobPointing pointing_;
+  std::array<pisco::SharedPointing, 2> shared_;  // the boresight chunks as shared, by JobPointing's slot
   std::array<std::vector<double>, 2> tod_;
   std::array<std::vector<double>, 2> hwp_;  // per-detector files: a job's plate angles, by TOD buffer
   std::optional<Job> pending_;

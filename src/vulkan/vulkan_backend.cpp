@@ -57,6 +57,9 @@ class VulkanBackend final : public Backend {
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override;
   void take_adjoint(const std::array<std::span<double>, 4>& maps) override;
+  std::uint64_t staged_samples() const override {
+    return slots_[0].staged.staged() + slots_[1].staged.staged();
+  }
 
  private:
   struct Slot {
@@ -66,6 +69,7 @@ class VulkanBackend final : public Backend {
     VkDescriptorSet set = VK_NULL_HANDLE;
     VkDescriptorSet polar_set = VK_NULL_HANDLE;  // the same with the polar copy's band as the sky
     SlotJob job;
+    StagedPointing staged;  // the samples `pointing` holds
     // The adjoint's, made at its first use: the scaled values, and the set with the maps.
     Buffer values;
     VkDescriptorSet adjoint_set = VK_NULL_HANDLE;
@@ -295,6 +299,7 @@ void VulkanBackend::make_slots(std::size_t chunk) {
       chunk,
       [&](std::size_t n) {
         for (Slot& s : slots_) {
+          s.staged.forget();
           s.pointing = Buffer(*device_, n * 4 * sizeof(double), storage, MemoryUse::upload);
           s.tod = Buffer(*device_, n * sizeof(double), storage, MemoryUse::readback);
           s.counts = Buffer(*device_, n * sizeof(std::uint32_t), storage, MemoryUse::readback);
@@ -369,7 +374,10 @@ void VulkanBackend::dispatch(Slot& slot, vk::ComputePipeline& pipeline, VkDescri
                              const PointingInput& pointing) {
   const auto& fn = device_->fn();
   const std::size_t n = pointing.size();
-  vk::pack_pointing(pointing, mode_.ff, static_cast<double*>(slot.pointing.mapped()));
+  // Pointing the slot already holds (PointingInput::shared: the same boresight chunk for another
+  // detector) is not packed again; the plate angles, the detector's own, always are.
+  if (!slot.staged.reuse(pointing.shared, pointing.shared_first, n, pointing.quaternions))
+    vk::pack_pointing(pointing, mode_.ff, static_cast<double*>(slot.pointing.mapped()));
   if (!pointing.plate_angle.empty())
     vk::pack_plate(pointing.plate_angle, mode_.ff, static_cast<double*>(slot.plate.mapped()));
   vk::PushConstants push = push_in;
@@ -419,6 +427,7 @@ std::uint64_t VulkanBackend::collect(Slot& slot, bool results) {
 
 void VulkanBackend::abandon() noexcept {
   ring_.abandon();
+  for (Slot& s : slots_) s.staged.forget();
   device_->fn().vkDeviceWaitIdle(device_->handle());
 }
 
