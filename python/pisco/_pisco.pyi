@@ -545,6 +545,23 @@ class Engine:
         """Completes the set-up that runs in the background (the sky's polar copy); optional."""
     @property
     def npix(self) -> int: ...
+    def convolve_detectors(
+        self,
+        detectors: Sequence[int | str],
+        theta: Float64Array | None = None,
+        phi: Float64Array | None = None,
+        psi: Float64Array | None = None,
+        *,
+        boresight_quats: Float64Array | None = None,
+        out: Sequence[Float64Array] | Float64Array | None = None,
+        accumulate: bool = False,
+        hwp_angle: Float64Array | None = None,
+        time: Float64Array | None = None,
+    ) -> list[Float64Array]:
+        """convolve() for several detectors on the same boresight pointing, checked once and uploaded
+        once for all of them on a GPU backend: a list of their TODs, the bits convolve() gives.
+        `out`: one array a detector (a list, or a 2-D array's rows), written or, with accumulate, added
+        to. hwp_angle goes to the detectors with a plate, time to those whose beam changes with time."""
     def submit(
         self,
         detector: int | str,

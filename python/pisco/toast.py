@@ -482,18 +482,25 @@ class PixelConvolve(Operator):
                         raise RuntimeError(f"PixelConvolve: observation {ob.name} has no shared '{self.times}', "
                                            "which sources need")
                     times = np.ascontiguousarray(views.shared[self.times][vw], dtype=np.float64)
+                # The detectors whose rows take the TOD as it is, in one call: the boresight checked
+                # once, and on a GPU uploaded once for all of them.
+                direct = []
                 for det in dets:
                     out = views.detdata[self.det_data][vw][det]
-                    direct = (
-                        scale == 1.0 and out.dtype == np.float64 and out.flags.c_contiguous and out.flags.writeable
-                    )
-                    if direct:
-                        engine.convolve(index[det], boresight_quats=quats, out=out, accumulate=not self.zero,
-                                        hwp_angle=angles)
-                        if times is not None:
+                    if scale == 1.0 and out.dtype == np.float64 and out.flags.c_contiguous and out.flags.writeable:
+                        direct.append(det)
+                if direct:
+                    rows = [views.detdata[self.det_data][vw][det] for det in direct]
+                    engine.convolve_detectors([index[det] for det in direct], boresight_quats=quats, out=rows,
+                                              accumulate=not self.zero, hwp_angle=angles)
+                    if times is not None:
+                        for det, out in zip(direct, rows):
                             engine.add_sources(index[det], times, self.sources, boresight_quats=quats, out=out,
                                                hwp_angle=angles)
-                    else:
+                taken = set(direct)
+                for det in dets:
+                    if det not in taken:
+                        out = views.detdata[self.det_data][vw][det]
                         tod = engine.convolve(index[det], boresight_quats=quats, hwp_angle=angles)
                         if times is not None:
                             engine.add_sources(index[det], times, self.sources, boresight_quats=quats, out=tod,

@@ -220,6 +220,62 @@ class PyEngine {
     return result;
   }
 
+  // Several detectors on one chunk of boresight pointing (Engine::submit of a list, then wait): a
+  // list of their TODs, written into (or, with accumulate, added to) out's arrays when given.
+  nb::object convolve_detectors(nb::handle detectors, nb::handle theta, nb::handle phi, nb::handle psi,
+                                nb::handle quats, nb::handle out, bool accumulate, nb::handle hwp_angle,
+                                nb::handle time_arg) {
+    if (nb::isinstance<nb::str>(detectors))
+      throw nb::type_error("convolve_detectors: detectors must be a sequence of indices or names, not one name");
+    std::vector<std::size_t> ds;
+    for (nb::handle d : detectors) ds.push_back(detector_index(d));
+    const PointingArgs p = pointing_args(theta, phi, psi, quats, "convolve_detectors");
+    const std::optional<ConstVector> h = hwp_args(hwp_angle, p.size);
+    const std::optional<ConstVector> time = time_args(time_arg, p.size);
+    nb::list results;
+    if (out.is_none()) {
+      if (accumulate) throw nb::type_error("convolve_detectors: accumulate=True adds into `out`, which must then be given");
+      for (std::size_t k = 0; k < ds.size(); ++k) results.append(nb::module_::import_("numpy").attr("empty")(p.size, "float64"));
+    } else {
+      for (nb::handle o : out) {
+        check_output_size(o, p.size);
+        results.append(nb::borrow(o));
+      }
+      if (results.size() != ds.size())
+        throw nb::value_error(("convolve_detectors: out holds " + std::to_string(results.size()) + " arrays for " +
+                               std::to_string(ds.size()) + " detectors (expected one a detector)").c_str());
+    }
+    std::vector<Vector> tods;
+    std::vector<std::span<double>> spans;
+    for (nb::handle r : results) {
+      tods.push_back(vector(r, "out"));
+      spans.emplace_back(tods.back().data(), p.size);
+    }
+    bool out_of_memory = false;
+    const std::string problem = checked_run(p, h, [&](Engine& e) {
+      try {
+        const std::uint64_t ticket =
+            p.theta ? e.submit(ds, p.angles(), spans, accumulate, span_of(h), span_of(time))
+                    : e.submit(ds, p.quaternions(), spans, accumulate, span_of(h), span_of(time));
+        e.wait(ticket);
+      } catch (...) {
+        // The detectors queued before the error write into these arrays: they complete first.
+        try {
+          e.wait();
+        } catch (...) {  // the error being reported is the first
+        }
+        try {
+          throw;
+        } catch (const std::bad_alloc&) {
+          out_of_memory = true;
+        }
+      }
+    });
+    if (!problem.empty()) throw nb::value_error(problem.c_str());
+    if (out_of_memory) raise_memory_error(chunk_memory("convolve_detectors", ds.front(), p.size));
+    return std::move(results);
+  }
+
   // Point sources (Engine::add_sources) at these samples, added into `out` (or new zeros).
   nb::object add_sources(nb::handle detector, nb::handle time_arg, const std::vector<SourceTrack>& sources,
                          nb::handle theta, nb::handle phi, nb::handle psi, nb::handle quats, nb::handle out,
@@ -808,6 +864,14 @@ void bind_engine_state(nb::class_<PyEngine>& cls) {
            "accumulate"_a = false, "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
            "Like convolve(), asynchronously: the pointing (hwp_angle, time) are read before submit() returns\n"
            "a ticket; out (required) is written by the time wait(ticket) returns.")
+      .def("convolve_detectors", &PyEngine::convolve_detectors, "detectors"_a, "theta"_a = nb::none(),
+           "phi"_a = nb::none(), "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),
+           "out"_a = nb::none(), "accumulate"_a = false, "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
+           "Like convolve() for several detectors (indices or names) on the same boresight pointing: a list\n"
+           "of their TODs, each the bits convolve() gives, written into out's arrays when given (a list, or a\n"
+           "2-D array's rows; accumulate=True adds into them). The pointing is checked once and a GPU backend\n"
+           "uploads it once for all of them. hwp_angle goes to the detectors with a plate, time to those whose\n"
+           "beam changes with time. Without the GIL.")
       .def("flag_samples", &PyEngine::flag_samples, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),
            "Masked skies (unseen='flag'): a new 1-D bool array, True where the sample's disc (the\n"

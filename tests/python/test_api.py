@@ -386,6 +386,45 @@ def test_submit_and_wait_give_convolve():
     assert np.array_equal(late, ref[0])
 
 
+def test_convolve_detectors_gives_each_detectors_convolve():
+    sky, beam, fp = small_setup()
+    fp.add("plated", zeta=0.2, hwp=pisco.HalfWavePlate(gamma=0.1),
+           offset=pisco.offset_quat(-2 * deg, 1 * deg, 0.3))
+    theta, phi, psi = pointing(700)
+    theta[:5] = [0.0, 1e-3, np.pi, np.pi - 2e-3, 0.02]  # at and near both poles
+    hwp = np.linspace(0.0, 40.0, 700)
+    quats = np.array([pisco.quat_from_pointing(t, f, s) for t, f, s in zip(theta, phi, psi)])
+    for backend in ("cpu", "simd"):
+        engine = pisco.Engine(sky, beam, fp, backend=backend)
+        names = ["pa", 3, "off", "pb"]
+        ref = [engine.convolve(d, theta, phi, psi, hwp_angle=hwp if d == 3 else None) for d in names]
+        got = engine.convolve_detectors(names, theta, phi, psi, hwp_angle=hwp)
+        assert len(got) == 4 and all(np.array_equal(a, b) for a, b in zip(ref, got))
+        rows = np.ones((4, 700))  # rows of a 2-D array, added into
+        engine.convolve_detectors(names, boresight_quats=quats, out=rows, accumulate=True, hwp_angle=hwp)
+        ref_q = [engine.convolve(d, boresight_quats=quats, hwp_angle=hwp if d == 3 else None) for d in names]
+        assert all(np.array_equal(rows[k], 1.0 + ref_q[k]) for k in range(4))
+    engine = pisco.Engine(sky, beam, fp, backend="cpu")
+    with pytest.raises(TypeError, match="a sequence of indices or names, not one name"):
+        engine.convolve_detectors("pa", theta, phi, psi)
+    with pytest.raises(ValueError, match="out holds 1 arrays for 2 detectors"):
+        engine.convolve_detectors([0, 1], theta, phi, psi, out=[np.zeros(700)])
+    with pytest.raises(ValueError, match="out: 699 samples, but the pointing has 700"):
+        engine.convolve_detectors([0, 1], theta, phi, psi, out=[np.zeros(700), np.zeros(699)])
+    with pytest.raises(TypeError, match="accumulate=True adds into `out`"):
+        engine.convolve_detectors([0], theta, phi, psi, accumulate=True)
+    with pytest.raises(IndexError, match="index 9 but the focal plane has 4 detectors"):
+        engine.convolve_detectors([0, 9], theta, phi, psi)
+    with pytest.raises(ValueError, match=r"theta\[2\] is nan"):
+        engine.convolve_detectors([0, 1], np.where(np.arange(700) == 2, np.nan, theta), phi, psi)
+    # An error of a later detector (no plate angles for the plated one) after the first is queued:
+    # the first completes into its array before the error is raised.
+    first = np.zeros(700)
+    with pytest.raises(ValueError, match="has a half-wave plate"):
+        engine.convolve_detectors([0, 3], theta, phi, psi, out=[first, np.zeros(700)])
+    assert np.array_equal(first, engine.convolve(0, theta, phi, psi))
+
+
 def test_argument_errors_name_the_argument():
     sky, beam, fp = small_setup()
     theta, phi, psi = pointing(20)
