@@ -409,7 +409,9 @@ TEST(BackendParity, HalfWavePlatesMatchTheReference) {
 // quaternions, written and accumulated, with offsets, a plate at the aperture (its angles the
 // detector's own) and one between the optics and the detector (four row detectors on one pointing).
 // A device backend stages each chunk's pointing once a slot instead of once a detector: counted exactly
-// on the pointing away from the poles, where every submission takes one device chunk.
+// on the pointing away from the poles, where every submission takes one device chunk (a detector's
+// samples near the poles go to the polar copy, and the sky's samples around them into pointing of
+// their own).
 TEST(BackendParity, SeveralDetectorsOnOneChunkGiveEachDetectorsBits) {
   SKIP_WITHOUT_DEVICE();
   const Scene s = scene(64, 2.725);
@@ -481,7 +483,9 @@ TEST(BackendParity, SeveralDetectorsOnOneChunkGiveEachDetectorsBits) {
           EXPECT_EQ(many.staged_samples(), p->size() * 2);
           EXPECT_EQ(shared.staged_samples(), p->size() * 2);
         } else if (chunk == 90) {
-          EXPECT_LT(many.staged_samples(), one.staged_samples() / 2);
+          // Across the poles each chunk holds polar samples alone among the sky's, so that each detector's
+          // sky samples are gathered into pointing of its own (SkyPass): little is shared there.
+          EXPECT_LE(many.staged_samples(), one.staged_samples());
           EXPECT_EQ(shared.staged_samples(), many.staged_samples());
         }
       }

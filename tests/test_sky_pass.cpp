@@ -2,7 +2,8 @@
 // engine's sky and a split beam's coarse sky are each one. Its forward pass and its adjoint are
 // transposes of each other on their own (<A s, d> = <s, A^T d>), over samples that cross both poles
 // in long runs and alone, on a detector at the boresight and one 6 deg off it; its accumulating
-// forward adds onto what the buffer holds at every sample, the polar ones included.
+// forward adds onto what the buffer holds at every sample, the polar ones included; and it sums each
+// sample once.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -165,6 +166,49 @@ TEST_P(SkyPassTest, AccumulatingAddsAtEverySample) {
   }
   for (std::size_t i = 0; i < p.size(); ++i)
     EXPECT_NEAR(added[i] - (1000.0 + double(i)), once[i], 1e-9 * (1000.0 + double(i))) << "sample " << i;
+}
+
+// Each sample is summed once, on the sky or on its polar copy: crossing_pointing's random samples
+// near the poles lie alone among the sky's (runs shorter than the adjoint keeps apart), and the
+// pass evaluates the pixels of the sky's samples on the sky and of the polar samples on the copy, no
+// more, with each sample's value what those two sets give submitted alone, bit for bit, written or
+// added.
+TEST_P(SkyPassTest, EachSampleIsSummedOnce) {
+  const std::string why = pisco_test::backend_unavailable(GetParam());
+  if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
+  const PassSetup s(GetParam(), 32);
+  const pisco::Pointing p = crossing_pointing();
+  const pisco::detail::PointingInput input = input_of(p);
+  const auto pass = s.pass(s.sky, s.summed);
+  for (const bool accumulate : {false, true}) {
+    pisco::detail::SkyPass::Work w;
+    pass->begin(1, input, w);
+    ASSERT_TRUE(w.polar);
+    ASSERT_NE(pisco::detail::sky_runs(w.polar->index, p.size(), 1), w.runs) << "no short run of polar samples";
+    pass->prepare();
+    std::vector<double> tod(p.size(), accumulate ? 0.25 : 0.0);
+    pass->submit(w, 1, input, tod, accumulate);
+    const std::uint64_t pixels = pass->wait(pass->last_ticket());
+    pisco::detail::SkyPass::finish(w);
+    // The two sets alone, straight through the pass's backend.
+    std::vector<bool> near(p.size(), false);
+    for (const std::size_t i : w.polar->index) near[i] = true;
+    pisco::Pointing away;
+    for (std::size_t i = 0; i < p.size(); ++i)
+      if (!near[i]) away.push_back(p.theta[i], p.phi[i], p.psi[i]);
+    std::vector<double> sky_values(away.size()), polar_values(w.polar->index.size());
+    pisco::detail::Backend& b = pass->backend();
+    const std::uint64_t t = pass->last_ticket();
+    b.submit(1, input_of(away), sky_values, false, t + 1);
+    const std::uint64_t sky_pixels = b.wait(t + 1);
+    b.submit(1, w.polar->input(), polar_values, false, t + 2);
+    const std::uint64_t polar_pixels = b.wait(t + 2);
+    EXPECT_EQ(pixels, sky_pixels + polar_pixels) << (accumulate ? "accumulating" : "writing");
+    for (std::size_t i = 0, a = 0, k = 0; i < p.size(); ++i) {
+      const double v = near[i] ? polar_values[k++] : sky_values[a++];
+      EXPECT_EQ(tod[i], accumulate ? 0.25 + v : v) << "sample " << i << (near[i] ? " (polar)" : "");
+    }
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, SkyPassTest, ::testing::ValuesIn(pisco::Engine::backend_names()),

@@ -67,8 +67,9 @@ bool find_polar_samples(const PointingInput& in, const DetectorOffset& offset, d
 
 // The runs [begin, end) of samples [0, n) that the sky's own pass sums when `polar` (ascending) go to
 // the polar copy: every sample but those in runs of at least `gap` consecutive polar samples. A
-// shorter run stays in its neighbours' submission, its values written over by the copy's: fewer,
-// longer submissions, and no sample summed twice but those. Empty runs are left out.
+// shorter run stays in its neighbours' submission: fewer, longer submissions (the adjoint's, whose
+// scatter of such a sample is 0; the forward pass, which would sum it twice, gathers the sky's
+// samples instead where the runs with gap 1 differ, SkyPass::begin). Empty runs are left out.
 std::vector<std::array<std::size_t, 2>> sky_runs(const std::vector<std::size_t>& polar, std::size_t n,
                                                  std::size_t gap = 64);
 

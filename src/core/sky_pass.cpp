@@ -55,6 +55,7 @@ void SkyPass::prepare() { attach(); }
 
 void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w) {
   w.polar.reset();
+  w.sky.reset();
   w.runs.assign(1, {0, input.size()});
   w.parts.clear();
   w.parts.reserve(4);
@@ -64,7 +65,29 @@ void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w) {
   const PreparedDetector& det = inputs_->detectors.at(detector);
   if (!find_polar_samples(input, det.offset, offset_angle_.at(detector), cut_.at(detector), *samples)) return;
   w.runs = sky_runs(samples->index, input.size());
+  // Where the adjoint's runs hold polar samples, the forward pass gathers the sky's own samples
+  // instead, so that it sums each sample once.
+  if (std::vector<std::array<std::size_t, 2>> exact = sky_runs(samples->index, input.size(), 1); exact != w.runs) {
+    auto g = std::make_shared<Work::Gathered>();
+    for (const auto& [b, e] : exact)
+      for (std::size_t i = b; i < e; ++i) {
+        g->index.push_back(i);
+        if (input.quaternions) g->quats.push_back(input.quats.quats[i]);
+        else g->angles.push_back(input.angles.theta[i], input.angles.phi[i], input.angles.psi[i]);
+        if (!input.plate_angle.empty()) g->plate_angle.push_back(input.plate_angle[i]);
+      }
+    w.sky = std::move(g);
+  }
   w.polar = std::move(samples);
+}
+
+PointingInput SkyPass::Work::Gathered::input() const {
+  PointingInput in;
+  in.quaternions = !quats.empty();
+  if (in.quaternions) in.quats = QuatPointingView{quats};
+  else in.angles = angles.view();
+  in.plate_angle = plate_angle;
+  return in;
 }
 
 void SkyPass::submit(Work& w, std::size_t target, const PointingInput& input, std::span<double> out,
@@ -76,9 +99,17 @@ void SkyPass::submit(Work& w, std::size_t target, const PointingInput& input, st
     part.base.resize(w.polar->index.size());
     for (std::size_t k = 0; k < part.base.size(); ++k) part.base[k] = out[w.polar->index[k]];
   }
-  for (const auto& [b, e] : w.runs) {
-    w.ticket = next_ticket_++;
-    backend_->submit(target, input.subspan(b, e - b), out.subspan(b, e - b), accumulate, w.ticket);
+  if (w.sky) {
+    if (!w.sky->index.empty()) {
+      part.sky_values.assign(w.sky->index.size(), 0.0);
+      w.ticket = next_ticket_++;
+      backend_->submit(target, w.sky->input(), part.sky_values, false, w.ticket);
+    }
+  } else {
+    for (const auto& [b, e] : w.runs) {
+      w.ticket = next_ticket_++;
+      backend_->submit(target, input.subspan(b, e - b), out.subspan(b, e - b), accumulate, w.ticket);
+    }
   }
   if (w.polar) {
     part.values.assign(w.polar->index.size(), 0.0);
@@ -90,9 +121,15 @@ void SkyPass::submit(Work& w, std::size_t target, const PointingInput& input, st
 void SkyPass::finish(Work& w) {
   if (!w.polar) return;
   const std::vector<std::size_t>& index = w.polar->index;
-  for (Work::Part& part : w.parts)
+  for (Work::Part& part : w.parts) {
+    if (w.sky)  // as the backend delivers a sample: written, or added
+      for (std::size_t k = 0; k < w.sky->index.size(); ++k) {
+        double& o = part.out[w.sky->index[k]];
+        o = part.accumulate ? o + part.sky_values[k] : part.sky_values[k];
+      }
     for (std::size_t k = 0; k < index.size(); ++k)
       part.out[index[k]] = (part.accumulate ? part.base[k] : 0.0) + part.values[k];
+  }
 }
 
 std::uint64_t SkyPass::adjoint(const Work& w, std::size_t target, const PointingInput& input,

@@ -49,11 +49,25 @@ class SkyPass {
   // queues, a plate's four rows among them) and each queued detector's values there.
   struct Work {
     std::shared_ptr<const PolarSamples> polar;  // null: none near a pole
-    std::vector<std::array<std::size_t, 2>> runs;  // the samples summed on the sky (sky_runs)
+    // The samples the adjoint scatters on the sky (sky_runs): a short run of polar samples stays in
+    // its neighbours', scattering 0.
+    std::vector<std::array<std::size_t, 2>> runs;
+    // The forward pass's samples on the sky, where they are not `runs` (a short run of polar samples
+    // between two of the sky's): gathered into one submission of their own, so that no sample is summed
+    // on both skies. Null: the forward pass sums `runs`.
+    struct Gathered {
+      std::vector<std::size_t> index;  // ascending
+      Pointing angles;
+      std::vector<Quat> quats;
+      std::vector<double> plate_angle;
+      PointingInput input() const;
+    };
+    std::shared_ptr<const Gathered> sky;
     struct Part {
       std::span<double> out;
       bool accumulate = false;
       std::vector<double> values, base;  // at the polar samples: the copy's, and what out held before
+      std::vector<double> sky_values;    // at the gathered samples: the sky's
     };
     std::vector<Part> parts;
     std::uint64_t ticket = 0;  // its last submission to the backend; 0: none
@@ -63,13 +77,14 @@ class SkyPass {
   // adjoint's scatter needs no copy.
   void begin(std::size_t detector, const PointingInput& input, Work& w);
   // Queues `target`'s values over the submission's samples: the sky's runs written into out (or
-  // added, with accumulate), the polar samples' into the work's own buffer, which finish() writes over
-  // out. `out` must stay valid until finish().
+  // added, with accumulate), the polar samples' (and gathered samples') into the work's own buffers,
+  // which finish() writes into out. Each sample is summed once. `out` must stay valid until finish().
   void submit(Work& w, std::size_t target, const PointingInput& input, std::span<double> out, bool accumulate);
   // Completes the backend's submissions up to `ticket`; returns the sky pixels they evaluated.
   std::uint64_t wait(std::uint64_t ticket) { return backend_->wait(ticket); }
   std::uint64_t last_ticket() const noexcept { return next_ticket_ - 1; }
-  // Once the work's ticket is waited for: the polar samples' values written over out.
+  // Once the work's ticket is waited for: the polar samples' values, and the gathered samples', written
+  // into out.
   static void finish(Work& w);
 
   // Scatters `target`'s values (d, or d times a plate's coefficient) into the backend's maps: the
