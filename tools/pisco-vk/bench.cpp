@@ -314,7 +314,11 @@ int run_stream_bench(const BenchOptions& options) {
   }
   if (options.repeat > 1) std::printf("         best of %u runs\n", options.repeat);
 
-  pisco::EngineOptions engine_options = bench_engine_options(options);
+  // The engine on the chosen backend with its own threads: --threads sets the host work's above,
+  // and a device backend takes none.
+  BenchOptions engine_bench = options;
+  engine_bench.threads = 0;
+  const pisco::EngineOptions engine_options = bench_engine_options(engine_bench);
   pisco::BeamOptions small;
   small.rho_max = 0.5 * deg;
   pisco::Engine engine(bench_sky(128, 0.0), {pisco::Beamsor::gaussian(0.5 * deg, small)}, pisco::FocalPlane(dets),
