@@ -400,10 +400,17 @@ class JobStream {
   // (docs/ground.md), added to the job's TOD.
   void add_ground(const Job& j, std::span<double> t) {
     const pisco::SurveyChunk& chunk = j.chunk;
-    c_.scan.ces.generate_horizon(j.first, t.size(), horizon_);
     ground_tod_.resize(t.size());
     try {
-      ground_->convolve(chunk.detector, horizon_.view(), ground_tod_, false, chunk.hwp_angle, chunk.time);
+      // A time chunk's horizon pointing is made once and shared by its detectors (Engine::share).
+      if (horizon_shared_.size() == 0 || j.first != horizon_first_ || t.size() != horizon_.size()) {
+        horizon_shared_ = pisco::SharedPointing{};
+        c_.scan.ces.generate_horizon(j.first, t.size(), horizon_);
+        horizon_first_ = j.first;
+        horizon_shared_ = ground_->share(horizon_.view());
+      }
+      ground_->wait(
+          ground_->submit(chunk.detector, horizon_shared_, ground_tod_, false, chunk.hwp_angle, chunk.time));
     } catch (const pisco::Error& e) {
       throw pisco::Error(c_.source.string() + ": [ground]: " + e.what(), e.kind());
     }
@@ -490,7 +497,9 @@ class JobStream {
   std::vector<double> weights_;
   std::vector<double> times_;  // the sources' sample times of a job
   Engine* ground_ = nullptr;   // [ground]: the engine over the ground map
-  pisco::Pointing horizon_;    // a job's boresight in the horizon frame
+  pisco::Pointing horizon_;    // a time chunk's boresight in the horizon frame, made once for its jobs
+  std::size_t horizon_first_ = 0;
+  pisco::SharedPointing horizon_shared_;
   std::vector<double> ground_tod_;
   std::vector<GroundStats> ground_stats_;
   std::vector<std::uint8_t> flags_;
