@@ -52,7 +52,8 @@ step() {  # step NAME TIMEOUT_S COMMAND...
   cat "$logs/step.log" >>"$all"
   echo "   exit $rc, $((SECONDS - t0)) s" | tee -a "$summary"
   case $name in
-    devices|bench*|registers*|stream*|class*) grep -v '^\s*$' "$logs/step.log" | tail -14 >>"$summary" ;;
+    devices|bench*|registers*|class*) grep -v '^\s*$' "$logs/step.log" | tail -14 >>"$summary" ;;
+    stream*) grep -v '^\s*$' "$logs/step.log" | tail -18 >>"$summary" ;;  # the host work, then the engine's
     test*) grep -E '^\[  (PASSED|FAILED|SKIPPED) ' "$logs/step.log" | tail -20 >>"$summary" ;;
   esac
   rm -f "$logs/step.log"

@@ -599,6 +599,10 @@ class Engine:
         """Samples summed so far on the sky's polar copy (quadrature='corrected')."""
 
     @property
+    def staged_samples(self) -> int:
+        """Pointing samples staged for the device so far (vulkan, cuda): once a detector, or once a
+        slot for convolve_detectors; 0 on cpu and simd."""
+    @property
     def mean_disc_pixels(self) -> float: ...
     @property
     def sidelobe_nside(self) -> int: ...

@@ -487,6 +487,7 @@ class PyEngine {
   std::string device_name() { return locked([](Engine& e) { return e.device_name(); }); }
   double mean_disc_pixels() { return locked([](Engine& e) { return e.mean_disc_pixels(); }); }
   std::uint64_t polar_samples() { return locked([](Engine& e) { return e.polar_samples(); }); }
+  std::uint64_t staged_samples() { return locked([](Engine& e) { return e.staged_samples(); }); }
   int sidelobe_nside() { return locked([](Engine& e) { return e.sidelobe_nside(); }); }
   std::size_t unseen_pixels() { return locked([](Engine& e) { return e.unseen_pixels(); }); }
   FocalPlane focal_plane() { return locked([](Engine& e) { return e.focal_plane(); }); }
@@ -890,6 +891,9 @@ void bind_engine_state(nb::class_<PyEngine>& cls) {
       .def_prop_ro("polar_samples", &PyEngine::polar_samples,
                    "Samples summed so far on the sky's polar copy (quadrature='corrected': those whose disc\n"
                    "reaches near a HEALPix pole).")
+      .def_prop_ro("staged_samples", &PyEngine::staged_samples,
+                   "Pointing samples staged for the device so far (vulkan, cuda; 0 on cpu and simd): once a\n"
+                   "detector, or once a slot for convolve_detectors.")
       .def_prop_ro("mean_disc_pixels", &PyEngine::mean_disc_pixels,
                    "Mean number of sky pixels summed per sample so far.")
       .def_prop_ro("unseen_pixels", &PyEngine::unseen_pixels,

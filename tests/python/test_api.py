@@ -405,6 +405,15 @@ def test_convolve_detectors_gives_each_detectors_convolve():
         ref_q = [engine.convolve(d, boresight_quats=quats, hwp_angle=hwp if d == 3 else None) for d in names]
         assert all(np.array_equal(rows[k], 1.0 + ref_q[k]) for k in range(4))
     engine = pisco.Engine(sky, beam, fp, backend="cpu")
+    assert engine.staged_samples == 0  # the host backends read the caller's pointing where it lies
+    if "vulkan" in [b.name for b in pisco.devices() if b.available]:
+        # Away from the poles, the four detectors' pointing is staged once in each of the two slots.
+        belt = 1.0 + theta / np.pi
+        dev = pisco.Engine(sky, beam, fp, backend="vulkan")
+        got = dev.convolve_detectors(names, belt, phi, psi, hwp_angle=hwp)
+        assert dev.staged_samples == 2 * 700
+        ref = engine.convolve_detectors(names, belt, phi, psi, hwp_angle=hwp)
+        assert all(np.allclose(a, b, rtol=0, atol=1e-4 * np.std(b)) for a, b in zip(got, ref))
     with pytest.raises(TypeError, match="a sequence of indices or names, not one name"):
         engine.convolve_detectors("pa", theta, phi, psi)
     with pytest.raises(ValueError, match="out holds 1 arrays for 2 detectors"):
