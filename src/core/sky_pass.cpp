@@ -69,6 +69,11 @@ void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w) {
   // instead, so that it sums each sample once.
   if (std::vector<std::array<std::size_t, 2>> exact = sky_runs(samples->index, input.size(), 1); exact != w.runs) {
     auto g = std::make_shared<Work::Gathered>();
+    const std::size_t n = input.size() - samples->index.size();
+    g->index.reserve(n);
+    if (input.quaternions) g->quats.reserve(n);
+    else g->angles.reserve(n);
+    if (!input.plate_angle.empty()) g->plate_angle.reserve(n);
     for (const auto& [b, e] : exact)
       for (std::size_t i = b; i < e; ++i) {
         g->index.push_back(i);

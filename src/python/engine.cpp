@@ -272,7 +272,7 @@ class PyEngine {
       }
     });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
-    if (out_of_memory) raise_memory_error(chunk_memory("convolve_detectors", ds.front(), p.size));
+    if (out_of_memory) raise_memory_error(chunk_memory("convolve_detectors", ds.empty() ? 0 : ds.front(), p.size));
     return std::move(results);
   }
 
