@@ -90,14 +90,27 @@ pisco::detail::PointingInput input_of(const pisco::Pointing& p) {
   return in;
 }
 
+// crossing_pointing() through a pass on `backend`, with what it needs: used in place (the input views p).
+struct Crossing {
+  PassSetup s;
+  pisco::Pointing p = crossing_pointing();
+  pisco::detail::PointingInput input = input_of(p);
+  std::unique_ptr<pisco::detail::SkyPass> pass = s.pass(s.sky, s.summed);
+  explicit Crossing(const std::string& backend) : s(backend, 32) {}
+  Crossing(const Crossing&) = delete;
+  Crossing& operator=(const Crossing&) = delete;
+};
+
 class SkyPassTest : public ::testing::TestWithParam<std::string> {
  protected:
+  void SetUp() override {
+    const std::string why = pisco_test::backend_unavailable(GetParam());
+    if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
+  }
   double bar() const { return GetParam() == "cpu" ? 1e-12 : 1e-5; }
 };
 
 TEST_P(SkyPassTest, ItsAdjointIsItsTranspose) {
-  const std::string why = pisco_test::backend_unavailable(GetParam());
-  if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
   const PassSetup s(GetParam(), 32);
   const pisco::Pointing p = crossing_pointing();
   const pisco::detail::PointingInput input = input_of(p);
@@ -147,24 +160,19 @@ TEST_P(SkyPassTest, ItsAdjointIsItsTranspose) {
 }
 
 TEST_P(SkyPassTest, AccumulatingAddsAtEverySample) {
-  const std::string why = pisco_test::backend_unavailable(GetParam());
-  if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
-  const PassSetup s(GetParam(), 32);
-  const pisco::Pointing p = crossing_pointing();
-  const pisco::detail::PointingInput input = input_of(p);
-  const auto pass = s.pass(s.sky, s.summed);
-  std::vector<double> once(p.size()), added(p.size());
+  const Crossing c(GetParam());
+  std::vector<double> once(c.p.size()), added(c.p.size());
   for (std::size_t i = 0; i < added.size(); ++i) added[i] = 1000.0 + double(i);
   for (const bool accumulate : {false, true}) {
     pisco::detail::SkyPass::Work w;
-    pass->begin(1, input, w);
+    c.pass->begin(1, c.input, w);
     ASSERT_TRUE(w.polar);
-    pass->prepare();
-    pass->submit(w, 1, input, accumulate ? added : once, accumulate);
-    pass->wait(pass->last_ticket());
+    c.pass->prepare();
+    c.pass->submit(w, 1, c.input, accumulate ? added : once, accumulate);
+    c.pass->wait(c.pass->last_ticket());
     pisco::detail::SkyPass::finish(w);
   }
-  for (std::size_t i = 0; i < p.size(); ++i)
+  for (std::size_t i = 0; i < c.p.size(); ++i)
     EXPECT_NEAR(added[i] - (1000.0 + double(i)), once[i], 1e-9 * (1000.0 + double(i))) << "sample " << i;
 }
 
@@ -174,21 +182,17 @@ TEST_P(SkyPassTest, AccumulatingAddsAtEverySample) {
 // more, with each sample's value what those two sets give submitted alone, bit for bit, written or
 // added.
 TEST_P(SkyPassTest, EachSampleIsSummedOnce) {
-  const std::string why = pisco_test::backend_unavailable(GetParam());
-  if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
-  const PassSetup s(GetParam(), 32);
-  const pisco::Pointing p = crossing_pointing();
-  const pisco::detail::PointingInput input = input_of(p);
-  const auto pass = s.pass(s.sky, s.summed);
+  const Crossing c(GetParam());
+  const pisco::Pointing& p = c.p;
   for (const bool accumulate : {false, true}) {
     pisco::detail::SkyPass::Work w;
-    pass->begin(1, input, w);
+    c.pass->begin(1, c.input, w);
     ASSERT_TRUE(w.polar);
     ASSERT_NE(pisco::detail::sky_runs(w.polar->index, p.size(), 1), w.runs) << "no short run of polar samples";
-    pass->prepare();
+    c.pass->prepare();
     std::vector<double> tod(p.size(), accumulate ? 0.25 : 0.0);
-    pass->submit(w, 1, input, tod, accumulate);
-    const std::uint64_t pixels = pass->wait(pass->last_ticket());
+    c.pass->submit(w, 1, c.input, tod, accumulate);
+    const std::uint64_t pixels = c.pass->wait(c.pass->last_ticket());
     pisco::detail::SkyPass::finish(w);
     // The two sets alone, straight through the pass's backend.
     std::vector<bool> near(p.size(), false);
@@ -197,8 +201,8 @@ TEST_P(SkyPassTest, EachSampleIsSummedOnce) {
     for (std::size_t i = 0; i < p.size(); ++i)
       if (!near[i]) away.push_back(p.theta[i], p.phi[i], p.psi[i]);
     std::vector<double> sky_values(away.size()), polar_values(w.polar->index.size());
-    pisco::detail::Backend& b = pass->backend();
-    const std::uint64_t t = pass->last_ticket();
+    pisco::detail::Backend& b = c.pass->backend();
+    const std::uint64_t t = c.pass->last_ticket();
     b.submit(1, input_of(away), sky_values, false, t + 1);
     const std::uint64_t sky_pixels = b.wait(t + 1);
     b.submit(1, w.polar->input(), polar_values, false, t + 2);

@@ -382,6 +382,8 @@ class Engine {
                              std::span<const double> hwp_angle, std::span<const double> time,
                              bool pointing_checked);
   template <class View>
+  SharedPointing share_view(const View& boresight);
+  template <class View>
   std::uint64_t submit_detectors(std::span<const std::size_t> detectors, const View& boresight,
                                  std::span<const std::span<double>> tods, bool accumulate,
                                  std::span<const double> hwp_angle, std::span<const double> time);

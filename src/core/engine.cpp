@@ -677,26 +677,24 @@ std::uint64_t Engine::submit(std::size_t detector, const QuatPointingView& bores
   return submit_view(detector, boresight, tod, accumulate, hwp_angle, time);
 }
 
-SharedPointing Engine::share(const PointingView& boresight) {
+template <class View>
+SharedPointing Engine::share_view(const View& boresight) {
   const auto host_start = std::chrono::steady_clock::now();
   check_pointing(boresight, "the shared boresight pointing");
   host_seconds_ += seconds_since(host_start);
   SharedPointing p;
-  p.angles_ = boresight;
+  if constexpr (std::is_same_v<View, QuatPointingView>) {
+    p.quats_ = boresight;
+    p.quaternions_ = true;
+  } else {
+    p.angles_ = boresight;
+  }
   p.key_ = detail::next_shared_key();
   return p;
 }
 
-SharedPointing Engine::share(const QuatPointingView& boresight) {
-  const auto host_start = std::chrono::steady_clock::now();
-  check_pointing(boresight, "the shared boresight pointing");
-  host_seconds_ += seconds_since(host_start);
-  SharedPointing p;
-  p.quats_ = boresight;
-  p.quaternions_ = true;
-  p.key_ = detail::next_shared_key();
-  return p;
-}
+SharedPointing Engine::share(const PointingView& boresight) { return share_view(boresight); }
+SharedPointing Engine::share(const QuatPointingView& boresight) { return share_view(boresight); }
 
 std::uint64_t Engine::submit(std::size_t detector, const SharedPointing& boresight, std::span<double> tod,
                              bool accumulate, std::span<const double> hwp_angle, std::span<const double> time) {

@@ -273,7 +273,7 @@ class PyEngine {
     });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
     if (out_of_memory) raise_memory_error(chunk_memory("convolve_detectors", ds.empty() ? 0 : ds.front(), p.size));
-    return std::move(results);
+    return results;
   }
 
   // Point sources (Engine::add_sources) at these samples, added into `out` (or new zeros).
