@@ -507,6 +507,9 @@ TEST(BackendParity, SeveralDetectorsOnOneChunkGiveEachDetectorsBits) {
   pisco_test::expect_error([&] { e.submit(std::vector<std::size_t>{0, 2}, nan.view().subspan(0, 10), two); },
                                     "the shared boresight pointing: sample 3 has a non-finite theta");
   pisco_test::expect_error([&] { e.submit(0, pisco::SharedPointing{}, t0); }, "was not made by Engine::share()");
+  const pisco::SharedPointing sv = e.share(v);
+  pisco_test::expect_error([&] { (void)sv.subspan(5, 6); }, "samples 5 to 11 (exclusive) of a chunk of 10");
+  EXPECT_EQ(e.submit(std::vector<std::size_t>{}, v, std::vector<std::span<double>>{}), 0u);  // nothing queued
 }
 
 }  // namespace

@@ -123,7 +123,7 @@ TEST_P(SkyPassTest, ItsAdjointIsItsTranspose) {
   const auto adjoint = s.pass(s.sky, s.summed);
   for (std::size_t det = 0; det < s.fp.size(); ++det) {
     pisco::detail::SkyPass::Work w;
-    pass->begin(det, input, w);
+    pass->begin(det, input, w, true);
     ASSERT_TRUE(w.polar);
     // Some polar samples in runs of their own (the scans), some inside the sky's runs (alone).
     EXPECT_GE(w.runs.size(), 2u);
@@ -139,7 +139,7 @@ TEST_P(SkyPassTest, ItsAdjointIsItsTranspose) {
       d_norm2 += d[i] * d[i];
     }
     pisco::detail::SkyPass::Work wa;
-    adjoint->begin(det, input, wa);
+    adjoint->begin(det, input, wa, false);
     adjoint->adjoint(wa, det, input, d, false);
     EXPECT_TRUE(adjoint->holds_adjoint());
   }
@@ -165,7 +165,7 @@ TEST_P(SkyPassTest, AccumulatingAddsAtEverySample) {
   for (std::size_t i = 0; i < added.size(); ++i) added[i] = 1000.0 + double(i);
   for (const bool accumulate : {false, true}) {
     pisco::detail::SkyPass::Work w;
-    c.pass->begin(1, c.input, w);
+    c.pass->begin(1, c.input, w, true);
     ASSERT_TRUE(w.polar);
     c.pass->prepare();
     c.pass->submit(w, 1, c.input, accumulate ? added : once, accumulate);
@@ -186,7 +186,7 @@ TEST_P(SkyPassTest, EachSampleIsSummedOnce) {
   const pisco::Pointing& p = c.p;
   for (const bool accumulate : {false, true}) {
     pisco::detail::SkyPass::Work w;
-    c.pass->begin(1, c.input, w);
+    c.pass->begin(1, c.input, w, true);
     ASSERT_TRUE(w.polar);
     ASSERT_NE(pisco::detail::sky_runs(w.polar->index, p.size(), 1), w.runs) << "no short run of polar samples";
     c.pass->prepare();

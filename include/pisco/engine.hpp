@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "pisco/beamsor.hpp"
+#include "pisco/error.hpp"
 #include "pisco/focal_plane.hpp"
 #include "pisco/pointing.hpp"
 #include "pisco/sky.hpp"
@@ -155,8 +156,11 @@ class SharedPointing {
   bool quaternions() const noexcept { return quaternions_; }
   const PointingView& angles() const noexcept { return angles_; }
   const QuatPointingView& quats() const noexcept { return quats_; }
-  // Samples [offset, offset + count), still shared.
+  // Samples [offset, offset + count), still shared; pisco::Error (input) beyond the chunk.
   SharedPointing subspan(std::size_t offset, std::size_t count) const {
+    if (offset > size() || count > size() - offset)
+      throw Error("SharedPointing::subspan: samples " + std::to_string(offset) + " to " +
+                  std::to_string(offset + count) + " (exclusive) of a chunk of " + std::to_string(size()));
     SharedPointing p = *this;
     if (quaternions_) p.quats_ = quats_.subspan(offset, count);
     else p.angles_ = angles_.subspan(offset, count);
@@ -228,10 +232,12 @@ class Engine {
   // Several detectors on one chunk of boresight pointing (a focal plane's detectors over a time chunk):
   // share() checks the pointing once and returns it marked as shared; submit() given that (whole, or
   // a part of it: SharedPointing::subspan) queues one detector as the submit() above does, the same
-  // bits, without checking the pointing again, and the device backends stage and upload it once for
-  // every detector rather than once each (twice, once per slot, while the detectors take turns in the
-  // two slots; each detector's offset is applied on the device). The pointing's values must stay as
-  // they were at share() until the last submit() given it has returned.
+  // bits, without checking the pointing again, and a device backend's slot that already holds those
+  // samples is not staged again: where each detector's submission fits one device chunk, the chunk
+  // is staged and uploaded twice (once in each of the two slots the detectors take turns in) instead
+  // of once per detector; each detector's offset is applied on the device. A detector with samples near a
+  // pole alone among the sky's sends its other samples as pointing of its own. The pointing's values
+  // must stay as they were at share() until the last submit() given it has returned.
   SharedPointing share(const PointingView& boresight);
   SharedPointing share(const QuatPointingView& boresight);
   std::uint64_t submit(std::size_t detector, const SharedPointing& boresight, std::span<double> tod,

@@ -558,8 +558,9 @@ class Engine:
         hwp_angle: Float64Array | None = None,
         time: Float64Array | None = None,
     ) -> list[Float64Array]:
-        """convolve() for several detectors on the same boresight pointing, checked once and uploaded
-        once for all of them on a GPU backend: a list of their TODs, the bits convolve() gives.
+        """convolve() for several detectors on the same boresight pointing, checked once and staged by a
+        GPU backend once in each of its two slots rather than once per detector: a list of their TODs,
+        the bits convolve() gives.
         `out`: one array a detector (a list, or a 2-D array's rows), written or, with accumulate, added
         to. hwp_angle goes to the detectors with a plate, time to those whose beam changes with time."""
     def submit(

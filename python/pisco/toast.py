@@ -483,7 +483,7 @@ class PixelConvolve(Operator):
                                            "which sources need")
                     times = np.ascontiguousarray(views.shared[self.times][vw], dtype=np.float64)
                 # The detectors whose rows take the TOD as it is, in one call: the boresight checked
-                # once, and on a GPU uploaded once for all of them.
+                # once, and on a GPU staged once a slot rather than once a detector.
                 direct = []
                 for det in dets:
                     out = views.detdata[self.det_data][vw][det]

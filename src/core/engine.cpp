@@ -543,8 +543,8 @@ std::uint64_t Engine::submit_view(std::size_t detector, const View& boresight, s
   try {
     // Each pass finds its samples near the poles (detail::SkyPass::begin); one that has some hands its
     // polar copy to its backend first, if it has not yet (outside the host work timed).
-    main_->begin(detector, input, pending->main);
-    if (split) outer_->begin(detector, input, pending->outer_work);
+    main_->begin(detector, input, pending->main, true);
+    if (split) outer_->begin(detector, input, pending->outer_work, true);
     host_seconds_ += seconds_since(host_start);
     if (pending->main.polar) main_->prepare();
     if (split && pending->outer_work.polar) outer_->prepare();
@@ -723,7 +723,7 @@ std::uint64_t Engine::submit_detectors(std::span<const std::size_t> detectors, c
                   std::to_string(tods[k].size()) + " samples but the pointing has " +
                   std::to_string(boresight.size()));
   }
-  if (detectors.empty()) return main_->last_ticket();
+  if (detectors.empty()) return 0;
   const SharedPointing shared = share(boresight);
   std::uint64_t ticket = 0;
   for (std::size_t k = 0; k < detectors.size(); ++k) {
@@ -815,8 +815,8 @@ void Engine::adjoint_view(std::size_t detector, const View& boresight, std::span
   // The diagonal leaves out the outer parts and the polar copy (the main backend's plain sum instead).
   const bool split = !squares && !split_.empty() && split_[detector];
   detail::SkyPass::Work main, outer;
-  if (!squares) main_->begin(detector, input, main);
-  if (split) outer_->begin(detector, input, outer);
+  if (!squares) main_->begin(detector, input, main, false);
+  if (split) outer_->begin(detector, input, outer, false);
   // The TOD of each row detector (or of the detector itself): d, or d times the plate's coefficient.
   std::array<std::vector<double>, 4> rows;
   std::vector<std::size_t> targets;
@@ -895,7 +895,7 @@ void Engine::normal_view(std::size_t detector, const View& boresight, std::span<
   }
   try {
     detail::SkyPass::Work work;
-    main_->begin(detector, input, work);
+    main_->begin(detector, input, work, false);
     if (work.polar) main_->prepare();
     pixels_ += main_->normal(work, detector, input);
     if (work.polar) polar_samples_ += work.polar->index.size();

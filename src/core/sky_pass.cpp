@@ -53,7 +53,7 @@ void SkyPass::attach() {
 
 void SkyPass::prepare() { attach(); }
 
-void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w) {
+void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w, bool forward) {
   w.polar.reset();
   w.sky.reset();
   w.runs.assign(1, {0, input.size()});
@@ -67,8 +67,11 @@ void SkyPass::begin(std::size_t detector, const PointingInput& input, Work& w) {
   w.runs = sky_runs(samples->index, input.size());
   // Where the adjoint's runs hold polar samples, the forward pass gathers the sky's own samples
   // instead, so that it sums each sample once.
-  if (std::vector<std::array<std::size_t, 2>> exact = sky_runs(samples->index, input.size(), 1); exact != w.runs) {
+  std::vector<std::array<std::size_t, 2>> exact;
+  if (forward) exact = sky_runs(samples->index, input.size(), 1);
+  if (forward && exact != w.runs) {
     auto g = std::make_shared<Work::Gathered>();
+    g->shared = next_shared_key();
     const std::size_t n = input.size() - samples->index.size();
     g->index.reserve(n);
     if (input.quaternions) g->quats.reserve(n);
@@ -92,6 +95,7 @@ PointingInput SkyPass::Work::Gathered::input() const {
   if (in.quaternions) in.quats = QuatPointingView{quats};
   else in.angles = angles.view();
   in.plate_angle = plate_angle;
+  in.shared = shared;
   return in;
 }
 

@@ -60,6 +60,7 @@ class SkyPass {
       Pointing angles;
       std::vector<Quat> quats;
       std::vector<double> plate_angle;
+      std::uint64_t shared = 0;  // its own key: a plate's four rows read it alike
       PointingInput input() const;
     };
     std::shared_ptr<const Gathered> sky;
@@ -73,9 +74,10 @@ class SkyPass {
     std::uint64_t ticket = 0;  // its last submission to the backend; 0: none
   };
   // Finds the samples of `input` near a pole for `detector` (its line of sight, its offset applied)
-  // and the runs the sky sums. A forward pass with such samples calls prepare() before submit(); the
+  // and the runs the sky sums; for a `forward` pass (submit()), the sky's samples gathered where
+  // those runs hold polar ones. A forward pass with such samples calls prepare() before submit(); the
   // adjoint's scatter needs no copy.
-  void begin(std::size_t detector, const PointingInput& input, Work& w);
+  void begin(std::size_t detector, const PointingInput& input, Work& w, bool forward);
   // Queues `target`'s values over the submission's samples: the sky's runs written into out (or
   // added, with accumulate), the polar samples' (and gathered samples') into the work's own buffers,
   // which finish() writes into out. Each sample is summed once. `out` must stay valid until finish().

@@ -220,13 +220,16 @@ class PyEngine {
     return result;
   }
 
-  // Several detectors on one chunk of boresight pointing (Engine::submit of a list, then wait): a
-  // list of their TODs, written into (or, with accumulate, added to) out's arrays when given.
-  nb::object convolve_detectors(nb::handle detectors, nb::handle theta, nb::handle phi, nb::handle psi,
+  // Several detectors on one chunk of boresight pointing (Engine::share, a submit() a detector, then
+  // wait): a list of their TODs, written into (or, with accumulate, added to) out's arrays when given.
+  nb::object convolve_detectors(nb::handle detectors_arg, nb::handle theta, nb::handle phi, nb::handle psi,
                                 nb::handle quats, nb::handle out, bool accumulate, nb::handle hwp_angle,
                                 nb::handle time_arg) {
-    if (nb::isinstance<nb::str>(detectors))
+    if (nb::isinstance<nb::str>(detectors_arg))
       throw nb::type_error("convolve_detectors: detectors must be a sequence of indices or names, not one name");
+    // A numpy array of indices as Python integers.
+    nb::object detectors = nb::hasattr(detectors_arg, "tolist") ? detectors_arg.attr("tolist")()
+                                                                 : nb::borrow(detectors_arg);
     std::vector<std::size_t> ds;
     for (nb::handle d : detectors) ds.push_back(detector_index(d));
     const PointingArgs p = pointing_args(theta, phi, psi, quats, "convolve_detectors");
@@ -246,24 +249,25 @@ class PyEngine {
                                std::to_string(ds.size()) + " detectors (expected one a detector)").c_str());
     }
     std::vector<Vector> tods;
-    std::vector<std::span<double>> spans;
-    for (nb::handle r : results) {
-      tods.push_back(vector(r, "out"));
-      spans.emplace_back(tods.back().data(), p.size);
-    }
+    for (nb::handle r : results) tods.push_back(vector(r, "out"));
     bool out_of_memory = false;
+    std::size_t failed = 0;  // the detector that ran out of memory
     const std::string problem = checked_run(p, h, [&](Engine& e) {
+      const SharedPointing shared = p.theta ? e.share(p.angles()) : e.share(p.quaternions());
+      std::uint64_t queued = 0;  // the last detector's ticket queued
       try {
-        const std::uint64_t ticket =
-            p.theta ? e.submit(ds, p.angles(), spans, accumulate, span_of(h), span_of(time))
-                    : e.submit(ds, p.quaternions(), spans, accumulate, span_of(h), span_of(time));
-        e.wait(ticket);
-      } catch (...) {
-        // The detectors queued before the error write into these arrays: they complete first.
-        try {
-          e.wait();
-        } catch (...) {  // the error being reported is the first
+        for (std::size_t k = 0; k < ds.size(); ++k) {
+          failed = ds[k];
+          const Detector& d = e.focal_plane()[ds[k]];
+          const bool plate = d.hwp.has_value() || d.plate_beams.has_value();
+          queued = e.submit(ds[k], shared, {tods[k].data(), p.size}, accumulate,
+                            plate ? span_of(h) : std::span<const double>(), span_of(time));
         }
+        e.wait(queued);
+      } catch (...) {
+        // The detectors queued before the error write into these arrays: they complete first. An
+        // error of theirs (or of a submission before the call) comes first, and is the one raised.
+        if (queued != 0) e.wait(queued);
         try {
           throw;
         } catch (const std::bad_alloc&) {
@@ -272,7 +276,7 @@ class PyEngine {
       }
     });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
-    if (out_of_memory) raise_memory_error(chunk_memory("convolve_detectors", ds.empty() ? 0 : ds.front(), p.size));
+    if (out_of_memory) raise_memory_error(chunk_memory("convolve_detectors", failed, p.size));
     return results;
   }
 
@@ -870,9 +874,9 @@ void bind_engine_state(nb::class_<PyEngine>& cls) {
            "out"_a = nb::none(), "accumulate"_a = false, "hwp_angle"_a = nb::none(), "time"_a = nb::none(),
            "Like convolve() for several detectors (indices or names) on the same boresight pointing: a list\n"
            "of their TODs, each the bits convolve() gives, written into out's arrays when given (a list, or a\n"
-           "2-D array's rows; accumulate=True adds into them). The pointing is checked once and a GPU backend\n"
-           "uploads it once for all of them. hwp_angle goes to the detectors with a plate, time to those whose\n"
-           "beam changes with time. Without the GIL.")
+           "2-D array's rows; accumulate=True adds into them). The pointing is checked once, and a GPU backend\n"
+           "stages it once in each of its two slots rather than once per detector. hwp_angle goes to the\n"
+           "detectors with a plate, time to those whose beam changes with time. Without the GIL.")
       .def("flag_samples", &PyEngine::flag_samples, "detector"_a, "theta"_a = nb::none(), "phi"_a = nb::none(),
            "psi"_a = nb::none(), nb::kw_only(), "boresight_quats"_a = nb::none(),
            "Masked skies (unseen='flag'): a new 1-D bool array, True where the sample's disc (the\n"

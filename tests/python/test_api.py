@@ -406,6 +406,9 @@ def test_convolve_detectors_gives_each_detectors_convolve():
         assert all(np.array_equal(rows[k], 1.0 + ref_q[k]) for k in range(4))
     engine = pisco.Engine(sky, beam, fp, backend="cpu")
     assert engine.staged_samples == 0  # the host backends read the caller's pointing where it lies
+    by_array = engine.convolve_detectors(np.array([2, 0]), theta, phi, psi)  # numpy integers
+    assert np.array_equal(by_array[0], engine.convolve(2, theta, phi, psi))
+    assert engine.convolve_detectors([], theta, phi, psi) == []
     if "vulkan" in [b.name for b in pisco.devices() if b.available]:
         # Away from the poles, the four detectors' pointing is staged once in each of the two slots.
         belt = 1.0 + theta / np.pi
