@@ -372,11 +372,12 @@ class Engine {
 
  private:
   // A submission's pointing as other submissions read it too (detail::PointingInput::shared): the key
-  // they share (0: a key of its own), and whether it has been checked already.
+  // they share (0: a key of its own), and whether it has been checked already. Always made with braces
+  // ({} is all zeros: unshared); no member initializers, so that `= {}` may default a parameter here.
   struct Shared {
-    std::uint64_t key = 0;
-    std::size_t first = 0;  // the submission's first sample within the shared chunk
-    bool checked = false;
+    std::uint64_t key;
+    std::size_t first;  // the submission's first sample within the shared chunk
+    bool checked;
   };
   // `node`: one of the engine's own detectors for a node of a beam that changes with time.
   template <class View>
