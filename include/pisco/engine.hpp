@@ -245,9 +245,9 @@ class Engine {
                        std::span<const double> time = {});
   // The same for a list of detectors in one call: tods[k] is detectors[k]'s TOD, of the pointing's size;
   // hwp_angle goes to the detectors with a half-wave plate (needed when one has one), time to those whose
-  // beam changes with time. The indices and buffer sizes are checked before anything is queued; any
-  // other error (naming its detector) leaves the detectors before it queued, as submit() calls in turn
-  // would. Returns the last detector's ticket. (A caller that reads back each detector's TOD while the
+  // beam changes with time. The indices and buffer sizes are checked before anything is queued; on any
+  // other error (naming its detector) the detectors before it have completed (their TODs written)
+  // when it is thrown. Returns the last detector's ticket (0 for no detectors). (A caller that reads back each detector's TOD while the
   // next ones convolve, as `pisco-vk run` does, calls share() and then submit() a detector at a time.)
   std::uint64_t submit(std::span<const std::size_t> detectors, const PointingView& boresight,
                        std::span<const std::span<double>> tods, bool accumulate = false,

@@ -706,7 +706,8 @@ std::uint64_t Engine::submit(std::size_t detector, const SharedPointing& boresig
 }
 
 // Several detectors on one chunk: the indices and buffers checked for all before any is queued, then
-// the pointing shared, and each detector queued as submit() queues it.
+// the pointing shared, and each detector queued as submit() queues it; on an error, what was queued
+// completed before it is thrown.
 template <class View>
 std::uint64_t Engine::submit_detectors(std::span<const std::size_t> detectors, const View& boresight,
                                        std::span<const std::span<double>> tods, bool accumulate,
@@ -726,10 +727,17 @@ std::uint64_t Engine::submit_detectors(std::span<const std::size_t> detectors, c
   if (detectors.empty()) return 0;
   const SharedPointing shared = share(boresight);
   std::uint64_t ticket = 0;
-  for (std::size_t k = 0; k < detectors.size(); ++k) {
-    const Detector& d = focal_plane_[detectors[k]];
-    const bool plate = d.hwp.has_value() || d.plate_beams.has_value();
-    ticket = submit(detectors[k], shared, tods[k], accumulate, plate ? hwp_angle : std::span<const double>(), time);
+  try {
+    for (std::size_t k = 0; k < detectors.size(); ++k) {
+      const Detector& d = focal_plane_[detectors[k]];
+      const bool plate = d.hwp.has_value() || d.plate_beams.has_value();
+      ticket = submit(detectors[k], shared, tods[k], accumulate, plate ? hwp_angle : std::span<const double>(), time);
+    }
+  } catch (...) {
+    // The detectors this call queued complete first, so that none writes its buffer after the error
+    // (an error of theirs, or of an earlier submission, is thrown instead).
+    if (ticket != 0) wait(ticket);
+    throw;
   }
   return ticket;
 }

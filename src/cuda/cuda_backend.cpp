@@ -164,11 +164,7 @@ class CudaBackend final : public Backend {
 
   void take_adjoint(const std::array<std::span<double>, 4>& maps) override { hand_over_adjoint(maps_, maps); }
 
-  std::uint64_t staged_samples() const override {
-    std::uint64_t n = 0;
-    for (const Slot& s : slots_) n += s.staged.staged();
-    return n;
-  }
+  std::uint64_t staged_samples() const override { return pisco::detail::staged_samples(slots_); }
 
   std::uint64_t wait(std::uint64_t ticket) override {
     make_current(device_);

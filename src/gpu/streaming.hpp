@@ -53,6 +53,14 @@ class StagedPointing {
   std::uint64_t staged_ = 0;
 };
 
+// The pointing samples a backend's slots (each with a member `StagedPointing staged`) have staged.
+template <class Slots>
+std::uint64_t staged_samples(const Slots& slots) {
+  std::uint64_t n = 0;
+  for (const auto& s : slots) n += s.staged.staged();
+  return n;
+}
+
 // Results of one slot into the caller's TOD: written, or added.
 inline void deliver(const SlotJob& job, const double* results) {
   if (job.accumulate)

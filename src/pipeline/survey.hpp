@@ -360,7 +360,7 @@ class JobStream {
         // A boresight chunk is checked once, and staged for a device once a slot, for all its
         // detectors (Engine::share).
         pisco::SharedPointing& shared = shared_[std::size_t(j.pointing_slot)];
-        if (pointing_.fresh() || shared.size() != span.count)
+        if (pointing_.fresh())
           shared = with_view(j.chunk, [&](const auto& view) { return engine_.share(view); });
         j.ticket = engine_.submit(span.detector, shared, t, false, j.chunk.hwp_angle, j.chunk.time);
       } else {

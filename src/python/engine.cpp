@@ -220,8 +220,8 @@ class PyEngine {
     return result;
   }
 
-  // Several detectors on one chunk of boresight pointing (Engine::share, a submit() a detector, then
-  // wait): a list of their TODs, written into (or, with accumulate, added to) out's arrays when given.
+  // Several detectors on one chunk of boresight pointing (Engine::submit of a list, then wait): a list
+  // of their TODs, written into (or, with accumulate, added to) out's arrays when given.
   nb::object convolve_detectors(nb::handle detectors_arg, nb::handle theta, nb::handle phi, nb::handle psi,
                                 nb::handle quats, nb::handle out, bool accumulate, nb::handle hwp_angle,
                                 nb::handle time_arg) {
@@ -250,33 +250,22 @@ class PyEngine {
     }
     std::vector<Vector> tods;
     for (nb::handle r : results) tods.push_back(vector(r, "out"));
+    std::vector<std::span<double>> spans;
+    for (Vector& t : tods) spans.emplace_back(t.data(), p.size);
     bool out_of_memory = false;
-    std::size_t failed = 0;  // the detector that ran out of memory
     const std::string problem = checked_run(p, h, [&](Engine& e) {
-      const SharedPointing shared = p.theta ? e.share(p.angles()) : e.share(p.quaternions());
-      std::uint64_t queued = 0;  // the last detector's ticket queued
+      // On an error, the detectors queued before it have completed into their arrays (Engine::submit).
       try {
-        for (std::size_t k = 0; k < ds.size(); ++k) {
-          failed = ds[k];
-          const Detector& d = e.focal_plane()[ds[k]];
-          const bool plate = d.hwp.has_value() || d.plate_beams.has_value();
-          queued = e.submit(ds[k], shared, {tods[k].data(), p.size}, accumulate,
-                            plate ? span_of(h) : std::span<const double>(), span_of(time));
-        }
-        e.wait(queued);
-      } catch (...) {
-        // The detectors queued before the error write into these arrays: they complete first. An
-        // error of theirs (or of a submission before the call) comes first, and is the one raised.
-        if (queued != 0) e.wait(queued);
-        try {
-          throw;
-        } catch (const std::bad_alloc&) {
-          out_of_memory = true;
-        }
+        e.wait(p.theta ? e.submit(ds, p.angles(), spans, accumulate, span_of(h), span_of(time))
+                       : e.submit(ds, p.quaternions(), spans, accumulate, span_of(h), span_of(time)));
+      } catch (const std::bad_alloc&) {
+        out_of_memory = true;
       }
     });
     if (!problem.empty()) throw nb::value_error(problem.c_str());
-    if (out_of_memory) raise_memory_error(chunk_memory("convolve_detectors", failed, p.size));
+    if (out_of_memory)
+      raise_memory_error("Engine.convolve_detectors: memory ran out for a chunk of " + std::to_string(p.size) +
+                         " samples of " + std::to_string(ds.size()) + " detectors; give shorter chunks");
     return results;
   }
 

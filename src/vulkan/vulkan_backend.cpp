@@ -57,9 +57,7 @@ class VulkanBackend final : public Backend {
   std::uint64_t adjoint(std::size_t detector, const PointingInput& pointing, std::span<const double> tod,
                         bool squares) override;
   void take_adjoint(const std::array<std::span<double>, 4>& maps) override;
-  std::uint64_t staged_samples() const override {
-    return slots_[0].staged.staged() + slots_[1].staged.staged();
-  }
+  std::uint64_t staged_samples() const override { return pisco::detail::staged_samples(slots_); }
 
  private:
   struct Slot {
